@@ -1,0 +1,60 @@
+"""Validation helpers for values that cross the public API.
+
+Each ``check_*`` coerces its input and raises ``ValueError`` with a message that names the argument, the
+value received and what is allowed, so bad input fails at the edge rather than as a NaN deep inside.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+
+
+def check_finite_scalar(name: str, value: float, *, low: float | None = None, high: float | None = None,
+                        low_open: bool = False) -> float:
+    """Return ``value`` as a float after checking it is finite and inside ``[low, high]``.
+
+    With ``low_open=True`` the lower bound is exclusive (``value > low``).
+    """
+    try:
+        x = float(value)
+    except (TypeError, ValueError) as e:
+        raise ValueError(f"{name} must be a number, got {value!r}") from e
+    if not math.isfinite(x):
+        raise ValueError(f"{name} must be finite, got {x}")
+    if low is not None and (x <= low if low_open else x < low):
+        op = ">" if low_open else ">="
+        raise ValueError(f"{name} must be {op} {low}, got {x}")
+    if high is not None and x > high:
+        raise ValueError(f"{name} must be <= {high}, got {x}")
+    return x
+
+
+def check_array(name: str, value: object, *, shape: Sequence[int | None] | None = None,
+                dtype: type | np.dtype = np.float64, allow_nan: bool = False) -> np.ndarray:
+    """Return ``value`` as an array of ``dtype`` after checking its shape and finiteness.
+
+    ``shape`` may hold ``None`` for an axis of any length. NaN is refused unless ``allow_nan``; infinities
+    are always refused.
+    """
+    arr = np.asarray(value, dtype=dtype)
+    if shape is not None:
+        ok = arr.ndim == len(shape) and all(s is None or s == n for s, n in zip(shape, arr.shape))
+        if not ok:
+            want = "(" + ", ".join("N" if s is None else str(s) for s in shape) + ")"
+            raise ValueError(f"{name}: expected shape {want}, got {arr.shape}")
+    if np.issubdtype(arr.dtype, np.floating):
+        if np.isinf(arr).any():
+            raise ValueError(f"{name} contains infinite values")
+        if not allow_nan and np.isnan(arr).any():
+            raise ValueError(f"{name} contains NaN values")
+    return arr
+
+
+def check_choice(name: str, value: str, allowed: Sequence[str]) -> str:
+    """Return ``value`` after checking it is one of ``allowed``."""
+    if value not in allowed:
+        raise ValueError(f"{name} must be one of {list(allowed)}, got {value!r}")
+    return value

@@ -1,0 +1,131 @@
+"""Load TOML files into typed, validated dataclasses.
+
+Config files are data: they are parsed with ``tomllib``, never executed. Every table of a file maps onto
+a dataclass of the same shape; unknown keys, wrong types and values refused by a dataclass's
+``__post_init__`` all raise one ``ConfigError`` that names the file and the dotted key.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import sys
+import types
+import typing
+from pathlib import Path
+from typing import Any, TypeVar
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover - exercised on Python 3.10 only
+    import tomli as tomllib
+
+from tactile_manip.errors import ConfigError
+
+T = TypeVar("T")
+
+
+def load_config(path: str | Path, cls: type[T]) -> T:
+    """Parse the TOML file at ``path`` into an instance of the dataclass ``cls``.
+
+    Raises:
+        ConfigError: the file is missing, is not valid TOML, or does not fit ``cls``.
+    """
+    path = Path(path)
+    try:
+        with path.open("rb") as f:
+            raw = tomllib.load(f)
+    except FileNotFoundError as e:
+        raise ConfigError(f"config file not found: {path}") from e
+    except tomllib.TOMLDecodeError as e:
+        raise ConfigError(f"{path}: not valid TOML: {e}") from e
+    return from_dict(cls, raw, where=str(path))
+
+
+def from_dict(cls: type[T], data: dict[str, Any], *, where: str = "config", prefix: str = "") -> T:
+    """Build the dataclass ``cls`` from a nested dict, checking keys and types recursively."""
+    if not isinstance(data, dict):
+        raise ConfigError(f"{where}: [{prefix or cls.__name__}] must be a table, got {type(data).__name__}")
+    hints = typing.get_type_hints(cls)
+    fields = {f.name: f for f in dataclasses.fields(cls) if f.init}
+    unknown = sorted(set(data) - set(fields))
+    if unknown:
+        raise ConfigError(f"{where}: unknown key(s) {', '.join(_dot(prefix, k) for k in unknown)}; "
+                          f"allowed: {', '.join(sorted(fields))}")
+    kwargs = {}
+    for name, value in data.items():
+        kwargs[name] = _coerce(hints[name], value, where=where, key=_dot(prefix, name))
+    try:
+        return cls(**kwargs)
+    except ConfigError:
+        raise
+    except (ValueError, TypeError) as e:
+        raise ConfigError(f"{where}: {_dot(prefix, '') or cls.__name__}: {e}") from e
+
+
+def to_dict(obj: Any) -> Any:
+    """Turn a (nested) dataclass into plain dicts, lists and scalars, for JSON or TOML output."""
+    if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
+        return {f.name: to_dict(getattr(obj, f.name)) for f in dataclasses.fields(obj)}
+    if isinstance(obj, (list, tuple)):
+        return [to_dict(v) for v in obj]
+    if isinstance(obj, dict):
+        return {k: to_dict(v) for k, v in obj.items()}
+    return obj
+
+
+def _dot(prefix: str, key: str) -> str:
+    return f"{prefix}.{key}" if prefix and key else (prefix or key)
+
+
+def _coerce(hint: Any, value: Any, *, where: str, key: str) -> Any:
+    origin = typing.get_origin(hint)
+    if dataclasses.is_dataclass(hint):
+        return from_dict(hint, value, where=where, prefix=key)
+    if origin in (typing.Union, types.UnionType):
+        args = typing.get_args(hint)
+        errors = []
+        for arg in args:
+            try:
+                return _coerce(arg, value, where=where, key=key)
+            except ConfigError as e:
+                errors.append(str(e))
+        raise ConfigError(f"{where}: {key} = {value!r} fits none of {_name(hint)}")
+    if origin in (tuple, list):
+        if not isinstance(value, (list, tuple)):
+            raise ConfigError(f"{where}: {key} must be an array, got {value!r}")
+        args = typing.get_args(hint)
+        if origin is tuple and args and args[-1] is not Ellipsis:
+            if len(args) != len(value):
+                raise ConfigError(f"{where}: {key} must have {len(args)} items, got {len(value)}")
+            items = [_coerce(a, v, where=where, key=f"{key}[{i}]") for i, (a, v) in enumerate(zip(args, value))]
+        else:
+            inner = args[0] if args else Any
+            items = [_coerce(inner, v, where=where, key=f"{key}[{i}]") for i, v in enumerate(value)]
+        return tuple(items) if origin is tuple else items
+    if origin is typing.Literal:
+        if value not in typing.get_args(hint):
+            raise ConfigError(f"{where}: {key} must be one of {list(typing.get_args(hint))}, got {value!r}")
+        return value
+    if hint is type(None):
+        if value is not None:
+            raise ConfigError(f"{where}: {key} must be empty")
+        return None
+    if hint is float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ConfigError(f"{where}: {key} must be a number, got {value!r}")
+        return float(value)
+    if hint is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ConfigError(f"{where}: {key} must be an integer, got {value!r}")
+        return value
+    if hint in (str, bool):
+        if not isinstance(value, hint):
+            raise ConfigError(f"{where}: {key} must be a {hint.__name__}, got {value!r}")
+        return value
+    if origin is dict or hint is Any:
+        return value
+    raise ConfigError(f"{where}: {key}: unsupported config type {_name(hint)}")
+
+
+def _name(hint: Any) -> str:
+    return getattr(hint, "__name__", None) or str(hint)

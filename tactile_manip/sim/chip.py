@@ -1,0 +1,144 @@
+"""MLX90393 magnetometer array under the skin: positions, Earth field, misalignment, noise and quantisation.
+
+Fields here are microtesla (``_ut``) and readings are (4, 4, 3) arrays ``[row, col, axis]`` (DESIGN.md 4):
+row 0 is +y, col 0 is -x. The chain from the magnet's field at the chips (pad axes) to a register value is
+
+    field + Earth  ->  rotate into chip axes  ->  + drift + noise  ->  round(/ LSB)  ->  clip to the rail.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from tactile_manip.checks import check_array, check_finite_scalar
+from tactile_manip.sim.params import ChipParams
+
+GRID = 4  # chips per row and per column
+_INT16_MAX = 32767
+_READING_SHAPE = (GRID, GRID, 3)
+
+
+def chip_positions_mm(*, pitch_mm: float, thickness_mm: float, gap_mm: float) -> np.ndarray:
+    """Centres of the 4x4 chips in the pad frame, mm: (4, 4, 3) ``[row, col, xyz]``.
+
+    Chip (r, c) sits at ``x = (c - 1.5) pitch``, ``y = (1.5 - r) pitch``, ``z = -(thickness + gap)``.
+    """
+    pitch = check_finite_scalar("pitch_mm", pitch_mm, low=0.0, low_open=True)
+    thick = check_finite_scalar("thickness_mm", thickness_mm, low=0.0, low_open=True)
+    gap = check_finite_scalar("gap_mm", gap_mm, low=0.0, low_open=True)
+    offsets = (np.arange(GRID) - (GRID - 1) / 2.0) * pitch  # -1.5, -0.5, 0.5, 1.5 pitches
+    pos = np.empty(_READING_SHAPE)
+    pos[..., 0] = offsets[None, :]
+    pos[..., 1] = -offsets[:, None]
+    pos[..., 2] = -(thick + gap)
+    return pos
+
+
+def _rotations(axes: np.ndarray, angles_rad: np.ndarray) -> np.ndarray:
+    """Rotation matrices (..., 3, 3) from unit axes (..., 3) and angles (...,) by Rodrigues' formula."""
+    k = np.zeros(axes.shape + (3,))
+    k[..., 0, 1], k[..., 0, 2], k[..., 1, 2] = -axes[..., 2], axes[..., 1], -axes[..., 0]
+    k -= np.swapaxes(k, -1, -2)  # fill the lower triangle: K is skew-symmetric
+    s, c = np.sin(angles_rad)[..., None, None], np.cos(angles_rad)[..., None, None]
+    return np.eye(3) + s * k + (1.0 - c) * (k @ k)
+
+
+def _unit_vectors(rng: np.random.Generator, shape: tuple[int, ...]) -> np.ndarray:
+    """Directions uniform on the sphere, (*shape, 3)."""
+    v = rng.standard_normal(shape + (3,))
+    return v / np.linalg.norm(v, axis=-1, keepdims=True)
+
+
+@dataclass(frozen=True, eq=False)
+class Measurement:
+    """One frame of the array as the chips report it.
+
+    Attributes:
+        counts: (4, 4, 3) int16 register values, LSB.
+        raw_ut: (4, 4, 3) float32 ``counts * LSB``, uT (not baseline-subtracted).
+        saturated: (4, 4, 3) bool, True where the count hit the rail ``+-saturation_counts``.
+    """
+
+    counts: np.ndarray
+    raw_ut: np.ndarray
+    saturated: np.ndarray
+
+
+@dataclass(eq=False)
+class ChipArray:
+    """Per-sensor constants drawn once: Earth field and the mounting rotation of each chip.
+
+    Attributes:
+        params: the chip parameters (LSB, noise, saturation, ...).
+        earth_ut: (3,) Earth field in pad axes, uT; random direction, magnitude ``params.earth_field_ut``.
+        rotations: (4, 4, 3, 3) rotation of each chip: its columns are the chip's axes in pad axes, so a
+            pad-frame field ``b`` reads ``R.T @ b``. Random axis, angle ~ N(0, ``params.rotation_deg``)
+            (that is the RMS angle); exactly the identity when ``rotation_deg`` is 0.
+    """
+
+    params: ChipParams
+    earth_ut: np.ndarray
+    rotations: np.ndarray
+
+    def __post_init__(self) -> None:
+        self.earth_ut = check_array("earth_ut", self.earth_ut, shape=(3,))
+        self.rotations = check_array("rotations", self.rotations, shape=_READING_SHAPE + (3,))
+        if self.params.saturation_counts > _INT16_MAX:
+            raise ValueError(f"params.saturation_counts must be <= {_INT16_MAX} (int16 register), got "
+                             f"{self.params.saturation_counts}")
+        self._lsb_ut = np.array([self.params.lsb_xy_ut, self.params.lsb_xy_ut, self.params.lsb_z_ut])
+        self._noise_ut = np.array([self.params.noise_xy_ut, self.params.noise_xy_ut, self.params.noise_z_ut])
+
+    @classmethod
+    def create(cls, params: ChipParams, rng: np.random.Generator) -> ChipArray:
+        """Draw the Earth field direction and the chip rotations from ``rng``."""
+        earth = _unit_vectors(rng, ()) * params.earth_field_ut
+        axes = _unit_vectors(rng, (GRID, GRID))
+        angles = rng.standard_normal((GRID, GRID)) * np.deg2rad(params.rotation_deg)
+        return cls(params=params, earth_ut=earth, rotations=_rotations(axes, angles))
+
+    def expected_ut(self, field_ut: object) -> np.ndarray:
+        """Noise-free, drift-free reading (4, 4, 3) in uT, not quantised: the idle-frame average (baseline).
+
+        Args:
+            field_ut: (4, 4, 3) magnet field at the chips in pad axes, uT (float32 or float64).
+
+        Returns:
+            (4, 4, 3) float64 ``R.T @ (field + earth)`` per chip, uT in chip axes.
+        """
+        b = check_array("field_ut", field_ut, shape=_READING_SHAPE) + self.earth_ut
+        return np.einsum("rcji,rcj->rci", self.rotations, b)
+
+    def measure(self, field_ut: object, rng: np.random.Generator, *, drift_ut: object | None = None
+                ) -> Measurement:
+        """One frame: expected reading + drift + Gaussian noise, rounded to counts and clipped to the rail.
+
+        Args:
+            field_ut: (4, 4, 3) magnet field at the chips in pad axes, uT; NaN or inf raises ValueError.
+            rng: source of the noise (always draws one (4, 4, 3) standard normal array).
+            drift_ut: optional (4, 4, 3) offset in chip axes, uT, from :meth:`draw_drift` (once per press).
+
+        Returns:
+            The :class:`Measurement`; ``saturated`` marks counts at ``+-params.saturation_counts``.
+        """
+        value = self.expected_ut(field_ut)
+        if drift_ut is not None:
+            value = value + check_array("drift_ut", drift_ut, shape=_READING_SHAPE)
+        value = value + rng.standard_normal(_READING_SHAPE) * self._noise_ut
+        rail = self.params.saturation_counts
+        counts = np.clip(np.rint(value / self._lsb_ut), -rail, rail).astype(np.int16)
+        saturated = np.abs(counts.astype(np.int32)) >= rail
+        return Measurement(counts=counts, raw_ut=self.counts_to_ut(counts), saturated=saturated)
+
+    def draw_drift(self, rng: np.random.Generator) -> np.ndarray:
+        """A per-press offset (4, 4, 3) in uT, each entry ~ N(0, ``params.drift_ut``)."""
+        return rng.standard_normal(_READING_SHAPE) * self.params.drift_ut
+
+    def counts_to_ut(self, counts: object) -> np.ndarray:
+        """Register values (..., 3) in LSB to float32 uT (x, y at ``lsb_xy_ut``, z at ``lsb_z_ut``)."""
+        c = check_array("counts", counts, shape=None)
+        if c.ndim == 0 or c.shape[-1] != 3:
+            raise ValueError(f"counts: expected shape (..., 3), got {c.shape}")
+        return (c * self._lsb_ut).astype(np.float32)

@@ -1,0 +1,191 @@
+"""The co-located sensor pair: one press of a rigid object gives a magnetic reading and a depth image.
+
+As in SuperMag's symmetric calibration rig, the same object is squeezed between the magnetic sensor
+(MBTS) and the vision-based sensor (VBTS), which share a 20x20x2.5 mm contact module but not its
+modulus. A press is quasi-static and force controlled:
+
+1. the object's gap to each pad from its protrusion heightmap and pose;
+2. a Polonsky-Keer contact solve per sensor (gel modulus for the VBTS, skin modulus for the MBTS);
+3. VBTS: the DTact pipeline on the rigid imprint ``clip(delta - s, 0)`` (200x200, 0.1 mm/px);
+4. MBTS: the deformed-dipole field change, plus baseline, Earth field, drift, noise, quantisation.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from tactile_manip.checks import check_finite_scalar
+from tactile_manip.sim.chip import ChipArray
+from tactile_manip.sim.contact import ContactSolution, solve_contact
+from tactile_manip.sim.mbts import MagneticSkin
+from tactile_manip.sim.objects import Indenter, IndenterPose
+from tactile_manip.sim.params import SimParams
+from tactile_manip.sim.vbts import dtact_depth
+
+
+@dataclass(frozen=True)
+class PressureSummary:
+    """Summary of the magnetic skin's contact pressure (the VBTS gel sees the same shape, softer)."""
+
+    peak_kpa: float = 0.0
+    mean_kpa: float = 0.0
+    area_mm2: float = 0.0
+    centroid_mm: tuple[float, float] = (0.0, 0.0)
+    iterations: int = 0
+
+
+@dataclass(frozen=True)
+class PairedSample:
+    """One co-located reading pair. Arrays follow DESIGN.md section 4.
+
+    Attributes:
+        field_ut: (4, 4, 3) float32, MBTS reading, baseline-subtracted, microtesla.
+        field_raw_ut: (4, 4, 3) float32, raw reading (counts x LSB), microtesla.
+        saturated: (4, 4, 3) bool, channels at the int16 rail.
+        field_change_ut: (4, 4, 3) float32, noise-free field change caused by the contact, microtesla.
+        depth_mm: (200, 200) float32 VBTS depth image (DTact pipeline), or None when not rendered.
+        imprint_mm: (200, 200) float32 ideal rigid imprint on the VBTS gel, mm.
+        contact_mask: (200, 200) bool, where the imprint is positive.
+        contact: whether the object touched the pad at all.
+        approach_mm: rigid approach into the VBTS gel; skin_approach_mm: into the magnetic skin.
+        force_n: press force on each sensor, N.
+        pressure: pressure summary on the magnetic skin.
+        object_name, pose, params: everything used to make the sample.
+        t_s: time within a sequence (0 for a single press).
+    """
+
+    field_ut: np.ndarray
+    field_raw_ut: np.ndarray
+    saturated: np.ndarray
+    field_change_ut: np.ndarray
+    depth_mm: np.ndarray | None
+    imprint_mm: np.ndarray
+    contact_mask: np.ndarray
+    contact: bool
+    approach_mm: float
+    skin_approach_mm: float
+    force_n: float
+    pressure: PressureSummary
+    object_name: str
+    pose: IndenterPose
+    params: SimParams = field(repr=False)
+    t_s: float = 0.0
+
+
+class SensorPair:
+    """Simulated MBTS + VBTS pair with one fixed set of parameters and per-sensor chip constants.
+
+    Args:
+        params: all physical parameters (defaults: :class:`~tactile_manip.sim.params.SimParams`).
+        seed: draws the per-sensor constants (Earth field direction, chip misalignment).
+    """
+
+    def __init__(self, params: SimParams | None = None, *, seed: int = 0) -> None:
+        self.params = params or SimParams()
+        p = self.params
+        self.chips = ChipArray.create(p.chip, np.random.default_rng(seed))
+        self.skin = MagneticSkin(p.layer, p.magnet, p.chip)
+        self.baseline_field_ut = self.skin.baseline_t() * 1e6
+        self.baseline_ut = self.chips.expected_ut(self.baseline_field_ut)
+        n = max(2, int(round(p.layer.size_mm / p.contact.pixel_mm)))
+        self._contact_xy = _grid(n, p.layer.size_mm / n)
+        self._image_xy = _grid(p.vbts.image_px, p.vbts.pixel_mm)
+
+    def press(self, indenter: Indenter, pose: IndenterPose, force_n: float, rng: np.random.Generator, *,
+              render_depth: bool = True) -> PairedSample:
+        """Press ``indenter`` at ``pose`` with ``force_n`` on both pads and read both sensors.
+
+        An object entirely off the pad gives a valid sample with ``contact=False``, zero depth and a
+        reading of noise and drift only. ``render_depth=False`` skips the VBTS pipeline (``depth_mm`` is
+        None) for jobs that need no ground truth.
+
+        Raises:
+            ValueError: ``force_n`` not finite and > 0.
+            SimulationError: a contact solve did not converge.
+        """
+        force = check_finite_scalar("force_n", force_n, low=0.0, low_open=True)
+        return self._sample(indenter, pose, force, rng, self.chips.draw_drift(rng), render_depth, 0.0)
+
+    def ramp(self, indenter: Indenter, pose: IndenterPose, forces_n: np.ndarray, rng: np.random.Generator, *,
+             render_depth: bool = False) -> list[PairedSample]:
+        """A press as a sequence at the chip rate (125 Hz): one sample per entry of ``forces_n``.
+
+        Entries <= 0 are frames without contact. One drift draw holds for the whole press.
+        """
+        forces = np.asarray(forces_n, dtype=np.float64)
+        if forces.ndim != 1 or not np.isfinite(forces).all():
+            raise ValueError(f"forces_n must be a finite 1-D array, got shape {forces.shape}")
+        drift = self.chips.draw_drift(rng)
+        period = 1.0 / self.params.chip.rate_hz
+        return [self._sample(indenter, pose, float(f), rng, drift, render_depth, i * period)
+                for i, f in enumerate(forces)]
+
+    @staticmethod
+    def ramp_profile(peak_force_n: float, *, rise_s: float = 0.4, hold_s: float = 0.2, rate_hz: float = 125.0
+                     ) -> np.ndarray:
+        """Force profile (N) of a press: linear rise to ``peak_force_n``, hold, linear release."""
+        peak = check_finite_scalar("peak_force_n", peak_force_n, low=0.0, low_open=True)
+        rise = np.linspace(0.0, peak, max(2, int(round(rise_s * rate_hz))) + 1)[1:]
+        hold = np.full(int(round(hold_s * rate_hz)), peak)
+        return np.concatenate([rise, hold, rise[::-1][1:], [0.0]])
+
+    def _sample(self, indenter: Indenter, pose: IndenterPose, force: float, rng: np.random.Generator,
+                drift_ut: np.ndarray, render_depth: bool, t_s: float) -> PairedSample:
+        p = self.params
+        gap_c, gap_i = self._gaps(indenter, pose)
+        touching = force > 0 and np.isfinite(gap_c).any() and np.isfinite(gap_i).any()
+        change_ut = np.zeros((4, 4, 3))
+        imprint = np.zeros(gap_i.shape)
+        delta_v = delta_m = 0.0
+        summary = PressureSummary()
+        if touching:
+            skin = self._solve(gap_c, force, p.layer.skin_modulus_kpa)
+            gel = self._solve(gap_c, force, p.layer.vbts_modulus_kpa)
+            delta_m, delta_v = skin.approach_mm, gel.approach_mm
+            change_ut = self.skin.field_change_t(skin.pressure_mpa, skin.pixel_mm) * 1e6
+            imprint = np.clip(delta_v - np.nan_to_num(gap_i, nan=np.inf), 0.0, None)
+            summary = self._summary(skin)
+        m = self.chips.measure(self.baseline_field_ut + change_ut, rng, drift_ut=drift_ut)
+        depth = None
+        if render_depth:
+            depth = dtact_depth(imprint, p.vbts, rng) if imprint.any() else np.zeros(imprint.shape, np.float32)
+        return PairedSample(
+            field_ut=(m.raw_ut - self.baseline_ut).astype(np.float32), field_raw_ut=m.raw_ut,
+            saturated=m.saturated, field_change_ut=change_ut.astype(np.float32), depth_mm=depth,
+            imprint_mm=imprint.astype(np.float32), contact_mask=imprint > 0, contact=bool(imprint.any()),
+            approach_mm=delta_v, skin_approach_mm=delta_m, force_n=force if touching else 0.0,
+            pressure=summary, object_name=indenter.name, pose=pose, params=p, t_s=t_s)
+
+    def _gaps(self, indenter: Indenter, pose: IndenterPose) -> tuple[np.ndarray, np.ndarray]:
+        """Initial gaps (mm, NaN off the object) on the contact grid and the image grid, same datum."""
+        prot_c = indenter.protrusion_mm(self._contact_xy[0], self._contact_xy[1], pose)
+        prot_i = indenter.protrusion_mm(self._image_xy[0], self._image_xy[1], pose)
+        if not (np.isfinite(prot_c).any() and np.isfinite(prot_i).any()):
+            return np.full(prot_c.shape, np.nan), np.full(prot_i.shape, np.nan)
+        top = max(np.nanmax(prot_c), np.nanmax(prot_i))
+        return top - prot_c, top - prot_i
+
+    def _solve(self, gap_mm: np.ndarray, force_n: float, modulus_kpa: float) -> ContactSolution:
+        c = self.params.contact
+        return solve_contact(gap_mm, force_n=force_n, modulus_mpa=modulus_kpa * 1e-3,
+                             thickness_mm=self.params.layer.thickness_mm, pixel_mm=self._contact_xy[2],
+                             tolerance=c.tolerance, max_iterations=c.max_iterations)
+
+    def _summary(self, sol: ContactSolution) -> PressureSummary:
+        p = sol.pressure_mpa
+        x, y, _ = self._contact_xy
+        total = p.sum()
+        return PressureSummary(peak_kpa=float(p.max() * 1e3), mean_kpa=float(p[p > 0].mean() * 1e3),
+                               area_mm2=sol.contact_area_mm2,
+                               centroid_mm=(float((p * x).sum() / total), float((p * y).sum() / total)),
+                               iterations=sol.iterations)
+
+
+def _grid(n: int, pixel_mm: float) -> tuple[np.ndarray, np.ndarray, float]:
+    """Pixel-centre coordinates (x, y) of an (n, n) image grid centred on the pad, and its spacing."""
+    c = (np.arange(n) - (n - 1) / 2.0) * pixel_mm
+    x, y = np.meshgrid(c, -c)  # row 0 at +y, column 0 at -x
+    return x, y, pixel_mm

@@ -1,0 +1,202 @@
+"""Every physical parameter of the paired-sensor simulator: default, unit, source and randomisation range.
+
+This is the one place where the simulator's numbers live. Each field carries metadata:
+
+- ``unit``: the unit (also in the field name where it is not SI);
+- ``source``: where the default comes from;
+- ``rand``: the ``(low, high)`` range used by :func:`randomise` for domain randomisation, or ``None`` for a
+  parameter that is a design choice rather than an uncertain physical quantity;
+- ``log``: draw log-uniformly (for scale-like quantities spanning a decade);
+- ``limits``: the open interval of values the physics accepts at all (checked in ``__post_init__``).
+
+All parameter sets are frozen dataclasses; use :func:`dataclasses.replace` or :func:`randomise` to derive
+variants. ``SimParams`` mirrors the ``[sim]`` table of the dataset configs.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+import numpy as np
+
+_INF = math.inf
+
+
+def param(default: Any, *, unit: str, source: str, rand: tuple[float, float] | None = None,
+          log: bool = False, limits: tuple[float, float] = (0.0, _INF)) -> Any:
+    """Declare a simulator parameter with its unit, source, randomisation range and valid open interval."""
+    return field(default=default, metadata={"unit": unit, "source": source, "rand": rand, "log": log,
+                                            "limits": limits})
+
+
+class _Validated:
+    """Checks every numeric field against its ``limits`` and its ``rand`` range on construction."""
+
+    def __post_init__(self) -> None:
+        for f in dataclasses.fields(self):  # type: ignore[arg-type]
+            value = getattr(self, f.name)
+            meta = f.metadata
+            if "limits" not in meta or isinstance(value, str) or isinstance(value, bool):
+                continue
+            lo, hi = meta["limits"]
+            where = f"{type(self).__name__}.{f.name}"
+            if not isinstance(value, (int, float)) or not math.isfinite(value):
+                raise ValueError(f"{where} must be a finite number, got {value!r}")
+            if not lo < value < hi:
+                raise ValueError(f"{where} = {value} is outside the allowed open interval ({lo}, {hi}) "
+                                 f"[{meta['unit']}]")
+            rand = meta["rand"]
+            if rand is not None and not lo < rand[0] <= rand[1] < hi:
+                raise ValueError(f"{where}: randomisation range {rand} must lie inside ({lo}, {hi})")
+
+
+@dataclass(frozen=True)
+class LayerParams(_Validated):
+    """The elastic contact module shared by both sensors (bonded to a rigid base, frictionless top)."""
+
+    size_mm: float = param(20.0, unit="mm", source="SuperMag Sec. III-B: 20x20x2.5 mm contact module")
+    thickness_mm: float = param(2.5, unit="mm", source="SuperMag Sec. III-B: 20x20x2.5 mm contact module")
+    vbts_modulus_kpa: float = param(
+        118.0, unit="kPa", rand=(85.0, 125.0),
+        source="Ecoflex 00-30: datasheet 100 % secant modulus 69 kPa; a neo-Hookean solid has a secant "
+               "modulus of 0.58 E at 100 % strain, so E ~ 118 kPa. DESIGN.md gives 50-125 kPa; below "
+               "~85 kPa the Allen key at 10-11 N is pushed through >85 % of the 2.5 mm layer, outside "
+               "the linear model, so the randomisation range starts there")
+    skin_modulus_kpa: float = param(
+        200.0, unit="kPa", rand=(120.0, 300.0),
+        source="Ecoflex 00-30 with MQP-15-7 powder (3:1:1 by weight, SuperMag Sec. III-B); particle "
+               "loading stiffens silicone about 2-4x (ReSkin-style skins)")
+
+
+@dataclass(frozen=True)
+class ContactParams(_Validated):
+    """Numerical settings of the Polonsky-Keer force-controlled contact solver."""
+
+    pixel_mm: float = param(0.25, unit="mm", limits=(1e-3, 5.0),
+                            source="design choice: 80x80 cells on the pad; grid-size invariance tested "
+                                   "against 0.125 mm")
+    max_iterations: int = param(300, unit="1", limits=(0, 100_000),
+                                source="design choice: flat punches need ~60, smooth bodies ~25")
+    tolerance: float = param(1e-5, unit="1", limits=(0.0, 1.0),
+                             source="design choice: relative L1 change of pressure between iterations")
+
+
+@dataclass(frozen=True)
+class VbtsParams(_Validated):
+    """DTact-style vision-based sensor: depth pipeline artefacts on the rigid imprint."""
+
+    image_px: int = param(200, unit="px", limits=(1, 10_000), source="SuperMag Sec. III-D: 200x200 images")
+    pixel_mm: float = param(0.1, unit="mm", limits=(1e-4, 10.0),
+                            source="20 mm pad over 200 px (SuperMag Sec. III-D)")
+    lookup_table: Literal["sensor_1", "sensor_2"] = field(
+        default="sensor_1",
+        metadata={"unit": "-", "source": "measured DTact grey-to-depth tables (9DTact, MIT); sensor_1 "
+                                         "saturates at 1.92 mm, sensor_2 at 1.35 mm", "rand": None})
+    dead_band_levels: int = param(2, unit="grey levels", limits=(-1, 255),
+                                  source="DTact lighting threshold: differences below 2 levels read as 0")
+    noise_grey_levels: float = param(1.0, unit="grey levels", rand=(0.5, 2.0), limits=(-1e-12, 255.0),
+                                     source="camera read noise ~1 grey level (DESIGN.md 5)")
+    blur_sigma_mm: float = param(0.07, unit="mm", rand=(0.05, 0.1), limits=(-1e-12, 10.0),
+                                 source="DTact depth smoothing, three Gaussian passes (DESIGN.md 5)")
+    blur_passes: int = param(3, unit="1", limits=(-1, 100), source="DTact depth smoothing (DESIGN.md 5)")
+
+
+@dataclass(frozen=True)
+class MagnetParams(_Validated):
+    """Magnetised skin and its discretisation into dipole cells."""
+
+    remanence_t: float = param(0.05, unit="T", rand=(0.03, 0.055),
+                               source="polarisation J_r of MQP-15-7 silicone composites (ReSkin-style "
+                                      "skins, DESIGN.md 5: 0.03-0.11 T); capped at 0.055 T because "
+                                      "above it the corner chips' z channel saturates (tested)")
+    chip_gap_mm: float = param(1.0, unit="mm", rand=(0.8, 2.0), limits=(1e-3, 100.0),
+                               source="skin-to-die distance of MLX90393 under a ReSkin skin (DESIGN.md 5: "
+                                      "0.5-2.0 mm); below 0.8 mm the corner chips saturate at J_r 0.055 T")
+    cell_mm: float = param(0.5, unit="mm", limits=(1e-3, 5.0),
+                           source="design choice: dipole cells 0.4-0.5 mm converge to <2 % (tested)")
+    thickness_nodes: int = param(6, unit="1", limits=(0, 64),
+                                 source="design choice: Gauss-Legendre nodes through the skin")
+    transport: Literal["rotation", "affine"] = field(
+        default="rotation",
+        metadata={"unit": "-", "rand": None,
+                  "source": "how a cell's moment follows the deformation: 'rotation' turns it by the exact "
+                            "rotation of omega = curl(u)/2; 'affine' maps it by the deformation gradient"})
+
+
+@dataclass(frozen=True)
+class ChipParams(_Validated):
+    """MLX90393 magnetometer array at ReSkin's settings."""
+
+    pitch_mm: float = param(5.0, unit="mm", source="SuperMag Sec. III-B: 4x4 array at 5 mm pitch")
+    lsb_xy_ut: float = param(0.200, unit="uT/LSB",
+                             source="MLX90393 datasheet sensitivity table at ReSkin's gain/resolution")
+    lsb_z_ut: float = param(0.323, unit="uT/LSB",
+                            source="MLX90393 datasheet sensitivity table at ReSkin's gain/resolution")
+    noise_xy_ut: float = param(1.5, unit="uT", rand=(1.5, 15.0), log=True, limits=(-1e-12, 1e4),
+                               source="MLX90393 datasheet RMS noise; up to 10-17 uT in idle eFlesh "
+                                      "recordings")
+    noise_z_ut: float = param(2.5, unit="uT", rand=(2.5, 15.0), log=True, limits=(-1e-12, 1e4),
+                              source="MLX90393 datasheet RMS noise; up to 10-17 uT in idle eFlesh "
+                                     "recordings")
+    earth_field_ut: float = param(50.0, unit="uT", rand=(25.0, 65.0), limits=(-1e-12, 1e4),
+                                  source="geomagnetic field magnitude, 25-65 uT worldwide")
+    drift_ut: float = param(5.0, unit="uT", rand=(0.0, 10.0), limits=(-1e-12, 1e4),
+                            source="per-press baseline drift (temperature, hysteresis), DESIGN.md 5")
+    rotation_deg: float = param(0.0, unit="deg", rand=(0.0, 3.0), limits=(-1e-12, 45.0),
+                                source="RMS mounting misalignment of each chip; 0 = ideal board")
+    saturation_counts: int = param(32767, unit="LSB", limits=(0, 1 << 31),
+                                   source="signed 16-bit output register of the MLX90393")
+    rate_hz: float = param(125.0, unit="Hz", source="SuperMag Sec. III-B: 125 Hz")
+
+
+@dataclass(frozen=True)
+class SimParams:
+    """All parameters of a :class:`~tactile_manip.sim.pair.SensorPair`."""
+
+    layer: LayerParams = field(default_factory=LayerParams)
+    contact: ContactParams = field(default_factory=ContactParams)
+    vbts: VbtsParams = field(default_factory=VbtsParams)
+    magnet: MagnetParams = field(default_factory=MagnetParams)
+    chip: ChipParams = field(default_factory=ChipParams)
+
+
+def randomise(params: Any, rng: np.random.Generator, *, spread: float = 1.0) -> Any:
+    """Return a copy of ``params`` (any parameter dataclass, nested) with every randomisable field drawn.
+
+    Each field with a ``rand`` range is drawn uniformly (log-uniformly where ``log``) from the range
+    shrunk about the default by ``spread`` in [0, 1]; ``spread=0`` returns the defaults unchanged.
+    """
+    if not 0.0 <= spread <= 1.0:
+        raise ValueError(f"spread must be in [0, 1], got {spread}")
+    changes = {}
+    for f in dataclasses.fields(params):
+        value = getattr(params, f.name)
+        if dataclasses.is_dataclass(value):
+            changes[f.name] = randomise(value, rng, spread=spread)
+            continue
+        rand = f.metadata.get("rand")
+        if rand is None:
+            continue
+        lo, hi = (math.log(rand[0]), math.log(rand[1])) if f.metadata["log"] else rand
+        centre = math.log(value) if f.metadata["log"] and value > 0 else value
+        lo, hi = centre + spread * (lo - centre), centre + spread * (hi - centre)
+        x = rng.uniform(min(lo, hi), max(lo, hi))
+        changes[f.name] = math.exp(x) if f.metadata["log"] else x
+    return dataclasses.replace(params, **changes)
+
+
+def describe(params: Any, prefix: str = "") -> list[dict[str, Any]]:
+    """Flatten a parameter tree into rows ``{name, value, unit, source, rand}`` (for docs and reports)."""
+    rows = []
+    for f in dataclasses.fields(params):
+        value = getattr(params, f.name)
+        name = f"{prefix}{f.name}"
+        if dataclasses.is_dataclass(value):
+            rows.extend(describe(value, prefix=f"{name}."))
+        else:
+            rows.append({"name": name, "value": value, "unit": f.metadata.get("unit", ""),
+                         "source": f.metadata.get("source", ""), "rand": f.metadata.get("rand")})
+    return rows
