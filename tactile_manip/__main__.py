@@ -1,0 +1,5 @@
+import sys
+
+from tactile_manip.cli import main
+
+sys.exit(main())

@@ -1,0 +1,52 @@
+"""The ``tactile-manip`` command line: one entry point, subcommands looked up in an explicit table.
+
+Each subcommand lives in ``tactile_manip.commands.<module>`` with ``add_arguments(parser)`` and
+``run(args) -> int``; command modules import their heavy dependencies inside ``run``, so ``--help`` is
+fast. Errors this package raises on purpose (bad configs, missing files, bad values) print one line and
+exit with status 2; anything else is a bug and keeps its traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+from collections.abc import Sequence
+
+from tactile_manip.errors import TactileManipError
+from tactile_manip.version import __version__
+
+# name -> (module, one-line help)
+COMMANDS: dict[str, tuple[str, str]] = {
+    "demo": ("tactile_manip.commands.demo", "press the paper's objects on the simulated sensor pair"),
+    "simulate": ("tactile_manip.commands.simulate", "generate a paired dataset from a config"),
+    "show": ("tactile_manip.commands.show", "render a sample (depth image and 4x4x3 field) to PNG"),
+    "params": ("tactile_manip.commands.params", "list every simulator parameter with source and range"),
+}
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="tactile-manip", description=__doc__.splitlines()[0])
+    parser.add_argument("--version", action="version", version=f"tactile_manip {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    for name, (module, help_text) in COMMANDS.items():
+        cmd = sub.add_parser(name, help=help_text, description=help_text)
+        importlib.import_module(module).add_arguments(cmd)
+        cmd.set_defaults(_module=module)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return int(importlib.import_module(args._module).run(args) or 0)
+    except (TactileManipError, ValueError, FileNotFoundError) as e:
+        print(f"tactile-manip {args.command}: error: {e}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"tactile-manip {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())
