@@ -43,9 +43,11 @@ def _shape_factor(x: np.ndarray) -> np.ndarray:
     # sinh x - x = x^3/6 + x^5/120 + x^7/5040 + x^9/362880 (error < 1e-12 relative for x < 0.5)
     num = xs**3 / 6.0 * (1.0 + xs**2 / 20.0 * (1.0 + xs**2 / 42.0 * (1.0 + xs**2 / 72.0)))
     out[small] = num / (np.cosh(xs) + 0.5 * xs**2 + 1.0)
-    xl = x[~small]
+    mid = ~small & (x < 80.0)  # beyond x = 80 the ratio is 1 to double precision
+    xl = x[mid]
     em = np.exp(-xl)  # multiply numerator and denominator by 2 e^{-x}
-    out[~small] = (1.0 - em * em - 2.0 * xl * em) / (1.0 + em * em + (xl**2 + 2.0) * em)
+    out[mid] = (1.0 - em * em - 2.0 * xl * em) / (1.0 + em * em + (xl**2 + 2.0) * em)
+    out[x >= 80.0] = 1.0
     return out
 
 

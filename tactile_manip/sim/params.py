@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import typing
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
@@ -36,9 +37,13 @@ class _Validated:
     """Checks every numeric field against its ``limits`` and its ``rand`` range on construction."""
 
     def __post_init__(self) -> None:
+        hints = typing.get_type_hints(type(self))
         for f in dataclasses.fields(self):  # type: ignore[arg-type]
             value = getattr(self, f.name)
             meta = f.metadata
+            choices = typing.get_args(hints[f.name]) if typing.get_origin(hints[f.name]) is Literal else ()
+            if choices and value not in choices:
+                raise ValueError(f"{type(self).__name__}.{f.name} must be one of {list(choices)}, got {value!r}")
             if "limits" not in meta or isinstance(value, str) or isinstance(value, bool):
                 continue
             lo, hi = meta["limits"]

@@ -1,0 +1,39 @@
+"""Importing the package and the simulator stays cheap: no heavy or optional package is pulled in (DESIGN.md 2).
+
+Each check runs in a fresh interpreter, since this test process has long since imported everything.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+HEAVY = ("torch", "onnxruntime", "roboticstoolbox", "franky", "serial", "trimesh", "matplotlib")
+
+
+def _heavy_modules_after(code: str) -> list[str]:
+    """Run ``code`` in a fresh interpreter; return the heavy top-level packages it left in ``sys.modules``."""
+    probe = (f"{code}\nimport json, sys\n"
+             f"print(json.dumps(sorted({{m.split('.')[0] for m in sys.modules}} & set({list(HEAVY)!r}))))")
+    done = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+@pytest.mark.parametrize("code", [
+    "import tactile_manip",
+    "import tactile_manip.sim.pair",
+    "import tactile_manip.sim.dataset",
+    # the CLI parser imports every command module, and `--help` must stay fast
+    "import tactile_manip.cli; tactile_manip.cli.build_parser()",
+])
+def test_import_pulls_in_no_heavy_package(code):
+    assert _heavy_modules_after(code) == []
+
+
+def test_probe_sees_a_heavy_import():
+    """The probe itself works: an import of matplotlib (a core dependency) is reported."""
+    assert _heavy_modules_after("import tactile_manip.plots; tactile_manip.plots._pyplot()") == ["matplotlib"]
