@@ -122,7 +122,11 @@ def _coerce(hint: Any, value: Any, *, where: str, key: str) -> Any:
         if not isinstance(value, hint):
             raise ConfigError(f"{where}: {key} must be a {hint.__name__}, got {value!r}")
         return value
-    if origin is dict or hint is Any:
+    if origin is dict:
+        if not isinstance(value, dict):
+            raise ConfigError(f"{where}: {key} must be a table, got {value!r}")
+        return value
+    if hint is Any:
         return value
     raise ConfigError(f"{where}: {key}: unsupported config type {_name(hint)}")
 

@@ -125,6 +125,12 @@ BAD_FILES = {
     "tuple of the wrong length": (lambda t: t.replace("force_n = [10.0, 11.0]", "force_n = [10.0]"),
                                   ["poses.force_n", "2 items"]),
     "scalar for a table": (lambda t: "sim = 3\n" + t, ["[sim] must be a table", "int"]),
+    "scalar for kwargs": (lambda t: t.replace("kwargs = { size_mm = 3.0 }", "kwargs = 3", 1),
+                          ["objects[2].kwargs", "must be a table"]),
+    "infinite yaw range": (lambda t: t.replace("yaw_deg = [-180.0, 180.0]", "yaw_deg = [-inf, inf]"),
+                           ["poses", "yaw_deg"]),
+    "unknown object name": (lambda t: t.replace('name = "letter_r"', 'name = "letter_q"'),
+                            ["objects[1]", "letter_q", "allen_key"]),
 }
 
 

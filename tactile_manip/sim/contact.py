@@ -64,8 +64,12 @@ class ContactSolution:
 
 
 def solve_contact(gap_mm: np.ndarray, *, force_n: float, modulus_mpa: float, thickness_mm: float,
-                  pixel_mm: float, tolerance: float = 1e-5, max_iterations: int = 300) -> ContactSolution:
+                  pixel_mm: float, tolerance: float = 1e-5, max_iterations: int = 300,
+                  initial_pressure_mpa: np.ndarray | None = None) -> ContactSolution:
     """Solve the force-controlled contact for an initial gap ``gap_mm`` (n, n), mm, NaN = no material.
+
+    ``initial_pressure_mpa`` (n, n) warm-starts the iteration (for example with the solution of the same
+    indenter on a stiffer layer); only its shape matters, it is rescaled to the force.
 
     Raises:
         ValueError: bad force, modulus, grid, or a gap with no finite cell or negative values.
@@ -82,18 +86,21 @@ def solve_contact(gap_mm: np.ndarray, *, force_n: float, modulus_mpa: float, thi
     if np.nanmin(s) < -1e-9:
         raise ValueError(f"gap_mm must be >= 0 (gap to first touch), got min {np.nanmin(s):.3g} mm")
     kernel_fft = _kernel_fft(s.shape[0], float(pixel_mm), float(thickness_mm)) / e
-    return _polonsky_keer(np.where(solid, s, _FAR_GAP_MM), solid, kernel_fft, force / pixel_mm**2,
+    p0 = (solid & (s <= s[solid].min() + 0.05)).astype(np.float64)  # cells near first touch
+    if initial_pressure_mpa is not None:
+        guess = np.where(solid, np.clip(check_array("initial_pressure_mpa", initial_pressure_mpa, shape=s.shape),
+                                        0.0, None), 0.0)
+        p0 = guess if guess.sum() > 0 else p0
+    return _polonsky_keer(np.where(solid, s, _FAR_GAP_MM), solid, p0, kernel_fft, force / pixel_mm**2,
                           pixel_mm, tolerance, max_iterations)
 
 
-def _polonsky_keer(s: np.ndarray, solid: np.ndarray, kernel_fft: np.ndarray, load: float, pixel_mm: float,
-                   tolerance: float, max_iterations: int) -> ContactSolution:
+def _polonsky_keer(s: np.ndarray, solid: np.ndarray, p0: np.ndarray, kernel_fft: np.ndarray, load: float,
+                   pixel_mm: float, tolerance: float, max_iterations: int) -> ContactSolution:
     """Polonsky-Keer CG; ``load`` is the required sum of cell pressures (F / dA)."""
     n = s.shape[0]
     conv = functools.partial(_convolve, kernel_fft=kernel_fft, n=n)
-    p = np.zeros_like(s)
-    start = solid & (s <= s[solid].min() + 0.05)  # cells near first touch
-    p[start] = load / start.sum()
+    p = p0 * (load / p0.sum())
     t = np.zeros_like(s)
     g_old, conjugate, residual = 1.0, False, np.inf
     for it in range(1, max_iterations + 1):

@@ -7,6 +7,7 @@ depend on the number of worker processes.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import math
 import multiprocessing
@@ -22,7 +23,7 @@ import numpy as np
 
 from tactile_manip.config import load_config, to_dict
 from tactile_manip.sim.dataset_io import FORMAT_VERSION, DEPTH_SCALE_MM, PairedDataset, quantise_depth
-from tactile_manip.sim.objects import Indenter, IndenterPose, make_indenter
+from tactile_manip.sim.objects import SHAPES, Indenter, IndenterPose, make_indenter
 from tactile_manip.sim.pair import SensorPair
 from tactile_manip.sim.params import SimParams, randomise
 from tactile_manip.version import code_version
@@ -44,6 +45,8 @@ class ObjectSpec:
             raise ValueError(f"objects.count must be >= 0, got {self.count}")
         if self.variants < 1:
             raise ValueError(f"objects.variants must be >= 1, got {self.variants}")
+        if self.name not in SHAPES:
+            raise ValueError(f"objects.name: unknown object {self.name!r}; known: {', '.join(sorted(SHAPES))}")
 
     @property
     def display_name(self) -> str:
@@ -67,7 +70,7 @@ class PoseRanges:
         lo, hi = self.force_n
         if not (0 < lo <= hi and math.isfinite(hi)):
             raise ValueError(f"poses.force_n must be 0 < low <= high, got {self.force_n}")
-        if not self.yaw_deg[0] <= self.yaw_deg[1]:
+        if not all(math.isfinite(v) for v in self.yaw_deg) or not self.yaw_deg[0] <= self.yaw_deg[1]:
             raise ValueError(f"poses.yaw_deg must be [low, high] with low <= high, got {self.yaw_deg}")
 
 
@@ -188,11 +191,28 @@ def generate(cfg: DatasetConfig, *, workers: int = 0,
             progress and progress(1)
     else:
         ctx = multiprocessing.get_context("spawn")
-        with ProcessPoolExecutor(workers, mp_context=ctx, initializer=_init_worker, initargs=(cfg,)) as pool:
+        with _single_threaded_children(), ProcessPoolExecutor(
+                workers, mp_context=ctx, initializer=_init_worker, initargs=(cfg,)) as pool:
             for r in pool.map(_simulate, tasks, chunksize=chunk):
                 results.append(r)
                 progress and progress(1)
     return _assemble(cfg, tasks, results, seconds=time.perf_counter() - start, workers=workers)
+
+
+@contextlib.contextmanager
+def _single_threaded_children():
+    """One BLAS/OpenMP thread per worker: the workers already fill the cores, and threads would fight."""
+    names = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+    saved = {k: os.environ.get(k) for k in names}
+    os.environ.update({k: "1" for k in names})
+    try:
+        yield
+    finally:
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
 
 
 def _assemble(cfg: DatasetConfig, tasks: list[_Task], results: list[dict[str, Any]], *, seconds: float,

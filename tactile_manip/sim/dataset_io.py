@@ -110,11 +110,16 @@ def load_dataset(path: str | Path) -> PairedDataset:
     if not path.is_file():
         raise DatasetError(f"dataset not found: {path} (make one with `tactile-manip simulate --out {path}`)")
     try:
-        with np.load(path, allow_pickle=False) as z:
+        z = np.load(path, allow_pickle=False)
+        if not isinstance(z, np.lib.npyio.NpzFile):
+            raise DatasetError(f"{path}: holds a single array, not a dataset archive (.npz)")
+        with z:
             missing = [k for k in _REQUIRED if k not in z.files]
             if missing:
                 raise DatasetError(f"{path}: not a tactile_manip dataset, missing arrays {missing}")
             arrays = {k: z[k] for k in _REQUIRED}
+    except DatasetError:
+        raise
     except (zipfile.BadZipFile, ValueError, OSError, EOFError) as e:
         raise DatasetError(f"{path}: cannot read as a dataset (.npz): {e}") from e
     try:

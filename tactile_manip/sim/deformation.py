@@ -11,6 +11,8 @@ in-plane derivatives multiply by ``i k``. Fields are evaluated on the same cell 
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from tactile_manip.sim.layer import vertical_profile
@@ -30,25 +32,38 @@ def layer_fields(pressure_mpa: np.ndarray, *, cell_mm: float, z_mm: np.ndarray, 
         (nz, ny, nx, 3, 3) with ``grad[..., i, j] = du_i / dx_j``.
     """
     ny, nx = pressure_mpa.shape
-    p_hat = np.fft.rfft2(pressure_mpa, s=(2 * ny, 2 * nx))
+    spectra = _transfer_spectra(ny, nx, float(cell_mm), tuple(float(z) for z in np.ravel(z_mm)),
+                                float(thickness_mm))
+    p_hat = np.fft.rfft2(pressure_mpa, s=(2 * ny, 2 * nx)) / modulus_mpa
+    fields = np.fft.irfft2(spectra * p_hat, s=(2 * ny, 2 * nx))[..., :ny, :nx]
+    fields = np.moveaxis(fields, 1, -1)  # (nz, ny, nx, 12)
+    return fields[..., :3], fields[..., 3:].reshape(fields.shape[:-1] + (3, 3))
+
+
+@functools.lru_cache(maxsize=8)
+def _transfer_spectra(ny: int, nx: int, cell_mm: float, z_mm: tuple[float, ...], thickness_mm: float
+                      ) -> np.ndarray:
+    """Transfer functions (nz, 12, 2ny, nx+1) from pressure to (u, grad u) for E = 1 MPa, read-only.
+
+    Order: u_x, u_y, u_z, then du_x/dx, /dy, /dz, du_y/dx, /dy, /dz, du_z/dx, /dy, /dz.
+    """
     kx = 2.0 * np.pi * np.fft.rfftfreq(2 * nx, d=cell_mm)[None, :]
     ky = -2.0 * np.pi * np.fft.fftfreq(2 * ny, d=cell_mm)[:, None]  # row index grows towards -y
     k2 = kx**2 + ky**2
     inv_k2 = np.divide(1.0, k2, out=np.zeros_like(k2), where=k2 > 0)
     k = np.sqrt(k2)
-    zeta = np.asarray(z_mm, dtype=np.float64) + thickness_mm  # height above the bonded base
     spectra = []
-    for z in zeta:
-        w, w1, w2 = vertical_profile(k, z, thickness_mm=thickness_mm, modulus_mpa=modulus_mpa)
+    for z in np.asarray(z_mm) + thickness_mm:  # height above the bonded base
+        w, w1, w2 = vertical_profile(k, z, thickness_mm=thickness_mm, modulus_mpa=1.0)
         h1 = 1j * w1 * inv_k2  # u_h = h1 * k_vec * p
         h2 = 1j * w2 * inv_k2  # du_h/dz = h2 * k_vec * p
         spectra.append([h1 * kx, h1 * ky, w,                                       # u_x, u_y, u_z
                         1j * kx * h1 * kx, 1j * ky * h1 * kx, h2 * kx,             # du_x/dx, /dy, /dz
                         1j * kx * h1 * ky, 1j * ky * h1 * ky, h2 * ky,             # du_y/dx, /dy, /dz
                         1j * kx * w, 1j * ky * w, w1])                             # du_z/dx, /dy, /dz
-    fields = np.fft.irfft2(np.asarray(spectra) * p_hat, s=(2 * ny, 2 * nx))[..., :ny, :nx]
-    fields = np.moveaxis(fields, 1, -1)  # (nz, ny, nx, 12)
-    return fields[..., :3], fields[..., 3:].reshape(fields.shape[:-1] + (3, 3))
+    out = np.asarray(spectra)
+    out.setflags(write=False)
+    return out
 
 
 def rotation_vectors(grad: np.ndarray) -> np.ndarray:

@@ -143,7 +143,7 @@ class SensorPair:
         summary = PressureSummary()
         if touching:
             skin = self._solve(gap_c, force, p.layer.skin_modulus_kpa)
-            gel = self._solve(gap_c, force, p.layer.vbts_modulus_kpa)
+            gel = self._solve(gap_c, force, p.layer.vbts_modulus_kpa, warm=skin.pressure_mpa)
             delta_m, delta_v = skin.approach_mm, gel.approach_mm
             change_ut = self.skin.field_change_t(skin.pressure_mpa, skin.pixel_mm) * 1e6
             imprint = np.clip(delta_v - np.nan_to_num(gap_i, nan=np.inf), 0.0, None)
@@ -168,11 +168,12 @@ class SensorPair:
         top = max(np.nanmax(prot_c), np.nanmax(prot_i))
         return top - prot_c, top - prot_i
 
-    def _solve(self, gap_mm: np.ndarray, force_n: float, modulus_kpa: float) -> ContactSolution:
+    def _solve(self, gap_mm: np.ndarray, force_n: float, modulus_kpa: float,
+               warm: np.ndarray | None = None) -> ContactSolution:
         c = self.params.contact
         return solve_contact(gap_mm, force_n=force_n, modulus_mpa=modulus_kpa * 1e-3,
                              thickness_mm=self.params.layer.thickness_mm, pixel_mm=self._contact_xy[2],
-                             tolerance=c.tolerance, max_iterations=c.max_iterations)
+                             tolerance=c.tolerance, max_iterations=c.max_iterations, initial_pressure_mpa=warm)
 
     def _summary(self, sol: ContactSolution) -> PressureSummary:
         p = sol.pressure_mpa

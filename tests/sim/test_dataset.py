@@ -1,0 +1,218 @@
+"""Dataset generation and its file: worker-count independence, seeding, splits, round trip, loading errors.
+
+The simulator takes ~50-70 ms per pair and spawning workers ~2 s, so the generated datasets are tiny
+(``scaled(0.004)``: 23 pairs) and shared across tests.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tactile_manip.config import from_dict, to_dict
+from tactile_manip.errors import DatasetError
+from tactile_manip.sim.dataset import DatasetConfig, ObjectSpec, PoseRanges, generate, load_dataset_config
+from tactile_manip.sim.dataset_io import FORMAT_VERSION, PairedDataset, load_dataset, save_dataset
+from tactile_manip.version import __version__, code_version
+
+ROOT = Path(__file__).resolve().parents[2]
+SUPERMAG = ROOT / "configs" / "dataset" / "supermag.toml"
+ARRAYS = ("field_ut", "field_raw_ut", "saturated", "depth_q", "object_index", "object_names", "split", "pose",
+          "force_n", "approach_mm", "skin_approach_mm", "contact")
+
+
+@pytest.fixture(scope="module")
+def cfg() -> DatasetConfig:
+    return load_dataset_config(SUPERMAG).scaled(0.004)
+
+
+@pytest.fixture(scope="module")
+def data(cfg) -> PairedDataset:
+    return generate(cfg, workers=1)
+
+
+@pytest.fixture(scope="module")
+def saved(data, tmp_path_factory) -> Path:
+    return save_dataset(tmp_path_factory.mktemp("ds") / "small.npz", data)
+
+
+def _assert_same_arrays(a: PairedDataset, b: PairedDataset) -> None:
+    for name in ARRAYS:
+        x, y = getattr(a, name), getattr(b, name)
+        assert x.dtype == y.dtype and x.shape == y.shape, name
+        np.testing.assert_array_equal(x, y, err_msg=name)
+
+
+# ---------------------------------------------------------------- generation
+
+
+def test_shapes_and_dtypes(data, cfg):
+    n = sum(o.count for o in cfg.objects)
+    assert n == 23 and len(data) == n
+    assert data.field_ut.shape == (n, 4, 4, 3) and data.field_ut.dtype == np.float32
+    assert data.saturated.dtype == bool and not data.saturated.any()
+    assert data.depth_q.shape == (n, 200, 200) and data.depth_q.dtype == np.uint8
+    assert data.pose.shape == (n, 5) and data.force_n.shape == (n,)
+    contact = data.contact
+    assert contact.sum() >= n // 2  # offsets of +-5 mm mostly land on the pad
+    assert ((data.force_n[contact] >= 10.0) & (data.force_n[contact] <= 11.0)).all()
+    assert np.abs(data.pose[:, :2]).max() <= 5.0
+
+
+def test_worker_count_does_not_change_the_data(data, cfg):
+    parallel = generate(cfg, workers=2)
+    _assert_same_arrays(data, parallel)
+    assert parallel.fingerprint() == data.fingerprint()
+    assert parallel.metadata["workers"] == 2
+
+
+def test_sample_depends_only_on_seed_and_index(data, cfg):
+    """Generating only the first object reproduces its samples: nothing leaks between samples."""
+    first = generate(dataclasses.replace(cfg, objects=cfg.objects[:1]), workers=1)
+    k = cfg.objects[0].count
+    np.testing.assert_array_equal(first.field_ut, data.field_ut[:k])
+    np.testing.assert_array_equal(first.depth_q, data.depth_q[:k])
+
+
+def test_a_different_seed_changes_the_readings(data, cfg):
+    other = generate(dataclasses.replace(cfg, seed=1), workers=1)
+    assert other.fingerprint() != data.fingerprint()
+    assert not np.array_equal(other.pose, data.pose)
+    assert np.abs(other.field_ut - data.field_ut).max() > 1.0  # microtesla, well above rounding
+    np.testing.assert_array_equal(other.split, data.split)  # splits come from the config, not the seed
+
+
+def test_splits_follow_the_config(data, cfg):
+    start = 0
+    for spec in cfg.objects:
+        part = list(data.split[start:start + spec.count])
+        if spec.split == "test":
+            assert part == ["test"] * spec.count
+        else:
+            n_train = math.floor(spec.count * (1 - cfg.validation_fraction))
+            assert part == ["train"] * n_train + ["val"] * (spec.count - n_train)
+        assert set(data.objects(np.arange(start, start + spec.count))) == {spec.display_name}
+        start += spec.count
+    assert [len(data.indices(s)) for s in ("train", "val", "test")] == [14, 2, 7]
+    assert list(data.object_names) == [o.display_name for o in cfg.objects]
+
+
+def test_procedural_variants_are_different_shapes():
+    spec = ObjectSpec("procedural", count=2, variants=2, kwargs={"seed": 3})
+    d = generate(DatasetConfig(objects=[spec], poses=PoseRanges(offset_mm=0.0, tilt_deg=0.0)), workers=1)
+    assert d.contact.all()
+    assert not np.array_equal(d.depth_q[0] > 0, d.depth_q[1] > 0)
+
+
+def test_depth_mm_is_float32_within_the_quantised_range(data):
+    depth = data.depth_mm()
+    assert depth.dtype == np.float32 and depth.shape == data.depth_q.shape
+    assert depth.min() >= 0.0 and depth.max() <= 2.55 + 1e-6
+    assert depth.max() > 0.5  # 10 N presses indent the gel by ~0.75-1.7 mm
+    np.testing.assert_allclose(data.depth_mm([3])[0], data.depth_q[3] * 0.01, rtol=1e-6)
+    assert not depth[~data.contact].any()  # no contact, no depth
+
+
+# ---------------------------------------------------------------- the file
+
+
+def test_save_load_round_trip(data, saved, cfg):
+    loaded = load_dataset(saved)
+    _assert_same_arrays(data, loaded)
+    assert loaded.fingerprint() == data.fingerprint()
+    meta = loaded.metadata
+    assert meta["format_version"] == FORMAT_VERSION
+    assert meta["code_version"] == code_version() and meta["code_version"].startswith(__version__)
+    assert meta["depth_scale_mm"] == 0.01 == loaded.depth_scale_mm
+    assert meta["config"] == json.loads(json.dumps(to_dict(cfg)))
+    assert from_dict(DatasetConfig, meta["config"]) == cfg  # a file tells how to regenerate it
+
+
+def test_save_appends_the_suffix_and_leaves_no_partial_file(data, tmp_path):
+    path = save_dataset(tmp_path / "noext", data)
+    assert path == tmp_path / "noext.npz" and path.is_file()
+    assert [p.name for p in tmp_path.iterdir()] == ["noext.npz"]
+
+
+def _rewrite(src: Path, dst: Path, **changes) -> Path:
+    """Copy the npz at ``src`` to ``dst`` with arrays replaced (a value of None drops the array)."""
+    with np.load(src, allow_pickle=False) as z:
+        arrays = {k: z[k] for k in z.files}
+    for k, v in changes.items():
+        if v is None:
+            arrays.pop(k)
+        else:
+            arrays[k] = v
+    np.savez(dst, **arrays)
+    return dst
+
+
+def _metadata_with(saved: Path, **items) -> np.ndarray:
+    with np.load(saved, allow_pickle=False) as z:
+        meta = json.loads(str(z["metadata"]))
+    meta.update(items)
+    return np.array(json.dumps(meta))
+
+
+def _load_error(path: Path) -> str:
+    with pytest.raises(DatasetError) as info:
+        load_dataset(path)
+    msg = str(info.value)
+    assert str(path) in msg
+    return msg
+
+
+def test_load_missing_file(tmp_path):
+    assert "dataset not found" in _load_error(tmp_path / "absent.npz")
+
+
+def test_load_random_bytes(tmp_path):
+    path = tmp_path / "noise.npz"
+    path.write_bytes(np.random.default_rng(0).integers(0, 256, 4096, dtype=np.uint8).tobytes())
+    assert "cannot read as a dataset" in _load_error(path)
+
+
+def test_load_truncated_file(saved, tmp_path):
+    path = tmp_path / "cut.npz"
+    path.write_bytes(saved.read_bytes()[: saved.stat().st_size // 2])
+    assert "cannot read as a dataset" in _load_error(path)
+
+
+def test_load_npz_missing_arrays(saved, tmp_path):
+    msg = _load_error(_rewrite(saved, tmp_path / "m.npz", depth_q=None, pose=None))
+    assert "missing arrays" in msg and "depth_q" in msg and "pose" in msg
+
+
+def test_load_wrong_format_version(saved, tmp_path):
+    path = _rewrite(saved, tmp_path / "v.npz", metadata=_metadata_with(saved, format_version=FORMAT_VERSION + 1))
+    msg = _load_error(path)
+    assert f"format version {FORMAT_VERSION + 1}" in msg and f"reads {FORMAT_VERSION}" in msg
+
+
+def test_load_metadata_not_json(saved, tmp_path):
+    msg = _load_error(_rewrite(saved, tmp_path / "j.npz", metadata=np.array("{not json")))
+    assert "metadata is not valid JSON" in msg
+
+
+def test_load_inconsistent_lengths(saved, data, tmp_path):
+    msg = _load_error(_rewrite(saved, tmp_path / "n.npz", force_n=data.force_n[:-1]))
+    assert "force_n" in msg and f"{len(data)} samples" in msg
+
+
+def test_load_refuses_pickled_arrays(saved, tmp_path):
+    """Files are data: an object array (which would need pickle) is refused, not unpickled."""
+    objects = np.array([{"a": 1}] * 23, dtype=object)
+    msg = _load_error(_rewrite(saved, tmp_path / "p.npz", object_names=objects))
+    assert "cannot read" in msg
+
+
+def test_load_plain_npy_file(tmp_path):
+    path = tmp_path / "array.npz"
+    with path.open("wb") as f:
+        np.save(f, np.zeros(3))
+    assert "not a dataset archive" in _load_error(path)
