@@ -25,7 +25,8 @@ import scipy
 
 from tactile_manip.sim.contact import solve_contact
 from tactile_manip.sim.dataset import DatasetConfig, generate, load_dataset_config
-from tactile_manip.sim.objects import Indenter, IndenterPose, make_indenter
+from tactile_manip.sim.objects import Indenter, IndenterPose
+from tactile_manip.sim.shapes import make_indenter
 from tactile_manip.sim.pair import SensorPair
 from tactile_manip.sim.vbts import dtact_depth
 from tactile_manip.version import code_version

@@ -25,7 +25,8 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
 
     from tactile_manip.plots import sample_figure
-    from tactile_manip.sim.objects import IndenterPose, make_indenter
+    from tactile_manip.sim.objects import IndenterPose
+    from tactile_manip.sim.shapes import make_indenter
     from tactile_manip.sim.pair import SensorPair
 
     rng = np.random.default_rng(args.seed)

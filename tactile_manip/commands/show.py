@@ -48,7 +48,8 @@ def _from_dataset(args: argparse.Namespace):
 def _from_simulation(args: argparse.Namespace):
     import numpy as np
 
-    from tactile_manip.sim.objects import IndenterPose, make_indenter
+    from tactile_manip.sim.objects import IndenterPose
+    from tactile_manip.sim.shapes import make_indenter
     from tactile_manip.sim.pair import SensorPair
 
     pose = IndenterPose(x_mm=args.x_mm, y_mm=args.y_mm, yaw_rad=math.radians(args.yaw_deg))

@@ -23,7 +23,8 @@ import numpy as np
 
 from tactile_manip.config import load_config, to_dict
 from tactile_manip.sim.dataset_io import FORMAT_VERSION, DEPTH_SCALE_MM, PairedDataset, quantise_depth
-from tactile_manip.sim.objects import SHAPES, Indenter, IndenterPose, make_indenter
+from tactile_manip.sim.objects import Indenter, IndenterPose
+from tactile_manip.sim.shapes import SHAPES, make_indenter
 from tactile_manip.sim.pair import SensorPair
 from tactile_manip.sim.params import SimParams, randomise
 from tactile_manip.version import code_version
@@ -33,7 +34,7 @@ from tactile_manip.version import code_version
 class ObjectSpec:
     """One object family of a dataset."""
 
-    name: str                                   # registry name (see tactile_manip.sim.objects.SHAPES)
+    name: str                                   # registry name (see tactile_manip.sim.shapes.SHAPES)
     count: int                                  # number of presses
     split: Literal["trainval", "test"] = "trainval"
     label: str = ""                             # name stored in the dataset (default: name)

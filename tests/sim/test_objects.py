@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from tactile_manip.errors import MeshError
-from tactile_manip.sim.objects import SHAPES, Indenter, IndenterPose, make_indenter, procedural, rod
+from tactile_manip.sim.objects import Indenter, IndenterPose
+from tactile_manip.sim.shapes import SHAPES, make_indenter, procedural, rod
 
 PX = 0.05
 

@@ -5,7 +5,8 @@ import dataclasses
 import numpy as np
 import pytest
 
-from tactile_manip.sim.objects import IndenterPose, make_indenter
+from tactile_manip.sim.objects import IndenterPose
+from tactile_manip.sim.shapes import make_indenter
 from tactile_manip.sim.pair import SensorPair
 from tactile_manip.sim.params import ContactParams, MagnetParams, SimParams
 
