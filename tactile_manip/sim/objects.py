@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 from scipy import ndimage
 
-from tactile_manip.checks import check_array, check_choice, check_finite_scalar
+from tactile_manip.checks import check_array, check_finite_scalar
 
 MAX_TILT_RAD = 0.35
 DEFAULT_PIXEL_MM = 0.05

@@ -12,7 +12,6 @@ modulus. A press is quasi-static and force controlled:
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
