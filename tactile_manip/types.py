@@ -1,0 +1,36 @@
+"""Core value types shared by the layers (numpy only)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+@dataclass(frozen=True, eq=False)
+class TactileReading:
+    """One magnetic tactile frame, as every sensor backend returns it.
+
+    Attributes:
+        field_ut: (R, C, 3) float32, baseline-subtracted field in microtesla, axes (x, y, z) of the pad frame,
+            row 0 at +y, column 0 at -x (DESIGN.md section 4). Equal to ``field_raw_ut`` until a baseline is set.
+        field_raw_ut: (R, C, 3) float32, field as the chips report it, microtesla.
+        saturated: (R, C, 3) bool, channels at the ADC rail (their value is a bound, not a measurement).
+        t_host_s: host monotonic time (``time.monotonic()``) when the frame became available, s.
+        t_device_s: device timestamp (MCU clock), s; NaN where the backend has none.
+        seq: frame sequence number (wraps at 2**16 on the wire; backends unwrap it).
+        temperature_c: (R, C) chip temperatures in Celsius, or None when not sent.
+    """
+
+    field_ut: np.ndarray
+    field_raw_ut: np.ndarray
+    saturated: np.ndarray
+    t_host_s: float
+    t_device_s: float = float("nan")
+    seq: int = 0
+    temperature_c: np.ndarray | None = field(default=None)
+
+    @property
+    def shape(self) -> tuple[int, ...]:
+        """Taxel grid and axes, e.g. (4, 4, 3)."""
+        return tuple(self.field_ut.shape)
