@@ -34,3 +34,26 @@ class TactileReading:
     def shape(self) -> tuple[int, ...]:
         """Taxel grid and axes, e.g. (4, 4, 3)."""
         return tuple(self.field_ut.shape)
+
+
+@dataclass(frozen=True)
+class AngleEstimate:
+    """In-plane orientation of a contact, as the pose pipeline reports it (an expected outcome, not an error).
+
+    Attributes:
+        angle_rad: principal axis, counter-clockwise from the pad +x axis, axial, in (-pi/2, pi/2];
+            0.0 when ``defined`` is False.
+        confidence: in [0, 1]: 1 - (minor / major eigenvalue) of the contact's second moments, times the
+            agreement of prior samples where those are available.
+        defined: False for an empty, too small or isotropic contact (then ``reason`` says which).
+        centroid_mm: contact centroid (x, y) in the pad frame, mm.
+        area_mm2: contact area, mm^2.
+        reason: why the angle is undefined ("" when defined).
+    """
+
+    angle_rad: float
+    confidence: float
+    defined: bool
+    centroid_mm: tuple[float, float] = (0.0, 0.0)
+    area_mm2: float = 0.0
+    reason: str = ""

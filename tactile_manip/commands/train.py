@@ -1,0 +1,39 @@
+"""``tactile-manip train``: train a SuperMag CVAE on a paired dataset (torch; `pip install "tactile_manip[train]"`).
+
+Start it with ``torchrun --nproc_per_node N -m tactile_manip train ...`` to train data-parallel.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--config", required=True, help="training TOML (e.g. configs/train/compact.toml)")
+    p.add_argument("--data", required=True, help="paired dataset .npz (tactile-manip simulate / collect)")
+    p.add_argument("--out", required=True, help="run folder for checkpoints, history and plots")
+    p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.pt")
+    p.add_argument("--epochs", type=int, default=None, help="override the config's epochs")
+    p.add_argument("--seed", type=int, default=None, help="override the config's seed")
+    p.add_argument("--threads", type=int, default=None, help="torch CPU threads per process")
+
+
+def run(args: argparse.Namespace) -> int:
+    from tactile_manip.learning.import_check import require_torch
+
+    require_torch()
+    from tqdm import tqdm
+
+    from tactile_manip.learning.train import load_train_config, train, with_overrides
+
+    cfg = with_overrides(load_train_config(args.config), epochs=args.epochs, seed=args.seed, threads=args.threads)
+    with tqdm(total=cfg.epochs, unit="epoch", desc=f"training {cfg.preset}") as bar:
+        def progress(row: dict) -> None:
+            bar.update(1)
+            bar.set_postfix(loss=f"{row['loss']:.0f}", val_psnr=f"{row['val_psnr']:.2f}")
+
+        summary = train(cfg, args.data, args.out, resume=args.resume, progress=progress)
+    if summary:
+        print(f"best validation PSNR {summary['best_val_psnr']:.2f} dB at epoch {summary['best_epoch']} "
+              f"({summary['epochs_run']} epochs, {summary['train_seconds'] / 60:.1f} min); wrote {args.out}/")
+    return 0

@@ -1,0 +1,1 @@
+"""Training, export and dataset tooling for the SuperMag CVAE. The only package that imports torch."""

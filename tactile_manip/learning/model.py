@@ -1,0 +1,289 @@
+"""The SuperMag conditional VAE: encoder q(z | x, I), conditional prior p(z | x), decoder p(I | z, x).
+
+``x`` is a magnetic reading (R, C, A) clamped to +-clamp_ut and scaled to [-1, 1]; ``I`` a depth image
+(H, W) in mm. The condition is embedded by two GELU fully connected layers and applied multiplicatively
+(``h * (1 + W e_x)`` per channel) at two stages of both the encoder and the decoder. The decoder outputs a
+Gaussian mean and log-variance per pixel. Only the prior and the decoder run at inference.
+
+The decoder works at a native resolution of ``4 * ceil(H / 4)`` (two transposed-convolution stages after a
+fully connected stem) and resizes bilinearly to (H, W): DTact depth images are smooth at that scale, and it
+keeps the compact preset inside a 125 Hz budget on one CPU core. The ``paper`` preset uses three stages
+and wide layers, close to the published 47.2 M parameters.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import torch
+from torch import nn
+from torch.nn import functional as F
+
+
+@dataclass(frozen=True)
+class CVAEConfig:
+    """Architecture of a SuperMag CVAE. Input and output shapes come from the dataset, not constants."""
+
+    taxel_rows: int = 4                 # reading grid rows
+    taxel_cols: int = 4                 # reading grid columns
+    axes: int = 3                       # field axes used (3, or 1 for the z-axis-only variant)
+    image_h: int = 200                  # output image rows, px
+    image_w: int = 200                  # output image columns, px
+    latent: int = 32                    # z dimension
+    embed: int = 128                    # condition embedding width
+    stem: int = 128                     # decoder FC width before the first feature map
+    stem_channels: int = 16             # channels of the first feature map (FC output)
+    native_scale: int = 2               # the decoder works at image size / native_scale, then resizes
+    channels: tuple[int, ...] = (32, 16, 8)  # decoder feature channels per stage (coarse -> fine)
+    enc_channels: tuple[int, ...] = (8, 16, 32)  # encoder channels per stage (fine -> coarse)
+    enc_blocks: int = 1                 # extra conv blocks per encoder stage
+    dec_blocks: int = 1                 # conv blocks after each decoder stage
+    encoder_pool: int = 2               # the encoder sees the image average-pooled by this factor
+    norm: str = "batch"                 # "batch" (the paper) or "group" (exactly data-parallel on CPU)
+    logvar_min: float = -10.0           # per-pixel log-variance floor, log(mm^2)
+    logvar_max: float = 2.0
+
+    def __post_init__(self) -> None:
+        for name in ("taxel_rows", "taxel_cols", "axes", "image_h", "image_w", "latent", "embed", "stem",
+                     "stem_channels", "native_scale"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"CVAEConfig.{name} must be >= 1, got {getattr(self, name)}")
+        if len(self.channels) < 2 or len(self.enc_channels) < 2:
+            raise ValueError("CVAEConfig.channels and enc_channels need at least two stages")
+        if self.norm not in ("batch", "group"):
+            raise ValueError(f"CVAEConfig.norm must be 'batch' or 'group', got {self.norm!r}")
+        if not self.logvar_min < self.logvar_max:
+            raise ValueError("CVAEConfig.logvar_min must be < logvar_max")
+
+    @property
+    def condition_size(self) -> int:
+        return self.taxel_rows * self.taxel_cols * self.axes
+
+    @property
+    def upsample_stages(self) -> int:
+        return len(self.channels) - 1
+
+    @property
+    def base_hw(self) -> tuple[int, int]:
+        """Feature-map size after the stem: the native resolution divided by 2 per stage."""
+        f = self.native_scale * 2**self.upsample_stages
+        return math.ceil(self.image_h / f), math.ceil(self.image_w / f)
+
+
+PRESETS: dict[str, dict] = {
+    # ~1.4 M parameters, ~33 M multiply-adds per reading: CPU real time.
+    "compact": {},
+    "small": {"latent": 16, "embed": 64, "stem": 64, "stem_channels": 8, "channels": (16, 8, 4),
+              "enc_channels": (4, 8, 16)},
+    "large": {"latent": 64, "embed": 256, "stem": 256, "stem_channels": 32, "channels": (64, 32, 16),
+              "enc_channels": (16, 32, 64)},
+    # Close to the paper's 47.2 M parameters and latent 512 (SuperMag Sec. IV-A): full resolution,
+    # three transposed-convolution stages, wide layers.
+    "paper": {"latent": 512, "embed": 512, "stem": 1024, "stem_channels": 64, "native_scale": 1,
+              "channels": (256, 128, 64, 32), "enc_channels": (32, 64, 128, 256), "enc_blocks": 2,
+              "dec_blocks": 2},
+}
+
+
+def preset(name: str, **overrides) -> CVAEConfig:
+    """The named architecture preset with shape overrides (taxel grid, axes, image size)."""
+    if name not in PRESETS:
+        raise ValueError(f"unknown preset {name!r}; known: {', '.join(PRESETS)}")
+    return CVAEConfig(**{**PRESETS[name], **overrides})
+
+
+class ConditionEmbedding(nn.Module):
+    """Two GELU fully connected layers: scaled reading (B, R*C*A) -> embedding (B, E)."""
+
+    def __init__(self, size: int, embed: int) -> None:
+        super().__init__()
+        self.net = nn.Sequential(nn.Linear(size, embed), nn.GELU(), nn.Linear(embed, embed), nn.GELU())
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return self.net(x)
+
+
+class Modulation(nn.Module):
+    """Multiplicative conditioning: h (B, C, H, W) * (1 + W e) per channel."""
+
+    def __init__(self, embed: int, channels: int) -> None:
+        super().__init__()
+        self.proj = nn.Linear(embed, channels)
+        nn.init.zeros_(self.proj.weight)
+        nn.init.zeros_(self.proj.bias)
+
+    def forward(self, h: torch.Tensor, e: torch.Tensor) -> torch.Tensor:
+        return h * (1.0 + self.proj(e))[:, :, None, None]
+
+
+def conv_block(c_in: int, c_out: int, norm: str = "batch") -> nn.Sequential:
+    """3x3 convolution, BatchNorm (or GroupNorm), GELU."""
+    layer = nn.BatchNorm2d(c_out) if norm == "batch" else nn.GroupNorm(min(4, c_out), c_out)
+    return nn.Sequential(nn.Conv2d(c_in, c_out, 3, padding=1, bias=False), layer, nn.GELU())
+
+
+class Encoder(nn.Module):
+    """q(z | x, I): depth image and condition -> (mu, logvar). Runs only in training."""
+
+    def __init__(self, cfg: CVAEConfig) -> None:
+        super().__init__()
+        ch = cfg.enc_channels
+        self.pool_in = cfg.encoder_pool
+        self.first = conv_block(1, ch[0], cfg.norm)
+        self.residual = conv_block(ch[0], ch[0], cfg.norm)  # residual first stage
+        stages = []
+        for c_in, c_out in zip(ch[:-1], ch[1:]):
+            layers = [nn.MaxPool2d(2), conv_block(c_in, c_out, cfg.norm)]
+            layers += [conv_block(c_out, c_out, cfg.norm) for _ in range(cfg.enc_blocks)]
+            stages.append(nn.Sequential(*layers))
+        self.stages = nn.ModuleList(stages)
+        self.mod = nn.ModuleList([Modulation(cfg.embed, ch[1]), Modulation(cfg.embed, ch[-1])])
+        self.pool = nn.AdaptiveAvgPool2d(4)
+        self.fc = nn.Sequential(nn.Linear(ch[-1] * 16 + cfg.embed, cfg.stem), nn.GELU(),
+                                nn.Linear(cfg.stem, 2 * cfg.latent))
+
+    def forward(self, image: torch.Tensor, e: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        h = image[:, None]
+        if self.pool_in > 1:
+            h = F.avg_pool2d(h, self.pool_in, ceil_mode=True)  # (B, 1, H / p, W / p)
+        h = self.first(h)                               # (B, c0, H / p, W / p)
+        h = h + self.residual(h)
+        for i, stage in enumerate(self.stages):
+            h = stage(h)                                # (B, c_i, H / 2^i, W / 2^i)
+            if i == 0:
+                h = self.mod[0](h, e)
+        h = self.mod[1](h, e)
+        h = self.pool(h).flatten(1)                     # (B, c_last * 16)
+        mu, logvar = self.fc(torch.cat([h, e], dim=1)).chunk(2, dim=1)
+        return mu, logvar
+
+
+class Prior(nn.Module):
+    """p(z | x): condition embedding -> (mu, logvar)."""
+
+    def __init__(self, cfg: CVAEConfig) -> None:
+        super().__init__()
+        self.net = nn.Sequential(nn.Linear(cfg.embed, cfg.embed), nn.GELU(), nn.Linear(cfg.embed, 2 * cfg.latent))
+
+    def forward(self, e: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        mu, logvar = self.net(e).chunk(2, dim=1)
+        return mu, logvar
+
+
+class Decoder(nn.Module):
+    """p(I | z, x): latent and condition embedding -> per-pixel mean (mm) and log-variance."""
+
+    def __init__(self, cfg: CVAEConfig) -> None:
+        super().__init__()
+        self.cfg = cfg
+        ch = cfg.channels
+        bh, bw = cfg.base_hw
+        self.stem = nn.Sequential(nn.Linear(cfg.latent + cfg.embed, cfg.stem), nn.GELU(),
+                                  nn.Linear(cfg.stem, cfg.stem_channels * bh * bw), nn.GELU())
+        self.base = nn.Sequential(conv_block(cfg.stem_channels, ch[0], cfg.norm),
+                                  *[conv_block(ch[0], ch[0], cfg.norm) for _ in range(cfg.dec_blocks)])
+        ups = []
+        for c_in, c_out in zip(ch[:-1], ch[1:]):
+            layers = [nn.ConvTranspose2d(c_in, c_out, 4, stride=2, padding=1), nn.GroupNorm(min(4, c_out), c_out),
+                      nn.ReLU()]
+            layers += [conv_block(c_out, c_out, cfg.norm) for _ in range(cfg.dec_blocks)]
+            ups.append(nn.Sequential(*layers))
+        self.ups = nn.ModuleList(ups)
+        self.mod = nn.ModuleList([Modulation(cfg.embed, ch[0]), Modulation(cfg.embed, ch[1])])
+        self.head = nn.Conv2d(ch[-1], 2, 3, padding=1)
+
+    def forward(self, z: torch.Tensor, e: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        bh, bw = self.cfg.base_hw
+        h = self.stem(torch.cat([z, e], dim=1)).view(z.shape[0], -1, bh, bw)  # (B, stem_ch, bh, bw)
+        h = self.mod[0](self.base(h), e)
+        for i, up in enumerate(self.ups):
+            h = up(h)                                   # (B, c_{i+1}, 2^{i+1} bh, 2^{i+1} bw)
+            if i == 0:
+                h = self.mod[1](h, e)
+        out = self.head(h)                              # (B, 2, native_h, native_w)
+        if out.shape[-2:] != (self.cfg.image_h, self.cfg.image_w):
+            out = F.interpolate(out, size=(self.cfg.image_h, self.cfg.image_w), mode="bilinear",
+                                align_corners=False)
+        mean = F.relu(out[:, 0])  # indentation is >= 0, and the background must be exactly 0 (SSIM)
+        logvar = out[:, 1].clamp(self.cfg.logvar_min, self.cfg.logvar_max)
+        return mean, logvar                             # (B, H, W) each
+
+
+class SuperMagCVAE(nn.Module):
+    """The whole CVAE. ``x`` is the scaled condition (B, R*C*A) in [-1, 1]; images are (B, H, W) in mm."""
+
+    def __init__(self, cfg: CVAEConfig) -> None:
+        super().__init__()
+        self.cfg = cfg
+        self.embed_enc = ConditionEmbedding(cfg.condition_size, cfg.embed)
+        self.embed_dec = ConditionEmbedding(cfg.condition_size, cfg.embed)
+        self.encoder = Encoder(cfg)
+        self.prior = Prior(cfg)
+        self.decoder = Decoder(cfg)
+
+    def forward(self, x: torch.Tensor, image: torch.Tensor, noise: torch.Tensor | None = None
+                ) -> dict[str, torch.Tensor]:
+        """Training pass: posterior sample -> reconstruction, with both latent distributions.
+
+        ``noise`` (B, Z) is the reparameterisation noise (drawn here when None); passing it makes
+        data-parallel runs draw exactly what a single process would.
+        """
+        e_dec = self.embed_dec(x)
+        mu_q, logvar_q = self.encoder(image, self.embed_enc(x))
+        mu_p, logvar_p = self.prior(e_dec)
+        noise = torch.randn_like(mu_q) if noise is None else noise
+        z = mu_q + noise * torch.exp(0.5 * logvar_q)
+        mean, logvar = self.decoder(z, e_dec)
+        return {"mean": mean, "logvar": logvar, "mu_q": mu_q, "logvar_q": logvar_q, "mu_p": mu_p,
+                "logvar_p": logvar_p}
+
+    def prior_mean_decode(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Decode at the prior mean: the deterministic inference path (mean and log-variance images)."""
+        e = self.embed_dec(x)
+        mu, _ = self.prior(e)
+        return self.decoder(mu, e)
+
+    def generate(self, x: torch.Tensor, eps: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Inference: ``eps`` (B, K, Z) standard normal -> mean depth (B, H, W) over K samples and its spread."""
+        e = self.embed_dec(x)
+        mu, logvar = self.prior(e)
+        b, k, zdim = eps.shape
+        z = (mu[:, None] + eps * torch.exp(0.5 * logvar)[:, None]).reshape(b * k, zdim)
+        mean, _ = self.decoder(z, e.repeat_interleave(k, dim=0))
+        mean = mean.view(b, k, *mean.shape[1:])
+        return mean.mean(dim=1), mean.std(dim=1, unbiased=False)
+
+
+def gaussian_nll(mean: torch.Tensor, logvar: torch.Tensor, image: torch.Tensor, nll_beta: float) -> torch.Tensor:
+    """Per-image Gaussian negative log-likelihood summed over pixels, (B,), beta-weighted when nll_beta > 0."""
+    nll = 0.5 * (logvar + (image - mean) ** 2 * torch.exp(-logvar) + math.log(2 * math.pi))
+    if nll_beta > 0:
+        nll = nll * torch.exp(nll_beta * logvar.detach())
+    return nll.flatten(1).sum(1)
+
+
+def negative_elbo(out: dict[str, torch.Tensor], image: torch.Tensor, *, kl_weight: float = 1.0,
+                  nll_beta: float = 0.0) -> tuple[torch.Tensor, dict[str, float]]:
+    """Per-sample negative ELBO (Gaussian NLL summed over pixels + KL(q || p)), averaged over the batch.
+
+    ``nll_beta > 0`` weights each pixel's NLL by its (detached) variance to the power beta (beta-NLL, Seitzer
+    et al., ICLR 2022): with a learned variance, plain NLL lets confident background pixels dominate and
+    starves the mean of the contact pixels; beta = 0.5 keeps the Gaussian decoder but fits the mean better.
+    """
+    nll = gaussian_nll(out["mean"], out["logvar"], image, nll_beta)
+    kl = 0.5 * (out["logvar_p"] - out["logvar_q"]
+                + (torch.exp(out["logvar_q"]) + (out["mu_q"] - out["mu_p"]) ** 2) * torch.exp(-out["logvar_p"]) - 1)
+    kl = kl.sum(1)
+    loss = (nll + kl_weight * kl).mean()
+    mse = ((image - out["mean"]) ** 2).mean()
+    stats = {"loss": loss.detach(), "nll": nll.detach().mean(), "kl": kl.detach().mean(), "mse": mse.detach()}
+    return loss, {k: float(v) for k, v in stats.items()}
+
+
+def count_parameters(model: nn.Module, *, inference_only: bool = False) -> int:
+    """Parameters of the whole model, or only of what runs at inference (embedding, prior, decoder)."""
+    if not inference_only or not isinstance(model, SuperMagCVAE):
+        return sum(p.numel() for p in model.parameters())
+    parts = (model.embed_dec, model.prior, model.decoder)
+    return sum(p.numel() for part in parts for p in part.parameters())

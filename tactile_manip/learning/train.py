@@ -1,0 +1,300 @@
+"""Training of the SuperMag CVAE: AdamW on the negative ELBO, seeded, resumable, optionally data-parallel.
+
+Run through ``tactile-manip train`` (or ``torchrun ... -m tactile_manip train`` for DistributedDataParallel:
+gloo on CPU, nccl on GPU). Each epoch validates the prior-mean reconstruction (PSNR with the fixed 2 mm data
+range) and writes ``checkpoint.pt`` (everything needed to resume), ``best.pt`` (best validation PSNR),
+``history.json`` and ``loss.png`` to the output folder. Early stopping ends the run when the validation
+PSNR has not improved for ``patience`` epochs; a NaN loss stops it with an error and keeps the last good
+checkpoint.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import os
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+import torch
+from torch.utils.data import DataLoader
+
+from tactile_manip.config import load_config, to_dict
+from tactile_manip.errors import TactileManipError
+from tactile_manip.learning.data import InputSpec, TensorPairs, augment_batch, select
+from tactile_manip.learning.model import (CVAEConfig, SuperMagCVAE, count_parameters, gaussian_nll, negative_elbo,
+                                          preset)
+from tactile_manip.perception.metrics import DEPTH_RANGE_MM
+from tactile_manip.sim.dataset_io import PairedDataset, load_dataset
+
+
+class TrainingError(TactileManipError, RuntimeError):
+    """Training cannot go on (a non-finite loss, an incompatible checkpoint)."""
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """Mirrors ``configs/train/*.toml``."""
+
+    preset: str = "compact"              # architecture preset (tactile_manip.learning.model.PRESETS)
+    latent: int = 0                      # override the preset's latent size (0: keep)
+    norm: str = ""                       # override the preset's normalisation ("batch" / "group"; "": keep)
+    axes: str = "xyz"                    # "xyz", or "z" for the z-axis-only variant
+    objects: list[str] = field(default_factory=list)  # train only on these objects ([]: all)
+    clamp_ut: float = 500.0              # input clamp, uT (SuperMag: +-500 scaled to [-1, 1])
+    epochs: int = 60
+    batch_size: int = 32                 # global batch (split across DDP processes)
+    lr: float = 1e-4                     # AdamW learning rate (SuperMag: 1e-4, fixed)
+    lr_schedule: Literal["constant", "cosine"] = "constant"  # cosine: decay to lr_min over the epochs
+    lr_min: float = 1e-5
+    weight_decay: float = 0.01
+    kl_weight: float = 1.0
+    nll_beta: float = 0.5                # beta-NLL weighting of the Gaussian decoder (0: plain NLL)
+    prior_weight: float = 1.0            # weight of the prior-path reconstruction (hybrid CVAE objective)
+    augment: bool = True                 # random symmetry of the square per batch
+    patience: int = 15                   # early stopping: epochs without a better validation PSNR
+    seed: int = 0
+    threads: int = 0                     # torch CPU threads per process (0: torch's default)
+    max_minutes: float = 0.0             # stop after this wall time (0: no limit)
+
+    def __post_init__(self) -> None:
+        positive = {"epochs": self.epochs, "batch_size": self.batch_size, "patience": self.patience}
+        for name, value in positive.items():
+            if value < 1:
+                raise ValueError(f"{name} must be >= 1, got {value}")
+        if not (math.isfinite(self.lr) and 0 < self.lr < 1):
+            raise ValueError(f"lr must be in (0, 1), got {self.lr}")
+        if not (math.isfinite(self.weight_decay) and self.weight_decay >= 0):
+            raise ValueError(f"weight_decay must be >= 0, got {self.weight_decay}")
+        if not (math.isfinite(self.nll_beta) and 0 <= self.nll_beta <= 1):
+            raise ValueError(f"nll_beta must be in [0, 1], got {self.nll_beta}")
+        if not (math.isfinite(self.prior_weight) and self.prior_weight >= 0):
+            raise ValueError(f"prior_weight must be >= 0, got {self.prior_weight}")
+        if not (math.isfinite(self.kl_weight) and self.kl_weight >= 0):
+            raise ValueError(f"kl_weight must be >= 0, got {self.kl_weight}")
+        InputSpec(self.clamp_ut, self.axes)
+
+
+def load_train_config(path: str | Path) -> TrainConfig:
+    return load_config(path, TrainConfig)
+
+
+def model_config(cfg: TrainConfig, data: PairedDataset) -> CVAEConfig:
+    """Architecture from the preset, with the taxel grid and image size read from the dataset."""
+    rows, cols, _ = data.field_ut.shape[1:]
+    h, w = data.depth_q.shape[1:]
+    extra = {"latent": cfg.latent} if cfg.latent else {}
+    if cfg.norm:
+        extra["norm"] = cfg.norm
+    return preset(cfg.preset, taxel_rows=rows, taxel_cols=cols, axes=len(InputSpec(cfg.clamp_ut, cfg.axes).axes),
+                  image_h=h, image_w=w, **extra)
+
+
+@dataclass
+class _Dist:
+    rank: int = 0
+    world: int = 1
+
+    @property
+    def main(self) -> bool:
+        return self.rank == 0
+
+
+def _init_distributed() -> _Dist:
+    """Join the torchrun process group when started by torchrun (WORLD_SIZE > 1)."""
+    world = int(os.environ.get("WORLD_SIZE", "1"))
+    if world <= 1:
+        return _Dist()
+    backend = "nccl" if torch.cuda.is_available() else "gloo"
+    torch.distributed.init_process_group(backend)
+    return _Dist(torch.distributed.get_rank(), world)
+
+
+def train(cfg: TrainConfig, data_path: str | Path, out_dir: str | Path, *, resume: bool = False,
+          progress: Callable[[dict[str, float]], None] | None = None) -> dict[str, Any]:
+    """Train a model and return the run summary (also written to ``out_dir/history.json``)."""
+    dist = _init_distributed()
+    try:
+        return _train(cfg, Path(data_path), Path(out_dir), resume, progress, dist)
+    finally:
+        if dist.world > 1:
+            torch.distributed.destroy_process_group()
+
+
+def _train(cfg: TrainConfig, data_path: Path, out: Path, resume: bool, progress, dist: _Dist) -> dict[str, Any]:
+    if cfg.threads:
+        torch.set_num_threads(cfg.threads)
+    torch.manual_seed(cfg.seed)
+    np.random.seed(cfg.seed)  # noqa: NPY002 - only for third-party code that reads the global state
+    data = load_dataset(data_path)
+    spec = InputSpec(cfg.clamp_ut, cfg.axes)
+    mcfg = model_config(cfg, data)
+    train_set = TensorPairs(data, select(data, "train", tuple(cfg.objects)))
+    val_set = TensorPairs(data, select(data, "val", tuple(cfg.objects)))
+    model = SuperMagCVAE(mcfg)
+    opt = torch.optim.AdamW(model.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
+    state = {"epoch": 0, "history": [], "best_psnr": -math.inf, "best_epoch": 0, "seconds": 0.0}
+    out.mkdir(parents=True, exist_ok=True)
+    if resume:
+        state = _load_checkpoint(out / "checkpoint.pt", model, opt, mcfg)
+    net = model
+    if dist.world > 1:
+        if torch.cuda.is_available():  # SyncBatchNorm needs a GPU; on CPU each process keeps its own statistics
+            model = torch.nn.SyncBatchNorm.convert_sync_batchnorm(model)
+        net = torch.nn.parallel.DistributedDataParallel(model)
+    sampler_gen = torch.Generator().manual_seed(cfg.seed)
+    schedule = _schedule(cfg)
+    start = time.perf_counter() - state["seconds"]
+    for epoch in range(state["epoch"] + 1, cfg.epochs + 1):
+        sampler_gen.manual_seed(cfg.seed * 100_003 + epoch)  # same batches for any world size and on resume
+        for group in opt.param_groups:
+            group["lr"] = schedule(epoch)
+        train_stats = _train_epoch(net, opt, train_set, cfg, spec, dist, sampler_gen)
+        val = evaluate_split(model, val_set, spec)
+        state["seconds"] = time.perf_counter() - start
+        row = {"epoch": epoch, "lr": schedule(epoch), **train_stats, **{f"val_{k}": v for k, v in val.items()},
+               "seconds": round(state["seconds"], 1)}
+        state["history"].append(row)
+        state["epoch"] = epoch
+        improved = val["psnr"] > state["best_psnr"]
+        if improved:
+            state["best_psnr"], state["best_epoch"] = val["psnr"], epoch
+        if not all(torch.isfinite(p).all() for p in model.parameters()):
+            raise TrainingError(f"parameters became non-finite in epoch {epoch} (lr {schedule(epoch)}); lower lr; "
+                                f"the last good checkpoint in {out} is kept")
+        if dist.main:
+            _save_checkpoint(out / "checkpoint.pt", model, opt, mcfg, cfg, spec, data, state)
+            if improved:
+                _save_checkpoint(out / "best.pt", model, opt, mcfg, cfg, spec, data, state)
+            _write_history(out, cfg, mcfg, model, data, state, dist)
+        if progress:
+            progress(row)
+        if epoch - state["best_epoch"] >= cfg.patience:
+            break
+        if cfg.max_minutes and state["seconds"] > 60 * cfg.max_minutes:
+            break
+    return json.loads((out / "history.json").read_text()) if dist.main else {}
+
+
+def _schedule(cfg: TrainConfig) -> Callable[[int], float]:
+    """Learning rate of each epoch (1-based)."""
+    if cfg.lr_schedule == "constant":
+        return lambda epoch: cfg.lr
+    span = max(cfg.epochs - 1, 1)
+    return lambda epoch: cfg.lr_min + 0.5 * (cfg.lr - cfg.lr_min) * (1 + math.cos(math.pi * (epoch - 1) / span))
+
+
+def _train_epoch(net, opt, train_set: TensorPairs, cfg: TrainConfig, spec: InputSpec, dist: _Dist,
+                 gen: torch.Generator) -> dict[str, float]:
+    net.train()
+    net_cfg = (net.module if hasattr(net, "module") else net).cfg
+    order = torch.randperm(len(train_set), generator=gen)
+    per_rank = cfg.batch_size // dist.world
+    sums: dict[str, float] = {}
+    n_batches = 0
+    for b in range(0, len(order) - cfg.batch_size + 1, cfg.batch_size):
+        batch = order[b:b + cfg.batch_size][dist.rank * per_rank:(dist.rank + 1) * per_rank]
+        field_ut = train_set.field[batch]
+        image = train_set.depth_q[batch].float() * train_set.depth_scale_mm
+        if cfg.augment:
+            field_ut, image = augment_batch(field_ut, image, gen)
+        noise = torch.randn(cfg.batch_size, net_cfg.latent, generator=gen)[dist.rank * per_rank:][:per_rank]
+        out = net(spec.scale(field_ut), image, noise)
+        loss, stats = negative_elbo(out, image, kl_weight=cfg.kl_weight, nll_beta=cfg.nll_beta)
+        if cfg.prior_weight > 0:  # Sohn et al. 2015: also train the path used at inference (z = prior mean)
+            module = net.module if hasattr(net, "module") else net
+            prior_nll = gaussian_nll(*module.prior_mean_decode(spec.scale(field_ut)), image, cfg.nll_beta).mean()
+            loss = loss + cfg.prior_weight * prior_nll
+            stats["prior_nll"] = float(prior_nll.detach())
+        if not torch.isfinite(loss):
+            raise TrainingError(f"loss became {float(loss)} at batch {n_batches}: lower lr (now {cfg.lr}) or "
+                                "check the data; the last good checkpoint is kept")
+        opt.zero_grad(set_to_none=True)
+        loss.backward()
+        torch.nn.utils.clip_grad_norm_(net.parameters(), 1e4)
+        opt.step()
+        for k, v in stats.items():
+            sums[k] = sums.get(k, 0.0) + v
+        n_batches += 1
+    return {k: v / max(n_batches, 1) for k, v in sums.items()}
+
+
+@torch.no_grad()
+def evaluate_split(model: SuperMagCVAE, pairs: TensorPairs, spec: InputSpec, *, batch: int = 128
+                   ) -> dict[str, float]:
+    """Prior-mean reconstruction of a split: MSE (mm^2) and mean PSNR (dB, data range 2 mm)."""
+    model.eval()
+    se, psnrs = [], []
+    for b in range(0, len(pairs), batch):
+        field_ut = pairs.field[b:b + batch]
+        image = pairs.depth_q[b:b + batch].float() * pairs.depth_scale_mm
+        eps = torch.zeros(len(field_ut), 1, model.cfg.latent)
+        mean, _ = model.generate(spec.scale(field_ut), eps)
+        mse = ((mean - image) ** 2).flatten(1).mean(1)
+        se.append(mse)
+        psnrs.append(10 * torch.log10(DEPTH_RANGE_MM**2 / mse.clamp_min(1e-12)))
+    return {"mse": float(torch.cat(se).mean()), "psnr": float(torch.cat(psnrs).mean())}
+
+
+def _save_checkpoint(path: Path, model, opt, mcfg: CVAEConfig, cfg: TrainConfig, spec: InputSpec,
+                     data: PairedDataset, state: dict) -> None:
+    payload = {"model": model.state_dict(), "optimizer": opt.state_dict(), "model_config": to_dict(mcfg),
+               "train_config": to_dict(cfg), "input": to_dict(spec), "data_fingerprint": data.fingerprint(),
+               "state": state}
+    tmp = path.with_name(path.name + ".partial")
+    torch.save(payload, tmp)
+    tmp.replace(path)
+
+
+def _load_checkpoint(path: Path, model, opt, mcfg: CVAEConfig) -> dict:
+    if not path.is_file():
+        raise TrainingError(f"--resume: no checkpoint at {path}")
+    payload = torch.load(path, map_location="cpu", weights_only=True)
+    if payload["model_config"] != to_dict(mcfg):
+        raise TrainingError(f"{path} was trained with another architecture or dataset shape; "
+                            "start a new output folder")
+    model.load_state_dict(payload["model"])
+    opt.load_state_dict(payload["optimizer"])
+    return payload["state"]
+
+
+def _write_history(out: Path, cfg: TrainConfig, mcfg: CVAEConfig, model, data: PairedDataset, state: dict,
+                   dist: _Dist) -> None:
+    summary = {"train_config": to_dict(cfg), "model_config": to_dict(mcfg),
+               "parameters": count_parameters(model),
+               "inference_parameters": count_parameters(model, inference_only=True),
+               "data_fingerprint": data.fingerprint(), "world_size": dist.world,
+               "threads": torch.get_num_threads(), "best_val_psnr": state["best_psnr"],
+               "best_epoch": state["best_epoch"], "epochs_run": state["epoch"],
+               "train_seconds": round(state["seconds"], 1), "history": state["history"]}
+    (out / "history.json").write_text(json.dumps(summary, indent=1))
+    _plot_losses(out / "loss.png", state["history"])
+
+
+def _plot_losses(path: Path, history: list[dict]) -> None:
+    from tactile_manip.plots import _pyplot
+
+    plt = _pyplot()
+    epochs = [r["epoch"] for r in history]
+    fig, (a, b) = plt.subplots(1, 2, figsize=(10, 3.6), constrained_layout=True)
+    a.plot(epochs, [r["loss"] for r in history], label="train -ELBO")
+    a.set_xlabel("epoch")
+    a.set_ylabel("negative ELBO per image")
+    a.set_yscale("symlog")
+    a.legend()
+    b.plot(epochs, [r["val_psnr"] for r in history], color="C1", label="validation PSNR (prior mean)")
+    b.set_xlabel("epoch")
+    b.set_ylabel("PSNR [dB], range 2 mm")
+    b.legend()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
+def with_overrides(cfg: TrainConfig, **changes: Any) -> TrainConfig:
+    """``cfg`` with the non-None ``changes`` applied (CLI flags)."""
+    return dataclasses.replace(cfg, **{k: v for k, v in changes.items() if v is not None})

@@ -1,0 +1,1 @@
+"""Perception: reconstructors (ONNX model and interpolation baselines), image metrics, and pose."""

@@ -1,0 +1,71 @@
+"""From a depth image to the in-plane angle of the contact: outlier removal, Gaussian filter, PCA.
+
+Pure functions over (H, W) depth images in mm (pixel (0, 0) at the pad's (-x, +y) corner). The angle is
+the principal axis of the depth-weighted second moments of the contact, counter-clockwise from +x and
+wrapped to (-pi/2, pi/2]; its confidence is ``1 - lambda_minor / lambda_major``. Empty, tiny or isotropic
+contacts give ``defined=False`` with a reason, never NaN.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy import ndimage
+
+from tactile_manip.types import AngleEstimate
+
+DEFAULT_THRESHOLD_MM = 0.1     # pixels shallower than this are not contact
+DEFAULT_SIGMA_MM = 0.3         # Gaussian filter before PCA
+MIN_CONTACT_PX = 20            # fewer contact pixels: angle undefined
+ISOTROPY_LIMIT = 0.9           # minor/major eigenvalue ratio above this: angle undefined
+
+
+def wrap_axial(angle_rad: float | np.ndarray) -> float | np.ndarray:
+    """Wrap an axial angle (period pi) to (-pi/2, pi/2]."""
+    wrapped = -np.mod(-np.asarray(angle_rad, dtype=np.float64) + np.pi / 2, np.pi) + np.pi / 2
+    return float(wrapped) if np.ndim(angle_rad) == 0 else wrapped
+
+
+def remove_outliers(depth_mm: np.ndarray, *, threshold_mm: float = DEFAULT_THRESHOLD_MM,
+                    min_fraction: float = 0.1) -> np.ndarray:
+    """Zero the connected contact regions smaller than ``min_fraction`` of the largest (speckle, ghosts)."""
+    d = np.nan_to_num(np.asarray(depth_mm, dtype=np.float64), nan=0.0, posinf=0.0, neginf=0.0)
+    labels, n = ndimage.label(d > threshold_mm)
+    if n <= 1:
+        return np.clip(d, 0.0, None)
+    sizes = ndimage.sum_labels(np.ones_like(d), labels, index=np.arange(1, n + 1))
+    keep = np.concatenate([[False], sizes >= min_fraction * sizes.max()])
+    return np.where(keep[labels], np.clip(d, 0.0, None), 0.0)
+
+
+def angle_from_image(depth_mm: np.ndarray, *, pixel_mm: float = 0.1, threshold_mm: float = DEFAULT_THRESHOLD_MM,
+                     sigma_mm: float = DEFAULT_SIGMA_MM) -> AngleEstimate:
+    """Principal in-plane angle of the contact in a depth image (H, W), mm."""
+    d = remove_outliers(depth_mm, threshold_mm=threshold_mm)
+    if sigma_mm > 0:
+        d = ndimage.gaussian_filter(d, sigma_mm / pixel_mm, mode="constant")
+    weights = np.where(d > threshold_mm, d - threshold_mm, 0.0)
+    n_px = int(np.count_nonzero(weights))
+    area = n_px * pixel_mm**2
+    if n_px < MIN_CONTACT_PX:
+        reason = "empty contact" if n_px == 0 else f"contact too small ({n_px} px < {MIN_CONTACT_PX})"
+        return AngleEstimate(0.0, 0.0, False, area_mm2=area, reason=reason)
+    h, w = d.shape
+    x = (np.arange(w) - (w - 1) / 2) * pixel_mm
+    y = -(np.arange(h) - (h - 1) / 2) * pixel_mm
+    total = weights.sum()
+    cx = float((weights.sum(0) * x).sum() / total)
+    cy = float((weights.sum(1) * y).sum() / total)
+    dx, dy = x[None, :] - cx, y[:, None] - cy
+    sxx = float((weights * dx * dx).sum() / total)
+    syy = float((weights * dy * dy).sum() / total)
+    sxy = float((weights * dx * dy).sum() / total)
+    half_diff = 0.5 * (sxx - syy)
+    radius = math.hypot(half_diff, sxy)
+    major, minor = 0.5 * (sxx + syy) + radius, 0.5 * (sxx + syy) - radius
+    ratio = minor / major if major > 0 else 1.0
+    if ratio > ISOTROPY_LIMIT:
+        return AngleEstimate(0.0, 0.0, False, (cx, cy), area, f"isotropic contact (eigenvalue ratio {ratio:.2f})")
+    angle = wrap_axial(0.5 * math.atan2(2.0 * sxy, sxx - syy))
+    return AngleEstimate(angle, float(np.clip(1.0 - ratio, 0.0, 1.0)), True, (cx, cy), area)
