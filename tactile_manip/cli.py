@@ -22,6 +22,13 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "simulate": ("tactile_manip.commands.simulate", "generate a paired dataset from a config"),
     "show": ("tactile_manip.commands.show", "render a sample (depth image and 4x4x3 field) to PNG"),
     "params": ("tactile_manip.commands.params", "list every simulator parameter with source and range"),
+    "train": ("tactile_manip.commands.train", "train a SuperMag CVAE on a paired dataset"),
+    "export": ("tactile_manip.commands.export", "export a trained checkpoint to ONNX with its metadata"),
+    "evaluate": ("tactile_manip.commands.evaluate", "reproduce SuperMag's Table I on the unseen test objects"),
+    "emulate": ("tactile_manip.commands.emulate", "emulate the sensor board's firmware on a pseudo-terminal"),
+    "record": ("tactile_manip.commands.record", "record a sensor's frames and health to a crash-safe file"),
+    "find-port": ("tactile_manip.commands.find_port", "list serial ports that may be the sensor board"),
+    "view": ("tactile_manip.commands.view", "show the 4x4x3 field of a sensor live (or save a snapshot)"),
 }
 
 

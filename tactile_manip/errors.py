@@ -25,3 +25,27 @@ class MeshError(TactileManipError, ValueError):
 
 class DatasetError(TactileManipError, ValueError):
     """A dataset file is missing, malformed, or from an incompatible format version."""
+
+
+class SensorError(TactileManipError):
+    """A tactile sensor (serial, simulated or replayed) cannot deliver what was asked."""
+
+
+class SensorTimeoutError(SensorError, TimeoutError):
+    """No frame, or no fresh enough frame, arrived in time; the message names the source and what to check."""
+
+
+class SensorDisconnectedError(SensorError, ConnectionError):
+    """The sensor is not connected (call ``connect()``), or its port could not be opened."""
+
+
+class CalibrationError(SensorError, ValueError):
+    """A baseline was refused (for example noise too high: something touched the pad while it was taken)."""
+
+
+class ProtocolError(SensorError, ValueError):
+    """Bytes or values that do not fit the MBTS wire protocol (DESIGN.md section 6)."""
+
+
+class RecordingError(SensorError, ValueError):
+    """A sensor recording file is missing, is not a recording, or is from an incompatible format version."""

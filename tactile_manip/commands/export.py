@@ -17,6 +17,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                                                  "pixel size and provenance")
     p.add_argument("--metrics", default=None, help="results.json of `tactile-manip evaluate` to store inside")
     p.add_argument("--pixel-mm", type=float, default=None, help="output pixel size (default: from --data or 0.1)")
+    p.add_argument("--card", default=None, help="also write a model card (markdown) here")
+    p.add_argument("--history", default=None, help="the run's history.json, for the model card")
+    p.add_argument("--table", default=None, help="table.md of `tactile-manip evaluate`, for the model card")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -39,4 +42,36 @@ def run(args: argparse.Namespace) -> int:
                        check_readings=readings)
     print(f"wrote {args.out}: {meta['parameters']:,} inference parameters, preset {meta['preset']}, "
           f"ONNX vs torch max |diff| {meta['parity_max_abs_mm']:.2e} mm")
+    if args.card:
+        from pathlib import Path
+
+        from tactile_manip.learning.card import write_model_card
+
+        history = args.history or str(Path(args.checkpoint).with_name("history.json"))
+        table = Path(args.table).read_text() if args.table else ""
+        write_model_card(args.card, meta, history, table_md=table, machine=_cpu_name(),
+                         commands=_commands(args))
+        print(f"wrote {args.card}")
     return 0
+
+
+def _cpu_name() -> str:
+    import os
+    from pathlib import Path
+
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return f"{line.split(':', 1)[1].strip()} ({os.cpu_count()} cores)"
+    except OSError:
+        pass
+    return f"{os.cpu_count()} cores"
+
+
+def _commands(args: argparse.Namespace) -> list[str]:
+    from pathlib import Path
+
+    run = Path(args.checkpoint).parent
+    return ["tactile-manip simulate --config configs/dataset/supermag.toml --out data/supermag.npz",
+            f"tactile-manip train --config configs/train/{run.name}.toml --data data/supermag.npz --out {run}",
+            f"tactile-manip export --checkpoint {args.checkpoint} --out {args.out} --data data/supermag.npz"]

@@ -154,7 +154,8 @@ def _train(cfg: TrainConfig, data_path: Path, out: Path, resume: bool, progress,
         sampler_gen.manual_seed(cfg.seed * 100_003 + epoch)  # same batches for any world size and on resume
         for group in opt.param_groups:
             group["lr"] = schedule(epoch)
-        train_stats = _train_epoch(net, opt, train_set, cfg, spec, dist, sampler_gen)
+        deadline = start + 60 * cfg.max_minutes if cfg.max_minutes else math.inf
+        train_stats = _train_epoch(net, opt, train_set, cfg, spec, dist, sampler_gen, deadline)
         val = evaluate_split(model, val_set, spec)
         state["seconds"] = time.perf_counter() - start
         row = {"epoch": epoch, "lr": schedule(epoch), **train_stats, **{f"val_{k}": v for k, v in val.items()},
@@ -190,14 +191,18 @@ def _schedule(cfg: TrainConfig) -> Callable[[int], float]:
 
 
 def _train_epoch(net, opt, train_set: TensorPairs, cfg: TrainConfig, spec: InputSpec, dist: _Dist,
-                 gen: torch.Generator) -> dict[str, float]:
+                 gen: torch.Generator, deadline: float = math.inf) -> dict[str, float]:
+    """One pass over the training set; stops early (a partial epoch) when ``deadline`` (perf_counter) passes."""
     net.train()
     net_cfg = (net.module if hasattr(net, "module") else net).cfg
     order = torch.randperm(len(train_set), generator=gen)
     per_rank = cfg.batch_size // dist.world
     sums: dict[str, float] = {}
     n_batches = 0
-    for b in range(0, len(order) - cfg.batch_size + 1, cfg.batch_size):
+    starts = range(0, len(order) - cfg.batch_size + 1, cfg.batch_size)
+    for b in starts:
+        if time.perf_counter() > deadline:
+            break
         batch = order[b:b + cfg.batch_size][dist.rank * per_rank:(dist.rank + 1) * per_rank]
         field_ut = train_set.field[batch]
         image = train_set.depth_q[batch].float() * train_set.depth_scale_mm
@@ -221,7 +226,10 @@ def _train_epoch(net, opt, train_set: TensorPairs, cfg: TrainConfig, spec: Input
         for k, v in stats.items():
             sums[k] = sums.get(k, 0.0) + v
         n_batches += 1
-    return {k: v / max(n_batches, 1) for k, v in sums.items()}
+    stats = {k: v / max(n_batches, 1) for k, v in sums.items()}
+    stats["batches"] = n_batches
+    stats["epoch_fraction"] = n_batches / max(len(starts), 1)
+    return stats
 
 
 @torch.no_grad()

@@ -30,12 +30,13 @@ def wrap_axial(angle_rad: float | np.ndarray) -> float | np.ndarray:
 def remove_outliers(depth_mm: np.ndarray, *, threshold_mm: float = DEFAULT_THRESHOLD_MM,
                     min_fraction: float = 0.1) -> np.ndarray:
     """Zero the connected contact regions smaller than ``min_fraction`` of the largest (speckle, ghosts)."""
-    d = np.nan_to_num(np.asarray(depth_mm, dtype=np.float64), nan=0.0, posinf=0.0, neginf=0.0)
+    # NaN/inf pixels are not contact; depths are capped far above any real indentation so sums cannot overflow
+    d = np.nan_to_num(np.asarray(depth_mm, dtype=np.float64), nan=0.0, posinf=0.0, neginf=0.0).clip(None, 1e6)
     labels, n = ndimage.label(d > threshold_mm)
     if n <= 1:
         return np.clip(d, 0.0, None)
     sizes = ndimage.sum_labels(np.ones_like(d), labels, index=np.arange(1, n + 1))
-    keep = np.concatenate([[False], sizes >= min_fraction * sizes.max()])
+    keep = np.concatenate([[True], sizes >= min_fraction * sizes.max()])  # label 0 (below threshold) stays
     return np.where(keep[labels], np.clip(d, 0.0, None), 0.0)
 
 
@@ -43,13 +44,14 @@ def angle_from_image(depth_mm: np.ndarray, *, pixel_mm: float = 0.1, threshold_m
                      sigma_mm: float = DEFAULT_SIGMA_MM) -> AngleEstimate:
     """Principal in-plane angle of the contact in a depth image (H, W), mm."""
     d = remove_outliers(depth_mm, threshold_mm=threshold_mm)
+    raw_px = int(np.count_nonzero(d > threshold_mm))
     if sigma_mm > 0:
         d = ndimage.gaussian_filter(d, sigma_mm / pixel_mm, mode="constant")
     weights = np.where(d > threshold_mm, d - threshold_mm, 0.0)
     n_px = int(np.count_nonzero(weights))
     area = n_px * pixel_mm**2
     if n_px < MIN_CONTACT_PX:
-        reason = "empty contact" if n_px == 0 else f"contact too small ({n_px} px < {MIN_CONTACT_PX})"
+        reason = "empty contact" if raw_px == 0 else f"contact too small ({n_px} px < {MIN_CONTACT_PX})"
         return AngleEstimate(0.0, 0.0, False, area_mm2=area, reason=reason)
     h, w = d.shape
     x = (np.arange(w) - (w - 1) / 2) * pixel_mm

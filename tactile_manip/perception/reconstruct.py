@@ -57,7 +57,10 @@ class Reconstructor(abc.ABC):
 
     def reconstruct_batch(self, fields_ut: np.ndarray) -> np.ndarray:
         """(N, R, C, 3) readings -> (N, H, W) float32 depth images."""
-        return self._run(self._check(fields_ut, batch=True))[0]
+        fields = self._check(fields_ut, batch=True)
+        if len(fields) == 0:
+            return np.empty((0, *self.output_shape), np.float32)
+        return self._run(fields)[0]
 
     def _check(self, field_ut: np.ndarray, *, batch: bool = False) -> np.ndarray:
         f = np.asarray(field_ut, dtype=np.float32)
@@ -140,6 +143,8 @@ def read_metadata(path: str | Path) -> dict[str, Any]:
         return _metadata_via_ort(path)
     except Exception as e:  # onnx raises DecodeError and friends
         raise ModelFileError(f"{path}: not a readable ONNX file ({type(e).__name__}: {e})") from e
+    if len(proto.graph.node) == 0:
+        raise ModelFileError(f"{path}: not a readable ONNX file (empty, or no graph)")
     props = {p.key: p.value for p in proto.metadata_props}
     return _parse_metadata(path, props.get(METADATA_KEY))
 

@@ -5,6 +5,8 @@ import subprocess
 import sys
 
 import pytest
+
+pytest.importorskip("torch", reason="training tests need torch: pip install torch==2.13.0")
 import torch
 
 from tactile_manip.learning.export import load_checkpoint

@@ -4,6 +4,8 @@ import json
 
 import numpy as np
 import pytest
+
+pytest.importorskip("torch", reason="training tests need torch: pip install torch==2.13.0")
 import torch
 
 from tactile_manip.learning.export import export_onnx, load_checkpoint

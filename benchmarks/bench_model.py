@@ -1,0 +1,116 @@
+"""Latency of the reconstruction models on onnxruntime: one reading, p50/p99, and batch throughput.
+
+    python -m benchmarks.bench_model                      # the shipped model and the paper preset
+    python -m benchmarks.bench_model --model NAME=PATH.onnx --repeats 2000
+
+Without a trained paper-preset file the harness exports an untrained one (latency does not depend on the
+weights). Prints a markdown table and writes benchmarks/results/model.json. It measures; it asserts nothing.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from benchmarks.bench_sim import machine_info
+from tactile_manip.perception.reconstruct import OnnxReconstructor, read_metadata
+
+SHIPPED = Path("models/supermag_compact.onnx")
+PAPER_RUN = Path("runs/paper/best.pt")
+PERIOD_MS = 8.0  # the sensor's 125 Hz frame period
+
+
+def _untrained(preset: str, folder: Path) -> Path:
+    """Export a randomly initialised model of ``preset`` (for timing only)."""
+    import torch
+
+    from tactile_manip.learning.data import InputSpec
+    from tactile_manip.learning.export import export_onnx
+    from tactile_manip.learning.model import SuperMagCVAE
+    from tactile_manip.learning.model import preset as make_preset
+
+    model = SuperMagCVAE(make_preset(preset))
+    ckpt = folder / f"{preset}.pt"
+    torch.save({"model": model.state_dict(), "model_config": _plain(model.cfg), "input": {"clamp_ut": 500.0,
+                "axes": "xyz"}, "train_config": {"preset": preset}, "data_fingerprint": "untrained"}, ckpt)
+    out = folder / f"{preset}.onnx"
+    export_onnx(ckpt, out, pixel_mm=0.1)
+    return out
+
+
+def _plain(cfg) -> dict[str, Any]:
+    from tactile_manip.config import to_dict
+
+    return to_dict(cfg)
+
+
+def time_model(path: Path, *, threads: int, repeats: int, batch: int) -> dict[str, Any]:
+    rec = OnnxReconstructor(path, threads=threads)
+    rng = np.random.default_rng(0)
+    readings = rng.normal(0, 150, (repeats,) + rec.input_shape).astype(np.float32)
+    for r in readings[:20]:
+        rec.reconstruct(r)
+    ms = []
+    for r in readings:
+        t0 = time.perf_counter()
+        rec.reconstruct(r)
+        ms.append((time.perf_counter() - t0) * 1e3)
+    block = readings[:batch]
+    t0 = time.perf_counter()
+    rounds = max(1, 200 // batch)
+    for _ in range(rounds):
+        rec.reconstruct_batch(block)
+    per_reading = (time.perf_counter() - t0) * 1e3 / (rounds * batch)
+    meta = read_metadata(path)
+    return {"model": str(path), "preset": meta.get("preset"), "parameters": meta.get("parameters"),
+            "file_mb": round(path.stat().st_size / 1e6, 2), "threads": threads,
+            "p50_ms": float(np.percentile(ms, 50)), "p99_ms": float(np.percentile(ms, 99)),
+            "batch": batch, "batch_ms_per_reading": per_reading}
+
+
+def markdown(report: dict[str, Any]) -> str:
+    m = report["machine"]
+    lines = [f"Machine: {m.get('cpu', '?')}, {m.get('cores', '?')} cores, onnxruntime {report['onnxruntime']}",
+             "", "| model | preset | parameters | file MB | threads | p50 ms | p99 ms | batch-64 ms/reading | "
+             "p99 within 8 ms period |", "|---|---|---|---|---|---|---|---|---|"]
+    for r in report["results"]:
+        lines.append(f"| {r['label']} | {r['preset']} | {r['parameters']:,} | {r['file_mb']} | {r['threads']} | "
+                     f"{r['p50_ms']:.2f} | {r['p99_ms']:.2f} | {r['batch_ms_per_reading']:.2f} | "
+                     f"{'yes' if r['p99_ms'] < PERIOD_MS else 'no'} |")
+    return "\n".join(lines) + "\n"
+
+
+def main(argv: list[str] | None = None) -> int:
+    import onnxruntime
+
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--model", action="append", default=[], metavar="LABEL=PATH")
+    p.add_argument("--repeats", type=int, default=1000)
+    p.add_argument("--threads", type=int, nargs="+", default=[1, os.cpu_count() or 1])
+    p.add_argument("--out", default="benchmarks/results/model.json")
+    args = p.parse_args(argv)
+    with tempfile.TemporaryDirectory() as tmp:
+        models = [tuple(s.split("=", 1)) for s in args.model]
+        if not models:
+            models = [("shipped compact", str(SHIPPED))]
+            paper = PAPER_RUN.with_suffix(".onnx") if PAPER_RUN.with_suffix(".onnx").exists() else None
+            models.append(("paper preset", str(paper or _untrained("paper", Path(tmp)))))
+        results = [{"label": label, **time_model(Path(path), threads=t, repeats=args.repeats, batch=64)}
+                   for label, path in models for t in dict.fromkeys(args.threads)]
+    report = {"machine": machine_info(), "onnxruntime": onnxruntime.__version__, "results": results}
+    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+    Path(args.out).write_text(json.dumps(report, indent=1))
+    print(markdown(report), end="")
+    print(f"wrote {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,29 @@
+"""``tactile-manip find-port``: list the serial ports that may be the sensor board."""
+
+from __future__ import annotations
+
+import argparse
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--all", action="store_true", help="also list ports without USB ids (built-in UARTs, ...)")
+
+
+def run(args: argparse.Namespace) -> int:
+    import sys
+
+    from tactile_manip.sensors.ports import list_ports
+
+    ports = list_ports(include_all=args.all)
+    if not ports:
+        print("find-port: no USB serial port found. Is the board plugged in with a data cable? On Linux, is your "
+              "user in the 'dialout' group? (`--all` lists every port; the emulator prints its own path)",
+              file=sys.stderr)
+        return 1
+    print(f"{'port':<24}{'likely':<8}description")
+    for p in ports:
+        print(f"{p.device:<24}{'yes' if p.likely else '':<8}{p.description}"
+              + (f"  [{p.bridge}]" if p.bridge else "") + (f"  {p.hwid}" if p.hwid and p.hwid != "n/a" else ""))
+    print("\nopen one with e.g. `tactile-manip view --port PORT`; ESP32 boards usually show a CP210x, CH340/CH9102 "
+          "or Espressif USB bridge")
+    return 0

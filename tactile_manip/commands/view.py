@@ -1,0 +1,149 @@
+"""``tactile-manip view``: the 4x4x3 field of a sensor, live (z as a heat map, x-y as arrows).
+
+``--port`` reads the board (or the emulator), ``--sim`` the simulated sensor pressing an object again and
+again, ``--replay`` a recording. ``--snapshot out.png --seconds N`` runs headless for N seconds and saves the
+last frame, so the view works (and is tested) without a display.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import time
+
+DEFAULT_SIM_PRESS = "letter_r,t=0.3,force=10,yaw=20,rise=0.4,hold=0.6"
+RANGE_FLOOR_UT = 20.0  # the colour and arrow scales never zoom in below this, so idle noise looks like noise
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    src = p.add_mutually_exclusive_group(required=True)
+    src.add_argument("--port", help="serial port of the board (or the emulator's path)")
+    src.add_argument("--sim", action="store_true", help="the simulated sensor, pressing --press in a loop")
+    src.add_argument("--replay", metavar="FILE", help="a recording from `tactile-manip record`")
+    p.add_argument("--press", action="append", default=[], metavar="SPEC",
+                   help=f"with --sim: scripted press (repeatable; default {DEFAULT_SIM_PRESS!r})")
+    p.add_argument("--baud", type=int, default=921600, help="baud rate (default 921600)")
+    p.add_argument("--no-baseline", action="store_true", help="show raw fields (no baseline at start)")
+    p.add_argument("--baseline-frames", type=int, default=125, help="frames averaged for the baseline (125)")
+    p.add_argument("--fps", type=float, default=20.0, help="display refresh rate (default 20)")
+    p.add_argument("--snapshot", metavar="PNG", help="run headless and save the last frame to this PNG")
+    p.add_argument("--seconds", type=float, default=2.0, help="with --snapshot: how long to read first, s")
+
+
+def run(args: argparse.Namespace) -> int:
+    from tactile_manip.sensors import (
+        ReplaySensor,
+        ReplaySensorConfig,
+        SerialSensor,
+        SerialSensorConfig,
+        SimulatedSensor,
+        parse_press,
+    )
+
+    if args.snapshot is None:
+        plt = _interactive_pyplot()  # fail before connecting when there is no display
+    else:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    if args.port:
+        sensor = SerialSensor(SerialSensorConfig(port=args.port, baudrate=args.baud))
+    elif args.replay:
+        sensor = ReplaySensor(ReplaySensorConfig(path=args.replay, loop=True))
+    else:
+        sensor = SimulatedSensor()
+    with sensor:
+        if not args.no_baseline:
+            sensor.calibrate_baseline(args.baseline_frames)
+        if args.sim:
+            presses = [parse_press(s) for s in args.press or [DEFAULT_SIM_PRESS]]
+            sensor.play(presses, period_s=max(p.end_s for p in presses) + 0.5)
+        view = FieldView(plt, sensor)
+        if args.snapshot:
+            return view.snapshot(args.snapshot, seconds=args.seconds)
+        return view.live(fps=args.fps)
+
+
+def _interactive_pyplot():
+    import matplotlib.pyplot as plt
+
+    if plt.get_backend().lower() in ("agg", "pdf", "svg", "ps", "cairo", "template"):
+        raise ValueError(f"no display for a live view (matplotlib backend {plt.get_backend()!r}); "
+                         "use --snapshot out.png --seconds N")
+    return plt
+
+
+class FieldView:
+    """One figure updated in place from a sensor's newest reading (drawn first by ``plots.plot_field``)."""
+
+    def __init__(self, plt, sensor) -> None:
+        import numpy as np
+
+        from tactile_manip.plots import plot_field
+
+        self.plt, self.sensor = plt, sensor
+        self.fig, self.ax = plt.subplots(figsize=(6.4, 5.6), constrained_layout=True)
+        plot_field(self.ax, np.zeros((4, 4, 3)))
+        self.image = self.ax.images[-1]
+        self.arrows = self.ax.collections[-1]
+        self.z_range = self.xy_range = RANGE_FLOOR_UT
+        self.frames = 0
+        self.last = None
+
+    def update(self) -> None:
+        """Redraw from the newest reading, or say in the title why there is none."""
+        import numpy as np
+
+        from tactile_manip.errors import SensorTimeoutError
+
+        try:
+            r = self.sensor.read_latest(max_age_s=0.5)
+        except SensorTimeoutError as e:
+            self.ax.set_title(f"stale: {str(e)[:70]}...", fontsize=8, color="red")
+            return
+        self.last = r
+        f = np.asarray(r.field_ut, dtype=np.float64)
+        # ranges follow the field up at once and relax slowly, so the scale does not flicker
+        self.z_range = max(RANGE_FLOOR_UT, float(np.abs(f[..., 2]).max()), 0.97 * self.z_range)
+        self.xy_range = max(RANGE_FLOOR_UT, float(np.hypot(f[..., 0], f[..., 1]).max()), 0.97 * self.xy_range)
+        self.image.set_data(f[..., 2])
+        self.image.set_clim(-self.z_range, self.z_range)
+        self.arrows.scale = self.xy_range / (0.45 * 5.0)  # the longest arrow spans 0.45 pitch (plot_field's rule)
+        self.arrows.set_UVC(f[..., 0], f[..., 1])
+        h = self.sensor.health()
+        kind = "field" if self.sensor.baseline is not None else "raw field"
+        self.ax.set_title(f"{self.sensor.source}: {kind}, seq {r.seq}, {h.rate_hz:.0f} Hz, "
+                          f"|Bz| <= {np.abs(f[..., 2]).max():.0f} uT, crc {h.crc_errors}, gaps {h.seq_gaps}",
+                          fontsize=9, color="black")
+
+    def snapshot(self, path: str, *, seconds: float) -> int:
+        """Read for ``seconds`` (updating as live), then save the figure; returns the exit status."""
+        from pathlib import Path
+
+        from tactile_manip.errors import SensorTimeoutError
+
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            try:
+                self.sensor.wait_new(timeout_s=0.5)
+                self.frames += 1
+            except SensorTimeoutError:
+                pass
+            if self.frames % 10 == 0:
+                self.update()
+        self.update()
+        Path(path).parent.mkdir(parents=True, exist_ok=True)
+        self.fig.savefig(path, dpi=90)
+        seq = "none" if self.last is None else self.last.seq
+        print(f"wrote {path} (last frame seq {seq}; {self.frames} readings taken in {seconds:g} s)")
+        return 0 if self.last is not None else 1
+
+    def live(self, *, fps: float) -> int:
+        from matplotlib.animation import FuncAnimation
+
+        interval_ms = max(1, int(math.ceil(1000.0 / fps)))
+        self._animation = FuncAnimation(self.fig, lambda _: self.update(), interval=interval_ms,
+                                        cache_frame_data=False)
+        self.plt.show()
+        return 0

@@ -1,0 +1,61 @@
+"""A model card (markdown) for an exported model: what it is, how it was trained, what it scores."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+
+def model_card(meta: dict[str, Any], history: dict[str, Any], *, table_md: str = "", machine: str = "",
+               commands: list[str] | None = None) -> str:
+    """Markdown text of the card from the export metadata, the training history and the evaluation table."""
+    tc, mc = meta["train_config"], meta["model_config"]
+    last = history["history"][-1]
+    data = meta.get("training_data", {})
+    lines = [
+        f"# SuperMag CVAE, `{meta['preset']}` preset",
+        "",
+        "Super-resolves one magnetic reading (4x4 MLX90393, 3 axes, microtesla, baseline-subtracted) into a "
+        f"{mc['image_h']}x{mc['image_w']} depth image ({meta['output']['pixel_mm']} mm/px, mm of indentation). "
+        "Conditional VAE after SuperMag (IROS 2025); only the conditional prior and the decoder are in the "
+        "ONNX file. Load it with `tactile_manip.perception.reconstruct.load_reconstructor(PATH)`.",
+        "",
+        "## Inputs and outputs",
+        f"- `field_ut` (B, {mc['taxel_rows']}, {mc['taxel_cols']}, 3) float32: {meta['input']['layout']}; "
+        f"{meta['input']['units']}; axes used: {meta['input']['axes_used']}; clamped to "
+        f"+-{meta['input']['clamp_ut']} uT and scaled to [-1, 1] inside the graph.",
+        f"- `eps` (B, K, {mc['latent']}) float32: prior samples; zeros with K = 1 give the prior mean.",
+        f"- `depth_mm`, `spread_mm` (B, {mc['image_h']}, {mc['image_w']}) float32: mean and spread over the K "
+        "samples.",
+        "",
+        "## Training",
+        f"- Data: {data.get('pairs', '?')} simulated pairs ({', '.join(data.get('objects', []))}), fingerprint "
+        f"`{meta['data_fingerprint']}`; trained on the `train` split of the objects "
+        f"{tc['objects'] or 'allen_key and letter_r (all trainval objects)'}.",
+        f"- Recipe: AdamW lr {tc['lr']} ({tc['lr_schedule']} to {tc['lr_min']}), weight decay "
+        f"{tc['weight_decay']}, batch {tc['batch_size']}, {tc['epochs']} epochs, negative ELBO with beta-NLL "
+        f"(beta {tc['nll_beta']}) plus the prior-path term (weight {tc['prior_weight']}), symmetry augmentation "
+        f"{'on' if tc['augment'] else 'off'}, seed {tc['seed']}.",
+        f"- Architecture: {meta['parameters']:,} inference parameters; latent {mc['latent']}; decoder channels "
+        f"{mc['channels']}; full config in the file's metadata.",
+        f"- Ran {history['epochs_run']} epochs in {history['train_seconds'] / 60:.1f} min with "
+        f"{history['threads']} torch threads{(' on ' + machine) if machine else ''}; best validation PSNR "
+        f"{history['best_val_psnr']:.2f} dB at epoch {history['best_epoch']} (last epoch: "
+        f"{last['val_psnr']:.2f} dB).",
+        "",
+    ]
+    if table_md:
+        lines += ["## Table I on unseen objects (test split, PSNR/SSIM data range 2 mm)", "", table_md.strip(), ""]
+    if commands:
+        lines += ["## Reproduce", "", "```bash", *commands, "```", ""]
+    lines += ["## Limits", "",
+              "Trained on simulated data of one default sensor pair (see docs/simulator.md). A real sensor needs "
+              "its own paired data: record it with `tactile-manip collect` and train with the same commands.", ""]
+    return "\n".join(lines)
+
+
+def write_model_card(path: str | Path, meta: dict[str, Any], history_path: str | Path, **kwargs: Any) -> Path:
+    history = json.loads(Path(history_path).read_text())
+    Path(path).write_text(model_card(meta, history, **kwargs))
+    return Path(path)

@@ -1,0 +1,305 @@
+"""Sensor recordings: an append-only file that survives a crash, its reader, and a recorder loop.
+
+Layout (version 1)::
+
+    line 1   b"tactile_manip recording\\n"
+    line 2   one JSON object + b"\\n": format version, source, chip LSBs, protocol version, code version, ...
+    records  tag (2 bytes) | payload length u16 | t_host_s f64 | payload | crc32 u32, little-endian;
+             the CRC-32 (zlib) covers tag, length, time and payload.
+
+Tags: ``FR`` a wire frame exactly as received (sync to CRC-16: seq, device time, status, raw counts,
+temperatures), ``HL`` a JSON health snapshot, ``EV`` a JSON event. ``t_host_s`` is the recording host's
+``time.monotonic()`` when the frame became available. The writer flushes and ``fsync``s every
+``sync_every_s`` (0.5 s by default), so a killed recorder leaves every frame up to that long before the kill;
+the reader stops at the first incomplete or damaged record (the torn tail of a crash) and reports its size.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import os
+import struct
+import threading
+import time
+import zlib
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from tactile_manip.errors import ProtocolError, RecordingError, SensorTimeoutError
+from tactile_manip.sensors.protocol import (
+    TEMPERATURE_LSB_C,
+    VERSION,
+    CountScale,
+    Unwrapper,
+    decode_frame,
+    encode_frame,
+)
+from tactile_manip.version import code_version
+
+if TYPE_CHECKING:
+    from tactile_manip.sensors.base import SensorFrame, SensorHealth, TactileSensor
+
+MAGIC = b"tactile_manip recording\n"
+FORMAT_VERSION = 1
+RECORD = struct.Struct("<2sHd")
+CRC32 = struct.Struct("<I")
+TAG_FRAME, TAG_HEALTH, TAG_EVENT = b"FR", b"HL", b"EV"
+
+
+class RecordingWriter:
+    """Append records to a new recording file (see the module docstring for the layout).
+
+    Args:
+        path: file to create (an existing file is replaced).
+        header: JSON-serialisable metadata; ``chip`` must hold ``lsb_xy_ut``, ``lsb_z_ut``, ``saturation_counts``.
+        sync_every_s: flush and fsync at least this often when records keep coming, s.
+    """
+
+    def __init__(self, path: str | Path, header: dict[str, Any], *, sync_every_s: float = 0.5) -> None:
+        self.path = Path(path)
+        self.sync_every_s = sync_every_s
+        head = {"format": "tactile_manip.recording", "format_version": FORMAT_VERSION,
+                "protocol_version": VERSION, "code_version": code_version(),
+                "created_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()), **header}
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._file = open(self.path, "wb")  # noqa: SIM115 - closed in close()
+        self._file.write(MAGIC + json.dumps(head).encode() + b"\n")
+        self.frames = 0
+        self.sync()
+
+    def write_frame(self, t_host_s: float, wire: bytes) -> None:
+        self._write(TAG_FRAME, t_host_s, wire)
+        self.frames += 1
+
+    def write_health(self, t_host_s: float, health: dict[str, Any]) -> None:
+        self._write(TAG_HEALTH, t_host_s, json.dumps(health, default=_json_default).encode())
+
+    def write_event(self, t_host_s: float, event: dict[str, Any]) -> None:
+        self._write(TAG_EVENT, t_host_s, json.dumps(event, default=_json_default).encode())
+
+    def sync(self) -> None:
+        """Push everything written so far to the disk."""
+        self._file.flush()
+        os.fsync(self._file.fileno())
+        self._last_sync = time.monotonic()
+
+    def maybe_sync(self) -> None:
+        if time.monotonic() - self._last_sync >= self.sync_every_s:
+            self.sync()
+
+    def close(self) -> None:
+        if not self._file.closed:
+            self.sync()
+            self._file.close()
+
+    def __enter__(self) -> RecordingWriter:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def _write(self, tag: bytes, t_host_s: float, payload: bytes) -> None:
+        head = RECORD.pack(tag, len(payload), t_host_s)
+        self._file.write(head + payload + CRC32.pack(zlib.crc32(payload, zlib.crc32(head))))
+
+
+def _json_default(obj: Any) -> Any:
+    if isinstance(obj, np.generic):
+        return obj.item()
+    raise TypeError(f"{type(obj).__name__} is not JSON serialisable")
+
+
+@dataclass(frozen=True, eq=False)
+class Recording:
+    """A recording read back. Arrays have one entry per frame, in file order.
+
+    Attributes:
+        path: the file.
+        header: the JSON header (source, chip, versions, ...).
+        t_host_s: (N,) host monotonic time of each frame, s.
+        seq: (N,) int64 frame counter, unwrapped.
+        t_device_s: (N,) device clock, unwrapped, s.
+        status: (N,) uint16 device status bits.
+        counts: (N, 4, 4, 3) int16 raw counts.
+        temperature_c: (N, 4, 4) float32 chip temperatures (NaN where a frame had none), or None.
+        health: health snapshots, each a dict with its ``t_host_s``.
+        events: events, each a dict with its ``t_host_s``.
+        truncated_bytes: bytes after the last complete record (a crash's torn tail), 0 for a clean file.
+    """
+
+    path: Path
+    header: dict[str, Any]
+    t_host_s: np.ndarray
+    seq: np.ndarray
+    t_device_s: np.ndarray
+    status: np.ndarray
+    counts: np.ndarray
+    temperature_c: np.ndarray | None
+    health: list[dict[str, Any]] = field(default_factory=list)
+    events: list[dict[str, Any]] = field(default_factory=list)
+    truncated_bytes: int = 0
+
+    def __len__(self) -> int:
+        return len(self.seq)
+
+    @property
+    def scale(self) -> CountScale:
+        chip = self.header["chip"]
+        return CountScale(chip["lsb_xy_ut"], chip["lsb_z_ut"], chip.get("saturation_counts", 32767))
+
+    def field_raw_ut(self) -> np.ndarray:
+        """(N, 4, 4, 3) float32 raw fields in uT (counts times the recorded LSBs)."""
+        return self.scale.to_ut(self.counts)
+
+
+def read_recording(path: str | Path) -> Recording:
+    """Read a recording, tolerating a torn last record (see ``Recording.truncated_bytes``).
+
+    Raises:
+        RecordingError: missing file, not a recording, or a newer format version.
+    """
+    path = Path(path)
+    try:
+        data = path.read_bytes()
+    except FileNotFoundError as e:
+        raise RecordingError(f"recording not found: {path}") from e
+    header, pos = _read_header(data, path)
+    frames, health, events = [], [], []
+    while pos + RECORD.size + CRC32.size <= len(data):
+        tag, length, t_host = RECORD.unpack_from(data, pos)
+        end = pos + RECORD.size + length
+        if end + CRC32.size > len(data):
+            break
+        if zlib.crc32(data[pos:end]) != CRC32.unpack_from(data, end)[0]:
+            break
+        payload = data[pos + RECORD.size:end]
+        if tag == TAG_FRAME:
+            try:
+                frames.append((t_host, decode_frame(payload)))
+            except ProtocolError:
+                break
+        elif tag in (TAG_HEALTH, TAG_EVENT):
+            (health if tag == TAG_HEALTH else events).append({"t_host_s": t_host, **json.loads(payload)})
+        pos = end + CRC32.size
+    return _assemble(path, header, frames, health, events, truncated=len(data) - pos)
+
+
+def _read_header(data: bytes, path: Path) -> tuple[dict[str, Any], int]:
+    if not data.startswith(MAGIC):
+        raise RecordingError(f"{path} is not a tactile_manip recording (it does not start with {MAGIC!r})")
+    end = data.find(b"\n", len(MAGIC))
+    try:
+        header = json.loads(data[len(MAGIC):end]) if end > 0 else None
+    except ValueError:
+        header = None
+    if not isinstance(header, dict):
+        raise RecordingError(f"{path}: the header line is missing or damaged (was the recorder killed at once?)")
+    if header.get("format_version", 0) > FORMAT_VERSION:
+        raise RecordingError(f"{path} has recording format {header['format_version']}; this tactile_manip "
+                             f"reads up to {FORMAT_VERSION}: upgrade tactile_manip")
+    return header, end + 1
+
+
+def _assemble(path: Path, header: dict[str, Any], frames: list, health: list, events: list, *,
+              truncated: int) -> Recording:
+    n = len(frames)
+    seq, clock = Unwrapper(16), Unwrapper(32)
+    counts = np.empty((n, 4, 4, 3), np.int16)
+    temps = np.full((n, 4, 4), np.nan, np.float32) if any(f.temperature_raw is not None for _, f in frames) else None
+    seqs, t_dev = np.empty(n, np.int64), np.empty(n)
+    for i, (_, f) in enumerate(frames):
+        seqs[i] = seq.update(f.seq)[0]
+        t_dev[i] = clock.update(f.t_mcu_us)[0] * 1e-6
+        counts[i] = f.counts
+        if temps is not None and f.temperature_raw is not None:
+            temps[i] = f.temperature_raw * TEMPERATURE_LSB_C
+    return Recording(path=path, header=header, t_host_s=np.array([t for t, _ in frames], np.float64), seq=seqs,
+                     t_device_s=t_dev, status=np.array([f.status for _, f in frames], np.uint16), counts=counts,
+                     temperature_c=temps, health=health, events=events, truncated_bytes=truncated)
+
+
+def recording_header(sensor: TactileSensor, **extra: Any) -> dict[str, Any]:
+    """Header fields describing ``sensor``: source, backend and chip settings."""
+    chip = sensor.chip
+    return {"source": sensor.source, "backend": type(sensor).__name__,
+            "chip": {"lsb_xy_ut": chip.lsb_xy_ut, "lsb_z_ut": chip.lsb_z_ut,
+                     "saturation_counts": chip.saturation_counts, "noise_xy_ut": chip.noise_xy_ut,
+                     "noise_z_ut": chip.noise_z_ut, "rate_hz": chip.rate_hz},
+            "host_clock": "time.monotonic() of the recording host, s", **extra}
+
+
+@dataclass
+class RecordSummary:
+    """What a :meth:`Recorder.run` wrote."""
+
+    frames: int                # frame records written
+    seconds: float             # wall time recorded, s
+    subscriber_overflows: int  # frames lost because the writer fell more than 16384 frames behind
+
+
+class Recorder:
+    """Write every frame of a connected sensor to a recording, plus a health record every ``health_every_s``.
+
+    Frames are taken from a subscription (never from the ring buffer), so none is skipped; backends without
+    wire bytes (simulated, replay) are encoded into wire frames from their raw counts.
+    """
+
+    def __init__(self, sensor: TactileSensor, path: str | Path, *, sync_every_s: float = 0.5,
+                 health_every_s: float = 1.0, metadata: dict[str, Any] | None = None) -> None:
+        self.sensor = sensor
+        self.path = Path(path)
+        self.sync_every_s = sync_every_s
+        self.health_every_s = health_every_s
+        self.metadata = metadata or {}
+        self._scale = CountScale.from_chip(sensor.chip)
+
+    def run(self, *, duration_s: float | None = None, stop: threading.Event | None = None,
+            on_health: Callable[[SensorHealth], None] | None = None) -> RecordSummary:
+        """Record until ``duration_s`` elapsed or ``stop`` is set (or KeyboardInterrupt); returns a summary."""
+        stop = stop or threading.Event()
+        t0 = time.monotonic()
+        next_health = t0 + self.health_every_s
+        with self.sensor.subscribe(max_frames=1 << 14) as sub, \
+                RecordingWriter(self.path, recording_header(self.sensor, **self.metadata),
+                                sync_every_s=self.sync_every_s) as out:
+            try:
+                while not stop.is_set() and (duration_s is None or time.monotonic() - t0 < duration_s):
+                    try:
+                        self._write(out, sub.get(0.1))
+                    except SensorTimeoutError:
+                        pass  # a stalled sensor: keep recording, the health records show it
+                    for item in sub.drain():
+                        self._write(out, item)
+                    now = time.monotonic()
+                    if now >= next_health:
+                        next_health = now + self.health_every_s
+                        self._health(out, now, on_health)
+                    out.maybe_sync()
+            finally:
+                for item in sub.drain():
+                    self._write(out, item)
+                self._health(out, time.monotonic(), None)
+            return RecordSummary(frames=out.frames, seconds=time.monotonic() - t0,
+                                 subscriber_overflows=sub.overflowed)
+
+    def _write(self, out: RecordingWriter, item: SensorFrame) -> None:
+        wire = item.wire
+        if wire is None:
+            r = item.reading
+            temps = None if r.temperature_c is None else np.rint(r.temperature_c / TEMPERATURE_LSB_C).astype(np.int16)
+            t_us = int(round(r.t_device_s * 1e6)) if math.isfinite(r.t_device_s) else 0
+            wire = encode_frame(self._scale.to_counts(r.field_raw_ut), seq=r.seq, t_mcu_us=t_us, status=item.status,
+                                temperature_raw=temps)
+        out.write_frame(item.reading.t_host_s, wire)
+
+    def _health(self, out: RecordingWriter, now: float, on_health: Callable[[SensorHealth], None] | None) -> None:
+        h = self.sensor.health()
+        out.write_health(now, dataclasses.asdict(h))
+        if on_health is not None:
+            on_health(h)

@@ -1,0 +1,218 @@
+"""The serial backend: the real MBTS board (or the firmware emulator's pty) read with pyserial.
+
+A reader thread blocks in ``Serial.read`` with a timeout (no busy loop), feeds the bytes to the protocol
+decoder and publishes each valid frame. The port is opened exclusively with DTR and RTS held low (ESP32
+boards reset, or enter their bootloader, when the host raises them), the first frames after every (re)open
+are dropped, and an error on the port closes it and reopens it with exponential back-off. pyserial is
+imported on ``connect()`` only, so ``import tactile_manip.sensors`` works without it.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from typing import Any
+
+import numpy as np
+
+from tactile_manip.errors import SensorDisconnectedError, SensorTimeoutError
+from tactile_manip.sensors.base import TactileSensor
+from tactile_manip.sensors.config import SerialSensorConfig
+from tactile_manip.sensors.protocol import TEMPERATURE_LSB_C, CountScale, Frame, FrameDecoder, Unwrapper
+
+
+def import_serial() -> Any:
+    """Return the pyserial module, or raise an ImportError naming the extra that installs it."""
+    try:
+        import serial
+    except ImportError as e:
+        raise ImportError('the serial sensor backend needs pyserial: pip install "tactile_manip[serial]"') from e
+    return serial
+
+
+class SerialSensor(TactileSensor):
+    """An MBTS board on a serial port (see :class:`~tactile_manip.sensors.base.TactileSensor` for the contract).
+
+    Several boards work as several instances (one port and one reader thread each); see
+    :class:`~tactile_manip.sensors.array.SensorArray`.
+
+    Args:
+        config: port, baud rate, timeouts, back-off, chip LSBs and baseline settings.
+    """
+
+    def __init__(self, config: SerialSensorConfig) -> None:
+        super().__init__(source=config.port, chip=config.chip, buffer_frames=config.buffer_frames,
+                         baseline=config.baseline)
+        self.config = config
+        self._scale = CountScale.from_chip(config.chip)
+        self._stop = threading.Event()
+        self._port_lock = threading.Lock()
+        self._port: Any = None
+        self._thread: threading.Thread | None = None
+        self._reset_link_counters()
+
+    # ------------------------------------------------------------------ TactileSensor hooks
+
+    def _open(self) -> None:
+        serial = import_serial()
+        self._reset_link_counters()
+        self._stop.clear()
+        self._port = self._open_port(serial)
+        self._begin_session()
+        self._thread = threading.Thread(target=self._run, args=(serial,), daemon=True,
+                                        name=f"tactile-serial {self.config.port}")
+        self._thread.start()
+        with self._cond:
+            if self._cond.wait_for(lambda: self._frames > 0, timeout=self.config.connect_timeout_s):
+                return
+        raise SensorTimeoutError(self._no_frame_message())
+
+    def _close(self) -> None:
+        self._stop.set()
+        with self._port_lock:
+            port = self._port
+        if port is not None:
+            try:
+                port.cancel_read()
+            except Exception:  # noqa: BLE001 - best effort: the join below has a timeout anyway
+                pass
+        if self._thread is not None:
+            self._thread.join(timeout=2.0)
+            self._thread = None
+        self._close_port()
+
+    def _link_health(self) -> dict[str, Any]:
+        st = self._decoder.stats
+        return {"link_up": self._connected and self._port is not None, "crc_errors": st.crc_errors,
+                "version_errors": st.version_errors, "resync_bytes": st.resync_bytes,
+                "dropped_at_start": self._dropped, "reconnects": self._reconnects, "reader_cpu_s": self._cpu_s,
+                "last_error": self._last_error}
+
+    def _stale_hint(self) -> str:
+        hint = "is the board powered and streaming? run `tactile-manip find-port`"
+        if self._connected and self._port is None:
+            hint += f"; the port is closed and being reopened ({self._failed_reopens} failed attempts so far)"
+        return hint
+
+    # ------------------------------------------------------------------ the reader thread
+
+    def _run(self, serial: Any) -> None:
+        cfg = self.config
+        cpu0 = time.thread_time()
+        backoff = cfg.reconnect_min_s
+        while not self._stop.is_set():
+            try:
+                port = self._port
+                if port is None:
+                    if not cfg.reconnect or self._stop.wait(backoff):
+                        break
+                    if self._reopen(serial):
+                        backoff = cfg.reconnect_min_s
+                    else:
+                        backoff = min(2.0 * backoff, cfg.reconnect_max_s)
+                    continue
+                # Block for the first byte, then take what else arrived with it: one wake-up per frame.
+                data = port.read(port.in_waiting or 1)
+                if data:
+                    more = port.in_waiting
+                    self._on_bytes(data + port.read(more) if more else data, time.monotonic())
+            except (serial.SerialException, OSError) as e:
+                self._last_error = f"{type(e).__name__}: {e}"
+                self._close_port()
+            except Exception as e:  # noqa: BLE001 - the thread must survive anything and report it
+                self._last_error = f"{type(e).__name__} in the reader thread: {e}"
+                self._decoder.reset()
+            finally:
+                self._cpu_s = time.thread_time() - cpu0
+
+    def _on_bytes(self, data: bytes, t_host_s: float) -> None:
+        for frame in self._decoder.feed(data):
+            if self._to_drop > 0:
+                self._to_drop -= 1
+                self._dropped += 1
+                continue
+            self._publish_frame(frame, t_host_s)
+
+    def _publish_frame(self, f: Frame, t_host_s: float) -> None:
+        seq, _ = self._seq.update(f.seq)
+        t_us, _ = self._clock.update(f.t_mcu_us)
+        counts = f.counts
+        rail = self._scale.saturation_counts
+        temps = None
+        if f.temperature_raw is not None:
+            temps = f.temperature_raw * np.float32(TEMPERATURE_LSB_C)
+        self._publish(self._scale.to_ut(counts), (counts >= rail) | (counts <= -rail), seq=seq,
+                      t_host_s=t_host_s, t_device_s=t_us * 1e-6, status=f.status, temperature_c=temps,
+                      wire=f.raw)
+
+    # ------------------------------------------------------------------ the port
+
+    def _open_port(self, serial: Any) -> Any:
+        cfg = self.config
+        port = serial.Serial()  # no port yet: nothing is opened before every setting is in place
+        port.baudrate = cfg.baudrate
+        port.timeout = cfg.read_timeout_s
+        port.exclusive = cfg.exclusive
+        port.dtr = False  # applied on open: ESP32 boards reset (or enter the bootloader) on DTR/RTS high
+        port.rts = False
+        port.port = cfg.port
+        try:
+            port.open()
+        except (serial.SerialException, OSError, ValueError) as e:
+            raise SensorDisconnectedError(
+                f"cannot open {cfg.port}: {e}. Is the board plugged in? `tactile-manip find-port` lists the "
+                "ports; if another program holds this one (the port is opened exclusively), close it") from e
+        return port
+
+    def _reopen(self, serial: Any) -> bool:
+        try:
+            port = self._open_port(serial)
+        except SensorDisconnectedError as e:
+            self._failed_reopens += 1
+            self._last_error = f"reopening: {e.__cause__ or e}"
+            return False
+        with self._port_lock:
+            if self._stop.is_set():
+                port.close()
+                return False
+            self._port = port
+        self._reconnects += 1
+        self._begin_session()
+        return True
+
+    def _close_port(self) -> None:
+        with self._port_lock:
+            port, self._port = self._port, None
+        if port is not None:
+            try:
+                port.close()
+            except Exception:  # noqa: BLE001 - closing a vanished device may fail; it is gone either way
+                pass
+
+    def _begin_session(self) -> None:
+        self._decoder.reset()
+        self._to_drop = self.config.drop_first_frames
+        self._start_session()
+
+    def _reset_link_counters(self) -> None:
+        self._decoder = FrameDecoder()
+        self._seq = Unwrapper(16)
+        self._clock = Unwrapper(32)
+        self._to_drop = 0
+        self._dropped = self._reconnects = self._failed_reopens = 0
+        self._cpu_s = 0.0
+        self._last_error = ""
+
+    def _no_frame_message(self) -> str:
+        cfg, st = self.config, self._decoder.stats
+        if st.bytes_in == 0:
+            why = "no bytes at all: is the board powered and running the streaming firmware?"
+        elif st.version_errors > st.crc_errors:
+            why = (f"{st.bytes_in} bytes but {st.version_errors} frames of another protocol version: update the "
+                   "firmware or tactile_manip so both speak version 1")
+        else:
+            why = (f"{st.bytes_in} bytes but no valid frame ({st.crc_errors} CRC errors): is the baud rate "
+                   f"{cfg.baudrate} right, and is this the sensor's port?")
+        err = f" (last error: {self._last_error})" if self._last_error else ""
+        return (f"opened {cfg.port} but no valid frame arrived in {cfg.connect_timeout_s:.1f} s: {why} "
+                f"`tactile-manip find-port` lists the ports{err}")

@@ -1,0 +1,111 @@
+"""The sensor subcommands: emulate, record, find-port, view; and the import weight of the sensors package."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+from tactile_manip.cli import COMMANDS, main
+from tactile_manip.sensors import read_recording
+from tactile_manip.sensors.ports import PortInfo, bridge_name, list_ports
+
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+
+
+def _one_line_error(capsys, command: str) -> str:
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and err.startswith(f"tactile-manip {command}: error: "), err
+    return err
+
+
+def test_the_four_commands_are_registered():
+    assert {"emulate", "record", "find-port", "view"} <= set(COMMANDS)
+
+
+def test_sensor_modules_and_the_parser_stay_free_of_serial_and_matplotlib():
+    code = ("import sys, tactile_manip, tactile_manip.sensors, tactile_manip.sensors.emulator, tactile_manip.cli\n"
+            "tactile_manip.cli.build_parser()\n"
+            "print(sorted({m.split('.')[0] for m in sys.modules} & {'serial', 'matplotlib', 'torch'}))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "[]"
+
+
+def test_emulate_prints_the_path_first_and_a_report_last(capsys):
+    assert main(["emulate", "--frames", "25", "--linger-s", "0", "--bit-flip-rate", "1"]) == 0
+    lines = capsys.readouterr().out.strip().splitlines()
+    assert lines[0].startswith("/dev/pts/")
+    report = json.loads(lines[-1])
+    assert report["event"] == "done" and report["frames_sent"] == 25 and report["corrupted_seqs"] == list(range(25))
+
+
+@pytest.mark.parametrize("args, match", [
+    (["--disconnect", "1:0.5"], "link"),
+    (["--bit-flip-rate", "2"], "probability"),
+    (["--press", "teapot"], "unknown object"),
+    (["--linger-s", "-1"], "linger"),
+])
+def test_emulate_bad_options_are_one_line_errors(capsys, args, match):
+    assert main(["emulate", *args]) == 2
+    assert match in _one_line_error(capsys, "emulate")
+
+
+def test_record_the_simulated_sensor(tmp_path, capsys):
+    out = tmp_path / "sim.tmrec"
+    assert main(["record", "--sim", "--out", str(out), "--seconds", "1.0", "--press", "letter_r,t=0.2"]) == 0
+    assert f"to {out}" in capsys.readouterr().out
+    rec = read_recording(out)
+    assert 100 <= len(rec) <= 135 and rec.header["backend"] == "SimulatedSensor"
+    assert main(["record", "--sim", "--out", str(out), "--seconds", "1"]) == 2
+    assert "--force" in _one_line_error(capsys, "record")
+    assert main(["record", "--port", "/dev/null-x", "--out", str(tmp_path / "b"), "--press", "letter_r"]) == 2
+    assert "--sim" in _one_line_error(capsys, "record")
+
+
+def test_record_a_missing_port_is_a_one_line_error(tmp_path, capsys):
+    assert main(["record", "--port", str(tmp_path / "ttyUSB9"), "--out", str(tmp_path / "r.tmrec")]) == 2
+    assert "find-port" in _one_line_error(capsys, "record")
+
+
+def test_find_port_lists_likely_boards_first(monkeypatch, capsys):
+    fake = [PortInfo("/dev/ttyUSB0", "CP2102 USB to UART Bridge Controller", "USB VID:PID=10C4:EA60",
+                     bridge_name(0x10C4, 0xEA60)),
+            PortInfo("/dev/ttyACM3", "USB JTAG/serial debug unit", "USB VID:PID=303A:1001",
+                     bridge_name(0x303A, 0x1001))]
+    monkeypatch.setattr("tactile_manip.sensors.ports.list_ports", lambda include_all=False: fake)
+    assert main(["find-port"]) == 0
+    out = capsys.readouterr().out
+    assert "/dev/ttyUSB0" in out and "CP210x" in out and "Espressif" in out and "yes" in out
+    monkeypatch.setattr("tactile_manip.sensors.ports.list_ports", lambda include_all=False: [])
+    assert main(["find-port"]) == 1
+    assert "no USB serial port" in capsys.readouterr().err
+
+
+def test_list_ports_runs_here():
+    assert all(isinstance(p, PortInfo) for p in list_ports(include_all=True))
+    assert bridge_name(0x1A86, 0x7523).startswith("WCH CH340") and bridge_name(0x1234, 1) == ""
+
+
+def test_view_snapshot_of_the_simulated_sensor(tmp_path, capsys):
+    out = tmp_path / "view.png"
+    assert main(["view", "--sim", "--snapshot", str(out), "--seconds", "0.8", "--baseline-frames", "25"]) == 0
+    assert "wrote" in capsys.readouterr().out
+    data = out.read_bytes()
+    assert data[:8] == PNG_MAGIC and len(data) > 10_000
+
+
+def test_view_snapshot_of_the_emulator(emulator, tmp_path):
+    e = emulator("--duration-s", "30", "--press", "allen_key,t=0.5,force=10", "--period-s", "2")
+    out = tmp_path / "port.png"
+    assert main(["view", "--port", e.path, "--snapshot", str(out), "--seconds", "0.6", "--no-baseline"]) == 0
+    assert out.read_bytes()[:8] == PNG_MAGIC
+
+
+def test_live_view_without_a_display_says_what_to_do(capsys, monkeypatch):
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    assert main(["view", "--sim"]) == 2
+    assert "--snapshot" in _one_line_error(capsys, "view")

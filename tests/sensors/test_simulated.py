@@ -1,0 +1,106 @@
+"""The simulated sensor: true contacts put on it, scripted presses, stalls, determinism, baseline refusal."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+
+from tactile_manip.errors import CalibrationError, SensorTimeoutError
+from tactile_manip.sensors import Press, SimulatedSensor, SimulatedSensorConfig
+from tactile_manip.sensors.contacts import ContactTimeline, parse_press
+from tactile_manip.sim.objects import IndenterPose
+from tactile_manip.sim.pair import SensorPair
+from tactile_manip.sim.shapes import make_indenter
+
+
+@pytest.fixture(scope="module")
+def pair():
+    return SensorPair()
+
+
+def test_set_contact_puts_the_true_field_on_the_readings(pair):
+    r_obj, pose = make_indenter("letter_r"), IndenterPose(x_mm=0.5, yaw_rad=0.3)
+    truth = pair.press(r_obj, pose, 10.0, np.random.default_rng(0), render_depth=False).field_change_ut
+    with SimulatedSensor(pair=pair) as s:
+        s.set_baseline(s.expected_baseline_ut)
+        idle = s.wait_new(2.0)
+        assert np.abs(idle.field_ut).max() < 15.0                     # noise (and quantisation) only
+        t0 = time.perf_counter()
+        change = s.set_contact(r_obj, pose, 10.0)
+        first_s = time.perf_counter() - t0
+        assert np.allclose(change, truth)
+        assert np.allclose(s.contact_field_ut, truth)
+        s.read_latest(1.0)
+        pressed = np.mean([s.wait_new(2.0).field_ut for _ in range(10)], axis=0)
+        assert np.abs(pressed - truth).max() < 5.0                    # truth + zero-mean noise
+        t0 = time.perf_counter()
+        s.set_contact(r_obj, pose, 10.0)                              # cached: no second solve
+        assert time.perf_counter() - t0 < 0.2 * first_s + 1e-3
+        s.clear_contact()
+        s.read_latest(1.0)
+        assert np.abs(s.wait_new(2.0).field_ut).max() < 15.0
+
+
+def test_same_seed_same_frames_other_seed_other_frames(pair):
+    def first_frames(seed):
+        s = SimulatedSensor(SimulatedSensorConfig(seed=seed), pair=pair)
+        with s.subscribe() as sub:
+            with s:
+                frames = [sub.get(2.0).reading for _ in range(15)]
+        return {r.seq: r.field_raw_ut for r in frames}
+
+    a, b, c = first_frames(4), first_frames(4), first_frames(5)
+    assert a.keys() == b.keys() == set(range(15))
+    assert all(np.array_equal(a[k], b[k]) for k in a)
+    assert not any(np.array_equal(a[k], c[k]) for k in a)
+
+
+def test_stall_and_resume(pair):
+    with SimulatedSensor(pair=pair) as s:
+        s.wait_new(2.0)
+        s.stall()
+        assert s.stalled and not s.health().link_up
+        time.sleep(0.25)
+        with pytest.raises(SensorTimeoutError, match=r"stalled: call resume\(\)"):
+            s.read_latest(max_age_s=0.1)
+        s.resume()
+        r = s.wait_new(2.0)
+        assert s.read_latest(0.2).seq >= r.seq and s.health().seq_gaps == 0
+
+
+def test_baseline_is_accepted_idle_and_refused_during_a_press(pair):
+    with SimulatedSensor(pair=pair) as s:
+        b = s.calibrate_baseline(40)
+        assert np.abs(b.offset_ut - s.expected_baseline_ut).max() < 3.0
+        assert np.all(b.noise_ut[..., :2] < 3.0) and np.all(b.noise_ut[..., 2] < 4.5)
+        s.play([Press("letter_r", start_s=0.0, peak_force_n=10.0, rise_s=0.5, hold_s=0.2)])
+        with pytest.raises(CalibrationError, match="touching the pad"):
+            s.calibrate_baseline(40)
+        assert s.baseline is b                                        # the refused one is not used
+
+
+def test_a_scripted_press_ramps_up_holds_and_releases(pair):
+    press = Press("cylinder", start_s=0.1, peak_force_n=8.0, rise_s=0.2, hold_s=0.1, object_kwargs={"size_mm": 4.0})
+    tl = ContactTimeline(pair, [press])
+    assert tl.force_at(0.05) == 0.0 and tl.force_at(0.2) == pytest.approx(4.0) and tl.force_at(0.35) == 8.0
+    assert np.abs(tl.change_at(0.05)).max() == 0.0
+    peak = np.abs(tl.change_at(0.35)).max()
+    assert 50.0 < peak < 500.0 and np.abs(tl.change_at(0.2)).max() < peak
+    assert np.allclose(tl.change_at(0.35), pair.press(make_indenter("cylinder", size_mm=4.0), IndenterPose(), 8.0,
+                                                     np.random.default_rng(0)).field_change_ut)
+    looped = ContactTimeline(pair, [press], period_s=1.0)
+    assert np.allclose(looped.change_at(2.35), tl.change_at(0.35))
+
+
+def test_press_specs_and_overlaps_are_checked(pair):
+    p = parse_press("letter_r,t=1.5,force=9,x=0.5,y=-1,yaw=90,rise=0.3,hold=0.2")
+    assert (p.name, p.start_s, p.peak_force_n, p.rise_s, p.hold_s) == ("letter_r", 1.5, 9.0, 0.3, 0.2)
+    assert p.pose.x_mm == 0.5 and p.pose.y_mm == -1.0 and p.pose.yaw_rad == pytest.approx(np.pi / 2)
+    for bad, match in [("", "object name"), ("teapot", "unknown object"), ("letter_r,t", "key=number"),
+                       ("letter_r,speed=3", "unknown key"), ("letter_r,force=-1", "peak_force_n")]:
+        with pytest.raises(ValueError, match=match):
+            parse_press(bad)
+    with pytest.raises(ValueError, match="overlap"):
+        ContactTimeline(pair, [Press("letter_r", start_s=0.0), Press("allen_key", start_s=0.5)])
