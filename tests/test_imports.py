@@ -27,6 +27,8 @@ def _heavy_modules_after(code: str) -> list[str]:
     "import tactile_manip",
     "import tactile_manip.sim.pair",
     "import tactile_manip.sim.dataset",
+    "import tactile_manip.sensors",
+    "import tactile_manip.perception.reconstruct, tactile_manip.perception.pose, tactile_manip.perception.metrics",
     # the CLI parser imports every command module, and `--help` must stay fast
     "import tactile_manip.cli; tactile_manip.cli.build_parser()",
 ])
