@@ -31,7 +31,6 @@ def _untrained(preset: str, folder: Path) -> Path:
     """Export a randomly initialised model of ``preset`` (for timing only)."""
     import torch
 
-    from tactile_manip.learning.data import InputSpec
     from tactile_manip.learning.export import export_onnx
     from tactile_manip.learning.model import SuperMagCVAE
     from tactile_manip.learning.model import preset as make_preset

@@ -20,9 +20,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
-import numpy as np
 import torch
-from torch.utils.data import DataLoader
 
 from tactile_manip.config import load_config, to_dict
 from tactile_manip.errors import TactileManipError
@@ -130,7 +128,6 @@ def _train(cfg: TrainConfig, data_path: Path, out: Path, resume: bool, progress,
     if cfg.threads:
         torch.set_num_threads(cfg.threads)
     torch.manual_seed(cfg.seed)
-    np.random.seed(cfg.seed)  # noqa: NPY002 - only for third-party code that reads the global state
     data = load_dataset(data_path)
     spec = InputSpec(cfg.clamp_ut, cfg.axes)
     mcfg = model_config(cfg, data)
@@ -201,7 +198,7 @@ def _train_epoch(net, opt, train_set: TensorPairs, cfg: TrainConfig, spec: Input
     n_batches = 0
     starts = range(0, len(order) - cfg.batch_size + 1, cfg.batch_size)
     for b in starts:
-        if time.perf_counter() > deadline:
+        if n_batches and time.perf_counter() > deadline:  # at least one step, so every epoch has statistics
             break
         batch = order[b:b + cfg.batch_size][dist.rank * per_rank:(dist.rank + 1) * per_rank]
         field_ut = train_set.field[batch]

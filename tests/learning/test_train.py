@@ -98,3 +98,10 @@ def test_presets_have_the_documented_sizes():
     # the paper reports 47.2 M parameters; our paper preset is within 15 % of that at inference
     assert count_parameters(paper, inference_only=True) == pytest.approx(47.2e6, rel=0.15)
     assert paper.cfg.latent == 512
+
+
+def test_wall_clock_cap_stops_mid_epoch_and_records_how_far(tiny_data, tmp_path):
+    summary = train(TrainConfig(**{**TINY, "epochs": 5, "max_minutes": 1e-6}), tiny_data, tmp_path)
+    first = summary["history"][0]
+    assert summary["epochs_run"] == 1 and first["epoch_fraction"] < 1.0
+    assert (tmp_path / "checkpoint.pt").exists()  # a partial epoch still leaves a usable checkpoint
