@@ -76,7 +76,7 @@ def time_model(path: Path, *, threads: int, repeats: int, batch: int) -> dict[st
 
 def markdown(report: dict[str, Any]) -> str:
     m = report["machine"]
-    lines = [f"Machine: {m.get('cpu', '?')}, {m.get('cores', '?')} cores, onnxruntime {report['onnxruntime']}",
+    lines = [f"Machine: {m.get('cpu_model', '?')}, {m.get('usable_cores', '?')} cores, onnxruntime {report['onnxruntime']}",
              "", "| model | preset | parameters | file MB | threads | p50 ms | p99 ms | batch-64 ms/reading | "
              "p99 within 8 ms period |", "|---|---|---|---|---|---|---|---|---|"]
     for r in report["results"]:

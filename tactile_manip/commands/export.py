@@ -20,6 +20,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--card", default=None, help="also write a model card (markdown) here")
     p.add_argument("--history", default=None, help="the run's history.json, for the model card")
     p.add_argument("--table", default=None, help="table.md of `tactile-manip evaluate`, for the model card")
+    p.add_argument("--latency", default=None, help="markdown latency table (benchmarks.bench_model), for the card")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -49,8 +50,9 @@ def run(args: argparse.Namespace) -> int:
 
         history = args.history or str(Path(args.checkpoint).with_name("history.json"))
         table = Path(args.table).read_text() if args.table else ""
+        latency = Path(args.latency).read_text() if args.latency else ""
         write_model_card(args.card, meta, history, table_md=table, machine=_cpu_name(),
-                         commands=_commands(args))
+                         commands=_commands(args), latency=latency)
         print(f"wrote {args.card}")
     return 0
 

@@ -8,7 +8,7 @@ from typing import Any
 
 
 def model_card(meta: dict[str, Any], history: dict[str, Any], *, table_md: str = "", machine: str = "",
-               commands: list[str] | None = None) -> str:
+               commands: list[str] | None = None, latency: str = "") -> str:
     """Markdown text of the card from the export metadata, the training history and the evaluation table."""
     tc, mc = meta["train_config"], meta["model_config"]
     last = history["history"][-1]
@@ -32,7 +32,7 @@ def model_card(meta: dict[str, Any], history: dict[str, Any], *, table_md: str =
         "## Training",
         f"- Data: {data.get('pairs', '?')} simulated pairs ({', '.join(data.get('objects', []))}), fingerprint "
         f"`{meta['data_fingerprint']}`; trained on the `train` split of the objects "
-        f"{tc['objects'] or 'allen_key and letter_r (all trainval objects)'}.",
+        f"{', '.join(tc['objects']) or 'marked trainval (the Allen key and the letter R)'}.",
         f"- Recipe: AdamW lr {tc['lr']} ({tc['lr_schedule']} to {tc['lr_min']}), weight decay "
         f"{tc['weight_decay']}, batch {tc['batch_size']}, {tc['epochs']} epochs, negative ELBO with beta-NLL "
         f"(beta {tc['nll_beta']}) plus the prior-path term (weight {tc['prior_weight']}), symmetry augmentation "
@@ -51,7 +51,9 @@ def model_card(meta: dict[str, Any], history: dict[str, Any], *, table_md: str =
         lines += ["## Reproduce", "", "```bash", *commands, "```", ""]
     lines += ["## Limits", "",
               "Trained on simulated data of one default sensor pair (see docs/simulator.md). A real sensor needs "
-              "its own paired data: record it with `tactile-manip collect` and train with the same commands.", ""]
+              "its own paired data in the same dataset format, trained with the same commands.", ""]
+    if latency:
+        lines += ["## Speed (onnxruntime, one reading)", "", latency.strip(), ""]
     return "\n".join(lines)
 
 
