@@ -14,7 +14,6 @@ time ``wait_new`` returned it to the caller ("returned"). Reader CPU is the read
 from __future__ import annotations
 
 import argparse
-import json
 import subprocess
 import sys
 import time
@@ -23,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.bench_sim import machine_info
+from benchmarks._common import machine_info, publish
 from tactile_manip.errors import SensorTimeoutError
 from tactile_manip.sensors import SerialSensor, SerialSensorConfig
 from tactile_manip.sensors.protocol import FrameDecoder, encode_frame
@@ -191,10 +190,7 @@ def main(argv: list[str] | None = None) -> int:
     report["goals_met"] = {"decode_us": report["decoder"]["decode_us"] < GOALS["decode_us"],
                            "latency_p99_ms": report["live"]["latency_available_ms"]["p99"] < GOALS["latency_p99_ms"],
                            "reader_cpu_percent": report["live"]["reader_cpu_percent"] < GOALS["reader_cpu_percent"]}
-    print(markdown(report))
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(report, indent=2) + "\n")
-    print(f"\nwrote {args.out}")
+    publish(report, args.out, markdown)
     return 0
 
 

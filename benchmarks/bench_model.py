@@ -10,7 +10,6 @@ weights). Prints a markdown table and writes benchmarks/results/model.json. It m
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import tempfile
 import time
@@ -19,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.bench_sim import machine_info
+from benchmarks._common import machine_info, publish
 from tactile_manip.perception.reconstruct import OnnxReconstructor, read_metadata
 
 SHIPPED = Path("models/supermag_compact.onnx")
@@ -104,10 +103,7 @@ def main(argv: list[str] | None = None) -> int:
         results = [{"label": label, **time_model(Path(path), threads=t, repeats=args.repeats, batch=64)}
                    for label, path in models for t in dict.fromkeys(args.threads)]
     report = {"machine": machine_info(), "onnxruntime": onnxruntime.__version__, "results": results}
-    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.out).write_text(json.dumps(report, indent=1))
-    print(markdown(report), end="")
-    print(f"wrote {args.out}")
+    publish(report, args.out, markdown)
     return 0
 
 

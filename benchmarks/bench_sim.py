@@ -10,10 +10,7 @@ Prints markdown tables and writes a JSON report with the machine it ran on. It m
 from __future__ import annotations
 
 import argparse
-import json
 import math
-import os
-import platform
 import sys
 import time
 from collections.abc import Callable
@@ -21,15 +18,14 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import scipy
 
+from benchmarks._common import machine_info, publish
 from tactile_manip.sim.contact import solve_contact
 from tactile_manip.sim.dataset import DatasetConfig, generate, load_dataset_config
 from tactile_manip.sim.objects import Indenter, IndenterPose
 from tactile_manip.sim.shapes import make_indenter
 from tactile_manip.sim.pair import SensorPair
 from tactile_manip.sim.vbts import dtact_depth
-from tactile_manip.version import code_version
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_CONFIG = ROOT / "configs" / "dataset" / "supermag.toml"
@@ -127,22 +123,6 @@ def _pairs(cfg: DatasetConfig) -> int:
     return sum(o.count for o in cfg.objects)
 
 
-def machine_info() -> dict[str, Any]:
-    cpu = platform.processor() or "unknown"
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    usable = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
-    return {"cpu_model": cpu, "cpu_count": os.cpu_count(), "usable_cores": usable,
-            "python": sys.version.split()[0], "numpy": np.__version__, "scipy": scipy.__version__,
-            "platform": platform.platform(), "code_version": code_version(),
-            "time_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
-
-
 def markdown(report: dict[str, Any]) -> str:
     m = report["machine"]
     lines = [f"Machine: {m['cpu_model']}, {m['usable_cores']}/{m['cpu_count']} cores, Python {m['python']}, "
@@ -188,10 +168,7 @@ def main(argv: list[str] | None = None) -> int:
               "presses": bench_presses(args.samples, args.seed),
               "generate": bench_generate(args.config, args.scale, args.workers),
               "full": bench_full(args.config, max(args.workers)) if args.full else None}
-    print(markdown(report))
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(report, indent=2) + "\n")
-    print(f"\nwrote {args.out}")
+    publish(report, args.out, markdown)
     return 0
 
 

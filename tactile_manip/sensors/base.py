@@ -149,6 +149,13 @@ class TactileSensor(abc.ABC):
     def _close(self) -> None:
         """Stop the producer and release everything; must not raise, may be called after a failed open."""
 
+    def _stop_producer(self, timeout_s: float = 2.0) -> None:
+        """Signal the backend's producer thread (``self._stop``, ``self._thread``) to end, and join it."""
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=timeout_s)
+            self._thread = None
+
     def _link_health(self) -> dict[str, Any]:
         """Backend counters for :class:`SensorHealth` (byte-level fields, reader CPU, last error)."""
         return {"link_up": self._connected}

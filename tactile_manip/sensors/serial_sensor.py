@@ -76,9 +76,7 @@ class SerialSensor(TactileSensor):
                 port.cancel_read()
             except Exception:  # noqa: BLE001 - best effort: the join below has a timeout anyway
                 pass
-        if self._thread is not None:
-            self._thread.join(timeout=2.0)
-            self._thread = None
+        self._stop_producer()
         self._close_port()
 
     def _link_health(self) -> dict[str, Any]:

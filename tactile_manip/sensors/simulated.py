@@ -130,10 +130,7 @@ class SimulatedSensor(TactileSensor):
             self._cond.wait_for(lambda: self._frames > 0 or self._stalled, timeout=2.0)
 
     def _close(self) -> None:
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join(timeout=2.0)
-            self._thread = None
+        self._stop_producer()
 
     def _link_health(self) -> dict[str, Any]:
         return {"link_up": self._connected and not self._stalled, "reader_cpu_s": self._cpu_s,
