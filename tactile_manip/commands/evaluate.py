@@ -36,22 +36,19 @@ def run(args: argparse.Namespace) -> int:
         if not sep or not label or not path:
             raise ValueError(f"--model must be LABEL=PATH, got {spec!r}")
         methods[label] = OnnxReconstructor(path, threads=args.threads)
-    results, predictions = evaluate_methods(data, methods, split=args.split, inception_onnx=args.inception_onnx)
-    seen_split = "val"
-    _, seen_predictions = evaluate_methods(data, methods, split=seen_split)
-    rows = _gallery_rows(data, args.split, seen_split)
-    preds = {args.split: predictions, seen_split: seen_predictions}
+    results, _ = evaluate_methods(data, methods, split=args.split, inception_onnx=args.inception_onnx)
+    rows = _gallery_rows(data, args.split, "val")
     write_report(args.out, results, {"data": str(args.data), "split": args.split,
                                      "data_fingerprint": data.fingerprint(),
                                      "baseline_fits": {k: methods[k].to_dict() for k in ("Bilinear", "Bicubic")},
                                      "psnr_data_range_mm": 2.0, "gallery_rows": rows})
-    gallery(f"{args.out}/gallery.png", data, preds, rows)
+    gallery(f"{args.out}/gallery.png", data, methods, rows)
     print(markdown_table(results), end="")
     print(f"wrote {args.out}/table.md, results.json, gallery.png")
     return 0
 
 
-def _gallery_rows(data, split: str, seen_split: str) -> list[tuple[str, int, int]]:
+def _gallery_rows(data, split: str, seen_split: str) -> list[tuple[str, int]]:
     """Two seen samples (one per training object) and one sample of each unseen object family."""
     rows = []
     for s in (seen_split, split):
@@ -59,6 +56,6 @@ def _gallery_rows(data, split: str, seen_split: str) -> list[tuple[str, int, int
         names = data.objects(idx)
         for n in list(dict.fromkeys(names.tolist()))[: 2 if s == seen_split else 7]:
             pos = int(np.flatnonzero(names == n)[0])
-            rows.append((s, int(idx[pos]), pos))
+            rows.append((s, int(idx[pos])))
     return rows
 

@@ -125,19 +125,20 @@ def markdown_table(results: list[MethodResult]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def gallery(path: str | Path, data: PairedDataset, predictions: dict[str, dict[str, np.ndarray]],
-            rows: list[tuple[str, int, int]]) -> None:
-    """Figure like the paper's gallery: one row per (split, dataset index, position in split), columns GT
-    then each method."""
+def gallery(path: str | Path, data: PairedDataset, methods: dict[str, Reconstructor],
+            rows: list[tuple[str, int]]) -> None:
+    """Figure like the paper's gallery: one row per (split, dataset index), columns ground truth then each
+    method, reconstructed here for just those readings."""
     from tactile_manip.plots import _pyplot
 
     plt = _pyplot()
-    methods = list(next(iter(predictions.values())).keys())
+    index = np.array([i for _, i in rows])
+    preds = {label: m.reconstruct_batch(data.field_ut[index]) for label, m in methods.items()}
     fig, axes = plt.subplots(len(rows), len(methods) + 1, figsize=(2.2 * (len(methods) + 1), 2.2 * len(rows)),
                              constrained_layout=True, squeeze=False)
-    for r, (split, index, pos) in enumerate(rows):
-        images = [data.depth_mm([index])[0]] + [predictions[split][m][pos] for m in methods]
-        for c, (img, title) in enumerate(zip(images, ["ground truth (VBTS)"] + methods)):
+    for r, (split, i) in enumerate(rows):
+        images = [data.depth_mm([i])[0]] + [preds[m][r] for m in methods]
+        for c, (img, title) in enumerate(zip(images, ["ground truth (VBTS)"] + list(methods))):
             ax = axes[r, c]
             ax.imshow(img, cmap="viridis", vmin=0, vmax=metrics.DEPTH_RANGE_MM)
             ax.set_xticks([])
@@ -145,7 +146,7 @@ def gallery(path: str | Path, data: PairedDataset, predictions: dict[str, dict[s
             if r == 0:
                 ax.set_title(title, fontsize=9)
             if c == 0:
-                ax.set_ylabel(f"{data.objects([index])[0]}\n({'seen' if split != 'test' else 'unseen'})", fontsize=8)
+                ax.set_ylabel(f"{data.objects([i])[0]}\n({'unseen' if split == 'test' else 'seen'})", fontsize=8)
     fig.savefig(path, dpi=80)
     plt.close(fig)
 
