@@ -49,3 +49,34 @@ class ProtocolError(SensorError, ValueError):
 
 class RecordingError(SensorError, ValueError):
     """A sensor recording file is missing, is not a recording, or is from an incompatible format version."""
+
+
+class RobotError(TactileManipError):
+    """The arm or gripper cannot do what was asked; subclasses say whether it moved and how to recover."""
+
+
+class ArmFault(RobotError, RuntimeError):
+    """The arm stopped on a fault mid-motion (a reflex, a communication or control error).
+
+    The arm is stopped where the fault left it; call ``Arm.recover()`` (at the trial boundary) before moving
+    again. ``kind`` names the fault (for example ``"reflex"`` or ``"communication"``).
+    """
+
+    def __init__(self, message: str, *, kind: str = "fault") -> None:
+        super().__init__(message)
+        self.kind = kind
+
+
+class IKError(RobotError, ValueError):
+    """No joint solution reaches a Cartesian target along the path (unreachable, a limit, or a joint jump).
+
+    Raised before the arm moves: the arm is where it was.
+    """
+
+
+class SafetyLimitError(RobotError, ValueError):
+    """A target outside the configured joint, workspace or speed limits was refused; the arm did not move."""
+
+
+class GripperError(RobotError, RuntimeError):
+    """The gripper failed to move or to report its state (not a missed grasp: that is a GraspResult)."""

@@ -49,6 +49,8 @@ class AngleEstimate:
         centroid_mm: contact centroid (x, y) in the pad frame, mm.
         area_mm2: contact area, mm^2.
         reason: why the angle is undefined ("" when defined).
+        timings_s: named durations of the estimate's stages in s (e.g. "reconstruct", "pose", "total"; and
+            "age", from the reading's arrival to the estimate), empty when not measured.
     """
 
     angle_rad: float
@@ -57,3 +59,4 @@ class AngleEstimate:
     centroid_mm: tuple[float, float] = (0.0, 0.0)
     area_mm2: float = 0.0
     reason: str = ""
+    timings_s: dict[str, float] = field(default_factory=dict, compare=False)

@@ -1,1 +1,17 @@
-"""Perception: reconstructors (ONNX model and interpolation baselines), image metrics, and pose."""
+"""Perception: reconstructors (ONNX model and interpolation baselines), image metrics, and pose.
+
+The pose API users plug into their tasks::
+
+    from tactile_manip.perception import TactilePoseEstimator, load_reconstructor
+    estimator = TactilePoseEstimator(load_reconstructor("models/supermag_compact.onnx"))
+    estimate = estimator.estimate(field_ut)     # (4, 4, 3) uT -> AngleEstimate
+
+(numpy and scipy at import; onnxruntime only when an ONNX model is loaded.)
+"""
+
+from tactile_manip.perception.estimator import TactilePoseEstimator
+from tactile_manip.perception.pose import PoseParams, angle_from_image, wrap_axial
+from tactile_manip.perception.reconstruct import Reconstructor, load_reconstructor
+
+__all__ = ["PoseParams", "Reconstructor", "TactilePoseEstimator", "angle_from_image", "load_reconstructor",
+           "wrap_axial"]

@@ -9,6 +9,7 @@ contacts give ``defined=False`` with a reason, never NaN.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 from scipy import ndimage
@@ -19,6 +20,35 @@ DEFAULT_THRESHOLD_MM = 0.1     # pixels shallower than this are not contact
 DEFAULT_SIGMA_MM = 0.3         # Gaussian filter before PCA
 MIN_CONTACT_PX = 20            # fewer contact pixels: angle undefined
 ISOTROPY_LIMIT = 0.9           # minor/major eigenvalue ratio above this: angle undefined
+OUTLIER_FRACTION = 0.1         # contact regions smaller than this fraction of the largest are removed
+
+
+@dataclass(frozen=True)
+class PoseParams:
+    """Post-processing and PCA parameters of :func:`angle_from_image` (the paper's pipeline).
+
+    Attributes:
+        threshold_mm: pixels shallower than this are not contact, mm.
+        sigma_mm: standard deviation of the Gaussian filter applied before PCA, mm (0: no filter).
+        outlier_fraction: connected contact regions smaller than this fraction of the largest are removed.
+        min_contact_px: fewer contact pixels than this after filtering: the angle is undefined.
+        isotropy_limit: a minor/major eigenvalue ratio above this: the angle is undefined (round contact).
+    """
+
+    threshold_mm: float = DEFAULT_THRESHOLD_MM
+    sigma_mm: float = DEFAULT_SIGMA_MM
+    outlier_fraction: float = OUTLIER_FRACTION
+    min_contact_px: int = MIN_CONTACT_PX
+    isotropy_limit: float = ISOTROPY_LIMIT
+
+    def __post_init__(self) -> None:
+        checks = {"threshold_mm": self.threshold_mm >= 0, "sigma_mm": self.sigma_mm >= 0,
+                  "outlier_fraction": 0 <= self.outlier_fraction <= 1, "min_contact_px": self.min_contact_px >= 1,
+                  "isotropy_limit": 0 < self.isotropy_limit <= 1}
+        for name, ok in checks.items():
+            value = getattr(self, name)
+            if not (ok and math.isfinite(value)):
+                raise ValueError(f"PoseParams.{name}: invalid value {value!r} (see the field's documentation)")
 
 
 def wrap_axial(angle_rad: float | np.ndarray) -> float | np.ndarray:
@@ -28,7 +58,7 @@ def wrap_axial(angle_rad: float | np.ndarray) -> float | np.ndarray:
 
 
 def remove_outliers(depth_mm: np.ndarray, *, threshold_mm: float = DEFAULT_THRESHOLD_MM,
-                    min_fraction: float = 0.1) -> np.ndarray:
+                    min_fraction: float = OUTLIER_FRACTION) -> np.ndarray:
     """Zero the connected contact regions smaller than ``min_fraction`` of the largest (speckle, ghosts)."""
     # NaN/inf pixels are not contact; depths are capped far above any real indentation so sums cannot overflow
     d = np.nan_to_num(np.asarray(depth_mm, dtype=np.float64), nan=0.0, posinf=0.0, neginf=0.0).clip(None, 1e6)
@@ -41,17 +71,23 @@ def remove_outliers(depth_mm: np.ndarray, *, threshold_mm: float = DEFAULT_THRES
 
 
 def angle_from_image(depth_mm: np.ndarray, *, pixel_mm: float = 0.1, threshold_mm: float = DEFAULT_THRESHOLD_MM,
-                     sigma_mm: float = DEFAULT_SIGMA_MM) -> AngleEstimate:
-    """Principal in-plane angle of the contact in a depth image (H, W), mm."""
-    d = remove_outliers(depth_mm, threshold_mm=threshold_mm)
+                     sigma_mm: float = DEFAULT_SIGMA_MM, params: PoseParams | None = None) -> AngleEstimate:
+    """Principal in-plane angle of the contact in a depth image (H, W), mm.
+
+    ``params`` (a :class:`PoseParams`) overrides ``threshold_mm`` and ``sigma_mm`` and sets the other limits.
+    """
+    p = params or PoseParams(threshold_mm=threshold_mm, sigma_mm=sigma_mm)
+    threshold_mm, sigma_mm = p.threshold_mm, p.sigma_mm
+    d = remove_outliers(depth_mm, threshold_mm=threshold_mm, min_fraction=p.outlier_fraction)
     raw_px = int(np.count_nonzero(d > threshold_mm))
     if sigma_mm > 0:
         d = ndimage.gaussian_filter(d, sigma_mm / pixel_mm, mode="constant")
     weights = np.where(d > threshold_mm, d - threshold_mm, 0.0)
     n_px = int(np.count_nonzero(weights))
     area = n_px * pixel_mm**2
-    if n_px < MIN_CONTACT_PX:
-        reason = "empty contact" if raw_px == 0 else f"contact too small ({n_px} px < {MIN_CONTACT_PX})"
+    if n_px < p.min_contact_px:
+        reason = ("empty contact" if raw_px == 0
+                  else f"contact too small ({n_px} px after filtering < {p.min_contact_px})")
         return AngleEstimate(0.0, 0.0, False, area_mm2=area, reason=reason)
     h, w = d.shape
     x = (np.arange(w) - (w - 1) / 2) * pixel_mm
@@ -67,7 +103,7 @@ def angle_from_image(depth_mm: np.ndarray, *, pixel_mm: float = 0.1, threshold_m
     radius = math.hypot(half_diff, sxy)
     major, minor = 0.5 * (sxx + syy) + radius, 0.5 * (sxx + syy) - radius
     ratio = minor / major if major > 0 else 1.0
-    if ratio > ISOTROPY_LIMIT:
+    if ratio > p.isotropy_limit:
         return AngleEstimate(0.0, 0.0, False, (cx, cy), area, f"isotropic contact (eigenvalue ratio {ratio:.2f})")
     angle = wrap_axial(0.5 * math.atan2(2.0 * sxy, sxx - syy))
     return AngleEstimate(angle, float(np.clip(1.0 - ratio, 0.0, 1.0)), True, (cx, cy), area)

@@ -248,13 +248,24 @@ def default_baseline_fit() -> dict[str, dict[str, Any]]:
 def load_reconstructor(name_or_path: str | Path, **kwargs: Any) -> Reconstructor:
     """``"bilinear"`` / ``"bicubic"`` (shipped fit) or a path to an exported ``.onnx`` model.
 
-    ``kwargs`` go to :class:`OnnxReconstructor` (threads, providers, samples, seed).
+    ``kwargs`` go to :class:`OnnxReconstructor` (threads, providers, samples, seed), or for a baseline set
+    ``output_px`` (a square output of that many pixels over the same pad, e.g. 16 for the paper's 4x4 -> 16x16
+    trial baseline).
     """
     key = str(name_or_path)
     if key in BASELINES:
         fit = default_baseline_fit()[key]
         fit["output_shape"] = tuple(fit["output_shape"])
         fit["input_shape"] = tuple(fit["input_shape"])
+        unknown = sorted(set(kwargs) - {"output_px"})
+        if unknown:
+            raise ValueError(f"{key}: unknown options {unknown}; a baseline takes only output_px")
+        if "output_px" in kwargs:
+            size = kwargs["output_px"]
+            if isinstance(size, bool) or not isinstance(size, int) or not 2 <= size <= 2000:
+                raise ValueError(f"{key}: output_px must be an integer in [2, 2000], got {size!r}")
+            pad_mm = fit["output_shape"][1] * fit["pixel_mm"]
+            fit["output_shape"], fit["pixel_mm"] = (size, size), pad_mm / size
         return BASELINES[key](**fit)
     if not key.endswith(".onnx") and not Path(key).exists():
         raise ModelFileError(f"unknown reconstructor {key!r}: use 'bilinear', 'bicubic' or a path to an .onnx model")

@@ -1,0 +1,128 @@
+"""Put a grasped rod into a slot: the tactile pose used for position as well as angle.
+
+The rod is held at an unknown in-hand angle and offset. The estimator gives both: the angle of the rod's axis
+in the pad frame and the contact centroid, a point on that axis. The arm first turns the hand about the pad
+normal through that point so the rod's axis is parallel to the slot, then translates it so the axis passes
+through the slot's centre. The slot is a world feature (base frame) whose axis must lie in the pad plane.
+
+Scored on the true rod pose: the axial angle between the rod and the slot in the pad plane, and the distance
+from the slot's centre to the rod's axis (the lateral error); a placement succeeds when both are inside the
+tolerances (the slot's clearance for the lateral error).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Protocol
+
+import numpy as np
+
+from tactile_manip.behaviours.reorient import ReorientConfig, _Abort, _grasp, _read
+from tactile_manip.checks import check_array, check_finite_scalar
+from tactile_manip.errors import ArmFault, IKError, SafetyLimitError
+from tactile_manip.perception.estimator import TactilePoseEstimator
+from tactile_manip.perception.pose import wrap_axial
+from tactile_manip.robot.base import Arm, Gripper
+from tactile_manip.robot.frames import angle_in_plane, hand_T_pad, rotate_pose_about
+from tactile_manip.sensors.base import TactileSensor
+from tactile_manip.types import AngleEstimate
+
+
+@dataclass(frozen=True)
+class Slot:
+    """A straight slot in the base frame: centre point (m), axis direction, and lateral clearance (m)."""
+
+    centre_base_m: np.ndarray
+    axis_base: np.ndarray
+    clearance_m: float = 0.001
+
+    def __post_init__(self) -> None:
+        check_array("Slot.centre_base_m", self.centre_base_m, shape=(3,))
+        axis = check_array("Slot.axis_base", self.axis_base, shape=(3,))
+        if not np.linalg.norm(axis) > 1e-9:
+            raise ValueError("Slot.axis_base must be a non-zero vector")
+        check_finite_scalar("Slot.clearance_m", self.clearance_m, low=0.0, low_open=True)
+
+
+class PoseTruth(Protocol):
+    """The held object's true pose (x axis along the rod), for scoring only."""
+
+    def object_pose_base(self) -> np.ndarray | None:
+        """base_T_object (4, 4), or None when unknown."""
+
+
+@dataclass
+class PlaceResult:
+    """What :func:`place_in_slot` did; errors are None when not executed or no truth was given."""
+
+    outcome: str
+    detail: str = ""
+    estimate: AngleEstimate | None = None
+    angle_error_rad: float | None = None
+    lateral_error_m: float | None = None
+    timings_s: dict[str, float] = field(default_factory=dict)
+
+    def succeeded(self, angle_tolerance_rad: float, clearance_m: float) -> bool:
+        return (self.outcome == "done" and self.angle_error_rad is not None and self.lateral_error_m is not None
+                and abs(self.angle_error_rad) <= angle_tolerance_rad and self.lateral_error_m <= clearance_m)
+
+
+def place_in_slot(arm: Arm, gripper: Gripper, sensor: TactileSensor, estimator: TactilePoseEstimator, slot: Slot, *,
+                  object_width_m: float, config: ReorientConfig | None = None,
+                  truth: PoseTruth | None = None) -> PlaceResult:
+    """Grasp the rod between the fingers, measure it, and move it into ``slot`` (see the module docstring).
+
+    An undefined estimate aborts ("abstained"): without an axis there is nothing to align.
+    """
+    cfg = config or ReorientConfig()
+    result = PlaceResult(outcome="error")
+    t0 = time.perf_counter()
+    normal = (arm.state().base_T_hand @ hand_T_pad())[:3, 2]
+    if abs(float(np.dot(np.asarray(slot.axis_base, float), normal))) > 1e-3 * np.linalg.norm(slot.axis_base):
+        raise ValueError("the slot's axis must lie in the pad plane (perpendicular to the pad normal), "
+                         f"got axis {np.asarray(slot.axis_base).tolist()} with the pad normal {normal.round(3).tolist()}")
+    try:
+        base_T_pad = _grasp(arm, gripper, object_width_m, cfg)[0] @ hand_T_pad()
+        est = _read(sensor, estimator, cfg)
+        result.estimate = est
+        if not est.defined:
+            raise _Abort("abstained", f"no rod axis to align: {est.reason}")
+        # a point on the rod's axis: the contact centroid, half the rod's width along the pad normal
+        axis_point = (base_T_pad @ np.array([est.centroid_mm[0] * 1e-3, est.centroid_mm[1] * 1e-3,
+                                             object_width_m / 2, 1.0]))[:3]
+        turn = float(wrap_axial(angle_in_plane(np.asarray(slot.axis_base, float), base_T_pad) - est.angle_rad))
+        _move(arm, rotate_pose_about(arm.state().base_T_hand, normal, axis_point, turn), cfg, "turn")
+        shift = arm.state().base_T_hand.copy()
+        shift[:3, 3] += np.asarray(slot.centre_base_m, float) - axis_point
+        _move(arm, shift, cfg, "approach")
+        result.outcome = "done"
+    except _Abort as stop:
+        result.outcome, result.detail = stop.outcome, stop.detail
+    result.timings_s["total"] = time.perf_counter() - t0
+    pose = truth.object_pose_base() if truth is not None and result.outcome == "done" else None
+    if pose is not None:
+        result.angle_error_rad, result.lateral_error_m = slot_errors(pose, slot, base_T_pad)
+    return result
+
+
+def slot_errors(base_T_object: np.ndarray, slot: Slot, base_T_pad: np.ndarray) -> tuple[float, float]:
+    """(axial angle rod - slot in the pad plane, rad; distance from the slot centre to the rod axis, m)."""
+    axis = base_T_object[:3, 0] / np.linalg.norm(base_T_object[:3, 0])
+    angle = float(wrap_axial(angle_in_plane(axis, base_T_pad)
+                             - angle_in_plane(np.asarray(slot.axis_base, float), base_T_pad)))
+    offset = np.asarray(slot.centre_base_m, float) - base_T_object[:3, 3]
+    lateral = float(np.linalg.norm(offset - np.dot(offset, axis) * axis))
+    return angle, lateral
+
+
+def _move(arm: Arm, target: np.ndarray, cfg: ReorientConfig, what: str) -> None:
+    try:
+        arm.move_cartesian(target, speed_factor=cfg.speed_factor)
+    except IKError as exc:
+        raise _Abort("ik_failed", f"{what}: {exc}") from None
+    except SafetyLimitError as exc:
+        raise _Abort("safety_refused", f"{what}: {exc}") from None
+    except ArmFault as exc:
+        raise _Abort("arm_fault", f"{what}: {exc}") from None
+

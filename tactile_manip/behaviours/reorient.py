@@ -1,0 +1,239 @@
+"""Grasp, estimate, reorient: the paper's in-hand reorientation behaviour (DESIGN.md section 8).
+
+The object is between the open fingers. The gripper closes to the force threshold, the tactile sensor is
+read, the estimator gives the in-hand angle and its confidence, and the arm turns the hand (and with it the
+object) about the pad normal through the contact by ``target - estimate``, so the object ends at the target
+angle in the pad frame the grasp started in. Low confidence follows a policy: act anyway, re-grasp and read
+again, or abstain.
+
+The behaviour receives its hardware (any :class:`~tactile_manip.robot.base.Arm`,
+:class:`~tactile_manip.robot.base.Gripper`, :class:`~tactile_manip.sensors.base.TactileSensor`) and a
+:class:`GroundTruth` that knows where the object really is (the kinematic twin in simulation; an operator or
+a tracker on a real robot). Every fault it can meet becomes an outcome of the result, never an escape:
+a missed grasp, a stale sensor, an IK failure, a safety refusal, an arm fault.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Literal, Protocol
+
+import numpy as np
+
+from tactile_manip.checks import check_choice, check_finite_scalar
+from tactile_manip.errors import ArmFault, GripperError, IKError, SafetyLimitError, SensorError
+from tactile_manip.perception.estimator import TactilePoseEstimator
+from tactile_manip.perception.pose import wrap_axial
+from tactile_manip.robot.base import Arm, Gripper
+from tactile_manip.robot.frames import angle_in_plane, hand_T_pad, rotate_pose_about
+from tactile_manip.sensors.base import TactileSensor
+from tactile_manip.types import AngleEstimate
+
+POLICIES = ("act", "regrasp", "abstain")
+
+
+@dataclass(frozen=True)
+class ReorientConfig:
+    """Parameters of the behaviour.
+
+    Attributes:
+        force_n: grasp force threshold, N (the paper's gripper threshold: 10 N).
+        width_tolerance_m: accepted deviation of the grasp width from the object's nominal width, m.
+        settle_s: wait after the grasp before the frames are read (the skin and the filter settle), s.
+        frames: consecutive frames averaged for one estimate (8 ms each at 125 Hz).
+        sensor_timeout_s: a frame later than this aborts the trial as a stale sensor, s.
+        min_confidence: estimates below this confidence (or undefined ones) trigger the policy.
+        low_confidence: "act" (turn anyway; an undefined angle then counts as 0), "regrasp" (open, close
+            again and re-read, up to ``max_regrasps`` times, then act on the best estimate) or "abstain".
+        max_regrasps: re-grasps allowed by the "regrasp" policy.
+        speed_factor: arm speed factor for the correction (None: the backend's default).
+    """
+
+    force_n: float = 10.0
+    width_tolerance_m: float = 0.004
+    settle_s: float = 0.04
+    frames: int = 4
+    sensor_timeout_s: float = 0.1
+    min_confidence: float = 0.3
+    low_confidence: Literal["act", "regrasp", "abstain"] = "regrasp"
+    max_regrasps: int = 1
+    speed_factor: float | None = None
+
+    def __post_init__(self) -> None:
+        check_finite_scalar("force_n", self.force_n, low=0.0, low_open=True, high=140.0)
+        check_finite_scalar("width_tolerance_m", self.width_tolerance_m, low=0.0, high=0.08)
+        check_finite_scalar("settle_s", self.settle_s, low=0.0, high=10.0)
+        check_finite_scalar("sensor_timeout_s", self.sensor_timeout_s, low=0.0, low_open=True)
+        check_finite_scalar("min_confidence", self.min_confidence, low=0.0, high=1.0)
+        check_choice("low_confidence", self.low_confidence, POLICIES)
+        if isinstance(self.frames, bool) or not isinstance(self.frames, int) or self.frames < 1:
+            raise ValueError(f"frames must be a positive integer, got {self.frames!r}")
+        if isinstance(self.max_regrasps, bool) or not isinstance(self.max_regrasps, int) or self.max_regrasps < 0:
+            raise ValueError(f"max_regrasps must be a non-negative integer, got {self.max_regrasps!r}")
+
+
+class GroundTruth(Protocol):
+    """Where the object really is (for scoring only; the behaviour never uses it to act)."""
+
+    def object_axis_base(self) -> np.ndarray | None:
+        """Unit vector (3,) of the held object's principal axis in the base frame, or None when unknown."""
+
+
+@dataclass
+class ReorientResult:
+    """What one run of the behaviour did (angles in rad, axial, in the pad frame at the first grasp)."""
+
+    outcome: str
+    detail: str = ""
+    estimate: AngleEstimate | None = None
+    action: str = "act"
+    regrasps: int = 0
+    correction_rad: float | None = None
+    final_angle_rad: float | None = None
+    error_rad: float | None = None
+    grasp_width_m: float | None = None
+    timings_s: dict[str, float] = field(default_factory=dict)
+
+
+class _Abort(Exception):
+    """A trial-ending outcome inside the behaviour (never escapes it)."""
+
+    def __init__(self, outcome: str, detail: str) -> None:
+        super().__init__(detail)
+        self.outcome, self.detail = outcome, detail
+
+
+def grasp_estimate_reorient(arm: Arm, gripper: Gripper, sensor: TactileSensor, estimator: TactilePoseEstimator,
+                            *, object_width_m: float, target_angle_rad: float, config: ReorientConfig | None = None,
+                            truth: GroundTruth | None = None, pad_T: np.ndarray | None = None) -> ReorientResult:
+    """Run the behaviour once on the object between the fingers (see the module docstring).
+
+    Args:
+        object_width_m: nominal width of the object across the fingers, m.
+        target_angle_rad: commanded final angle of the object's axis in the pad frame at grasp.
+        truth: scores the final angle when given (``final_angle_rad`` and ``error_rad`` stay None otherwise).
+        pad_T: hand_T_pad of the sensor (default :func:`~tactile_manip.robot.frames.hand_T_pad`).
+
+    The gripper is left closed on the object (the caller releases it); the arm stays where the correction
+    left it, or where a fault stopped it.
+    """
+    cfg = config or ReorientConfig()
+    target = float(wrap_axial(check_finite_scalar("target_angle_rad", target_angle_rad)))
+    result = ReorientResult(outcome="error")
+    timings = result.timings_s
+    t_start = time.perf_counter()
+    try:
+        base_T_hand, result.grasp_width_m = _grasp(arm, gripper, object_width_m, cfg)
+        base_T_pad = base_T_hand @ (hand_T_pad() if pad_T is None else pad_T)
+        timings["grasp"] = time.perf_counter() - t_start
+        t0 = time.perf_counter()
+        est = _estimate_with_policy(gripper, sensor, estimator, object_width_m, cfg, result)
+        result.estimate = est
+        timings["estimate"] = time.perf_counter() - t0
+        if result.action == "abstain":
+            raise _Abort("abstained", f"estimate below confidence {cfg.min_confidence:.2f}: "
+                                      f"{est.reason or f'confidence {est.confidence:.2f}'}")
+        result.correction_rad = float(wrap_axial(target - (est.angle_rad if est.defined else 0.0)))
+        t0 = time.perf_counter()
+        result.correction_rad = _turn_about_pad_normal(arm, base_T_pad, est, result.correction_rad, cfg)
+        timings["reorient"] = time.perf_counter() - t0
+        result.outcome = "done"
+    except _Abort as stop:
+        result.outcome, result.detail = stop.outcome, stop.detail
+    finally:
+        timings["total"] = time.perf_counter() - t_start
+    if truth is not None and result.outcome == "done":
+        axis = truth.object_axis_base()
+        if axis is not None:
+            result.final_angle_rad = float(wrap_axial(angle_in_plane(np.asarray(axis, float), base_T_pad)))
+            result.error_rad = float(wrap_axial(result.final_angle_rad - target))
+    return result
+
+
+def _grasp(arm: Arm, gripper: Gripper, width_m: float, cfg: ReorientConfig) -> tuple[np.ndarray, float]:
+    """Close on the object; returns base_T_hand at the grasp and the grasp width (m)."""
+    try:
+        grasp = gripper.grasp(width_m, cfg.force_n, epsilon_inner_m=cfg.width_tolerance_m,
+                              epsilon_outer_m=cfg.width_tolerance_m)
+    except GripperError as exc:
+        raise _Abort("grasp_failed", f"gripper error: {exc}") from None
+    if not grasp.success:
+        raise _Abort("grasp_failed", f"gripper stopped at {grasp.width_m * 1e3:.1f} mm, object "
+                                     f"{width_m * 1e3:.1f} +- {cfg.width_tolerance_m * 1e3:.1f} mm")
+    try:
+        return arm.state().base_T_hand, grasp.width_m
+    except ArmFault as exc:
+        raise _Abort("arm_fault", f"arm state unavailable after the grasp: {exc}") from None
+
+
+def _read(sensor: TactileSensor, estimator: TactilePoseEstimator, cfg: ReorientConfig) -> AngleEstimate:
+    if cfg.settle_s > 0:
+        time.sleep(cfg.settle_s)
+    try:
+        return estimator.read(sensor, frames=cfg.frames, timeout_s=cfg.sensor_timeout_s)
+    except SensorError as exc:
+        raise _Abort("sensor_stale", f"tactile sensor: {exc}") from None
+
+
+def _confident(est: AngleEstimate, cfg: ReorientConfig) -> bool:
+    return est.defined and est.confidence >= cfg.min_confidence
+
+
+def _estimate_with_policy(gripper: Gripper, sensor: TactileSensor, estimator: TactilePoseEstimator, width_m: float,
+                          cfg: ReorientConfig, result: ReorientResult) -> AngleEstimate:
+    est = _read(sensor, estimator, cfg)
+    if _confident(est, cfg) or cfg.low_confidence == "act":
+        return est
+    if cfg.low_confidence == "abstain":
+        result.action = "abstain"
+        return est
+    best = est
+    while result.regrasps < cfg.max_regrasps and not _confident(best, cfg):
+        result.regrasps += 1
+        result.action = "regrasp"
+        try:
+            gripper.open(width_m + 0.01)
+        except GripperError as exc:
+            raise _Abort("grasp_failed", f"gripper error while re-grasping: {exc}") from None
+        _grasp_again(gripper, width_m, cfg)
+        est = _read(sensor, estimator, cfg)
+        if est.defined and (not best.defined or est.confidence > best.confidence):
+            best = est
+    return best
+
+
+def _grasp_again(gripper: Gripper, width_m: float, cfg: ReorientConfig) -> None:
+    try:
+        grasp = gripper.grasp(width_m, cfg.force_n, epsilon_inner_m=cfg.width_tolerance_m,
+                              epsilon_outer_m=cfg.width_tolerance_m)
+    except GripperError as exc:
+        raise _Abort("grasp_failed", f"gripper error while re-grasping: {exc}") from None
+    if not grasp.success:
+        raise _Abort("grasp_failed", f"re-grasp stopped at {grasp.width_m * 1e3:.1f} mm")
+
+
+def _turn_about_pad_normal(arm: Arm, base_T_pad: np.ndarray, est: AngleEstimate, angle_rad: float,
+                           cfg: ReorientConfig) -> float:
+    """Rotate the hand by ``angle_rad`` about the pad normal through the contact centroid; returns the turn made.
+
+    A rod is axial: turning by ``angle_rad - sign(angle_rad) * pi`` aligns it just as well, so when the turn
+    has no joint path (or the safety layer refuses it) the other way round is tried before giving up.
+    """
+    centroid_pad_m = np.array([est.centroid_mm[0] * 1e-3, est.centroid_mm[1] * 1e-3, 0.0, 1.0])
+    point = (base_T_pad @ centroid_pad_m)[:3]
+    turns = [angle_rad, angle_rad - math.copysign(math.pi, angle_rad)] if angle_rad != 0 else [0.0]
+    failures: list[str] = []
+    for turn in turns:
+        try:
+            start = arm.state().base_T_hand
+            arm.move_cartesian(rotate_pose_about(start, base_T_pad[:3, 2], point, turn), speed_factor=cfg.speed_factor)
+            return turn
+        except (IKError, SafetyLimitError) as exc:  # the arm did not move: try the other way round
+            failures.append(f"turn of {math.degrees(turn):+.1f} deg: {exc}")
+            last = exc
+        except ArmFault as exc:
+            raise _Abort("arm_fault", f"turn of {math.degrees(turn):+.1f} deg: {exc}") from None
+    outcome = "safety_refused" if isinstance(last, SafetyLimitError) else "ik_failed"
+    raise _Abort(outcome, "; ".join(failures))

@@ -1,0 +1,259 @@
+"""Run a reorientation trial scene: every presentation once per method, logged as it completes.
+
+In simulation the scene is wired like this: the kinematic twin holds the presented object; when the twin
+gripper closes on it, the simulated tactile sensor is told the contact (the object's shape, its in-hand
+angle and offset in the pad frame, the grasp force) and renders the magnetic field of that contact at
+125 Hz with fresh chip noise per frame; when the gripper opens, the pad is empty again. The estimator only
+ever sees the sensor's frames. The trial is scored from the twin's true object pose after the correction.
+
+Each (trial, method) is appended to ``trials.jsonl`` and fsynced as soon as it completes; ``resume=True``
+skips the pairs already there, so a killed run loses no completed trial and can be continued.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from tactile_manip.behaviours.reorient import ReorientResult, grasp_estimate_reorient
+from tactile_manip.perception.estimator import TactilePoseEstimator
+from tactile_manip.perception.pose import wrap_axial
+from tactile_manip.perception.reconstruct import load_reconstructor
+from tactile_manip.robot.frames import hand_T_pad, rotation_about, transform
+from tactile_manip.trials.record import TrialRecord
+from tactile_manip.trials.scene import MethodSpec, TrialObject, TrialScene
+
+
+@dataclass(frozen=True)
+class Presentation:
+    """One trial's draw: which object, at which in-hand angle (rad, pad frame), offset (mm) and force (N)."""
+
+    trial: int
+    seed: int
+    obj: TrialObject
+    angle_rad: float
+    offset_mm: tuple[float, float]
+    force_n: float
+
+
+def draw_presentation(scene: TrialScene, trial: int) -> Presentation:
+    """The presentation of trial ``trial``: a pure function of the scene's seed and the index."""
+    seed = int(np.random.SeedSequence([scene.seed, trial]).generate_state(1)[0])
+    rng = np.random.default_rng(seed)
+    p = scene.presentation
+    obj = p.objects[trial % len(p.objects)]
+    angle = float(wrap_axial(math.radians(rng.uniform(*p.angle_deg))))
+    offset = rng.uniform(-p.offset_mm, p.offset_mm, size=2)
+    force = float(rng.uniform(*p.force_n))
+    return Presentation(trial, seed, obj, angle, (float(offset[0]), float(offset[1])), force)
+
+
+def pad_T_object(angle_rad: float, offset_mm: tuple[float, float], width_m: float) -> np.ndarray:
+    """Object frame (x along its axis, centred between the pads) in the pad frame."""
+    return transform(rotation_about(np.array([0.0, 0.0, 1.0]), angle_rad),
+                     np.array([offset_mm[0] * 1e-3, offset_mm[1] * 1e-3, width_m / 2]))
+
+
+def resolve_model_path(spec: MethodSpec, scene_path: Path | None) -> str:
+    """The reconstructor argument for ``spec``: a baseline name, or an existing model path."""
+    if spec.reconstructor in ("bilinear", "bicubic"):
+        return spec.reconstructor
+    path = Path(spec.reconstructor)
+    candidates = [path] if path.is_absolute() else [Path.cwd() / path]
+    if scene_path is not None and not path.is_absolute():
+        candidates += [parent / path for parent in Path(scene_path).resolve().parents]
+    for candidate in candidates:
+        if candidate.exists():
+            return str(candidate)
+    return str(path)  # load_reconstructor raises the clear "missing model" error
+
+
+def build_estimators(scene: TrialScene, scene_path: Path | None = None) -> dict[str, TactilePoseEstimator]:
+    """One estimator per method (models are loaded once, before the first trial)."""
+    out = {}
+    for spec in scene.methods:
+        target = resolve_model_path(spec, scene_path)
+        if target in ("bilinear", "bicubic"):
+            kwargs = {"output_px": spec.output_px} if spec.output_px else {}
+        else:
+            kwargs = {"threads": spec.threads, "samples": spec.samples}
+        out[spec.name] = TactilePoseEstimator(load_reconstructor(target, **kwargs))
+    return out
+
+
+class SimulatedCell:
+    """The simulated work cell: kinematic twin arm and gripper, a world holding the object, a simulated sensor.
+
+    Built from a scene; only the parts the scene names (no dynamics engine, no VBTS rendering).
+    """
+
+    def __init__(self, scene: TrialScene) -> None:
+        from tactile_manip.robot.safety import SafeArm
+        from tactile_manip.robot.twin import KinematicArm, TwinArmConfig, TwinGripper, TwinWorld
+        from tactile_manip.sensors.simulated import SimulatedSensor
+        from tactile_manip.sim.shapes import make_indenter
+
+        self.scene = scene
+        self.twin = KinematicArm(TwinArmConfig(home_q_rad=scene.robot.home_q_rad,
+                                               speed_factor=scene.robot.speed_factor))
+        self.arm = SafeArm(self.twin, scene.robot.safety)
+        self.world = TwinWorld(self.twin)
+        self.gripper = TwinGripper(self.twin, self.world)
+        self.sensor = SimulatedSensor(scene.sensor)
+        self._indenters = {o.display_name: make_indenter(o.name, **o.kwargs) for o in scene.presentation.objects}
+        self._presentation: Presentation | None = None
+        self._stall_after_grasp = False
+        self.world.on_grasp.append(self._on_grasp)
+        self.world.on_release.append(lambda obj: self.sensor.clear_contact())
+
+    # -------------------------------------------------------------- wiring of the twin to the sensor
+
+    def _on_grasp(self, obj, hand_T_object: np.ndarray, force_n: float) -> None:
+        from tactile_manip.sim.objects import IndenterPose
+
+        pad_T_obj = np.linalg.inv(hand_T_pad()) @ hand_T_object
+        yaw = math.atan2(pad_T_obj[1, 0], pad_T_obj[0, 0])
+        pose = IndenterPose(x_mm=pad_T_obj[0, 3] * 1e3, y_mm=pad_T_obj[1, 3] * 1e3, yaw_rad=yaw)
+        force = self._presentation.force_n if self._presentation is not None else force_n
+        self.sensor.set_contact(obj.payload, pose, force)
+        if self._stall_after_grasp:
+            self.sensor.stall()
+
+    # -------------------------------------------------------------- lifecycle
+
+    @contextlib.contextmanager
+    def connected(self) -> Iterator[SimulatedCell]:
+        """Connect everything, take the sensor's baseline with nothing on the pad, disconnect at the end."""
+        with self.sensor, self.arm, self.gripper:
+            self.sensor.calibrate_baseline()
+            yield self
+
+    @contextlib.contextmanager
+    def presented(self, p: Presentation, *, arm_fault: bool = False,
+                  sensor_stall: bool = False) -> Iterator[tuple[object, WorldTruth]]:
+        """Trial boundary, then ``p``'s object between the open fingers; yields (world object, its truth).
+
+        On exit (also after a fault) the gripper opens, the object is removed and the sensor resumes.
+        ``arm_fault`` arms a reflex on the next arm move; ``sensor_stall`` stops the sensor once it is grasped.
+        """
+        from tactile_manip.robot.twin import WorldObject
+
+        self._ready_for_trial()
+        obj = WorldObject(p.obj.display_name, p.obj.grasp_width_m, payload=self._indenters[p.obj.display_name])
+        self._presentation, self._stall_after_grasp = p, sensor_stall
+        self.world.present(obj, hand_T_pad() @ pad_T_object(p.angle_rad, p.offset_mm, obj.width_m))
+        if arm_fault:
+            self.twin.inject_fault(kind="reflex", at_fraction=0.5)
+        try:
+            yield obj, WorldTruth(self.world, obj)
+        finally:
+            self._stall_after_grasp = False
+            if self.sensor.stalled:
+                self.sensor.resume()
+            self.gripper.open()
+            self.world.remove(obj)
+            self._presentation = None
+
+    def run_one(self, p: Presentation, estimator: TactilePoseEstimator, *, arm_fault: bool = False,
+                sensor_stall: bool = False) -> ReorientResult:
+        """Present ``p``, run the reorientation behaviour with ``estimator``, release, reset."""
+        with self.presented(p, arm_fault=arm_fault, sensor_stall=sensor_stall) as (obj, truth):
+            return grasp_estimate_reorient(self.arm, self.gripper, self.sensor, estimator,
+                                           object_width_m=obj.width_m,
+                                           target_angle_rad=math.radians(self.scene.target_deg),
+                                           config=self.scene.behaviour, truth=truth)
+
+    def _ready_for_trial(self) -> None:
+        """Trial boundary: clear any fault (and an armed but unused fault injection), open, go home."""
+        self.twin.recover()
+        self.gripper.open()
+        self.arm.home()
+
+
+class WorldTruth:
+    """Ground truth from the twin (for scoring): the object's pose and axis in the base frame."""
+
+    def __init__(self, world, obj) -> None:
+        self._world, self._obj = world, obj
+
+    def object_pose_base(self) -> np.ndarray:
+        return self._world.object_pose(self._obj)
+
+    def object_axis_base(self) -> np.ndarray:
+        return self.object_pose_base()[:3, 0]
+
+
+def make_record(p: Presentation, method: str, target_rad: float, result: ReorientResult) -> TrialRecord:
+    """The log line of one trial."""
+    est = result.estimate
+    return TrialRecord(
+        trial=p.trial, seed=p.seed, method=method, object=p.obj.display_name, true_angle_rad=p.angle_rad,
+        offset_mm=p.offset_mm, target_angle_rad=float(wrap_axial(target_rad)),
+        estimated_angle_rad=est.angle_rad if est is not None and est.defined else None,
+        confidence=est.confidence if est is not None else 0.0, defined=bool(est is not None and est.defined),
+        action=result.action, regrasps=result.regrasps, final_angle_rad=result.final_angle_rad,
+        error_rad=result.error_rad, outcome=result.outcome, detail=result.detail,
+        timings_s={k: round(v, 6) for k, v in result.timings_s.items()},
+        extra={"force_n": round(p.force_n, 4), "grasp_width_m": result.grasp_width_m,
+               "correction_rad": result.correction_rad,
+               "estimate_timings_s": dict(est.timings_s) if est is not None else {}})
+
+
+def run_scene(scene: TrialScene, write: Callable[[TrialRecord], None], *, estimators: dict[str, TactilePoseEstimator],
+              skip: set[tuple[int, str]] = frozenset(), progress: bool = True) -> int:
+    """Run every (trial, method) of ``scene`` not in ``skip`` on the simulated cell; ``write`` each record.
+
+    Returns the number of trials run. Outcomes other than "done" are recorded, never raised; only an
+    interrupt (Ctrl-C) or a failure to build the cell stops the run.
+    """
+    from tqdm.auto import tqdm
+
+    if scene.robot.backend != "twin":
+        raise NotImplementedError("tactile-manip trials runs the simulated cell (robot.backend = 'twin'); on a "
+                                  "real FR3 use the behaviour with FrankyArm directly (docs/robot.md)")
+    cell = SimulatedCell(scene)
+    todo = [(i, m) for i in range(scene.trials) for m in estimators if (i, m) not in skip]
+    faults = scene.faults
+    target = math.radians(scene.target_deg)
+    count = 0
+    with cell.connected(), tqdm(total=len(todo), desc=f"trials ({scene.name})", unit="trial",
+                                disable=not progress) as bar:
+        for i, method in todo:
+            p = draw_presentation(scene, i)
+            t0 = time.perf_counter()
+            try:
+                result = cell.run_one(p, estimators[method], arm_fault=i in faults.arm_fault_trials,
+                                      sensor_stall=i in faults.sensor_stall_trials)
+            except Exception as exc:  # noqa: BLE001 - a broken trial is recorded, the run goes on
+                result = ReorientResult(outcome="error", detail=f"{type(exc).__name__}: {exc}")
+            result.timings_s.setdefault("trial", time.perf_counter() - t0)
+            write(make_record(p, method, target, result))
+            count += 1
+            bar.update()
+    return count
+
+
+def run_trials(scene: TrialScene, out_dir: str | Path, *, scene_path: str | Path | None = None,
+               resume: bool = False, progress: bool = True, tolerance_deg: float | None = None):
+    """Run ``scene`` into ``out_dir`` (trials.jsonl fsynced per trial, then the report) and return the summary.
+
+    With ``resume=True`` the (trial, method) pairs already in ``out_dir/trials.jsonl`` are skipped (the scene
+    must be the same: the log refuses a different one).
+    """
+    from tactile_manip.config import to_dict
+    from tactile_manip.trials.log import TrialLog, completed_keys, read_trials
+    from tactile_manip.trials.report import write_report
+
+    out = Path(out_dir)
+    estimators = build_estimators(scene, Path(scene_path) if scene_path is not None else None)
+    skip = completed_keys(out / "trials.jsonl") if resume and (out / "trials.jsonl").exists() else set()
+    with TrialLog(out, config=to_dict(scene), resume=resume) as log:
+        run_scene(scene, log.append, estimators=estimators, skip=skip, progress=progress)
+    tolerance = math.radians(scene.tolerance_deg if tolerance_deg is None else tolerance_deg)
+    return write_report(out, read_trials(out / "trials.jsonl"), tolerance, title=f"Reorientation trials: {scene.name}")

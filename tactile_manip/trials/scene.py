@@ -1,0 +1,190 @@
+"""A reorientation trial scene: the TOML file ``tactile-manip trials --config`` reads, as typed dataclasses.
+
+A scene names only what the job needs (DESIGN.md section 3): the methods compared, the objects and how they
+are presented, the robot backend with its safety limits, the tactile sensor, the behaviour's parameters and
+(for robustness runs) a fault plan. See ``configs/scenes/reorient_sim.toml`` for a commented example.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+from tactile_manip.behaviours.reorient import ReorientConfig
+from tactile_manip.checks import check_finite_scalar
+from tactile_manip.config import load_config
+from tactile_manip.robot.safety import SafetyLimits
+from tactile_manip.sensors.config import SimulatedSensorConfig
+
+
+@dataclass(frozen=True)
+class MethodSpec:
+    """One compared method: a name for the logs and the reconstructor behind the estimator.
+
+    Attributes:
+        name: label in the logs and plots, e.g. "supermag".
+        reconstructor: "bilinear", "bicubic" or a path to an exported .onnx model (relative paths are
+            resolved against the working directory, then against the scene file's repository).
+        output_px: baselines only: square output size (16 = the paper's 4x4 -> 16x16 trial baseline; 0 keeps
+            the shipped 200x200).
+        samples: ONNX models only: prior samples per reading (> 1 adds their spread to the confidence).
+        threads: onnxruntime intra-op threads.
+    """
+
+    name: str
+    reconstructor: str
+    output_px: int = 0
+    samples: int = 1
+    threads: int = 1
+
+    def __post_init__(self) -> None:
+        if not self.name or not self.name.replace("_", "").replace("-", "").isalnum():
+            raise ValueError(f"methods.name must be a non-empty word (letters, digits, _ or -), got {self.name!r}")
+        if self.output_px < 0 or self.samples < 1 or self.threads < 1:
+            raise ValueError(f"method {self.name}: output_px >= 0, samples >= 1 and threads >= 1 are required")
+
+
+@dataclass(frozen=True)
+class TrialObject:
+    """An object the trials present (any simulator shape, see ``tactile-manip params`` / sim.shapes).
+
+    Attributes:
+        name: shape name, e.g. "cylinder", "hex_bar", "square_bar".
+        label: name in the logs (default: name).
+        kwargs: shape arguments, e.g. {size_mm = 3.0}.
+        width_mm: width across the fingers, mm (0: the shape's ``size_mm``, right for the rods).
+    """
+
+    name: str
+    label: str = ""
+    kwargs: dict[str, Any] = field(default_factory=dict)
+    width_mm: float = 0.0
+
+    @property
+    def display_name(self) -> str:
+        return self.label or self.name
+
+    @property
+    def grasp_width_m(self) -> float:
+        width = self.width_mm or float(self.kwargs.get("size_mm", 0.0))
+        if not width > 0:
+            raise ValueError(f"object {self.display_name}: set width_mm (no size_mm to take the width from)")
+        return width * 1e-3
+
+
+@dataclass(frozen=True)
+class PresentationConfig:
+    """How an object is put between the fingers: its in-hand angle and contact offset, drawn per trial.
+
+    Attributes:
+        angle_deg: [low, high] of the uniform in-hand angle of the object's axis in the pad frame, deg.
+        offset_mm: the contact centre is uniform within +-offset_mm of the pad centre in pad x and y, mm.
+        force_n: [low, high] of the uniform grasp force, N (the gripper's threshold plus overshoot).
+        objects: presented in turn (trial i gets object i mod len(objects)).
+    """
+
+    angle_deg: tuple[float, float] = (-90.0, 90.0)
+    offset_mm: float = 2.0
+    force_n: tuple[float, float] = (10.0, 11.0)
+    objects: list[TrialObject] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        lo, hi = self.angle_deg
+        if not (math.isfinite(lo) and math.isfinite(hi) and -180.0 <= lo <= hi <= 180.0):
+            raise ValueError(f"presentation.angle_deg must be [low, high] within [-180, 180], got {self.angle_deg}")
+        check_finite_scalar("presentation.offset_mm", self.offset_mm, low=0.0, high=8.0)
+        f_lo, f_hi = self.force_n
+        if not (math.isfinite(f_lo) and math.isfinite(f_hi) and 0 < f_lo <= f_hi <= 140.0):
+            raise ValueError(f"presentation.force_n must be [low, high] within (0, 140] N, got {self.force_n}")
+
+
+@dataclass(frozen=True)
+class RobotConfig:
+    """Which arm and gripper: the kinematic twin, or a real FR3 through franky-control.
+
+    Attributes:
+        backend: "twin" or "franky".
+        host: franky only: the robot's address (FCI enabled).
+        relative_dynamics_factor: franky only: fraction of the robot's velocity/acceleration/jerk limits.
+        speed_factor: twin only: fraction of the joint velocity limits used for the modelled durations.
+        home_q_rad: where each trial starts and the object is presented, rad. The default holds the hand
+            pointing down with the pad normal along -x of the base, so turns of +-95 degrees about the pad
+            normal stay inside the FR3 joint limits in both directions (with joint 7 at +pi/4 instead, joint 6
+            reaches its limit before +-90 degrees).
+        safety: limits every target is checked against before the arm moves.
+    """
+
+    backend: Literal["twin", "franky"] = "twin"
+    host: str = ""
+    relative_dynamics_factor: float = 0.05
+    speed_factor: float = 0.1
+    home_q_rad: tuple[float, float, float, float, float, float, float] = (
+        0.0, -0.3, 0.0, -2.2, 0.0, 2.0, -math.pi / 4)
+    safety: SafetyLimits = field(default_factory=SafetyLimits)
+
+    def __post_init__(self) -> None:
+        check_finite_scalar("robot.relative_dynamics_factor", self.relative_dynamics_factor, low=0.0,
+                            low_open=True, high=1.0)
+        check_finite_scalar("robot.speed_factor", self.speed_factor, low=0.0, low_open=True, high=1.0)
+        if self.backend == "franky" and not self.host:
+            raise ValueError("robot.host: the franky backend needs the robot's address (no default robot)")
+
+
+@dataclass(frozen=True)
+class FaultPlan:
+    """Faults injected on purpose (simulation only), to prove a run survives them.
+
+    Attributes:
+        arm_fault_trials: trial indices whose correction move stops on an injected reflex.
+        sensor_stall_trials: trial indices during which the tactile sensor stops after the grasp.
+    """
+
+    arm_fault_trials: list[int] = field(default_factory=list)
+    sensor_stall_trials: list[int] = field(default_factory=list)
+
+
+@dataclass(frozen=True)
+class TrialScene:
+    """Everything ``tactile-manip trials`` needs (see ``configs/scenes/reorient_sim.toml``).
+
+    Attributes:
+        name: scene name (in the logs and the report title).
+        trials: presentations per run; each is run once per method on the same seed.
+        seed: master seed: presentation i uses ``numpy.random.SeedSequence([seed, i])``.
+        tolerance_deg: success tolerance on |final - target|, deg (re-score later with ``tactile-manip score``).
+        target_deg: commanded final angle of the object's axis in the pad frame at grasp, deg.
+        methods: the compared methods (default: the shipped SuperMag model and the paper's 16x16 bilinear).
+    """
+
+    name: str = "reorient"
+    trials: int = 100
+    seed: int = 0
+    tolerance_deg: float = 5.0
+    target_deg: float = 0.0
+    methods: list[MethodSpec] = field(default_factory=lambda: [
+        MethodSpec("supermag", "models/supermag_compact.onnx"), MethodSpec("bilinear", "bilinear", output_px=16)])
+    presentation: PresentationConfig = field(default_factory=PresentationConfig)
+    robot: RobotConfig = field(default_factory=RobotConfig)
+    sensor: SimulatedSensorConfig = field(default_factory=SimulatedSensorConfig)
+    behaviour: ReorientConfig = field(default_factory=ReorientConfig)
+    faults: FaultPlan = field(default_factory=FaultPlan)
+
+    def __post_init__(self) -> None:
+        if isinstance(self.trials, bool) or self.trials < 1:
+            raise ValueError(f"trials must be a positive integer, got {self.trials!r}")
+        check_finite_scalar("tolerance_deg", self.tolerance_deg, low=0.0, low_open=True, high=90.0)
+        check_finite_scalar("target_deg", self.target_deg, low=-90.0, high=90.0)
+        if not self.methods:
+            raise ValueError("methods: name at least one method")
+        names = [m.name for m in self.methods]
+        if len(set(names)) != len(names):
+            raise ValueError(f"methods: names must be unique, got {names}")
+        if not self.presentation.objects:
+            raise ValueError("presentation.objects: name at least one object")
+
+
+def load_scene(path: str | Path) -> TrialScene:
+    """Read a scene TOML file (raises ConfigError naming the file and the key on any problem)."""
+    return load_config(path, TrialScene)
