@@ -29,6 +29,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "record": ("tactile_manip.commands.record", "record a sensor's frames and health to a crash-safe file"),
     "find-port": ("tactile_manip.commands.find_port", "list serial ports that may be the sensor board"),
     "view": ("tactile_manip.commands.view", "show the 4x4x3 field of a sensor live (or save a snapshot)"),
+    "trials": ("tactile_manip.commands.trials", "run grasp-estimate-reorient trials per method and report"),
+    "score": ("tactile_manip.commands.score", "re-score a saved trial run at another tolerance (no re-run)"),
 }
 
 

@@ -24,7 +24,7 @@ from tactile_manip.errors import ArmFault, IKError, SafetyLimitError
 from tactile_manip.perception.estimator import TactilePoseEstimator
 from tactile_manip.perception.pose import wrap_axial
 from tactile_manip.robot.base import Arm, Gripper
-from tactile_manip.robot.frames import angle_in_plane, hand_T_pad, rotate_pose_about
+from tactile_manip.robot.frames import angle_in_plane, hand_T_finger_pad, hand_T_pad, rotate_pose_about
 from tactile_manip.sensors.base import TactileSensor
 from tactile_manip.types import AngleEstimate
 
@@ -83,14 +83,15 @@ def place_in_slot(arm: Arm, gripper: Gripper, sensor: TactileSensor, estimator: 
         raise ValueError("the slot's axis must lie in the pad plane (perpendicular to the pad normal), "
                          f"got axis {np.asarray(slot.axis_base).tolist()} with the pad normal {normal.round(3).tolist()}")
     try:
-        base_T_pad = _grasp(arm, gripper, object_width_m, cfg)[0] @ hand_T_pad()
+        base_T_hand, width_m = _grasp(arm, gripper, object_width_m, cfg)
+        base_T_pad = base_T_hand @ hand_T_finger_pad(width_m)
         est = _read(sensor, estimator, cfg)
         result.estimate = est
         if not est.defined:
             raise _Abort("abstained", f"no rod axis to align: {est.reason}")
-        # a point on the rod's axis: the contact centroid, half the rod's width along the pad normal
+        # a point on the rod's axis: the contact centroid, half the grasp width along the pad normal
         axis_point = (base_T_pad @ np.array([est.centroid_mm[0] * 1e-3, est.centroid_mm[1] * 1e-3,
-                                             object_width_m / 2, 1.0]))[:3]
+                                             width_m / 2, 1.0]))[:3]
         turn = float(wrap_axial(angle_in_plane(np.asarray(slot.axis_base, float), base_T_pad) - est.angle_rad))
         _move(arm, rotate_pose_about(arm.state().base_T_hand, normal, axis_point, turn), cfg, "turn")
         shift = arm.state().base_T_hand.copy()

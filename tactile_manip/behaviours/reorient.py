@@ -27,7 +27,7 @@ from tactile_manip.errors import ArmFault, GripperError, IKError, SafetyLimitErr
 from tactile_manip.perception.estimator import TactilePoseEstimator
 from tactile_manip.perception.pose import wrap_axial
 from tactile_manip.robot.base import Arm, Gripper
-from tactile_manip.robot.frames import angle_in_plane, hand_T_pad, rotate_pose_about
+from tactile_manip.robot.frames import angle_in_plane, hand_T_finger_pad, rotate_pose_about
 from tactile_manip.sensors.base import TactileSensor
 from tactile_manip.types import AngleEstimate
 
@@ -114,7 +114,8 @@ def grasp_estimate_reorient(arm: Arm, gripper: Gripper, sensor: TactileSensor, e
         object_width_m: nominal width of the object across the fingers, m.
         target_angle_rad: commanded final angle of the object's axis in the pad frame at grasp.
         truth: scores the final angle when given (``final_angle_rad`` and ``error_rad`` stay None otherwise).
-        pad_T: hand_T_pad of the sensor (default :func:`~tactile_manip.robot.frames.hand_T_pad`).
+        pad_T: hand_T_pad of the sensor (default: the pad on the +y finger at the grasp width,
+            :func:`~tactile_manip.robot.frames.hand_T_finger_pad`).
 
     The gripper is left closed on the object (the caller releases it); the arm stays where the correction
     left it, or where a fault stopped it.
@@ -126,7 +127,7 @@ def grasp_estimate_reorient(arm: Arm, gripper: Gripper, sensor: TactileSensor, e
     t_start = time.perf_counter()
     try:
         base_T_hand, result.grasp_width_m = _grasp(arm, gripper, object_width_m, cfg)
-        base_T_pad = base_T_hand @ (hand_T_pad() if pad_T is None else pad_T)
+        base_T_pad = base_T_hand @ (hand_T_finger_pad(result.grasp_width_m) if pad_T is None else pad_T)
         timings["grasp"] = time.perf_counter() - t_start
         t0 = time.perf_counter()
         est = _estimate_with_policy(gripper, sensor, estimator, object_width_m, cfg, result)

@@ -64,6 +64,13 @@ def hand_T_pad(pad_offset_m: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> np
     return transform(HAND_R_PAD, np.asarray(pad_offset_m, dtype=np.float64))
 
 
+def hand_T_finger_pad(opening_m: float) -> np.ndarray:
+    """Pad frame of the sensor on the +y finger when the fingers are ``opening_m`` apart (pad surface at
+    hand y = +opening/2, so an object centred between the fingers has its centre at pad z = opening/2)."""
+    opening = check_finite_scalar("opening_m", opening_m, low=0.0, high=0.2)
+    return hand_T_pad((0.0, opening / 2, 0.0))
+
+
 def angle_in_plane(direction: np.ndarray, frame_T: np.ndarray) -> float:
     """Angle (rad, atan2) of a 3-vector's projection on the x-y plane of ``frame_T`` (a 4x4 pose, same base)."""
     d = check_array("direction", direction, shape=(3,))

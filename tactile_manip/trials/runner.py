@@ -25,7 +25,7 @@ from tactile_manip.behaviours.reorient import ReorientResult, grasp_estimate_reo
 from tactile_manip.perception.estimator import TactilePoseEstimator
 from tactile_manip.perception.pose import wrap_axial
 from tactile_manip.perception.reconstruct import load_reconstructor
-from tactile_manip.robot.frames import hand_T_pad, rotation_about, transform
+from tactile_manip.robot.frames import hand_T_finger_pad, rotation_about, transform
 from tactile_manip.trials.record import TrialRecord
 from tactile_manip.trials.scene import MethodSpec, TrialObject, TrialScene
 
@@ -55,7 +55,7 @@ def draw_presentation(scene: TrialScene, trial: int) -> Presentation:
 
 
 def pad_T_object(angle_rad: float, offset_mm: tuple[float, float], width_m: float) -> np.ndarray:
-    """Object frame (x along its axis, centred between the pads) in the pad frame."""
+    """Object frame (x along its axis, its centre ``width_m / 2`` off the pad surface) in the pad frame."""
     return transform(rotation_about(np.array([0.0, 0.0, 1.0]), angle_rad),
                      np.array([offset_mm[0] * 1e-3, offset_mm[1] * 1e-3, width_m / 2]))
 
@@ -117,7 +117,7 @@ class SimulatedCell:
     def _on_grasp(self, obj, hand_T_object: np.ndarray, force_n: float) -> None:
         from tactile_manip.sim.objects import IndenterPose
 
-        pad_T_obj = np.linalg.inv(hand_T_pad()) @ hand_T_object
+        pad_T_obj = np.linalg.inv(hand_T_finger_pad(obj.width_m)) @ hand_T_object
         yaw = math.atan2(pad_T_obj[1, 0], pad_T_obj[0, 0])
         pose = IndenterPose(x_mm=pad_T_obj[0, 3] * 1e3, y_mm=pad_T_obj[1, 3] * 1e3, yaw_rad=yaw)
         force = self._presentation.force_n if self._presentation is not None else force_n
@@ -147,7 +147,7 @@ class SimulatedCell:
         self._ready_for_trial()
         obj = WorldObject(p.obj.display_name, p.obj.grasp_width_m, payload=self._indenters[p.obj.display_name])
         self._presentation, self._stall_after_grasp = p, sensor_stall
-        self.world.present(obj, hand_T_pad() @ pad_T_object(p.angle_rad, p.offset_mm, obj.width_m))
+        self.world.present(obj, hand_T_finger_pad(obj.width_m) @ pad_T_object(p.angle_rad, p.offset_mm, obj.width_m))
         if arm_fault:
             self.twin.inject_fault(kind="reflex", at_fraction=0.5)
         try:

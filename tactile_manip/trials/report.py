@@ -1,0 +1,163 @@
+"""A run's report: ``summary.json``, a markdown summary, and two figures (matplotlib, Agg backend).
+
+Files, written to the given folder (``TAG`` is empty for the run's own report and ``_<tol>deg``, e.g.
+``_5deg``, when ``tactile-manip score`` re-scores a run, so reports at several tolerances sit side by side)::
+
+    summary{TAG}.json                run info, tolerance, per-method results, paired comparisons, per object
+    summary{TAG}.md                  the same as markdown tables
+    errors{TAG}.png                  histogram of |error| (deg) per method over executed trials, tolerance line
+    success_vs_tolerance{TAG}.png    success rate vs tolerance 0-20 deg, Wilson 95 % bands, tolerance marked
+
+matplotlib is imported inside the plotting functions, so importing this module is free.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from tactile_manip.trials.record import OUTCOMES, TrialRecord
+from tactile_manip.trials.stats import RunSummary, success_vs_tolerance, summarise, wilson_interval
+
+SWEEP_MAX_DEG = 20.0
+SWEEP_STEP_DEG = 0.1
+RUN_KEYS = ("run_id", "config_hash", "code_version", "started_utc")  # copied from run.json into the summary
+
+
+def tolerance_tag(tolerance_rad: float) -> str:
+    """File-name tag of a re-scored report, e.g. ``"_5deg"`` or ``"_2.5deg"``."""
+    return f"_{math.degrees(tolerance_rad):.6g}deg"
+
+
+def write_report(run_dir: str | Path, records: Sequence[TrialRecord], tolerance_rad: float, *,
+                 title: str = "Reorientation trials", tag: str = "",
+                 run_info: Mapping[str, Any] | None = None) -> RunSummary:
+    """Score ``records`` at ``tolerance_rad`` and write the report files (module docstring) to ``run_dir``.
+
+    Args:
+        run_dir: folder to write to (created if missing).
+        records: the run's trial records.
+        tolerance_rad: success tolerance on |final - target|, rad.
+        title: heading of the markdown summary and the figures.
+        tag: appended to every file stem (see :func:`tolerance_tag`); empty for the run's own report.
+        run_info: the run's ``run.json`` (id, config hash, code version), copied into the summary.
+
+    Returns:
+        The RunSummary the files show.
+    """
+    summary = summarise(records, tolerance_rad)
+    out = Path(run_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    run = {k: run_info[k] for k in RUN_KEYS if k in run_info} if run_info else {}
+    doc = {"title": title, "run": run, "tolerance_rad": tolerance_rad, **summary.to_dict()}
+    (out / f"summary{tag}.json").write_text(json.dumps(doc, indent=2) + "\n", encoding="utf-8")
+    (out / f"summary{tag}.md").write_text(markdown_summary(summary, title=title, run_info=run), encoding="utf-8")
+    plot_errors(out / f"errors{tag}.png", records, tolerance_rad, title=title)
+    plot_success_vs_tolerance(out / f"success_vs_tolerance{tag}.png", records, tolerance_rad, title=title)
+    return summary
+
+
+def markdown_summary(summary: RunSummary, *, title: str = "Reorientation trials",
+                     run_info: Mapping[str, Any] | None = None) -> str:
+    """The summary as markdown: results per method, paired comparisons, outcomes and per-object counts."""
+    tol = summary.tolerance_deg
+    lines = [f"# {title}", ""]
+    if run_info:
+        lines += [", ".join(f"{k} `{v}`" for k, v in run_info.items()), ""]
+    lines += [f"Success: outcome `done` and |final - target| <= {tol:.6g} deg ({math.radians(tol):.4g} rad); "
+              f"{summary.n_records} trial records.", ""]
+    lines += _table(["method", "success", "rate", "Wilson 95 % CI", "median abs err (deg)", "p95 abs err (deg)",
+                     "abstained", "faults"],
+                    [[m, f"{s.successes}/{s.n}", _pct(s.success_rate), f"{_pct(s.wilson_low)} - {_pct(s.wilson_high)}",
+                      _deg(s.abs_error_median_deg), _deg(s.abs_error_p95_deg), str(s.abstentions), str(s.faults)]
+                     for m, s in summary.methods.items()])
+    if summary.paired:
+        lines += ["", "## Paired comparison (trials both methods ran)", ""]
+        lines += _table(["A", "B", "pairs", "both", "only A", "only B", "neither", "McNemar p (exact)"],
+                        [[p.method_a, p.method_b, str(p.n_pairs), str(p.both), str(p.only_a), str(p.only_b),
+                          str(p.neither), f"{p.mcnemar_p:.4g}"] for p in summary.paired])
+    seen = [o for o in OUTCOMES if any(s.outcomes[o] for s in summary.methods.values())]
+    lines += ["", "## Outcomes", ""]
+    lines += _table(["method", *seen], [[m, *(str(s.outcomes[o]) for o in seen)]
+                                        for m, s in summary.methods.items()])
+    lines += ["", "## Per object (successes/trials)", ""]
+    lines += _table(["object", *summary.methods],
+                    [[obj, *(f"{by[m].successes}/{by[m].n}" if m in by else "-" for m in summary.methods)]
+                     for obj, by in summary.per_object.items()])
+    return "\n".join(lines) + "\n"
+
+
+def plot_errors(path: str | Path, records: Sequence[TrialRecord], tolerance_rad: float, *,
+                title: str = "") -> None:
+    """Histogram of |error| (deg) per method over executed trials, with the tolerance as a dashed line."""
+    from tactile_manip.plots import _pyplot
+
+    plt = _pyplot()
+    methods = dict.fromkeys(r.method for r in records)
+    errors_deg = {m: np.degrees([abs(r.error_rad) for r in records if r.method == m and r.outcome == "done"])
+                  for m in methods}
+    tol_deg = math.degrees(tolerance_rad)
+    top = max([SWEEP_MAX_DEG, tol_deg * 1.2, *(float(e.max()) for e in errors_deg.values() if e.size)])
+    bins = np.linspace(0.0, math.ceil(top), min(90, math.ceil(top)) + 1)
+    fig, ax = plt.subplots(figsize=(7, 4), constrained_layout=True)
+    try:
+        for m, e in errors_deg.items():
+            label = f"{m} ({e.size} executed)" if e.size else f"{m} (no executed trial)"
+            ax.hist(e, bins=bins, histtype="step", linewidth=2, label=label)
+        ax.axvline(tol_deg, color="k", linestyle="--", label=f"tolerance {tol_deg:.6g} deg")
+        ax.set_xlabel("|final - target| [deg]")
+        ax.set_ylabel("trials")
+        ax.yaxis.get_major_locator().set_params(integer=True)
+        ax.set_title(f"{title}: final error" if title else "final error")
+        ax.legend()
+        fig.savefig(path, dpi=100)
+    finally:
+        plt.close(fig)
+
+
+def plot_success_vs_tolerance(path: str | Path, records: Sequence[TrialRecord], tolerance_rad: float, *,
+                              title: str = "") -> None:
+    """Success rate vs tolerance (0-20 deg, wider if the tolerance is) with Wilson 95 % bands."""
+    from tactile_manip.plots import _pyplot
+
+    plt = _pyplot()
+    tol_deg = math.degrees(tolerance_rad)
+    sweep_deg = np.arange(0.0, max(SWEEP_MAX_DEG, tol_deg) + SWEEP_STEP_DEG / 2, SWEEP_STEP_DEG)
+    rates = success_vs_tolerance(records, np.radians(sweep_deg))
+    counts = {m: sum(r.method == m for r in records) for m in rates}
+    fig, ax = plt.subplots(figsize=(7, 4), constrained_layout=True)
+    try:
+        for m, rate in rates.items():
+            n = counts[m]
+            bands = np.array([wilson_interval(int(round(x * n)), n) for x in rate])
+            (line,) = ax.step(sweep_deg, rate, where="post", linewidth=2, label=f"{m} (n={n})")
+            ax.fill_between(sweep_deg, bands[:, 0], bands[:, 1], step="post", alpha=0.2,
+                            color=line.get_color(), linewidth=0)
+        ax.axvline(tol_deg, color="k", linestyle="--", label=f"tolerance {tol_deg:.6g} deg")
+        ax.set_xlim(0.0, sweep_deg[-1])
+        ax.set_ylim(0.0, 1.02)
+        ax.set_xlabel("tolerance on |final - target| [deg]")
+        ax.set_ylabel("success rate (Wilson 95 % band)")
+        ax.set_title(f"{title}: success vs tolerance" if title else "success vs tolerance")
+        ax.legend(loc="lower right")
+        fig.savefig(path, dpi=100)
+    finally:
+        plt.close(fig)
+
+
+def _table(header: list[str], rows: list[list[str]]) -> list[str]:
+    return ["| " + " | ".join(header) + " |", "|" + "---|" * len(header),
+            *("| " + " | ".join(row) + " |" for row in rows)]
+
+
+def _pct(x: float) -> str:
+    return f"{100 * x:.1f} %"
+
+
+def _deg(x: float | None) -> str:
+    return "-" if x is None else f"{x:.2f}"

@@ -1,0 +1,148 @@
+"""TactilePoseEstimator: the pose API on the shipped model and the baselines, from arrays and from sensors."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tactile_manip.errors import SensorTimeoutError
+from tactile_manip.perception import PoseParams, TactilePoseEstimator, load_reconstructor, wrap_axial
+from tactile_manip.sim.objects import IndenterPose
+from tactile_manip.sim.pair import SensorPair
+from tactile_manip.sim.shapes import make_indenter
+
+pytest.importorskip("onnxruntime")
+
+MODEL = Path(__file__).resolve().parents[2] / "models" / "supermag_compact.onnx"
+
+
+@pytest.fixture(scope="module")
+def supermag() -> TactilePoseEstimator:
+    return TactilePoseEstimator(load_reconstructor(MODEL))
+
+
+@pytest.fixture(scope="module")
+def pair() -> SensorPair:
+    return SensorPair(seed=0)
+
+
+def _rod_field(pair: SensorPair, yaw_deg: float, *, size_mm: float = 4.0, seed: int = 0) -> np.ndarray:
+    rod = make_indenter("hex_bar", size_mm=size_mm)
+    sample = pair.press(rod, IndenterPose(0.5, -0.5, math.radians(yaw_deg)), 10.0, np.random.default_rng(seed),
+                        render_depth=False)
+    return sample.field_ut
+
+
+def _axial_error_deg(a_rad: float, b_rad: float) -> float:
+    return abs(math.degrees(wrap_axial(a_rad - b_rad)))
+
+
+@pytest.mark.parametrize("yaw_deg", [-60.0, 0.0, 35.0, 90.0, -89.5])
+def test_rod_angle_from_one_reading(supermag, pair, yaw_deg) -> None:
+    est = supermag.estimate(_rod_field(pair, yaw_deg))
+    assert est.defined and 0.5 < est.confidence <= 1.0
+    assert _axial_error_deg(est.angle_rad, math.radians(yaw_deg)) < 3.0
+    assert -math.pi / 2 < est.angle_rad <= math.pi / 2          # wrapped, also at the +-90 degree seam
+    assert est.area_mm2 > 20.0
+    assert set(est.timings_s) == {"reconstruct", "pose", "total"} and est.timings_s["total"] > 0
+
+
+def test_empty_reading_is_undefined_not_nan(supermag) -> None:
+    est = supermag.estimate(np.zeros((4, 4, 3)))
+    assert not est.defined and est.reason and est.confidence == 0.0
+    assert all(math.isfinite(v) for v in (est.angle_rad, est.confidence, est.area_mm2, *est.centroid_mm))
+
+
+def test_saturated_reading_gives_a_finite_estimate(supermag) -> None:
+    est = supermag.estimate(np.full((4, 4, 3), 1e5, np.float32))  # clamped to +-500 uT as in training
+    assert all(math.isfinite(v) for v in (est.angle_rad, est.confidence, est.area_mm2))
+    assert 0.0 <= est.confidence <= 1.0
+
+
+@pytest.mark.parametrize("bad, match", [(np.full((4, 4, 3), np.nan), "NaN"), (np.zeros((4, 4, 2)), "shape"),
+                                        (np.zeros((16, 3)), "shape")])
+def test_bad_readings_raise_a_clear_error(supermag, bad, match) -> None:
+    with pytest.raises(ValueError, match=match):
+        supermag.estimate(bad)
+
+
+def test_float32_and_float64_readings_agree(supermag, pair) -> None:
+    field = _rod_field(pair, 20.0).astype(np.float64)
+    a, b = supermag.estimate(field), supermag.estimate(field.astype(np.float32))
+    assert a.defined and b.defined
+    assert abs(a.angle_rad - b.angle_rad) < 1e-4 and abs(a.confidence - b.confidence) < 1e-4
+
+
+def test_frames_are_averaged_before_the_estimate(supermag, pair) -> None:
+    fields = [_rod_field(pair, 20.0, seed=s) for s in range(3)]
+    mean = supermag.estimate(np.mean(np.stack(fields).astype(np.float64), axis=0))
+    avg = supermag.estimate_frames(fields)
+    assert avg.angle_rad == pytest.approx(mean.angle_rad, abs=1e-9)
+    with pytest.raises(ValueError, match="at least one"):
+        supermag.estimate_frames([])
+    with pytest.raises(ValueError, match="different shapes"):
+        supermag.estimate_frames([np.zeros((4, 4, 3)), np.zeros((4, 4, 2))])
+
+
+def test_prior_samples_can_only_lower_the_confidence(pair) -> None:
+    field = _rod_field(pair, -30.0)
+    one = TactilePoseEstimator(load_reconstructor(MODEL)).estimate(field)
+    many = TactilePoseEstimator(load_reconstructor(MODEL, samples=4, seed=0)).estimate(field)
+    assert many.defined and 0.0 <= many.confidence <= one.confidence + 1e-9
+
+
+def test_bilinear_16px_baseline_runs_the_same_pipeline(pair) -> None:
+    est = TactilePoseEstimator(load_reconstructor("bilinear", output_px=16)).estimate(_rod_field(pair, 10.0))
+    assert est.defined or est.reason
+    assert math.isfinite(est.angle_rad)
+
+
+def test_pose_params_are_validated() -> None:
+    with pytest.raises(ValueError, match="isotropy_limit"):
+        PoseParams(isotropy_limit=0.0)
+    with pytest.raises(ValueError, match="sigma_mm"):
+        PoseParams(sigma_mm=float("nan"))
+    with pytest.raises(TypeError, match="Reconstructor"):
+        TactilePoseEstimator("models/supermag_compact.onnx")  # type: ignore[arg-type]
+
+
+# ---------------------------------------------------------------- from a sensor
+
+
+@pytest.fixture
+def sensor():
+    from tactile_manip.sensors.simulated import SimulatedSensor
+
+    with SimulatedSensor() as s:
+        s.calibrate_baseline(frames=20)
+        yield s
+
+
+def test_read_uses_only_frames_after_the_call(supermag, sensor) -> None:
+    rod = make_indenter("cylinder", size_mm=3.0)
+    sensor.set_contact(rod, IndenterPose(0.0, 0.0, math.radians(-40.0)), 10.0)
+    est = supermag.read(sensor, frames=3, timeout_s=0.5)
+    assert est.defined and _axial_error_deg(est.angle_rad, math.radians(-40.0)) < 3.0
+    assert est.timings_s["age"] >= 0.0
+    sensor.clear_contact()
+    assert not supermag.read(sensor, timeout_s=0.5).defined
+
+
+def test_stream_yields_one_estimate_per_new_frame(supermag, sensor) -> None:
+    sensor.set_contact(make_indenter("square_bar", size_mm=2.5), IndenterPose(yaw_rad=0.3), 10.0)
+    estimates = list(supermag.stream(sensor, timeout_s=0.5, max_estimates=4))
+    assert len(estimates) == 4
+    assert all(math.isfinite(e.angle_rad) for e in estimates)
+
+
+def test_a_stalled_sensor_raises_instead_of_returning_stale_estimates(supermag, sensor) -> None:
+    sensor.stall()
+    with pytest.raises(SensorTimeoutError):
+        supermag.read(sensor, timeout_s=0.05)
+    with pytest.raises(SensorTimeoutError):
+        next(supermag.stream(sensor, timeout_s=0.05))
+    sensor.resume()
+    assert supermag.read(sensor, timeout_s=0.5) is not None

@@ -1,0 +1,172 @@
+"""The trial runner on the simulated cell: paired methods, faults recorded, runs that survive a kill."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tactile_manip.robot.safety import SafetyLimits
+from tactile_manip.trials.log import read_trials
+from tactile_manip.trials.runner import SimulatedCell, build_estimators, draw_presentation, run_scene, run_trials
+from tactile_manip.trials.scene import (FaultPlan, MethodSpec, PresentationConfig, RobotConfig, TrialObject,
+                                        TrialScene, load_scene)
+
+pytest.importorskip("roboticstoolbox")
+pytest.importorskip("onnxruntime")
+
+REPO = Path(__file__).resolve().parents[2]
+MODEL = str(REPO / "models" / "supermag_compact.onnx")
+THIN_RODS = [TrialObject("cylinder", "cylinder_3mm", {"size_mm": 3.0}),
+             TrialObject("hex_bar", "hex_bar_4mm", {"size_mm": 4.0})]
+
+
+def _scene(**changes) -> TrialScene:
+    base = TrialScene(name="test", trials=4, seed=3,
+                      methods=[MethodSpec("supermag", MODEL), MethodSpec("bilinear", "bilinear", output_px=16)],
+                      presentation=PresentationConfig(objects=THIN_RODS))
+    return dataclasses.replace(base, **changes)
+
+
+def _run(scene: TrialScene) -> list:
+    records = []
+    run_scene(scene, records.append, estimators=build_estimators(scene), progress=False)
+    return records
+
+
+def test_presentations_are_a_pure_function_of_seed_and_index() -> None:
+    scene = _scene()
+    a, b = draw_presentation(scene, 2), draw_presentation(scene, 2)
+    assert a == b and a != draw_presentation(scene, 3)
+    assert draw_presentation(dataclasses.replace(scene, seed=4), 2).seed != a.seed
+    assert -math.pi / 2 < a.angle_rad <= math.pi / 2 and all(abs(o) <= 2.0 for o in a.offset_mm)
+
+
+def test_every_method_runs_every_presentation_and_supermag_turns_rods_to_target() -> None:
+    records = _run(_scene())
+    assert [(r.trial, r.method) for r in records] == [(i, m) for i in range(4) for m in ("supermag", "bilinear")]
+    by_trial = {}
+    for r in records:
+        by_trial.setdefault(r.trial, []).append(r)
+    for pair in by_trial.values():  # identical presentation for both methods
+        assert len({(r.seed, r.object, r.true_angle_rad, r.offset_mm) for r in pair}) == 1
+    supermag = [r for r in records if r.method == "supermag"]
+    assert all(r.outcome == "done" for r in supermag), [r.detail for r in supermag]
+    for r in supermag:
+        # the error is measured on the twin's object pose, and matches estimate error up to the arm's tolerance
+        assert abs(r.error_rad) < math.radians(5.0)
+        est_err = wrap(r.true_angle_rad - r.estimated_angle_rad)
+        assert abs(abs(r.error_rad) - abs(est_err)) < math.radians(0.2)
+
+
+def wrap(a: float) -> float:
+    return float((a + math.pi / 2) % math.pi - math.pi / 2)
+
+
+def test_injected_faults_are_recorded_and_the_next_trial_runs() -> None:
+    scene = _scene(methods=[MethodSpec("supermag", MODEL)],
+                   faults=FaultPlan(arm_fault_trials=[1], sensor_stall_trials=[2]))
+    records = _run(scene)
+    outcomes = [r.outcome for r in records]
+    assert outcomes == ["done", "arm_fault", "sensor_stale", "done"], [r.detail for r in records]
+    assert "reflex" in records[1].detail and "tactile sensor" in records[2].detail
+    assert records[1].final_angle_rad is None and records[1].error_rad is None
+
+
+def test_an_unreachable_turn_is_an_ik_failure_and_the_arm_stays() -> None:
+    # joint 7 at +pi/4 puts joint 6 near its limit: an 80 degree turn has no joint path either way round
+    robot = RobotConfig(home_q_rad=(0.0, -0.3, 0.0, -2.2, 0.0, 2.0, math.pi / 4))
+    scene = _scene(trials=2, methods=[MethodSpec("supermag", MODEL)], robot=robot,
+                   presentation=PresentationConfig(angle_deg=(-80.0, -80.0), objects=THIN_RODS))
+    records = _run(scene)
+    assert [r.outcome for r in records] == ["ik_failed", "ik_failed"]
+    assert "no IK solution" in records[0].detail and "did not move" in records[0].detail
+
+
+def test_a_refused_target_is_recorded_as_a_safety_refusal() -> None:
+    robot = RobotConfig(safety=SafetyLimits(max_rotation_rad=0.01))
+    scene = _scene(trials=2, methods=[MethodSpec("supermag", MODEL)], robot=robot,
+                   presentation=PresentationConfig(angle_deg=(40.0, 50.0), objects=THIN_RODS))
+    assert [r.outcome for r in _run(scene)] == ["safety_refused", "safety_refused"]
+
+
+def test_the_abstain_policy_counts_an_empty_grasp_as_abstained() -> None:
+    # a procedural dome is round: the angle is undefined, the abstain policy does not act
+    dome = TrialObject("procedural", "dome", {"seed": 3}, width_mm=4.0)
+    behaviour = dataclasses.replace(_scene().behaviour, low_confidence="abstain", min_confidence=0.99)
+    scene = _scene(trials=1, methods=[MethodSpec("bilinear", "bilinear", output_px=16)], behaviour=behaviour,
+                   presentation=PresentationConfig(objects=[dome]))
+    (record,) = _run(scene)
+    assert record.outcome == "abstained" and record.action == "abstain"
+
+
+def test_run_trials_writes_log_summary_and_plots(tmp_path) -> None:
+    summary = run_trials(_scene(trials=2), tmp_path / "run", progress=False)
+    files = {p.name for p in (tmp_path / "run").iterdir()}
+    assert {"trials.jsonl", "run.json", "summary.md", "summary.json", "errors.png", "success_vs_tolerance.png"} <= files
+    assert len(read_trials(tmp_path / "run")) == 4
+    assert summary.methods["supermag"].n == 2
+
+
+def test_the_shipped_scenes_load() -> None:
+    for path in [REPO / "configs/scenes/reorient_sim.toml", *sorted((REPO / "tasks").glob("*.toml"))]:
+        scene = load_scene(path)
+        assert scene.presentation.objects and scene.methods, path
+
+
+def test_the_cell_wires_the_grasp_to_the_sensor() -> None:
+    cell = SimulatedCell(_scene())
+    with cell.connected():
+        p = draw_presentation(cell.scene, 0)
+        with cell.presented(p) as (obj, truth):
+            assert not np.any(cell.sensor.contact_field_ut)
+            assert cell.gripper.grasp(obj.width_m, 10.0).success
+            assert np.abs(cell.sensor.contact_field_ut).max() > 20.0   # the rod's field, uT
+            assert np.allclose(truth.object_pose_base(), cell.world.object_pose(obj))
+        assert not np.any(cell.sensor.contact_field_ut)                 # released: the pad is empty again
+
+
+@pytest.mark.slow
+def test_killing_a_run_loses_no_completed_trial_and_resume_finishes_it(tmp_path) -> None:
+    scene_file = tmp_path / "scene.toml"
+    scene_file.write_text(f'''name = "kill"
+trials = 40
+seed = 1
+[[methods]]
+name = "supermag"
+reconstructor = "{MODEL}"
+[[presentation.objects]]
+name = "cylinder"
+kwargs = {{ size_mm = 3.0 }}
+''')
+    out = tmp_path / "run"
+    cmd = [sys.executable, "-m", "tactile_manip.cli", "trials", "--config", str(scene_file), "--out", str(out),
+           "--quiet"]
+    proc = subprocess.Popen(cmd, cwd=REPO, start_new_session=True, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL)
+    log = out / "trials.jsonl"
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline:
+        if log.exists() and log.read_text().count("\n") >= 5:
+            break
+        time.sleep(0.05)
+    os.killpg(proc.pid, signal.SIGKILL)
+    proc.wait()
+    lines = [ln for ln in log.read_text().split("\n") if ln.strip()]
+    complete = [json.loads(ln) for ln in lines if ln.endswith("}")]
+    assert 5 <= len(complete) < 40
+    assert [r["trial"] for r in complete] == list(range(len(complete)))
+    done = subprocess.run(cmd + ["--resume"], cwd=REPO, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    records = read_trials(out)
+    assert sorted(r.trial for r in records) == list(range(40))
+    assert [r.to_dict() for r in records[:len(complete)]] == complete
