@@ -110,9 +110,9 @@ class RobotConfig:
         relative_dynamics_factor: franky only: fraction of the robot's velocity/acceleration/jerk limits.
         speed_factor: twin only: fraction of the joint velocity limits used for the modelled durations.
         home_q_rad: where each trial starts and the object is presented, rad. The default holds the hand
-            pointing down with the pad normal along -x of the base, so turns of +-95 degrees about the pad
-            normal stay inside the FR3 joint limits in both directions (with joint 7 at +pi/4 instead, joint 6
-            reaches its limit before +-90 degrees).
+            pointing straight down with the pad normal along -x of the base (the fingers close along base x),
+            so turns of +-95 degrees about the pad normal stay inside the FR3 joint limits in both directions
+            (from the twin's home, joint 7 at +pi/4, joint 6 reaches its limit before +90 degrees).
         safety: limits every target is checked against before the arm moves.
     """
 
@@ -121,7 +121,7 @@ class RobotConfig:
     relative_dynamics_factor: float = 0.05
     speed_factor: float = 0.1
     home_q_rad: tuple[float, float, float, float, float, float, float] = (
-        0.0, -0.3, 0.0, -2.2, 0.0, 2.0, -math.pi / 4)
+        0.0, -0.3, 0.0, -2.2, 0.0, 1.9, -math.pi / 4)
     safety: SafetyLimits = field(default_factory=SafetyLimits)
 
     def __post_init__(self) -> None:

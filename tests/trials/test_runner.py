@@ -84,7 +84,7 @@ def test_injected_faults_are_recorded_and_the_next_trial_runs() -> None:
 
 def test_an_unreachable_turn_is_an_ik_failure_and_the_arm_stays() -> None:
     # joint 7 at +pi/4 puts joint 6 near its limit: an 80 degree turn has no joint path either way round
-    robot = RobotConfig(home_q_rad=(0.0, -0.3, 0.0, -2.2, 0.0, 2.0, math.pi / 4))
+    robot = RobotConfig(home_q_rad=(0.0, -0.3, 0.0, -2.2, 0.0, 1.9, math.pi / 4))
     scene = _scene(trials=2, methods=[MethodSpec("supermag", MODEL)], robot=robot,
                    presentation=PresentationConfig(angle_deg=(-80.0, -80.0), objects=THIN_RODS))
     records = _run(scene)

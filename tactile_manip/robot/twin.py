@@ -1,0 +1,557 @@
+"""Kinematic FR3 twin: an ``Arm``, a ``Gripper`` and a tiny world of graspable objects (no dynamics).
+
+The arm is roboticstoolbox-python's Panda model (its end frame is the Franka Hand TCP: flange, -45 deg about
+z, 0.1034 m along z) with the FR3 joint limits substituted. Joint moves interpolate linearly; Cartesian moves
+follow a straight line in position and a slerp in orientation, solved step by step with a warm-started
+Levenberg-Marquardt IK. Motions are instantaneous unless ``realtime`` is set; their modelled duration (each
+joint at most ``dq_max * speed_factor``, no acceleration phase) is logged in ``last_move_duration_s``.
+
+A held object follows the hand rigidly; :class:`TwinWorld` tells listeners (a simulated tactile sensor) when
+an object is grasped or released. roboticstoolbox is imported when an arm connects, never at import.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from tactile_manip.checks import check_array, check_finite_scalar
+from tactile_manip.errors import ArmFault, GripperError, IKError, RobotError, SafetyLimitError
+from tactile_manip.robot.base import N_JOINTS, Arm, ArmState, GraspResult, Gripper, GripperState
+from tactile_manip.robot.frames import rotation_about
+from tactile_manip.robot.safety import check_rigid_transform, pose_error
+
+
+def _frozen(values: list[float]) -> np.ndarray:
+    a = np.array(values, dtype=np.float64)
+    a.flags.writeable = False
+    return a
+
+
+# FR3 datasheet (Franka Research 3), rad and rad/s; joint 6's range is shifted compared to the Panda.
+FR3_Q_MIN_RAD = _frozen([-2.7437, -1.7837, -2.9007, -3.0421, -2.8065, 0.5445, -3.0159])
+FR3_Q_MAX_RAD = _frozen([2.7437, 1.7837, 2.9007, -0.1518, 2.8065, 4.5169, 3.0159])
+FR3_DQ_MAX_RAD_S = _frozen([2.62, 2.62, 2.62, 2.62, 5.26, 4.18, 5.26])
+# Panda's "ready" pose qr with joint 6 at 1.9 rad instead of 2.0, so the hand z axis points straight down
+# (qr tilts it by 5.7 deg): TCP at (0.463, 0, 0.403) m, hand x = base x, fingers closing along base y.
+FR3_HOME_Q_RAD = (0.0, -0.3, 0.0, -2.2, 0.0, 1.9, math.pi / 4)
+
+
+class RobotNotConnectedError(RobotError, ConnectionError):
+    """A twin arm or gripper was used before ``connect()`` (or after ``disconnect()``)."""
+
+
+@dataclass(frozen=True)
+class TwinArmConfig:
+    """Settings of :class:`KinematicArm`.
+
+    Attributes:
+        home_q_rad: (7,) configuration of ``home()``, rad (inside the FR3 limits).
+        speed_factor: default fraction of the joint velocity limits when a move passes none, in (0, 1].
+        step_m: largest TCP translation between two IK steps of a Cartesian path, m.
+        step_rad: largest TCP rotation between two IK steps, rad.
+        max_joint_step_rad: a path step whose solution moves any joint more than this is refused, rad.
+        ik_seed: seed of the perturbed warm starts tried when the plain warm start fails.
+        ik_restarts: how many perturbed warm starts to try per step.
+        ik_tolerance: IK residual bound, 0.5 |e|^2 with e the pose error (m and rad): 1e-12 ~ 1.4 um.
+        reach_tolerance_m: the reached TCP position must be this close to the target, m.
+        reach_tolerance_rad: the reached TCP orientation must be this close to the target, rad.
+        realtime: sleep for the modelled duration of each move (off: moves return at once).
+    """
+
+    home_q_rad: tuple[float, ...] = FR3_HOME_Q_RAD  # rad
+    speed_factor: float = 0.1  # fraction of dq_max, like a careful real robot
+    step_m: float = 0.005  # m
+    step_rad: float = 0.035  # rad (2 deg)
+    max_joint_step_rad: float = 0.25  # rad
+    ik_seed: int = 0
+    ik_restarts: int = 4
+    ik_tolerance: float = 1e-12  # 0.5 |e|^2, m and rad
+    reach_tolerance_m: float = 1e-4  # m
+    reach_tolerance_rad: float = 1e-3  # rad
+    realtime: bool = False
+
+    def __post_init__(self) -> None:
+        q = check_array("home_q_rad", self.home_q_rad, shape=(N_JOINTS,))
+        bad = np.flatnonzero((q < FR3_Q_MIN_RAD) | (q > FR3_Q_MAX_RAD))
+        if bad.size:
+            j = int(bad[0])
+            raise ValueError(f"home_q_rad: joint {j + 1} = {q[j]} rad outside the FR3 limits "
+                             f"[{FR3_Q_MIN_RAD[j]}, {FR3_Q_MAX_RAD[j]}]")
+        check_finite_scalar("speed_factor", self.speed_factor, low=0.0, high=1.0, low_open=True)
+        check_finite_scalar("step_m", self.step_m, low=0.0, high=0.1, low_open=True)
+        check_finite_scalar("step_rad", self.step_rad, low=0.0, high=0.5, low_open=True)
+        check_finite_scalar("max_joint_step_rad", self.max_joint_step_rad, low=0.0, high=math.pi, low_open=True)
+        for name in ("ik_seed", "ik_restarts"):
+            value = getattr(self, name)
+            if not isinstance(value, int) or value < 0:
+                raise ValueError(f"{name} must be an integer >= 0, got {value!r}")
+        check_finite_scalar("ik_tolerance", self.ik_tolerance, low=0.0, high=1e-4, low_open=True)
+        check_finite_scalar("reach_tolerance_m", self.reach_tolerance_m, low=0.0, low_open=True)
+        check_finite_scalar("reach_tolerance_rad", self.reach_tolerance_rad, low=0.0, low_open=True)
+
+
+@functools.lru_cache(maxsize=1)
+def _fr3_kinematics() -> Any:
+    """roboticstoolbox ETS of the Panda (flange + Franka Hand TCP) with the FR3 joint limits; built once."""
+    try:
+        import roboticstoolbox as rtb
+    except ImportError as e:
+        raise ImportError("the kinematic FR3 twin needs roboticstoolbox-python: "
+                          "pip install 'tactile_manip[robot]'") from e
+    panda = rtb.models.Panda()
+    for link in panda.links:
+        if link.isjoint:
+            link.qlim = [FR3_Q_MIN_RAD[link.jindex], FR3_Q_MAX_RAD[link.jindex]]
+    return panda.ets()
+
+
+def interpolate_poses(base_T_start: np.ndarray, base_T_goal: np.ndarray, *, step_m: float,
+                      step_rad: float) -> np.ndarray:
+    """(N, 4, 4) poses from start (excluded) to goal (included): straight line in position, slerp in rotation.
+
+    N is the smallest count keeping each step within ``step_m`` (m) and ``step_rad`` (rad), at least 1.
+    """
+    from scipy.spatial.transform import Rotation
+
+    r0 = base_T_start[:3, :3]
+    rotvec = Rotation.from_matrix(r0.T @ base_T_goal[:3, :3]).as_rotvec()  # start-frame axis * angle
+    angle_rad = float(np.linalg.norm(rotvec))
+    d_m = base_T_goal[:3, 3] - base_T_start[:3, 3]
+    n = max(1, math.ceil(float(np.linalg.norm(d_m)) / step_m), math.ceil(angle_rad / step_rad))
+    poses = np.tile(np.eye(4), (n, 1, 1))
+    for i in range(1, n + 1):
+        s = i / n
+        rot = rotation_about(rotvec, s * angle_rad) if angle_rad > 1e-12 else np.eye(3)
+        poses[i - 1, :3, :3] = r0 @ rot
+        poses[i - 1, :3, 3] = base_T_start[:3, 3] + s * d_m
+    poses[-1] = base_T_goal  # exact goal, no interpolation round-off
+    return poses
+
+
+class KinematicArm(Arm):
+    """The FR3 as pure kinematics: FK, stepped warm-started IK, limit and jump checks, fault injection.
+
+    Moves are all-or-nothing: a Cartesian path is solved completely before the arm moves, and a refused move
+    (:class:`IKError`, :class:`SafetyLimitError`) leaves it where it was. An injected fault stops the next
+    move part-way and raises :class:`ArmFault`. Every method but ``connect`` raises
+    :class:`RobotNotConnectedError` before ``connect()``. The arm starts at ``home_q_rad``.
+    """
+
+    def __init__(self, config: TwinArmConfig | None = None) -> None:
+        self.config = config if config is not None else TwinArmConfig()
+        self._q_rad = np.array(self.config.home_q_rad, dtype=np.float64)
+        self._ets: Any = None
+        self._connected = False
+        self._fault = ""  # message of the current fault, "" when none
+        self._fault_kind = ""
+        self._armed_fault: tuple[str, float] | None = None
+        self.last_move_duration_s = 0.0  # modelled duration of the last (possibly partial) move, s
+        self.last_path_q_rad = self._q_rad[None].copy()  # (N, 7) configurations the last move went through
+
+    # --- connection ----------------------------------------------------------------------------------
+    def connect(self) -> None:
+        if self._ets is None:
+            self._ets = _fr3_kinematics()
+        self._connected = True
+
+    def disconnect(self) -> None:
+        self._connected = False
+
+    @property
+    def is_connected(self) -> bool:
+        return self._connected
+
+    # --- limits --------------------------------------------------------------------------------------
+    @property
+    def q_min_rad(self) -> np.ndarray:
+        return FR3_Q_MIN_RAD.copy()
+
+    @property
+    def q_max_rad(self) -> np.ndarray:
+        return FR3_Q_MAX_RAD.copy()
+
+    @property
+    def dq_max_rad_s(self) -> np.ndarray:
+        return FR3_DQ_MAX_RAD_S.copy()
+
+    @property
+    def home_q_rad(self) -> np.ndarray:
+        return np.array(self.config.home_q_rad, dtype=np.float64)
+
+    # --- state and kinematics ------------------------------------------------------------------------
+    def state(self) -> ArmState:
+        self._require_connected()
+        return ArmState(q_rad=self._q_rad.copy(), base_T_hand=self.fk(self._q_rad),
+                        faulted=bool(self._fault), fault=self._fault)
+
+    def fk(self, q_rad: np.ndarray) -> np.ndarray:
+        """(4, 4) TCP pose in the base frame at joint positions ``q_rad`` (7,), rad."""
+        self._require_connected()
+        q = check_array("q_rad", q_rad, shape=(N_JOINTS,))
+        return np.array(self._ets.fkine(q).A, dtype=np.float64)
+
+    # --- faults --------------------------------------------------------------------------------------
+    def inject_fault(self, kind: str = "reflex", at_fraction: float = 0.5) -> None:
+        """Arm a one-shot fault: the next move that starts stops at ``at_fraction`` of its path and raises
+        :class:`ArmFault` (``kind``). A move refused before it starts does not use it up; ``recover()``
+        disarms it."""
+        if not isinstance(kind, str) or not kind:
+            raise ValueError(f"kind must be a non-empty string, got {kind!r}")
+        self._armed_fault = (kind, check_finite_scalar("at_fraction", at_fraction, low=0.0, high=1.0))
+
+    def recover(self) -> None:
+        """Clear the fault, and an injected fault no move has used yet (a fresh start at the trial boundary)."""
+        self._require_connected()
+        self._fault = self._fault_kind = ""
+        self._armed_fault = None
+
+    # --- moves ---------------------------------------------------------------------------------------
+    def move_joints(self, q_rad: np.ndarray, *, speed_factor: float | None = None) -> None:
+        """Linear joint-space move to ``q_rad`` (7,), rad. Raises SafetyLimitError outside the FR3 limits."""
+        self._require_ready()
+        q = check_array("q_rad", q_rad, shape=(N_JOINTS,))
+        sf = self._speed_factor(speed_factor)
+        problem = self._limit_problem(q)
+        if problem:
+            raise SafetyLimitError(f"joint target refused: {problem}; the arm did not move")
+        self._execute(np.stack([self._q_rad, q]), sf)
+
+    def move_cartesian(self, base_T_hand: np.ndarray, *, speed_factor: float | None = None) -> None:
+        """Straight-line TCP move to ``base_T_hand`` (4, 4); raises IKError (arm unmoved) when a step fails."""
+        self._require_ready()
+        target = check_rigid_transform("base_T_hand", base_T_hand, tolerance=1e-5)
+        sf = self._speed_factor(speed_factor)
+        path_q = self.plan_cartesian(target)
+        self._execute(path_q, sf)
+
+    def plan_cartesian(self, base_T_hand: np.ndarray) -> np.ndarray:
+        """(N + 1, 7) joint path (current configuration first) reaching ``base_T_hand``; nothing moves.
+
+        Raises:
+            IKError: a step has no solution inside the FR3 limits within ``max_joint_step_rad`` of the
+                previous one, or the final configuration misses the target by more than the reach tolerance.
+        """
+        self._require_connected()
+        target = check_rigid_transform("base_T_hand", base_T_hand, tolerance=1e-5)
+        cfg = self.config
+        poses = interpolate_poses(self.fk(self._q_rad), target, step_m=cfg.step_m, step_rad=cfg.step_rad)
+        path = [self._q_rad.copy()]
+        for i, pose in enumerate(poses):
+            q, reason = self._solve_step(pose, path[-1], step_index=i)
+            if q is None:
+                raise IKError(f"move_cartesian: no IK solution at step {i + 1}/{len(poses)} ({reason}); "
+                              f"target position {np.round(target[:3, 3], 4).tolist()} m; the arm did not move. "
+                              "Choose a nearer target or move through an intermediate pose")
+            path.append(q)
+        self._check_reached(path[-1], target)
+        return np.stack(path)
+
+    # --- internals -----------------------------------------------------------------------------------
+    def _solve_step(self, base_T_hand: np.ndarray, q_prev: np.ndarray, *,
+                    step_index: int) -> tuple[np.ndarray | None, str]:
+        """IK for one path pose warm-started at ``q_prev``; (q, "") or (None, why every start failed)."""
+        rng = np.random.default_rng([self.config.ik_seed, step_index])
+        starts = [q_prev] + [q_prev + rng.uniform(-0.05, 0.05, N_JOINTS) for _ in range(self.config.ik_restarts)]
+        reason = ""
+        for q0 in starts:
+            # slimit=1: one search from q0 only (the solver's own restarts are not seeded, so not repeatable)
+            sol = self._ets.ik_LM(base_T_hand, q0=q0, ilimit=60, slimit=1, tol=self.config.ik_tolerance,
+                                  joint_limits=False)
+            if not sol.success or sol.searches != 1:
+                why = f"did not converge, residual {sol.residual:.1e}"
+            else:
+                q = _unwrap_near(np.asarray(sol.q, dtype=np.float64), q_prev)
+                why = self._limit_problem(q) or self._jump_problem(q, q_prev)
+                if not why:
+                    return q, ""
+            reason = reason or why  # the plain warm start's reason is the informative one
+        return None, reason
+
+    def _limit_problem(self, q_rad: np.ndarray) -> str:
+        for j in range(N_JOINTS):
+            if not FR3_Q_MIN_RAD[j] <= q_rad[j] <= FR3_Q_MAX_RAD[j]:
+                return (f"joint {j + 1} = {q_rad[j]:.4f} rad outside the FR3 limits "
+                        f"[{FR3_Q_MIN_RAD[j]}, {FR3_Q_MAX_RAD[j]}]")
+        return ""
+
+    def _jump_problem(self, q_rad: np.ndarray, q_prev: np.ndarray) -> str:
+        dq = np.abs(q_rad - q_prev)
+        j = int(np.argmax(dq))
+        if dq[j] > self.config.max_joint_step_rad:
+            return f"joint {j + 1} would jump {dq[j]:.3f} rad > max_joint_step_rad {self.config.max_joint_step_rad}"
+        return ""
+
+    def _check_reached(self, q_rad: np.ndarray, target: np.ndarray) -> None:
+        position_m, angle_rad = pose_error(self.fk(q_rad), target)
+        if position_m > self.config.reach_tolerance_m or angle_rad > self.config.reach_tolerance_rad:
+            raise IKError(f"move_cartesian: the solved path ends {position_m * 1e3:.3f} mm / "
+                          f"{math.degrees(angle_rad):.3f} deg from the target (tolerance "
+                          f"{self.config.reach_tolerance_m * 1e3} mm / {self.config.reach_tolerance_rad} rad); "
+                          "the arm did not move")
+
+    def _execute(self, path_q: np.ndarray, speed_factor: float) -> None:
+        """Commit a planned path (or the part before an injected fault), log its duration, maybe sleep."""
+        segment_s = np.max(np.abs(np.diff(path_q, axis=0)) / (FR3_DQ_MAX_RAD_S * speed_factor), axis=1)
+        fault, self._armed_fault = self._armed_fault, None
+        if fault is not None:
+            path_q, segment_s = _cut_path(path_q, segment_s, fault[1])
+        self.last_path_q_rad = path_q.copy()
+        self.last_move_duration_s = float(segment_s.sum())
+        self._q_rad = path_q[-1].copy()
+        if self.config.realtime:
+            time.sleep(self.last_move_duration_s)
+        if fault is not None:
+            kind, fraction = fault
+            self._fault, self._fault_kind = f"{kind} (injected) at {fraction:.0%} of the move", kind
+            raise ArmFault(f"arm stopped by a {kind} fault at {fraction:.0%} of the move; call recover() "
+                           "before moving again", kind=kind)
+
+    def _speed_factor(self, speed_factor: float | None) -> float:
+        if speed_factor is None:
+            return self.config.speed_factor
+        return check_finite_scalar("speed_factor", speed_factor, low=0.0, high=1.0, low_open=True)
+
+    def _require_connected(self) -> None:
+        if not self._connected:
+            raise RobotNotConnectedError("the twin arm is not connected: call connect() first")
+
+    def _require_ready(self) -> None:
+        self._require_connected()
+        if self._fault:
+            raise ArmFault(f"the arm is faulted ({self._fault}): call recover() before moving again",
+                           kind=self._fault_kind)
+
+
+def _unwrap_near(q_rad: np.ndarray, q_ref_rad: np.ndarray) -> np.ndarray:
+    """``q_rad`` shifted by whole turns to lie nearest ``q_ref_rad`` (the IK solver wraps angles to [-pi, pi])."""
+    return q_rad + 2.0 * np.pi * np.round((q_ref_rad - q_rad) / (2.0 * np.pi))
+
+
+def _cut_path(path_q: np.ndarray, segment_s: np.ndarray, fraction: float) -> tuple[np.ndarray, np.ndarray]:
+    """The first ``fraction`` of a piecewise-linear joint path (by path parameter) and its segment durations."""
+    s = fraction * (len(path_q) - 1)
+    i = min(int(math.floor(s)), len(path_q) - 2)
+    frac = s - i
+    q_stop = path_q[i] + frac * (path_q[i + 1] - path_q[i])
+    return np.vstack([path_q[: i + 1], q_stop]), np.append(segment_s[:i], frac * segment_s[i])
+
+
+# --- world and gripper -------------------------------------------------------------------------------
+
+GRIPPER_MAX_WIDTH_M = 0.08  # Franka Hand stroke, m
+GRIPPER_MAX_FORCE_N = 70.0  # Franka Hand continuous grasp force, N
+GRIPPER_MAX_SPEED_M_S = 0.1  # Franka Hand finger speed (both fingers together), m/s
+# an object's origin must lie inside this box around the TCP (half-extents x, y, z in the hand frame, m)
+# to be between the fingers: the finger pads are about 20 mm square and open to +-40 mm along y.
+FINGER_REGION_HALF_M = (0.02, GRIPPER_MAX_WIDTH_M / 2, 0.02)
+
+GraspListener = Callable[["WorldObject", np.ndarray, float], None]
+ReleaseListener = Callable[["WorldObject"], None]
+
+
+@dataclass(eq=False)
+class WorldObject:
+    """A rigid object that can be presented to the hand and held (compared by identity).
+
+    Attributes:
+        name: label for logs.
+        width_m: extent along the finger closing direction (hand y) where the fingers meet it, m.
+        payload: anything the scene attaches (for example the simulator's indenter); the twin ignores it.
+    """
+
+    name: str
+    width_m: float  # m
+    payload: Any = None
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.name, str) or not self.name:
+            raise ValueError(f"name must be a non-empty string, got {self.name!r}")
+        check_finite_scalar("width_m", self.width_m, low=0.0, high=GRIPPER_MAX_WIDTH_M, low_open=True)
+
+
+class TwinWorld:
+    """Objects with poses in the base frame; at most one is held and then follows the hand rigidly.
+
+    Listeners: ``on_grasp`` callbacks get ``(obj, hand_T_object, force_n)`` when the gripper closes on an
+    object, ``on_release`` callbacks get ``(obj)`` when it lets go (the object stays where it was released).
+    """
+
+    def __init__(self, arm: Arm) -> None:
+        self.arm = arm
+        self.on_grasp: list[GraspListener] = []
+        self.on_release: list[ReleaseListener] = []
+        self._base_T_object: dict[WorldObject, np.ndarray] = {}
+        self._held: WorldObject | None = None
+        self._hand_T_held = np.eye(4)
+
+    @property
+    def objects(self) -> list[WorldObject]:
+        """Objects in the world, in the order they were presented."""
+        return list(self._base_T_object)
+
+    @property
+    def held(self) -> WorldObject | None:
+        """The object the gripper holds, or None."""
+        return self._held
+
+    def present(self, obj: WorldObject, hand_T_object: np.ndarray) -> None:
+        """Place ``obj`` at ``hand_T_object`` (4, 4) relative to the hand as it is now (between the open fingers)."""
+        if not isinstance(obj, WorldObject):
+            raise TypeError(f"obj must be a WorldObject, got {type(obj).__name__}")
+        if obj in self._base_T_object:
+            raise ValueError(f"{obj.name!r} is already in the world: remove() it before presenting it again")
+        pose = check_rigid_transform("hand_T_object", hand_T_object)
+        self._base_T_object[obj] = self._base_T_hand() @ pose
+
+    def object_pose(self, obj: WorldObject) -> np.ndarray:
+        """(4, 4) base_T_object now (moving with the hand while held)."""
+        self._require_known(obj)
+        if obj is self._held:
+            return self._base_T_hand() @ self._hand_T_held
+        return self._base_T_object[obj].copy()
+
+    def remove(self, obj: WorldObject) -> None:
+        """Take ``obj`` out of the world (released first if held)."""
+        self._require_known(obj)
+        if obj is self._held:
+            self.release()
+        del self._base_T_object[obj]
+
+    def object_between_fingers(self) -> tuple[WorldObject, np.ndarray] | None:
+        """The object whose origin is nearest the TCP inside :data:`FINGER_REGION_HALF_M`, with its hand_T_object."""
+        hand_T_base = np.linalg.inv(self._base_T_hand())
+        best: tuple[float, WorldObject, np.ndarray] | None = None
+        for obj in self._base_T_object:
+            hand_T_object = hand_T_base @ self.object_pose(obj)
+            p = hand_T_object[:3, 3]
+            if np.all(np.abs(p) <= FINGER_REGION_HALF_M) and (best is None or np.linalg.norm(p) < best[0]):
+                best = (float(np.linalg.norm(p)), obj, hand_T_object)
+        return None if best is None else (best[1], best[2])
+
+    def hold(self, obj: WorldObject, hand_T_object: np.ndarray, force_n: float) -> None:
+        """Attach ``obj`` to the hand at ``hand_T_object`` and tell the ``on_grasp`` listeners (gripper use)."""
+        self._require_known(obj)
+        if self._held is not None and self._held is not obj:
+            raise ValueError(f"already holding {self._held.name!r}: release it before holding {obj.name!r}")
+        self._held, self._hand_T_held = obj, np.array(hand_T_object, dtype=np.float64)
+        for callback in list(self.on_grasp):
+            callback(obj, self._hand_T_held.copy(), float(force_n))
+
+    def release(self) -> None:
+        """Let go of the held object where it is now and tell the ``on_release`` listeners (no-op if none)."""
+        obj = self._held
+        if obj is None:
+            return
+        self._base_T_object[obj] = self.object_pose(obj)
+        self._held = None
+        for callback in list(self.on_release):
+            callback(obj)
+
+    def _base_T_hand(self) -> np.ndarray:
+        return self.arm.state().base_T_hand
+
+    def _require_known(self, obj: WorldObject) -> None:
+        if obj not in self._base_T_object:
+            raise ValueError(f"{getattr(obj, 'name', obj)!r} is not in the world: present() it first")
+
+
+class TwinGripper(Gripper):
+    """A kinematic Franka Hand: the fingers stop on the object between them, which is then held.
+
+    The coupled fingers centre a grasped object along the closing axis (its hand y offset becomes 0).
+    A grasp that meets an object outside the width tolerance stops on it but fails (``success=False``,
+    nothing held), as the real hand does; a grasp with nothing between the fingers closes fully.
+    ``inject_fault()`` makes the next grasp raise :class:`GripperError`.
+    """
+
+    def __init__(self, arm: KinematicArm, world: TwinWorld, *, realtime: bool = False) -> None:
+        if world.arm is not arm:
+            raise ValueError("world must be built on the same arm as the gripper: TwinWorld(arm)")
+        self.arm, self.world, self.realtime = arm, world, realtime
+        self._width_m = GRIPPER_MAX_WIDTH_M
+        self._connected = False
+        self._armed_fault = ""
+        self.last_duration_s = 0.0  # modelled duration of the last open / grasp, s
+
+    def connect(self) -> None:
+        self._connected = True
+
+    def disconnect(self) -> None:
+        self._connected = False
+
+    @property
+    def is_connected(self) -> bool:
+        return self._connected
+
+    @property
+    def max_width_m(self) -> float:
+        return GRIPPER_MAX_WIDTH_M
+
+    def state(self) -> GripperState:
+        self._require_connected()
+        return GripperState(width_m=self._width_m, is_grasped=self.world.held is not None)
+
+    def inject_fault(self, message: str = "gripper communication error") -> None:
+        """Make the next ``grasp`` raise :class:`GripperError` with ``message`` (one shot)."""
+        self._armed_fault = str(message) or "gripper fault"
+
+    def open(self, width_m: float | None = None, *, speed_m_s: float = 0.05) -> None:
+        """Move the fingers to ``width_m`` (default fully open), releasing a held object narrower than it."""
+        self._require_connected()
+        width = GRIPPER_MAX_WIDTH_M if width_m is None else self._check_width(width_m)
+        held = self.world.held
+        if held is not None:
+            if width <= held.width_m:
+                raise GripperError(f"open to {width} m would not release {held.name!r} ({held.width_m} m wide): "
+                                   "open wider (default: fully open)")
+            self.world.release()
+        self._move_fingers(width, speed_m_s)
+
+    def grasp(self, width_m: float, force_n: float, *, speed_m_s: float = 0.02, epsilon_inner_m: float = 0.005,
+              epsilon_outer_m: float = 0.005) -> GraspResult:
+        self._require_connected()
+        width = self._check_width(width_m)
+        force = check_finite_scalar("force_n", force_n, low=0.0, high=GRIPPER_MAX_FORCE_N, low_open=True)
+        eps_in = check_finite_scalar("epsilon_inner_m", epsilon_inner_m, low=0.0)
+        eps_out = check_finite_scalar("epsilon_outer_m", epsilon_outer_m, low=0.0)
+        if self._armed_fault:
+            message, self._armed_fault = self._armed_fault, ""
+            raise GripperError(f"grasp failed: {message} (injected); the fingers did not move. "
+                               "Check the hand, then open() and retry")
+        found = self.world.object_between_fingers()
+        if found is None or found[0].width_m > self._width_m + 1e-9:
+            duration_s = self._move_fingers(0.0, speed_m_s)
+            return GraspResult(success=False, width_m=0.0, force_n=0.0, duration_s=duration_s)
+        obj, hand_T_object = found
+        duration_s = self._move_fingers(obj.width_m, speed_m_s)
+        success = width - eps_in <= obj.width_m <= width + eps_out
+        if success and self.world.held is not obj:
+            centred = hand_T_object.copy()
+            centred[1, 3] = 0.0  # the coupled fingers centre the object along the closing axis
+            self.world.hold(obj, centred, force)
+        elif not success:
+            self.world.release()
+        return GraspResult(success=success, width_m=obj.width_m, force_n=force, duration_s=duration_s)
+
+    def _move_fingers(self, width_m: float, speed_m_s: float) -> float:
+        speed = check_finite_scalar("speed_m_s", speed_m_s, low=0.0, high=GRIPPER_MAX_SPEED_M_S, low_open=True)
+        duration_s = abs(self._width_m - width_m) / speed
+        self._width_m = width_m
+        self.last_duration_s = duration_s
+        if self.realtime:
+            time.sleep(duration_s)
+        return duration_s
+
+    def _check_width(self, width_m: float) -> float:
+        return check_finite_scalar("width_m", width_m, low=0.0, high=GRIPPER_MAX_WIDTH_M)
+
+    def _require_connected(self) -> None:
+        if not self._connected:
+            raise RobotNotConnectedError("the twin gripper is not connected: call connect() first")
