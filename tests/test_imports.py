@@ -29,6 +29,10 @@ def _heavy_modules_after(code: str) -> list[str]:
     "import tactile_manip.sim.dataset",
     "import tactile_manip.sensors",
     "import tactile_manip.perception.reconstruct, tactile_manip.perception.pose, tactile_manip.perception.metrics",
+    "import tactile_manip.perception",
+    "import tactile_manip.robot, tactile_manip.robot.twin, tactile_manip.robot.safety, tactile_manip.robot.conformance",
+    "import tactile_manip.behaviours.reorient, tactile_manip.behaviours.place",
+    "import tactile_manip.trials.scene, tactile_manip.trials.runner, tactile_manip.trials.stats",
     # the CLI parser imports every command module, and `--help` must stay fast
     "import tactile_manip.cli; tactile_manip.cli.build_parser()",
 ])

@@ -10,6 +10,8 @@ tolerance, so a run can be re-scored at another tolerance without re-running it 
 - ``"ik_failed"``: no joint path reached the corrected pose (the arm did not move).
 - ``"arm_fault"``: the arm stopped on a fault mid-motion; it was recovered before the next trial.
 - ``"safety_refused"``: the safety layer refused the corrected pose (outside joint, workspace or speed limits).
+- ``"unmeasured"``: the correction was executed but nobody measured the final angle (a real-robot trial whose
+  operator left the measurement blank).
 - ``"error"``: anything else (``detail`` holds the message).
 
 Every outcome other than ``"done"`` counts as a failure of the trial.
@@ -22,7 +24,8 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
-OUTCOMES = ("done", "abstained", "grasp_failed", "sensor_stale", "ik_failed", "arm_fault", "safety_refused", "error")
+OUTCOMES = ("done", "abstained", "grasp_failed", "sensor_stale", "ik_failed", "arm_fault", "safety_refused",
+            "unmeasured", "error")
 RECORD_VERSION = 1
 
 

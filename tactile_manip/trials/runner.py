@@ -22,10 +22,12 @@ from pathlib import Path
 import numpy as np
 
 from tactile_manip.behaviours.reorient import ReorientResult, grasp_estimate_reorient
+from tactile_manip.errors import ConfigError
 from tactile_manip.perception.estimator import TactilePoseEstimator
 from tactile_manip.perception.pose import wrap_axial
 from tactile_manip.perception.reconstruct import load_reconstructor
 from tactile_manip.robot.frames import hand_T_finger_pad, rotation_about, transform
+from tactile_manip.sensors.config import SimulatedSensorConfig
 from tactile_manip.trials.record import TrialRecord
 from tactile_manip.trials.scene import MethodSpec, TrialObject, TrialScene
 
@@ -99,6 +101,9 @@ class SimulatedCell:
         from tactile_manip.sensors.simulated import SimulatedSensor
         from tactile_manip.sim.shapes import make_indenter
 
+        if not isinstance(scene.sensor, SimulatedSensorConfig):
+            raise ConfigError("sensor: the simulated cell (robot.backend = 'twin') needs the simulated sensor; "
+                              "remove the [sensor] port")
         self.scene = scene
         self.twin = KinematicArm(TwinArmConfig(home_q_rad=scene.robot.home_q_rad,
                                                speed_factor=scene.robot.speed_factor))
@@ -190,15 +195,18 @@ class WorldTruth:
 
 
 def make_record(p: Presentation, method: str, target_rad: float, result: ReorientResult) -> TrialRecord:
-    """The log line of one trial."""
+    """The log line of one trial (a correction without a measured final angle is "unmeasured")."""
     est = result.estimate
+    outcome, detail = result.outcome, result.detail
+    if outcome == "done" and result.error_rad is None:
+        outcome, detail = "unmeasured", "the final angle was not measured"
     return TrialRecord(
         trial=p.trial, seed=p.seed, method=method, object=p.obj.display_name, true_angle_rad=p.angle_rad,
         offset_mm=p.offset_mm, target_angle_rad=float(wrap_axial(target_rad)),
         estimated_angle_rad=est.angle_rad if est is not None and est.defined else None,
         confidence=est.confidence if est is not None else 0.0, defined=bool(est is not None and est.defined),
         action=result.action, regrasps=result.regrasps, final_angle_rad=result.final_angle_rad,
-        error_rad=result.error_rad, outcome=result.outcome, detail=result.detail,
+        error_rad=result.error_rad, outcome=outcome, detail=detail,
         timings_s={k: round(v, 6) for k, v in result.timings_s.items()},
         extra={"force_n": round(p.force_n, 4), "grasp_width_m": result.grasp_width_m,
                "correction_rad": result.correction_rad,
@@ -206,18 +214,24 @@ def make_record(p: Presentation, method: str, target_rad: float, result: Reorien
 
 
 def run_scene(scene: TrialScene, write: Callable[[TrialRecord], None], *, estimators: dict[str, TactilePoseEstimator],
-              skip: set[tuple[int, str]] = frozenset(), progress: bool = True) -> int:
-    """Run every (trial, method) of ``scene`` not in ``skip`` on the simulated cell; ``write`` each record.
+              skip: set[tuple[int, str]] = frozenset(), progress: bool = True, cell=None) -> int:
+    """Run every (trial, method) of ``scene`` not in ``skip``; ``write`` each record.
+
+    ``cell`` (default: built from ``scene.robot.backend``: :class:`SimulatedCell` for the twin,
+    :class:`~tactile_manip.trials.operator.OperatorCell` for a real FR3) provides ``connected()`` and ``run_one``.
 
     Returns the number of trials run. Outcomes other than "done" are recorded, never raised; only an
     interrupt (Ctrl-C) or a failure to build the cell stops the run.
     """
     from tqdm.auto import tqdm
 
-    if scene.robot.backend != "twin":
-        raise NotImplementedError("tactile-manip trials runs the simulated cell (robot.backend = 'twin'); on a "
-                                  "real FR3 use the behaviour with FrankyArm directly (docs/robot.md)")
-    cell = SimulatedCell(scene)
+    if cell is None:
+        if scene.robot.backend == "twin":
+            cell = SimulatedCell(scene)
+        else:
+            from tactile_manip.trials.operator import OperatorCell
+
+            cell = OperatorCell(scene)
     todo = [(i, m) for i in range(scene.trials) for m in estimators if (i, m) not in skip]
     faults = scene.faults
     target = math.radians(scene.target_deg)
@@ -247,7 +261,7 @@ def run_trials(scene: TrialScene, out_dir: str | Path, *, scene_path: str | Path
     must be the same: the log refuses a different one).
     """
     from tactile_manip.config import to_dict
-    from tactile_manip.trials.log import TrialLog, completed_keys, read_trials
+    from tactile_manip.trials.log import TrialLog, completed_keys, read_run_info, read_trials
     from tactile_manip.trials.report import write_report
 
     out = Path(out_dir)
@@ -256,4 +270,5 @@ def run_trials(scene: TrialScene, out_dir: str | Path, *, scene_path: str | Path
     with TrialLog(out, config=to_dict(scene), resume=resume) as log:
         run_scene(scene, log.append, estimators=estimators, skip=skip, progress=progress)
     tolerance = math.radians(scene.tolerance_deg if tolerance_deg is None else tolerance_deg)
-    return write_report(out, read_trials(out / "trials.jsonl"), tolerance, title=f"Reorientation trials: {scene.name}")
+    return write_report(out, read_trials(out / "trials.jsonl"), tolerance, title=f"Reorientation trials: {scene.name}",
+                        run_info=read_run_info(out))

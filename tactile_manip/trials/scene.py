@@ -16,7 +16,7 @@ from tactile_manip.behaviours.reorient import ReorientConfig
 from tactile_manip.checks import check_finite_scalar
 from tactile_manip.config import load_config
 from tactile_manip.robot.safety import SafetyLimits
-from tactile_manip.sensors.config import SimulatedSensorConfig
+from tactile_manip.sensors.config import SerialSensorConfig, SimulatedSensorConfig
 
 
 @dataclass(frozen=True)
@@ -156,6 +156,8 @@ class TrialScene:
         tolerance_deg: success tolerance on |final - target|, deg (re-score later with ``tactile-manip score``).
         target_deg: commanded final angle of the object's axis in the pad frame at grasp, deg.
         methods: the compared methods (default: the shipped SuperMag model and the paper's 16x16 bilinear).
+        presentation, robot, behaviour, faults: see their classes.
+        sensor: the simulated sensor's settings (twin), or the board's serial settings (``port = ...``, real FR3).
     """
 
     name: str = "reorient"
@@ -167,7 +169,7 @@ class TrialScene:
         MethodSpec("supermag", "models/supermag_compact.onnx"), MethodSpec("bilinear", "bilinear", output_px=16)])
     presentation: PresentationConfig = field(default_factory=PresentationConfig)
     robot: RobotConfig = field(default_factory=RobotConfig)
-    sensor: SimulatedSensorConfig = field(default_factory=SimulatedSensorConfig)
+    sensor: SimulatedSensorConfig | SerialSensorConfig = field(default_factory=SimulatedSensorConfig)
     behaviour: ReorientConfig = field(default_factory=ReorientConfig)
     faults: FaultPlan = field(default_factory=FaultPlan)
 

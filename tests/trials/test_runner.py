@@ -170,3 +170,65 @@ kwargs = {{ size_mm = 3.0 }}
     records = read_trials(out)
     assert sorted(r.trial for r in records) == list(range(40))
     assert [r.to_dict() for r in records[:len(complete)]] == complete
+
+
+# ---------------------------------------------------------------- the operator cell (real-robot path)
+
+
+class _ScriptedOperator:
+    """Stands in for the person at a real robot, using the twin world to present and measure the object."""
+
+    def __init__(self, sim: SimulatedCell, answer_blank_on: set[int]) -> None:
+        self.sim, self.blank, self.trial, self.obj = sim, answer_blank_on, -1, None
+        self.said: list[str] = []
+
+    def say(self, text: str) -> None:
+        self.said.append(text)
+        if text.startswith("trial "):
+            self.trial = int(text.split(":")[0].split()[1])
+
+    def ask(self, prompt: str) -> str:
+        from tactile_manip.robot.frames import angle_in_plane, hand_T_finger_pad
+        from tactile_manip.robot.twin import WorldObject
+        from tactile_manip.trials.runner import pad_T_object
+
+        sim = self.sim
+        if prompt.startswith("press Enter when it is in place"):
+            p = draw_presentation(sim.scene, self.trial)
+            self.obj = WorldObject(p.obj.display_name, p.obj.grasp_width_m, payload=sim._indenters[p.obj.display_name])
+            sim._presentation = p
+            sim.world.present(self.obj, hand_T_finger_pad(self.obj.width_m)
+                              @ pad_T_object(p.angle_rad, p.offset_mm, self.obj.width_m))
+            self.base_T_pad = sim.arm.state().base_T_hand @ hand_T_finger_pad(self.obj.width_m)
+        elif prompt.startswith("measured final angle"):
+            if self.trial in self.blank:
+                return ""
+            axis = sim.world.object_pose(self.obj)[:3, 0]
+            return f"{math.degrees(angle_in_plane(axis, self.base_T_pad)):.3f}"
+        elif prompt.startswith("take the object out"):
+            sim.world.remove(self.obj)
+        return ""
+
+
+def test_the_operator_cell_runs_the_same_behaviour_with_a_person_in_the_loop() -> None:
+    from tactile_manip.trials.operator import OperatorCell
+
+    scene = _scene(trials=3, methods=[MethodSpec("supermag", MODEL)])
+    sim = SimulatedCell(scene)
+    person = _ScriptedOperator(sim, answer_blank_on={2})
+    cell = OperatorCell(scene, arm=sim.arm, gripper=sim.gripper, sensor=sim.sensor, ask=person.ask, say=person.say)
+    records = []
+    run_scene(scene, records.append, estimators=build_estimators(scene), progress=False, cell=cell)
+    assert [r.outcome for r in records] == ["done", "done", "unmeasured"], [r.detail for r in records]
+    assert all(abs(r.error_rad) < math.radians(5.0) for r in records[:2])
+    assert any("between the fingers" in s for s in person.said)
+
+
+def test_the_operator_cell_needs_a_real_sensor_and_no_injected_faults() -> None:
+    from tactile_manip.errors import ConfigError
+    from tactile_manip.trials.operator import OperatorCell
+
+    with pytest.raises(ConfigError, match="port"):
+        OperatorCell(_scene(), arm=object(), gripper=object())
+    with pytest.raises(ConfigError, match="only in simulation"):
+        OperatorCell(_scene(faults=FaultPlan(arm_fault_trials=[0])), arm=object(), gripper=object(), sensor=object())

@@ -1,0 +1,130 @@
+"""The trial cell on a real robot: FR3 and Franka Hand through franky, the board on a serial port, an operator.
+
+The same scene file and the same behaviour as in simulation; what the simulator did, a person does:
+
+1. present: the operator holds the object between the open fingers at the drawn in-hand angle and offset
+   (printed in the pad frame) and confirms; the gripper then closes on it;
+2. measure: after the correction the operator measures the object's angle in the pad plane of the grasp
+   (protractor or camera) and types it; a blank answer records the trial as done with an unknown error,
+   which the summary then counts as a failure.
+
+Both prompts go through ``ask`` / ``say`` callables (``input`` and ``print`` by default) so a GUI or a
+tracker can answer instead. The arm is wrapped in :class:`~tactile_manip.robot.safety.SafeArm` and moves at
+the scene's low ``relative_dynamics_factor``; faults are recovered at the trial boundary.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+
+import numpy as np
+
+from tactile_manip.behaviours.reorient import ReorientResult, grasp_estimate_reorient
+from tactile_manip.errors import ConfigError
+from tactile_manip.perception.estimator import TactilePoseEstimator
+from tactile_manip.robot.base import Arm, Gripper
+from tactile_manip.robot.frames import hand_T_pad
+from tactile_manip.sensors.base import TactileSensor
+from tactile_manip.sensors.config import SerialSensorConfig
+from tactile_manip.trials.scene import TrialScene
+
+
+@dataclass(frozen=True)
+class PresentedObject:
+    """What the behaviour needs of the object on a real robot: its label and nominal width."""
+
+    name: str
+    width_m: float
+
+
+class OperatorTruth:
+    """The operator's measurement of the final angle, turned into an axis in the base frame."""
+
+    def __init__(self, base_T_pad: np.ndarray, ask: Callable[[str], str], say: Callable[[str], None]) -> None:
+        self._base_T_pad, self._ask, self._say = base_T_pad, ask, say
+
+    def object_axis_base(self) -> np.ndarray | None:
+        prompt = "measured final angle of the object's axis in the grasp's pad plane, deg (blank: unknown): "
+        while True:
+            answer = self._ask(prompt).strip()
+            if not answer:
+                return None
+            try:
+                angle = math.radians(float(answer))
+            except ValueError:
+                self._say(f"not a number: {answer!r}")
+                continue
+            if math.isfinite(angle):
+                return self._base_T_pad[:3, :3] @ np.array([math.cos(angle), math.sin(angle), 0.0])
+            self._say(f"not a finite angle: {answer!r}")
+
+
+class OperatorCell:
+    """A real cell (see the module docstring). ``arm``/``gripper``/``sensor`` default to the scene's franky
+    backend and serial sensor; pass your own (e.g. franky-sim, or any Arm) to override."""
+
+    def __init__(self, scene: TrialScene, *, arm: Arm | None = None, gripper: Gripper | None = None,
+                 sensor: TactileSensor | None = None, ask: Callable[[str], str] = input,
+                 say: Callable[[str], None] = print) -> None:
+        if scene.faults.arm_fault_trials or scene.faults.sensor_stall_trials:
+            raise ConfigError("faults: injected faults exist only in simulation (robot.backend = 'twin')")
+        if sensor is None and not isinstance(scene.sensor, SerialSensorConfig):
+            raise ConfigError("sensor: a real robot needs the real board: give [sensor] a port "
+                              "(e.g. port = \"/dev/ttyUSB0\")")
+        self.scene, self._ask, self._say = scene, ask, say
+        if arm is None or gripper is None:
+            from tactile_manip.robot.franky_arm import FrankyArm, FrankyConfig, FrankyGripper
+            from tactile_manip.robot.safety import SafeArm
+
+            config = FrankyConfig(host=scene.robot.host, relative_dynamics_factor=scene.robot.relative_dynamics_factor,
+                                  home_q_rad=scene.robot.home_q_rad)
+            arm = arm or SafeArm(FrankyArm(config), scene.robot.safety)
+            gripper = gripper or FrankyGripper(config)
+        if sensor is None:
+            from tactile_manip.sensors.serial_sensor import SerialSensor
+
+            sensor = SerialSensor(scene.sensor)
+        self.arm, self.gripper, self.sensor = arm, gripper, sensor
+
+    @contextlib.contextmanager
+    def connected(self) -> Iterator[OperatorCell]:
+        """Connect everything, home, open, and take the sensor's baseline with the pad clear."""
+        with self.sensor, self.arm, self.gripper:
+            self.arm.recover()
+            self.arm.home()
+            self.gripper.open()
+            self._ask("clear the tactile pad (nothing touching it), then press Enter to take its baseline ")
+            self.sensor.calibrate_baseline()
+            yield self
+
+    @contextlib.contextmanager
+    def presented(self, p) -> Iterator[tuple[PresentedObject, OperatorTruth]]:
+        """Trial boundary (recover, home, open), then the operator presents ``p``'s object."""
+        self.arm.recover()
+        self.arm.home()
+        self.gripper.open()
+        obj = PresentedObject(p.obj.display_name, p.obj.grasp_width_m)
+        self._say(f"trial {p.trial}: hold {obj.name} ({obj.width_m * 1e3:.1f} mm) between the fingers, its axis at "
+                  f"{math.degrees(p.angle_rad):+.1f} deg from the pad's x axis (hand x), centred "
+                  f"({p.offset_mm[0]:+.1f}, {p.offset_mm[1]:+.1f}) mm from the pad centre")
+        self._ask("press Enter when it is in place ")
+        base_T_pad = self.arm.state().base_T_hand @ hand_T_pad()
+        try:
+            yield obj, OperatorTruth(base_T_pad, self._ask, self._say)
+        finally:
+            self.gripper.open()
+            self._ask("take the object out of the hand, then press Enter ")
+
+    def run_one(self, p, estimator: TactilePoseEstimator, *, arm_fault: bool = False,
+                sensor_stall: bool = False) -> ReorientResult:
+        """Present ``p``, run the reorientation behaviour, ask for the measured final angle."""
+        if arm_fault or sensor_stall:
+            raise ConfigError("injected faults exist only in simulation")
+        with self.presented(p) as (obj, truth):
+            return grasp_estimate_reorient(self.arm, self.gripper, self.sensor, estimator,
+                                           object_width_m=obj.width_m,
+                                           target_angle_rad=math.radians(self.scene.target_deg),
+                                           config=self.scene.behaviour, truth=truth)
