@@ -108,7 +108,7 @@ def test_summary_per_method_at_5_deg():
     assert (sm.wilson_low, sm.wilson_high) == wilson_interval(5, 6)
     assert bl.success_rate == pytest.approx(1 / 6)
     assert bl.outcomes == {"done": 3, "abstained": 1, "grasp_failed": 1, "sensor_stale": 0, "ik_failed": 1,
-                           "arm_fault": 0, "safety_refused": 0, "error": 0}
+                           "arm_fault": 0, "safety_refused": 0, "unmeasured": 0, "error": 0}
     assert sm.abs_error_median_deg == pytest.approx(2.5)
     assert sm.abs_error_max_deg == pytest.approx(7.0)
     assert bl.abs_error_median_deg == pytest.approx(12.0)
