@@ -55,6 +55,10 @@ class RobotError(TactileManipError):
     """The arm or gripper cannot do what was asked; subclasses say whether it moved and how to recover."""
 
 
+class RobotNotConnectedError(RobotError, ConnectionError):
+    """An arm or gripper was used before ``connect()`` (or after ``disconnect()``)."""
+
+
 class ArmFault(RobotError, RuntimeError):
     """The arm stopped on a fault mid-motion (a reflex, a communication or control error).
 

@@ -153,18 +153,24 @@ def grasp_estimate_reorient(arm: Arm, gripper: Gripper, sensor: TactileSensor, e
     return result
 
 
-def _grasp(arm: Arm, gripper: Gripper, width_m: float, cfg: ReorientConfig) -> tuple[np.ndarray, float]:
-    """Close on the object; returns base_T_hand at the grasp and the grasp width (m)."""
+def _close_on(gripper: Gripper, width_m: float, cfg: ReorientConfig, what: str) -> float:
+    """Close to the force threshold on the object; returns the grasp width (m) or ends the trial."""
     try:
         grasp = gripper.grasp(width_m, cfg.force_n, epsilon_inner_m=cfg.width_tolerance_m,
                               epsilon_outer_m=cfg.width_tolerance_m)
     except GripperError as exc:
-        raise _Abort("grasp_failed", f"gripper error: {exc}") from None
+        raise _Abort("grasp_failed", f"gripper error during the {what}: {exc}") from None
     if not grasp.success:
-        raise _Abort("grasp_failed", f"gripper stopped at {grasp.width_m * 1e3:.1f} mm, object "
+        raise _Abort("grasp_failed", f"{what}: the gripper stopped at {grasp.width_m * 1e3:.1f} mm, object "
                                      f"{width_m * 1e3:.1f} +- {cfg.width_tolerance_m * 1e3:.1f} mm")
+    return grasp.width_m
+
+
+def _grasp(arm: Arm, gripper: Gripper, width_m: float, cfg: ReorientConfig) -> tuple[np.ndarray, float]:
+    """Close on the object; returns base_T_hand at the grasp and the grasp width (m)."""
+    width = _close_on(gripper, width_m, cfg, "grasp")
     try:
-        return arm.state().base_T_hand, grasp.width_m
+        return arm.state().base_T_hand, width
     except ArmFault as exc:
         raise _Abort("arm_fault", f"arm state unavailable after the grasp: {exc}") from None
 
@@ -198,21 +204,11 @@ def _estimate_with_policy(gripper: Gripper, sensor: TactileSensor, estimator: Ta
             gripper.open(width_m + 0.01)
         except GripperError as exc:
             raise _Abort("grasp_failed", f"gripper error while re-grasping: {exc}") from None
-        _grasp_again(gripper, width_m, cfg)
+        _close_on(gripper, width_m, cfg, "re-grasp")
         est = _read(sensor, estimator, cfg)
         if est.defined and (not best.defined or est.confidence > best.confidence):
             best = est
     return best
-
-
-def _grasp_again(gripper: Gripper, width_m: float, cfg: ReorientConfig) -> None:
-    try:
-        grasp = gripper.grasp(width_m, cfg.force_n, epsilon_inner_m=cfg.width_tolerance_m,
-                              epsilon_outer_m=cfg.width_tolerance_m)
-    except GripperError as exc:
-        raise _Abort("grasp_failed", f"gripper error while re-grasping: {exc}") from None
-    if not grasp.success:
-        raise _Abort("grasp_failed", f"re-grasp stopped at {grasp.width_m * 1e3:.1f} mm")
 
 
 def _turn_about_pad_normal(arm: Arm, base_T_pad: np.ndarray, est: AngleEstimate, angle_rad: float,

@@ -13,7 +13,8 @@ from pathlib import Path
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--config", required=True, help="scene TOML, e.g. configs/scenes/reorient_sim.toml")
-    p.add_argument("--out", default=None, help="run folder (default: runs/trials/<scene name>)")
+    p.add_argument("--out", default=None,
+                   help="run folder (default: a new runs/trials/<scene name>-<UTC time>; an existing folder needs --resume)")
     p.add_argument("--trials", type=int, default=None, help="override the scene's number of presentations")
     p.add_argument("--methods", default=None, help="comma-separated subset of the scene's methods")
     p.add_argument("--resume", action="store_true", help="continue a killed run in --out (same scene)")
@@ -22,6 +23,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     import dataclasses
+    import time
 
     from tactile_manip.trials.runner import run_trials
     from tactile_manip.trials.scene import load_scene
@@ -36,7 +38,12 @@ def run(args: argparse.Namespace) -> int:
         if unknown:
             raise ValueError(f"--methods: {unknown} not in the scene's methods {sorted(known)}")
         scene = dataclasses.replace(scene, methods=[known[m] for m in wanted])
-    out = Path(args.out) if args.out else Path("runs") / "trials" / scene.name
+    if args.out:
+        out = Path(args.out)
+    elif args.resume:
+        raise ValueError("--resume needs --out: the run folder to continue")
+    else:
+        out = Path("runs") / "trials" / f"{scene.name}-{time.strftime('%Y%m%dT%H%M%SZ', time.gmtime())}"
     summary = run_trials(scene, out, scene_path=args.config, resume=args.resume, progress=not args.quiet)
     md = out / "summary.md"
     if md.exists():

@@ -30,11 +30,10 @@ from typing import Any, ClassVar
 import numpy as np
 
 from tactile_manip.checks import check_array, check_finite_scalar
-from tactile_manip.errors import ArmFault, GripperError, RobotError, SafetyLimitError
-from tactile_manip.robot.base import N_JOINTS, Arm, ArmState, GraspResult, Gripper, GripperState
+from tactile_manip.errors import ArmFault, GripperError, RobotError, RobotNotConnectedError, SafetyLimitError
+from tactile_manip.robot.base import N_JOINTS, ArmState, GraspResult, Gripper, GripperState
+from tactile_manip.robot.fr3 import FR3_HOME_Q_RAD, FR3Arm, check_fr3_configuration, fr3_joint_violation
 from tactile_manip.robot.safety import check_rigid_transform
-from tactile_manip.robot.twin import (FR3_DQ_MAX_RAD_S, FR3_HOME_Q_RAD, FR3_Q_MAX_RAD, FR3_Q_MIN_RAD,
-                                      RobotNotConnectedError)
 
 FRANKA_HAND_MAX_WIDTH_M = 0.08  # nominal opening of the Franka Hand before homing has measured it, m
 FRANKA_HAND_MAX_FORCE_N = 140.0  # Franka Hand peak grasp force (70 N continuous), N
@@ -92,12 +91,7 @@ class FrankyConfig:
             raise ValueError(f"FrankyConfig.enforce_realtime must be true or false, got {self.enforce_realtime!r}")
         _thresholds("collision_torque_threshold_nm", self.collision_torque_threshold_nm, 7, "Nm")
         _thresholds("collision_force_threshold_n", self.collision_force_threshold_n, 6, "N")
-        q = check_array("FrankyConfig.home_q_rad", self.home_q_rad, shape=(N_JOINTS,))
-        bad = np.flatnonzero((q < FR3_Q_MIN_RAD) | (q > FR3_Q_MAX_RAD))
-        if bad.size:
-            j = int(bad[0])
-            raise ValueError(f"FrankyConfig.home_q_rad: joint {j + 1} = {q[j]} rad outside the FR3 limits "
-                             f"[{FR3_Q_MIN_RAD[j]}, {FR3_Q_MAX_RAD[j]}]")
+        check_fr3_configuration("FrankyConfig.home_q_rad", self.home_q_rad)
         check_finite_scalar("FrankyConfig.hand_tcp_offset_m", self.hand_tcp_offset_m, low=0.0, high=0.5)
         check_finite_scalar("FrankyConfig.hand_tcp_yaw_rad", self.hand_tcp_yaw_rad, low=-math.pi, high=math.pi)
         check_finite_scalar("FrankyConfig.settle_tolerance_rad", self.settle_tolerance_rad, low=0.0, high=0.1,
@@ -160,7 +154,7 @@ def arm_error(franky: ModuleType, e: BaseException, *, action: str, host: str) -
                     kind="fault")
 
 
-class FrankyArm(Arm):
+class FrankyArm(FR3Arm):
     """A real FR3 (or franky-sim) through franky-control; see the module docstring for frames and errors.
 
     Every method but ``connect`` and the limit properties raises
@@ -207,23 +201,6 @@ class FrankyArm(Arm):
     def is_connected(self) -> bool:
         return self._robot is not None
 
-    # --- limits --------------------------------------------------------------------------------------
-    @property
-    def q_min_rad(self) -> np.ndarray:
-        return FR3_Q_MIN_RAD.copy()
-
-    @property
-    def q_max_rad(self) -> np.ndarray:
-        return FR3_Q_MAX_RAD.copy()
-
-    @property
-    def dq_max_rad_s(self) -> np.ndarray:
-        return FR3_DQ_MAX_RAD_S.copy()
-
-    @property
-    def home_q_rad(self) -> np.ndarray:
-        return np.array(self.config.home_q_rad, dtype=np.float64)
-
     # --- state ---------------------------------------------------------------------------------------
     def state(self) -> ArmState:
         franky, robot = self._require_connected()
@@ -251,10 +228,9 @@ class FrankyArm(Arm):
         """Joint-space move (franky ``JointMotion``) to ``q_rad`` (7,), rad."""
         franky, robot = self._require_ready()
         q = check_array("q_rad", q_rad, shape=(N_JOINTS,))
-        for j in range(N_JOINTS):
-            if not FR3_Q_MIN_RAD[j] <= q[j] <= FR3_Q_MAX_RAD[j]:
-                raise SafetyLimitError(f"joint target refused: joint {j + 1} = {q[j]:.4f} rad outside the FR3 "
-                                       f"limits [{FR3_Q_MIN_RAD[j]}, {FR3_Q_MAX_RAD[j]}]; the arm did not move")
+        problem = fr3_joint_violation(q)
+        if problem:
+            raise SafetyLimitError(f"joint target refused: {problem}; the arm did not move")
         motion = franky.JointMotion(q.copy(), relative_dynamics_factor=_speed_factor(speed_factor))
         self._move(franky, robot, motion, action="joint move")
 

@@ -22,29 +22,12 @@ from typing import Any
 import numpy as np
 
 from tactile_manip.checks import check_array, check_finite_scalar
-from tactile_manip.errors import ArmFault, GripperError, IKError, RobotError, SafetyLimitError
+from tactile_manip.errors import ArmFault, GripperError, IKError, RobotNotConnectedError, SafetyLimitError  # noqa: F401
 from tactile_manip.robot.base import N_JOINTS, Arm, ArmState, GraspResult, Gripper, GripperState
+from tactile_manip.robot.fr3 import (FR3_DQ_MAX_RAD_S, FR3_HOME_Q_RAD, FR3_Q_MAX_RAD, FR3_Q_MIN_RAD,  # noqa: F401
+                                     FR3Arm, check_fr3_configuration)
 from tactile_manip.robot.frames import rotation_about
 from tactile_manip.robot.safety import check_rigid_transform, pose_error
-
-
-def _frozen(values: list[float]) -> np.ndarray:
-    a = np.array(values, dtype=np.float64)
-    a.flags.writeable = False
-    return a
-
-
-# FR3 datasheet (Franka Research 3), rad and rad/s; joint 6's range is shifted compared to the Panda.
-FR3_Q_MIN_RAD = _frozen([-2.7437, -1.7837, -2.9007, -3.0421, -2.8065, 0.5445, -3.0159])
-FR3_Q_MAX_RAD = _frozen([2.7437, 1.7837, 2.9007, -0.1518, 2.8065, 4.5169, 3.0159])
-FR3_DQ_MAX_RAD_S = _frozen([2.62, 2.62, 2.62, 2.62, 5.26, 4.18, 5.26])
-# Panda's "ready" pose qr with joint 6 at 1.9 rad instead of 2.0, so the hand z axis points straight down
-# (qr tilts it by 5.7 deg): TCP at (0.463, 0, 0.403) m, hand x = base x, fingers closing along base y.
-FR3_HOME_Q_RAD = (0.0, -0.3, 0.0, -2.2, 0.0, 1.9, math.pi / 4)
-
-
-class RobotNotConnectedError(RobotError, ConnectionError):
-    """A twin arm or gripper was used before ``connect()`` (or after ``disconnect()``)."""
 
 
 @dataclass(frozen=True)
@@ -78,12 +61,7 @@ class TwinArmConfig:
     realtime: bool = False
 
     def __post_init__(self) -> None:
-        q = check_array("home_q_rad", self.home_q_rad, shape=(N_JOINTS,))
-        bad = np.flatnonzero((q < FR3_Q_MIN_RAD) | (q > FR3_Q_MAX_RAD))
-        if bad.size:
-            j = int(bad[0])
-            raise ValueError(f"home_q_rad: joint {j + 1} = {q[j]} rad outside the FR3 limits "
-                             f"[{FR3_Q_MIN_RAD[j]}, {FR3_Q_MAX_RAD[j]}]")
+        check_fr3_configuration("home_q_rad", self.home_q_rad)
         check_finite_scalar("speed_factor", self.speed_factor, low=0.0, high=1.0, low_open=True)
         check_finite_scalar("step_m", self.step_m, low=0.0, high=0.1, low_open=True)
         check_finite_scalar("step_rad", self.step_rad, low=0.0, high=0.5, low_open=True)
@@ -135,7 +113,7 @@ def interpolate_poses(base_T_start: np.ndarray, base_T_goal: np.ndarray, *, step
     return poses
 
 
-class KinematicArm(Arm):
+class KinematicArm(FR3Arm):
     """The FR3 as pure kinematics: FK, stepped warm-started IK, limit and jump checks, fault injection.
 
     Moves are all-or-nothing: a Cartesian path is solved completely before the arm moves, and a refused move
@@ -167,23 +145,6 @@ class KinematicArm(Arm):
     @property
     def is_connected(self) -> bool:
         return self._connected
-
-    # --- limits --------------------------------------------------------------------------------------
-    @property
-    def q_min_rad(self) -> np.ndarray:
-        return FR3_Q_MIN_RAD.copy()
-
-    @property
-    def q_max_rad(self) -> np.ndarray:
-        return FR3_Q_MAX_RAD.copy()
-
-    @property
-    def dq_max_rad_s(self) -> np.ndarray:
-        return FR3_DQ_MAX_RAD_S.copy()
-
-    @property
-    def home_q_rad(self) -> np.ndarray:
-        return np.array(self.config.home_q_rad, dtype=np.float64)
 
     # --- state and kinematics ------------------------------------------------------------------------
     def state(self) -> ArmState:
