@@ -4,8 +4,9 @@ Run through ``tactile-manip train`` (or ``torchrun ... -m tactile_manip train`` 
 gloo on CPU, nccl on GPU). Each epoch validates the prior-mean reconstruction (PSNR with the fixed 2 mm data
 range) and writes ``checkpoint.pt`` (everything needed to resume), ``best.pt`` (best validation PSNR),
 ``history.json`` and ``loss.png`` to the output folder. Early stopping ends the run when the validation
-PSNR has not improved for ``patience`` epochs; a NaN loss stops it with an error and keeps the last good
-checkpoint.
+PSNR has not improved for ``patience`` epochs; a NaN or infinite loss (checked at every step), or non-finite
+weights or validation output (checked before each checkpoint), stops it with a ``TrainingError`` naming the
+epoch and the learning rate, and keeps the last good checkpoint.
 """
 
 from __future__ import annotations
@@ -67,6 +68,8 @@ class TrainConfig:
                 raise ValueError(f"{name} must be >= 1, got {value}")
         if not (math.isfinite(self.lr) and 0 < self.lr < 1):
             raise ValueError(f"lr must be in (0, 1), got {self.lr}")
+        if not (math.isfinite(self.lr_min) and 0 <= self.lr_min < 1):  # the cosine schedule ends at lr_min
+            raise ValueError(f"lr_min must be in [0, 1), got {self.lr_min}")
         if not (math.isfinite(self.weight_decay) and self.weight_decay >= 0):
             raise ValueError(f"weight_decay must be >= 0, got {self.weight_decay}")
         if not (math.isfinite(self.nll_beta) and 0 <= self.nll_beta <= 1):
@@ -152,7 +155,7 @@ def _train(cfg: TrainConfig, data_path: Path, out: Path, resume: bool, progress,
         for group in opt.param_groups:
             group["lr"] = schedule(epoch)
         deadline = start + 60 * cfg.max_minutes if cfg.max_minutes else math.inf
-        train_stats = _train_epoch(net, opt, train_set, cfg, spec, dist, sampler_gen, deadline)
+        train_stats = _train_epoch(net, opt, train_set, cfg, spec, dist, sampler_gen, deadline, epoch=epoch)
         val = evaluate_split(model, val_set, spec)
         state["seconds"] = time.perf_counter() - start
         row = {"epoch": epoch, "lr": schedule(epoch), **train_stats, **{f"val_{k}": v for k, v in val.items()},
@@ -162,9 +165,13 @@ def _train(cfg: TrainConfig, data_path: Path, out: Path, resume: bool, progress,
         improved = val["psnr"] > state["best_psnr"]
         if improved:
             state["best_psnr"], state["best_epoch"] = val["psnr"], epoch
-        if not all(torch.isfinite(p).all() for p in model.parameters()):
-            raise TrainingError(f"parameters became non-finite in epoch {epoch} (lr {schedule(epoch)}); lower lr; "
-                                f"the last good checkpoint in {out} is kept")
+        # weights, BatchNorm statistics and the validation output: a model that is finite but outputs NaN
+        # (overflowing variance) is as diverged as one with NaN weights, and is not saved either
+        finite = all(torch.isfinite(t).all() for t in model.state_dict().values() if t.is_floating_point())
+        if not (finite and math.isfinite(val["mse"])):
+            what = "parameters or statistics" if not finite else f"the validation error ({val['mse']})"
+            raise TrainingError(f"training diverged: {what} became NaN or infinite in epoch {epoch} "
+                                f"(lr {schedule(epoch):g}); lower lr; the last good checkpoint in {out} is kept")
         if dist.main:
             _save_checkpoint(out / "checkpoint.pt", model, opt, mcfg, cfg, spec, data, state)
             if improved:
@@ -188,7 +195,7 @@ def _schedule(cfg: TrainConfig) -> Callable[[int], float]:
 
 
 def _train_epoch(net, opt, train_set: TensorPairs, cfg: TrainConfig, spec: InputSpec, dist: _Dist,
-                 gen: torch.Generator, deadline: float = math.inf) -> dict[str, float]:
+                 gen: torch.Generator, deadline: float = math.inf, *, epoch: int = 0) -> dict[str, float]:
     """One pass over the training set; stops early (a partial epoch) when ``deadline`` (perf_counter) passes."""
     net.train()
     net_cfg = (net.module if hasattr(net, "module") else net).cfg
@@ -213,9 +220,11 @@ def _train_epoch(net, opt, train_set: TensorPairs, cfg: TrainConfig, spec: Input
             prior_nll = gaussian_nll(*module.prior_mean_decode(spec.scale(field_ut)), image, cfg.nll_beta).mean()
             loss = loss + cfg.prior_weight * prior_nll
             stats["prior_nll"] = float(prior_nll.detach())
-        if not torch.isfinite(loss):
-            raise TrainingError(f"loss became {float(loss)} at batch {n_batches}: lower lr (now {cfg.lr}) or "
-                                "check the data; the last good checkpoint is kept")
+        if not torch.isfinite(loss):  # before the step and before this epoch's checkpoint
+            lr = opt.param_groups[0]["lr"]
+            raise TrainingError(f"training diverged: the loss became {float(loss.detach())} (NaN or infinite) in "
+                                f"epoch {epoch}, step {n_batches + 1} (lr {lr:g}); lower lr or check the data; "
+                                "no checkpoint of this epoch is written, earlier ones are kept")
         opt.zero_grad(set_to_none=True)
         loss.backward()
         torch.nn.utils.clip_grad_norm_(net.parameters(), 1e4)

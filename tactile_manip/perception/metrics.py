@@ -22,6 +22,7 @@ DEPTH_RANGE_MM = 2.0
 SSIM_SIGMA_PX = 1.5
 SSIM_K1, SSIM_K2 = 0.01, 0.03
 _BORDER_PX = 5
+MAX_ABS_MM = 1e50  # larger |depth| is refused: SSIM multiplies four depths, which overflows near 1e77
 
 
 def _pair(pred: np.ndarray, truth: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -31,6 +32,9 @@ def _pair(pred: np.ndarray, truth: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         raise ValueError(f"expected two (H, W) or (N, H, W) arrays of one shape, got {p.shape} and {t.shape}")
     if not (np.isfinite(p).all() and np.isfinite(t).all()):
         raise ValueError("images contain NaN or infinite values")
+    if max(np.abs(p).max(initial=0.0), np.abs(t).max(initial=0.0)) > MAX_ABS_MM:
+        raise ValueError(f"images contain values beyond +-{MAX_ABS_MM:g} mm: not depth images in mm (check the "
+                         "units); SSIM's fourth powers would overflow to NaN")
     return (p[None], t[None]) if p.ndim == 2 else (p, t)
 
 

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
+from tactile_manip.checks import check_finite_scalar
 from tactile_manip.types import AngleEstimate
 
 DEFAULT_THRESHOLD_MM = 0.1     # pixels shallower than this are not contact
@@ -33,6 +34,10 @@ class PoseParams:
         outlier_fraction: connected contact regions smaller than this fraction of the largest are removed.
         min_contact_px: fewer contact pixels than this after filtering: the angle is undefined.
         isotropy_limit: a minor/major eigenvalue ratio above this: the angle is undefined (round contact).
+        background: "median" subtracts the image's median level first when it is positive (an image whose
+            background is not zero, like the interpolation baselines' fitted offset of 0.14 mm, would otherwise
+            count the whole pad as contact; contacts covering less than half the image are unaffected);
+            "none" keeps the image as it is.
     """
 
     threshold_mm: float = DEFAULT_THRESHOLD_MM
@@ -40,8 +45,11 @@ class PoseParams:
     outlier_fraction: float = OUTLIER_FRACTION
     min_contact_px: int = MIN_CONTACT_PX
     isotropy_limit: float = ISOTROPY_LIMIT
+    background: str = "median"
 
     def __post_init__(self) -> None:
+        if self.background not in ("median", "none"):
+            raise ValueError(f"PoseParams.background must be 'median' or 'none', got {self.background!r}")
         checks = {"threshold_mm": self.threshold_mm >= 0, "sigma_mm": self.sigma_mm >= 0,
                   "outlier_fraction": 0 <= self.outlier_fraction <= 1, "min_contact_px": self.min_contact_px >= 1,
                   "isotropy_limit": 0 < self.isotropy_limit <= 1}
@@ -70,14 +78,31 @@ def remove_outliers(depth_mm: np.ndarray, *, threshold_mm: float = DEFAULT_THRES
     return np.where(keep[labels], np.clip(d, 0.0, None), 0.0)
 
 
+def _minus_background(depth_mm: np.ndarray) -> tuple[np.ndarray, float]:
+    """The image less its median level when that level is positive (finite pixels only), and that level."""
+    d = np.asarray(depth_mm, dtype=np.float64)
+    finite = d[np.isfinite(d)]
+    level = float(np.median(finite)) if finite.size else 0.0
+    return (d - level, level) if level > 0 else (d, 0.0)
+
+
 def angle_from_image(depth_mm: np.ndarray, *, pixel_mm: float = 0.1, threshold_mm: float = DEFAULT_THRESHOLD_MM,
                      sigma_mm: float = DEFAULT_SIGMA_MM, params: PoseParams | None = None) -> AngleEstimate:
     """Principal in-plane angle of the contact in a depth image (H, W), mm.
 
     ``params`` (a :class:`PoseParams`) overrides ``threshold_mm`` and ``sigma_mm`` and sets the other limits.
+
+    Raises:
+        ValueError: ``depth_mm`` is not 2-D, or ``pixel_mm`` is not finite and > 0.
     """
+    if np.ndim(depth_mm) != 2:
+        raise ValueError(f"depth_mm: expected an (H, W) image, got shape {np.shape(depth_mm)}")
+    pixel_mm = check_finite_scalar("pixel_mm", pixel_mm, low=0.0, low_open=True)
     p = params or PoseParams(threshold_mm=threshold_mm, sigma_mm=sigma_mm)
     threshold_mm, sigma_mm = p.threshold_mm, p.sigma_mm
+    level = 0.0
+    if p.background == "median":
+        depth_mm, level = _minus_background(depth_mm)
     d = remove_outliers(depth_mm, threshold_mm=threshold_mm, min_fraction=p.outlier_fraction)
     raw_px = int(np.count_nonzero(d > threshold_mm))
     if sigma_mm > 0:
@@ -86,8 +111,12 @@ def angle_from_image(depth_mm: np.ndarray, *, pixel_mm: float = 0.1, threshold_m
     n_px = int(np.count_nonzero(weights))
     area = n_px * pixel_mm**2
     if n_px < p.min_contact_px:
-        reason = ("empty contact" if raw_px == 0
-                  else f"contact too small ({n_px} px after filtering < {p.min_contact_px})")
+        if raw_px == 0 and level > threshold_mm:
+            reason = f"uniform contact: nothing stands above the image's background level ({level:.3g} mm)"
+        elif raw_px == 0:
+            reason = "empty contact"
+        else:
+            reason = f"contact too small ({n_px} px after filtering < {p.min_contact_px})"
         return AngleEstimate(0.0, 0.0, False, area_mm2=area, reason=reason)
     h, w = d.shape
     x = (np.arange(w) - (w - 1) / 2) * pixel_mm

@@ -63,7 +63,9 @@ class Reconstructor(abc.ABC):
         return self._run(fields)[0]
 
     def _check(self, field_ut: np.ndarray, *, batch: bool = False) -> np.ndarray:
-        f = np.asarray(field_ut, dtype=np.float32)
+        # finiteness is checked before the float32 cast: a finite float64 beyond float32's range (1e300) is a
+        # huge reading, saturated to the float32 limit, not an infinite one
+        f = np.asarray(field_ut, dtype=np.float64)
         want = ((None,) if batch else ()) + tuple(self.input_shape)
         if f.ndim != len(want) or any(w is not None and w != n for w, n in zip(want, f.shape)):
             shape = "(N, " + ", ".join(map(str, self.input_shape)) + ")" if batch else str(self.input_shape)
@@ -72,7 +74,8 @@ class Reconstructor(abc.ABC):
             bad = np.argwhere(~np.isfinite(f))[0].tolist()
             raise ValueError(f"{self.name}: reading contains NaN or infinite values (first at index {bad}); "
                              "drop the frame or re-read the sensor")
-        return f
+        f32_max = float(np.finfo(np.float32).max)
+        return np.clip(f, -f32_max, f32_max).astype(np.float32)
 
     @abc.abstractmethod
     def _run(self, fields_ut: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:

@@ -10,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from tactile_manip.perception.pose import MIN_CONTACT_PX, angle_from_image, remove_outliers, wrap_axial
+from tactile_manip.perception.pose import MIN_CONTACT_PX, PoseParams, angle_from_image, remove_outliers, wrap_axial
 
 PIXEL_MM = 0.1
 SIZE_PX = 100  # a 10 mm x 10 mm pad
@@ -284,3 +284,17 @@ def test_never_nan_for_depths_near_the_float_maximum(value: float) -> None:
                   elements=st.floats(allow_nan=True, allow_infinity=True, width=64)))
 def test_never_nan_for_arbitrary_images(img: np.ndarray) -> None:
     _never_nan(angle_from_image(img, pixel_mm=PIXEL_MM))
+
+
+def test_a_positive_background_level_is_removed_before_the_pca():
+    img = bar(math.radians(25.0))
+    lifted = img + 0.137                                  # the interpolation baselines' fitted offset, mm
+    kept = angle_from_image(lifted, pixel_mm=PIXEL_MM, params=PoseParams(background="none"))
+    removed = angle_from_image(lifted, pixel_mm=PIXEL_MM)
+    assert kept.area_mm2 > 0.9 * (SIZE_PX * PIXEL_MM) ** 2            # the whole pad counts as contact
+    assert removed.defined and axial_error(removed.angle_rad, math.radians(25.0)) < ONE_DEG
+    assert removed.area_mm2 < 15.0 and removed.confidence > kept.confidence + 0.3   # the 6 x 1 mm bar, blurred
+    same = angle_from_image(img, pixel_mm=PIXEL_MM)                   # zero background: unchanged
+    assert same.angle_rad == angle_from_image(img, pixel_mm=PIXEL_MM, params=PoseParams(background="none")).angle_rad
+    with pytest.raises(ValueError, match="background"):
+        PoseParams(background="mean")

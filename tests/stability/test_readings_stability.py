@@ -1,0 +1,236 @@
+"""Stability of the pose API on hard magnetic readings (4, 4, 3) uT, for the shipped model and the baselines.
+
+Every case states what it expects: a finite estimate with a confidence in [0, 1] and either a defined angle or
+a reason, a specific value, or a ``ValueError`` naming the problem. Never NaN.
+
+Already covered elsewhere (not repeated here): the shipped model on an all-zero reading and on one uniform
+1e5 uT reading, a full-NaN reading, and float32 against float64 readings (tests/perception/test_estimator.py);
+the clamp of a tiny exported model and NaN/inf at one taxel through the reconstructors
+(tests/perception/test_reconstruct.py); saturation flags and the int16 rail of the chip model
+(tests/sim/test_chip.py).
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tactile_manip.perception import TactilePoseEstimator, load_reconstructor, wrap_axial
+from tactile_manip.sim.objects import IndenterPose
+from tactile_manip.sim.pair import SensorPair
+from tactile_manip.sim.shapes import make_indenter
+from tactile_manip.types import AngleEstimate
+
+MODEL = Path(__file__).resolve().parents[2] / "models" / "supermag_compact.onnx"
+F32_MAX = float(np.finfo(np.float32).max)
+DEAD_CHIPS = [(1, 2), (2, 1)]  # middle of the array, under the rod
+ROD_YAWS_DEG = [-60.0, 30.0, 90.0]
+DEAD_CHIP_TOLERANCE_DEG = 3.0  # a chip stuck at 0 costs the shipped model no more than its usual error
+
+
+def _estimator(name: str) -> TactilePoseEstimator:
+    if name.startswith("supermag"):
+        pytest.importorskip("onnxruntime", reason="the shipped model needs onnxruntime")
+        samples = 4 if name.endswith("x4") else 1
+        return TactilePoseEstimator(load_reconstructor(MODEL, samples=samples, seed=0))
+    if name == "bilinear16":
+        return TactilePoseEstimator(load_reconstructor("bilinear", output_px=16))
+    return TactilePoseEstimator(load_reconstructor(name))
+
+
+@pytest.fixture(scope="module")
+def estimators() -> Callable[[str], TactilePoseEstimator]:
+    """``estimators(name)``: each estimator built once per module, only when a test asks for it."""
+    cache: dict[str, TactilePoseEstimator] = {}
+
+    def get(name: str) -> TactilePoseEstimator:
+        if name not in cache:
+            cache[name] = _estimator(name)
+        return cache[name]
+
+    return get
+
+
+@pytest.fixture(scope="module")
+def pair() -> SensorPair:
+    return SensorPair(seed=0)
+
+
+@pytest.fixture(scope="module")
+def rod_readings(pair: SensorPair) -> dict[float, np.ndarray]:
+    """A 4 mm hex bar at 10 N, off centre, at each yaw of ROD_YAWS_DEG: real simulated readings (float32, uT)."""
+    rod = make_indenter("hex_bar", size_mm=4.0)
+    return {yaw: pair.press(rod, IndenterPose(0.5, -0.5, math.radians(yaw)), 10.0, np.random.default_rng(0),
+                            render_depth=False).field_ut for yaw in ROD_YAWS_DEG}
+
+
+@pytest.fixture(scope="module")
+def rail_ut(pair: SensorPair) -> np.ndarray:
+    """(3,) the chip model's int16 rail in uT (x, y, z): ``saturation_counts * LSB``."""
+    chip = pair.params.chip
+    return chip.saturation_counts * np.array([chip.lsb_xy_ut, chip.lsb_xy_ut, chip.lsb_z_ut])
+
+
+def _assert_sane(est: AngleEstimate) -> None:
+    """The contract of every estimate: finite numbers, confidence in [0, 1], wrapped angle, defined or a reason."""
+    values = (est.angle_rad, est.confidence, est.area_mm2, *est.centroid_mm)
+    assert all(math.isfinite(v) for v in values), est
+    assert 0.0 <= est.confidence <= 1.0, est
+    assert -math.pi / 2 < est.angle_rad <= math.pi / 2, est
+    assert est.defined or (est.reason and est.confidence == 0.0), est
+
+
+def _same(a: AngleEstimate, b: AngleEstimate) -> None:
+    assert (a.defined, a.reason) == (b.defined, b.reason)
+    assert a.angle_rad == pytest.approx(b.angle_rad, abs=1e-9)
+    assert a.confidence == pytest.approx(b.confidence, abs=1e-9)
+    assert a.area_mm2 == pytest.approx(b.area_mm2, abs=1e-9)
+
+
+def _axial_error_deg(a_rad: float, b_rad: float) -> float:
+    return abs(math.degrees(wrap_axial(a_rad - b_rad)))
+
+
+# ---------------------------------------------------------------- saturation
+
+
+def _signs() -> np.ndarray:
+    return np.where(np.random.default_rng(3).random((4, 4, 3)) < 0.5, -1.0, 1.0)
+
+
+@pytest.mark.filterwarnings("error::RuntimeWarning")  # no silent overflow in a cast
+@pytest.mark.parametrize("magnitude_ut", [500.0, 501.0, 1e4, 1e30, F32_MAX, 1e300])
+@pytest.mark.parametrize("pattern", ["plus", "minus", "mixed"])
+def test_shipped_model_at_and_beyond_the_500_ut_clamp_equals_the_clamp(estimators, magnitude_ut, pattern):
+    """Expected: exactly the estimate of the reading at the +-500 uT clamp (finite; 1e300 is not 'infinite');
+    with 4 prior samples, a finite estimate whose confidence is in [0, 1]."""
+    signs = {"plus": np.ones((4, 4, 3)), "minus": -np.ones((4, 4, 3)), "mixed": _signs()}[pattern]
+    est = estimators("supermag")
+    got = est.estimate(signs * magnitude_ut)
+    _assert_sane(got)
+    _same(got, est.estimate(signs * 500.0))
+    _assert_sane(estimators("supermag-x4").estimate(signs * magnitude_ut))  # random samples: no equality
+
+
+def test_shipped_model_on_readings_at_the_int16_rail_equals_the_clamp(estimators, pair):
+    """Readings the chip model produces when every channel is on the int16 rail (baseline-subtracted):
+    expected, the estimate of the same signs at the 500 uT clamp."""
+    est = estimators("supermag")
+    for sign in (1.0, -1.0):
+        m = pair.chips.measure(np.full((4, 4, 3), sign * 1e6), np.random.default_rng(0))
+        assert m.saturated.all()
+        reading = m.raw_ut - pair.baseline_ut
+        assert np.abs(reading).min() > 500.0  # beyond the clamp on every channel, not vacuous
+        got = est.estimate(reading)
+        _assert_sane(got)
+        _same(got, est.estimate(np.clip(reading, -500.0, 500.0)))
+
+
+@pytest.mark.filterwarnings("error::RuntimeWarning")
+@pytest.mark.parametrize("name", ["bilinear", "bilinear16"])
+@pytest.mark.parametrize("sign, reason", [(1.0, "empty"), (-1.0, "uniform contact")])
+@pytest.mark.parametrize("magnitude", ["rail", 1e30, F32_MAX, 1e300])
+def test_baselines_at_saturation_are_undefined_with_a_reason(estimators, pair, rail_ut, name, sign, reason,
+                                                             magnitude):
+    """The baselines do not clamp: a strong +z everywhere maps to no depth (gain < 0): 'empty contact'; a strong
+    -z everywhere to a uniform deep image, all background: 'uniform contact'. Both undefined, never NaN."""
+    reading = sign * (np.broadcast_to(rail_ut, (4, 4, 3)) if magnitude == "rail" else np.full((4, 4, 3), magnitude))
+    got = estimators(name).estimate(reading)
+    _assert_sane(got)
+    assert not got.defined and reason in got.reason
+
+
+# ---------------------------------------------------------------- zero and denormal readings
+
+
+@pytest.mark.parametrize("name", ["bilinear", "bilinear16"])
+def test_baselines_on_an_all_zero_reading_are_uniform_not_nan(estimators, name):
+    """The fitted offset (0.137 mm) is above the 0.1 mm contact threshold: a zero reading is a uniform shallow
+    image, which the median background removal takes as background: undefined, 'uniform contact' (the shipped
+    model's case is in test_estimator.py)."""
+    got = estimators(name).estimate(np.zeros((4, 4, 3)))
+    _assert_sane(got)
+    assert not got.defined and "uniform contact" in got.reason
+
+
+@pytest.mark.filterwarnings("error::RuntimeWarning")
+@pytest.mark.parametrize("name", ["supermag", "bilinear", "bilinear16"])
+@pytest.mark.parametrize("value", [1e-40, -1e-40, 1e-45, 5e-324])
+def test_denormal_readings_behave_like_zero(estimators, name, value):
+    """Expected: the image within 1e-6 mm of the all-zero reading's and the same (undefined) estimate."""
+    est = estimators(name)
+    zero_est, zero_rec = est.estimate_with_image(np.zeros((4, 4, 3)))
+    got, rec = est.estimate_with_image(np.full((4, 4, 3), value))
+    _assert_sane(got)
+    np.testing.assert_allclose(rec.depth_mm, zero_rec.depth_mm, atol=1e-6)
+    assert not got.defined
+    _same(got, zero_est)
+
+
+# ---------------------------------------------------------------- one dead chip in a real rod reading
+
+
+@pytest.mark.parametrize("chip", DEAD_CHIPS)
+def test_a_chip_stuck_at_zero_barely_moves_the_shipped_models_angle(estimators, rod_readings, chip):
+    est = estimators("supermag")
+    for yaw_deg, reading in rod_readings.items():
+        dead = reading.copy()
+        dead[chip] = 0.0
+        got = est.estimate(dead)
+        _assert_sane(got)
+        assert got.defined and got.confidence > 0.5
+        assert _axial_error_deg(got.angle_rad, math.radians(yaw_deg)) < DEAD_CHIP_TOLERANCE_DEG
+
+
+@pytest.mark.parametrize("chip", DEAD_CHIPS)
+@pytest.mark.parametrize("stuck", ["zero", "rail+", "rail-"])
+@pytest.mark.parametrize("name", ["supermag", "supermag-x4", "bilinear", "bilinear16"])
+def test_a_dead_chip_gives_a_finite_estimate(estimators, pair, rod_readings, rail_ut, chip, stuck, name):
+    """A chip's three axes stuck at 0 or at the int16 rail (raw), in a real reading. Expected: finite, confidence
+    in [0, 1], defined or a reason; for the shipped model, exactly the estimate with that chip at the clamp
+    (a stuck rail is no worse than a saturated chip). The angle itself may be off (up to ~30 degrees
+    measured with a railed chip), which is why the sensor's saturation flags matter."""
+    est = estimators(name)
+    for reading in rod_readings.values():
+        dead = reading.astype(np.float64)
+        if stuck == "zero":
+            dead[chip] = 0.0
+        else:
+            dead[chip] = (rail_ut if stuck == "rail+" else -rail_ut) - pair.baseline_ut[chip]
+        got = est.estimate(dead)
+        _assert_sane(got)
+        if name == "supermag" and stuck != "zero":  # (4 random prior samples: no equality)
+            assert np.abs(dead[chip]).min() > 500.0
+            _same(got, est.estimate(np.clip(dead, -500.0, 500.0)))
+
+
+# ---------------------------------------------------------------- NaN and infinity
+
+
+@pytest.mark.parametrize("name", ["supermag", "bilinear", "bilinear16"])
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
+def test_non_finite_values_raise_a_value_error_naming_them(estimators, rod_readings, name, bad):
+    reading = rod_readings[30.0].copy()
+    reading[2, 1, 1] = bad
+    est = estimators(name)
+    with pytest.raises(ValueError, match=r"NaN or infinite values \(first at index \[2, 1, 1\]\)"):
+        est.estimate(reading)
+    with pytest.raises(ValueError, match="NaN or infinite"):  # one bad frame spoils the average
+        est.estimate_frames([rod_readings[30.0], reading])
+
+
+def test_huge_float64_readings_are_not_reported_as_infinite(estimators):
+    """1e300 is finite: it must not raise 'NaN or infinite' nor warn about an overflowing cast
+    (it saturates at the float32 limit, so it equals the float32-maximum reading)."""
+    for name in ("supermag", "bilinear"):
+        est = estimators(name)
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            got = est.estimate(np.full((4, 4, 3), -1e300))
+        _assert_sane(got)
+        _same(got, est.estimate(np.full((4, 4, 3), -F32_MAX, np.float32)))
