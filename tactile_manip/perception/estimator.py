@@ -16,7 +16,9 @@ and per-stage timings. It can average several consecutive frames and stream esti
 
 Confidence: the PCA's ``1 - lambda_minor / lambda_major``; when the reconstructor draws several prior samples
 (``OnnxReconstructor(samples=K)``), it is multiplied by the samples' agreement on the contact,
-``clip(1 - mean(spread) / mean(depth), 0, 1)`` over the contact pixels.
+``clip(1 - mean(spread) / mean(depth), 0, 1)`` over the contact pixels; and when a
+:class:`~tactile_manip.types.TactileReading` flags saturated channels (a chip at its ADC rail reports a bound,
+not a measurement), by the fraction of chips with no saturated axis.
 """
 
 from __future__ import annotations
@@ -73,6 +75,8 @@ class TactilePoseEstimator:
         est = angle_from_image(rec.depth_mm, pixel_mm=self.reconstructor.pixel_mm, params=self.params)
         if est.defined and rec.spread_mm is not None:
             est = replace(est, confidence=est.confidence * _sample_agreement(rec, self.params.threshold_mm))
+        if est.defined and isinstance(reading, TactileReading):
+            est = replace(est, confidence=est.confidence * _unsaturated_fraction(reading.saturated))
         t2 = time.perf_counter()
         timings = {"reconstruct": t1 - t0, "pose": t2 - t1, "total": t2 - t0}
         if isinstance(reading, TactileReading):
@@ -88,6 +92,9 @@ class TactilePoseEstimator:
         if len(shapes) != 1:
             raise ValueError(f"readings of different shapes cannot be averaged: {sorted(shapes)}")
         est = self.estimate(np.mean(np.stack(fields).astype(np.float64), axis=0))
+        flags = [r.saturated for r in readings if isinstance(r, TactileReading)]
+        if est.defined and flags:
+            est = replace(est, confidence=est.confidence * _unsaturated_fraction(np.logical_or.reduce(flags)))
         last = readings[-1]
         if isinstance(last, TactileReading):
             est.timings_s["age"] = time.monotonic() - last.t_host_s
@@ -127,6 +134,12 @@ def _fresh_frames(sensor: TactileSensor, frames: int, timeout_s: float) -> list[
         if reading.t_host_s >= start_s:
             readings.append(reading)
     return readings
+
+
+def _unsaturated_fraction(saturated: np.ndarray) -> float:
+    """Fraction of chips (R, C) none of whose axes is at the rail, from (R, C, A) flags."""
+    flags = np.asarray(saturated, dtype=bool)
+    return 1.0 - float(flags.any(axis=-1).mean()) if flags.size else 1.0
 
 
 def _sample_agreement(rec: Reconstruction, threshold_mm: float) -> float:

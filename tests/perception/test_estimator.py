@@ -146,3 +146,18 @@ def test_a_stalled_sensor_raises_instead_of_returning_stale_estimates(supermag, 
         next(supermag.stream(sensor, timeout_s=0.05))
     sensor.resume()
     assert supermag.read(sensor, timeout_s=0.5) is not None
+
+
+def test_saturated_chips_lower_the_confidence(supermag, pair) -> None:
+    from tactile_manip.types import TactileReading
+
+    field = _rod_field(pair, 25.0).astype(np.float32)
+    flags = np.zeros((4, 4, 3), bool)
+    clean = supermag.estimate(TactileReading(field, field, flags, t_host_s=0.0))
+    flags[1, 2, 2] = flags[2, 2, 0] = True                  # two chips with an axis at the rail
+    railed = supermag.estimate(TactileReading(field, field, flags, t_host_s=0.0))
+    assert railed.angle_rad == clean.angle_rad
+    assert railed.confidence == pytest.approx(clean.confidence * 14 / 16)
+    frames = supermag.estimate_frames([TactileReading(field, field, np.zeros_like(flags), t_host_s=0.0),
+                                       TactileReading(field, field, flags, t_host_s=0.0)])
+    assert frames.confidence == pytest.approx(clean.confidence * 14 / 16, rel=1e-6)
