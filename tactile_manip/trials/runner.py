@@ -26,6 +26,7 @@ from tactile_manip.errors import ConfigError
 from tactile_manip.perception.estimator import TactilePoseEstimator
 from tactile_manip.perception.pose import wrap_axial
 from tactile_manip.perception.reconstruct import load_reconstructor
+from tactile_manip.perception.symmetry import SymmetrizedReconstructor
 from tactile_manip.robot.frames import hand_T_finger_pad, rotation_about, transform
 from tactile_manip.sensors.config import SimulatedSensorConfig
 from tactile_manip.trials.record import TrialRecord
@@ -85,7 +86,10 @@ def build_estimators(scene: TrialScene, scene_path: Path | None = None) -> dict[
             kwargs = {"output_px": spec.output_px} if spec.output_px else {}
         else:
             kwargs = {"threads": spec.threads, "samples": spec.samples}
-        out[spec.name] = TactilePoseEstimator(load_reconstructor(target, **kwargs))
+        reconstructor = load_reconstructor(target, **kwargs)
+        if spec.symmetrize:
+            reconstructor = SymmetrizedReconstructor(reconstructor)
+        out[spec.name] = TactilePoseEstimator(reconstructor)
     return out
 
 

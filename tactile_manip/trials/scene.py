@@ -31,6 +31,8 @@ class MethodSpec:
             the shipped 200x200).
         samples: ONNX models only: prior samples per reading (> 1 adds their spread to the confidence).
         threads: onnxruntime intra-op threads.
+        symmetrize: average the reconstruction over the sensor's 8 symmetries
+            (:class:`~tactile_manip.perception.symmetry.SymmetrizedReconstructor`; 8 readings per estimate).
     """
 
     name: str
@@ -38,6 +40,7 @@ class MethodSpec:
     output_px: int = 0
     samples: int = 1
     threads: int = 1
+    symmetrize: bool = False
 
     def __post_init__(self) -> None:
         if not self.name or not self.name.replace("_", "").replace("-", "").isalnum():
@@ -155,7 +158,8 @@ class TrialScene:
         seed: master seed: presentation i uses ``numpy.random.SeedSequence([seed, i])``.
         tolerance_deg: success tolerance on |final - target|, deg (re-score later with ``tactile-manip score``).
         target_deg: commanded final angle of the object's axis in the pad frame at grasp, deg.
-        methods: the compared methods (default: the shipped SuperMag model and the paper's 16x16 bilinear).
+        methods: the compared methods (default: the shipped SuperMag model, one pass and averaged over the
+            sensor's symmetries, and the paper's 16x16 bilinear baseline).
         presentation, robot, behaviour, faults: see their classes.
         sensor: the simulated sensor's settings (twin), or the board's serial settings (``port = ...``, real FR3).
     """
@@ -166,7 +170,9 @@ class TrialScene:
     tolerance_deg: float = 5.0
     target_deg: float = 0.0
     methods: list[MethodSpec] = field(default_factory=lambda: [
-        MethodSpec("supermag", "models/supermag_compact.onnx"), MethodSpec("bilinear", "bilinear", output_px=16)])
+        MethodSpec("supermag", "models/supermag_compact.onnx"),
+        MethodSpec("supermag_sym", "models/supermag_compact.onnx", symmetrize=True),
+        MethodSpec("bilinear", "bilinear", output_px=16)])
     presentation: PresentationConfig = field(default_factory=PresentationConfig)
     robot: RobotConfig = field(default_factory=RobotConfig)
     sensor: SimulatedSensorConfig | SerialSensorConfig = field(default_factory=SimulatedSensorConfig)

@@ -1,0 +1,95 @@
+"""The sensor's symmetries: exact on the simulator, the same as the training augmentation, and a reconstructor
+averaged over them that is exactly equivariant."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tactile_manip.perception import TactilePoseEstimator, load_reconstructor, wrap_axial
+from tactile_manip.perception.symmetry import (SymmetrizedReconstructor, inverse_transform_image, symmetry_group,
+                                               transform_image, transform_reading)
+from tactile_manip.sim.objects import IndenterPose
+from tactile_manip.sim.pair import SensorPair
+from tactile_manip.sim.shapes import make_indenter
+
+MODEL = Path(__file__).resolve().parents[2] / "models" / "supermag_compact.onnx"
+GROUP = symmetry_group((4, 4, 3), (200, 200))
+
+
+def _turned(pose: IndenterPose, k: int, mirror: bool) -> IndenterPose:
+    """The pose after mirror (x -> -x) and k counter-clockwise quarter turns about the pad centre."""
+    x, y, yaw = pose.x_mm, pose.y_mm, pose.yaw_rad
+    if mirror:
+        x, yaw = -x, math.pi - yaw
+    for _ in range(k):
+        x, y, yaw = -y, x, yaw + math.pi / 2
+    return IndenterPose(x, y, yaw)
+
+
+@pytest.mark.parametrize("k, mirror", [(1, False), (2, False), (0, True), (3, True)])
+def test_a_transformed_contact_gives_the_transformed_reading_and_image(k, mirror) -> None:
+    pair, rod = SensorPair(seed=0), make_indenter("square_bar", size_mm=2.5)
+    pose = IndenterPose(1.2, -0.7, 0.4)
+    a = pair.press(rod, pose, 10.0, np.random.default_rng(0))
+    b = pair.press(rod, _turned(pose, k, mirror), 10.0, np.random.default_rng(0))
+    peak = np.abs(a.field_change_ut).max()
+    assert np.abs(transform_reading(a.field_change_ut, k, mirror) - b.field_change_ut).max() < 0.02 * peak
+    overlap = np.logical_and(transform_image(a.contact_mask, k, mirror), b.contact_mask).sum()
+    assert overlap > 0.95 * b.contact_mask.sum()
+
+
+def test_the_group_and_the_inverse() -> None:
+    assert len(GROUP) == 8 and len(symmetry_group((4, 5, 3), (40, 50))) == 4
+    img = np.random.default_rng(0).random((3, 7, 7))
+    for k, m in GROUP:
+        assert np.array_equal(inverse_transform_image(transform_image(img, k, m), k, m), img)
+    turned = transform_reading(np.ones((4, 4, 3)) * [1.0, 0.0, 0.0], 1, False)
+    assert np.allclose(turned[..., :2], [0.0, 1.0])            # +x field turned a quarter CCW points to +y
+
+
+def test_the_same_transforms_as_the_training_augmentation() -> None:
+    torch = pytest.importorskip("torch")
+    from tactile_manip.learning.data import dihedral
+
+    rng = np.random.default_rng(1)
+    field, image = rng.normal(size=(2, 4, 4, 3)), rng.random((2, 12, 12))
+    for k, m in GROUP:
+        f, im = dihedral(torch.from_numpy(field), torch.from_numpy(image), k, m)
+        assert np.allclose(f.numpy(), transform_reading(field, k, m))
+        assert np.allclose(im.numpy(), transform_image(image, k, m))
+
+
+def test_the_averaged_reconstructor_is_exactly_equivariant() -> None:
+    pytest.importorskip("onnxruntime")
+    sym = SymmetrizedReconstructor(load_reconstructor(MODEL), spread=True)
+    pair = SensorPair(seed=0)
+    field = pair.press(make_indenter("hex_bar", size_mm=4.0), IndenterPose(0.5, 1.0, 0.3), 10.0,
+                       np.random.default_rng(2), render_depth=False).field_ut
+    base = sym.reconstruct(field)
+    assert sym.name.endswith("+sym") and base.spread_mm is not None and np.isfinite(base.spread_mm).all()
+    for k, m in GROUP[1:]:
+        turned = sym.reconstruct(transform_reading(field, k, m)).depth_mm
+        assert np.abs(turned - transform_image(base.depth_mm, k, m)).max() < 1e-4
+    batch = sym.reconstruct_batch(np.stack([field, field]))
+    assert batch.shape == (2, 200, 200) and np.allclose(batch[0], base.depth_mm, atol=1e-6)
+
+
+def test_averaging_over_the_symmetries_sharpens_the_rod_angle() -> None:
+    pytest.importorskip("onnxruntime")
+    pair, rng = SensorPair(seed=0), np.random.default_rng(3)
+    single = TactilePoseEstimator(load_reconstructor(MODEL))
+    averaged = TactilePoseEstimator(SymmetrizedReconstructor(load_reconstructor(MODEL)))
+    errors = {"single": [], "averaged": []}
+    for i in range(24):
+        size = (8.0, 5.0)[i % 2]
+        rod = make_indenter(("hex_bar", "square_bar")[i % 2], size_mm=size)   # the wide bars, the hard cases
+        yaw = rng.uniform(-math.pi / 2, math.pi / 2)
+        field = pair.press(rod, IndenterPose(*rng.uniform(-2, 2, 2), yaw), 10.5, rng, render_depth=False).field_ut
+        for name, est in (("single", single), ("averaged", averaged)):
+            errors[name].append(abs(wrap_axial(est.estimate(field).angle_rad - yaw)))
+    assert np.mean(errors["averaged"]) < 0.8 * np.mean(errors["single"])
+    assert np.percentile(np.degrees(errors["averaged"]), 90) < 5.0
