@@ -15,6 +15,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--data", required=True, help="paired dataset .npz (its test split is evaluated)")
     p.add_argument("--model", action="append", default=[], metavar="LABEL=PATH",
                    help="an exported model, e.g. 'SuperMag=models/supermag_compact.onnx' (repeatable)")
+    p.add_argument("--symmetrized", action="append", default=[], metavar="LABEL=PATH",
+                   help="an exported model averaged over the sensor's 8 symmetries (SymmetrizedReconstructor)")
     p.add_argument("--out", required=True, help="folder for table.md, results.json and gallery.png")
     p.add_argument("--split", default="test", choices=("train", "val", "test"))
     p.add_argument("--inception-onnx", default=None,
@@ -31,11 +33,15 @@ def run(args: argparse.Namespace) -> int:
     train = data.indices("train")
     methods = {name.capitalize(): cls.fit(data.field_ut[train], data.depth_mm(train))
                for name, cls in BASELINES.items()}
-    for spec in args.model:
-        label, sep, path = spec.partition("=")
-        if not sep or not label or not path:
-            raise ValueError(f"--model must be LABEL=PATH, got {spec!r}")
-        methods[label] = OnnxReconstructor(path, threads=args.threads)
+    from tactile_manip.perception.symmetry import SymmetrizedReconstructor
+
+    for option, specs in (("--model", args.model), ("--symmetrized", args.symmetrized)):
+        for spec in specs:
+            label, sep, path = spec.partition("=")
+            if not sep or not label or not path:
+                raise ValueError(f"{option} must be LABEL=PATH, got {spec!r}")
+            model = OnnxReconstructor(path, threads=args.threads)
+            methods[label] = SymmetrizedReconstructor(model) if option == "--symmetrized" else model
     results, _ = evaluate_methods(data, methods, split=args.split, inception_onnx=args.inception_onnx)
     rows = _gallery_rows(data, args.split, "val")
     write_report(args.out, results, {"data": str(args.data), "split": args.split,

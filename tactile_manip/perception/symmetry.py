@@ -18,6 +18,8 @@ import numpy as np
 
 from tactile_manip.perception.reconstruct import Reconstructor
 
+CHUNK = 64  # readings per inner batch (8 x 64 images at a time)
+
 
 def transform_reading(field_ut: np.ndarray, quarter_turns: int, mirror: bool) -> np.ndarray:
     """Readings (..., R, C, 3) after ``mirror`` (x -> -x) and then ``quarter_turns`` counter-clockwise turns."""
@@ -70,6 +72,10 @@ class SymmetrizedReconstructor(Reconstructor):
         self.group = symmetry_group(self.input_shape, self.output_shape)
 
     def _run(self, fields_ut: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+        if len(fields_ut) > CHUNK:  # bound the memory of the 8x batch
+            parts = [self._run(fields_ut[i:i + CHUNK]) for i in range(0, len(fields_ut), CHUNK)]
+            spread = np.concatenate([p[1] for p in parts]) if self.spread else None
+            return np.concatenate([p[0] for p in parts]), spread
         n, g = len(fields_ut), len(self.group)
         batch = np.concatenate([transform_reading(fields_ut, k, m) for k, m in self.group])  # (g*n, R, C, 3)
         images = self.inner.reconstruct_batch(batch).reshape(g, n, *self.output_shape)

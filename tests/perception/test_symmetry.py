@@ -93,3 +93,14 @@ def test_averaging_over_the_symmetries_sharpens_the_rod_angle() -> None:
             errors[name].append(abs(wrap_axial(est.estimate(field).angle_rad - yaw)))
     assert np.mean(errors["averaged"]) < 0.8 * np.mean(errors["single"])
     assert np.percentile(np.degrees(errors["averaged"]), 90) < 5.0
+
+
+def test_large_batches_are_processed_in_chunks_with_the_same_result(monkeypatch) -> None:
+    from tactile_manip.perception import symmetry
+    from tactile_manip.perception.reconstruct import BilinearReconstructor
+
+    sym = SymmetrizedReconstructor(BilinearReconstructor(gain_mm_per_ut=-0.01, offset_mm=0.0), spread=True)
+    fields = np.random.default_rng(4).normal(0, 100, (5, 4, 4, 3))
+    whole = sym.reconstruct_batch(fields)
+    monkeypatch.setattr(symmetry, "CHUNK", 2)
+    assert np.allclose(sym.reconstruct_batch(fields), whole)
