@@ -1,6 +1,7 @@
 """End-to-end tactile pose: reading -> angle latency against angle error, per method.
 
-    python -m benchmarks.bench_pose                        # shipped SuperMag, bilinear 16x16 and 200x200
+    python -m benchmarks.bench_pose                        # shipped SuperMag (one pass and symmetry-averaged),
+                                                           # bilinear 16x16 and 200x200
     python -m benchmarks.bench_pose --readings 300 --method mine=path/to/model.onnx
 
 Readings are simulated presses of the six unseen rods (random in-hand angle, +-2 mm offset, 10-11 N, chip
@@ -21,6 +22,7 @@ import numpy as np
 
 from benchmarks._common import machine_info, publish
 from tactile_manip.perception import TactilePoseEstimator, load_reconstructor, wrap_axial
+from tactile_manip.perception.symmetry import SymmetrizedReconstructor
 from tactile_manip.sim.objects import IndenterPose
 from tactile_manip.sim.pair import SensorPair
 from tactile_manip.sim.shapes import make_indenter
@@ -81,7 +83,8 @@ def main() -> None:
     parser.add_argument("--out", default="benchmarks/results/pose.json")
     args = parser.parse_args()
     os.environ.setdefault("OMP_NUM_THREADS", "1")
-    methods = {"supermag_compact": load_reconstructor("models/supermag_compact.onnx", threads=1),
+    shipped = load_reconstructor("models/supermag_compact.onnx", threads=1)
+    methods = {"supermag_compact": shipped, "supermag_compact_sym": SymmetrizedReconstructor(shipped),
                "bilinear_16px": load_reconstructor("bilinear", output_px=16),
                "bilinear_200px": load_reconstructor("bilinear")}
     for spec in args.method:

@@ -71,7 +71,7 @@ def main() -> None:
                 log.flush()
     lines = [f"# Slot insertion ({scene.trials} presentations per method; success: |angle| <= "
              f"{args.angle_tolerance_deg:g} deg and lateral <= {args.clearance_mm:g} mm)", "",
-             "| method | success | Wilson 95 % CI | median |angle| deg | median lateral mm | p95 lateral mm |",
+             "| method | success | Wilson 95 % CI | median abs angle (deg) | median lateral (mm) | p95 lateral (mm) |",
              "|---|---|---|---|---|---|"]
     for name, rs in rows.items():
         k = sum(r["success"] for r in rs)
