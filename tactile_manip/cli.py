@@ -31,6 +31,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "view": ("tactile_manip.commands.view", "show the 4x4x3 field of a sensor live (or save a snapshot)"),
     "trials": ("tactile_manip.commands.trials", "run grasp-estimate-reorient trials per method and report"),
     "score": ("tactile_manip.commands.score", "re-score a saved trial run at another tolerance (no re-run)"),
+    "collect": ("tactile_manip.commands.collect", "calibrate the VBTS and record synchronized MBTS/VBTS pairs"),
 }
 
 
