@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import struct
 import time
 import zlib
@@ -31,15 +30,15 @@ from typing import Any
 import numpy as np
 
 from tactile_manip.errors import RecordingError
+from tactile_manip.sensors.framed_file import CRC32, TAG_EVENT, FramedWriter, json_default
 from tactile_manip.sim.dataset_io import DEPTH_SCALE_MM, FORMAT_VERSION as DATASET_VERSION, PairedDataset, SPLITS
 from tactile_manip.version import code_version
 
 MAGIC = b"tactile_manip pairs\n"
 FORMAT_VERSION = 1
 RECORD = struct.Struct("<2sId")
-CRC32 = struct.Struct("<I")
 JSON_LEN = struct.Struct("<H")
-TAG_PAIR, TAG_EVENT = b"PR", b"EV"
+TAG_PAIR = b"PR"
 
 
 @dataclass(frozen=True, eq=False)
@@ -53,71 +52,23 @@ class PairRecord:
     info: dict[str, Any]        # t_depth_s, t_field_s, dt_s, seq_depth, seq_field, force_n, object, pose, press
 
 
-class PairLogWriter:
+class PairLogWriter(FramedWriter):
     """Append pairs and events to a new pair log (an existing file is replaced)."""
 
     def __init__(self, path: str | Path, header: dict[str, Any], *, sync_every_s: float = 0.5) -> None:
-        if not 0 < sync_every_s <= 1.0:
-            raise ValueError(f"sync_every_s must be in (0, 1], got {sync_every_s}")
-        self.path = Path(path)
-        self.sync_every_s = sync_every_s
-        head = {"format": "tactile_manip.pairs", "format_version": FORMAT_VERSION, "code_version": code_version(),
-                "created_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()), **header}
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        self._file = open(self.path, "wb")  # noqa: SIM115 - closed in close()
-        self._file.write(MAGIC + json.dumps(head, default=_json_default).encode() + b"\n")
+        head = {"format": "tactile_manip.pairs", "format_version": FORMAT_VERSION, **header}
+        super().__init__(path, MAGIC, head, RECORD, sync_every_s=sync_every_s)
         self.pairs = 0
-        self.sync()
 
     def write_pair(self, t_host_s: float, record: PairRecord) -> None:
         meta = json.dumps({**record.info, "field_shape": list(record.field_ut.shape),
-                           "depth_shape": list(record.depth_q.shape)}, default=_json_default).encode()
+                           "depth_shape": list(record.depth_q.shape)}, default=json_default).encode()
         payload = b"".join([JSON_LEN.pack(len(meta)), meta, np.ascontiguousarray(record.field_ut, "<f4").tobytes(),
                             np.ascontiguousarray(record.field_raw_ut, "<f4").tobytes(),
                             np.ascontiguousarray(record.saturated, np.uint8).tobytes(),
                             zlib.compress(np.ascontiguousarray(record.depth_q, np.uint8).tobytes(), 1)])
-        self._write(TAG_PAIR, t_host_s, payload)
+        self.write_record(TAG_PAIR, t_host_s, payload)
         self.pairs += 1
-
-    def write_event(self, t_host_s: float, event: dict[str, Any]) -> None:
-        self._write(TAG_EVENT, t_host_s, json.dumps(event, default=_json_default).encode())
-
-    def sync(self) -> None:
-        """Push everything written so far to the disk."""
-        self._file.flush()
-        os.fsync(self._file.fileno())
-        self._last_sync = time.monotonic()
-
-    def maybe_sync(self) -> None:
-        if time.monotonic() - self._last_sync >= self.sync_every_s:
-            self.sync()
-
-    def close(self) -> None:
-        if not self._file.closed:
-            self.sync()
-            self._file.close()
-
-    def __enter__(self) -> PairLogWriter:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
-
-    def _write(self, tag: bytes, t_host_s: float, payload: bytes) -> None:
-        head = RECORD.pack(tag, len(payload), t_host_s)
-        self._file.write(head + payload + CRC32.pack(zlib.crc32(payload, zlib.crc32(head))))
-        self.maybe_sync()
-
-
-def _json_default(obj: Any) -> Any:
-    if isinstance(obj, np.generic):
-        return obj.item()
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    if isinstance(obj, Path):
-        return str(obj)
-    raise TypeError(f"{type(obj).__name__} is not JSON serialisable")
-
 
 @dataclass(frozen=True, eq=False)
 class PairLog:

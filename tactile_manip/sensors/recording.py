@@ -19,7 +19,6 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
-import os
 import struct
 import threading
 import time
@@ -40,7 +39,7 @@ from tactile_manip.sensors.protocol import (
     decode_frame,
     encode_frame,
 )
-from tactile_manip.version import code_version
+from tactile_manip.sensors.framed_file import CRC32, TAG_EVENT, FramedWriter, json_default
 
 if TYPE_CHECKING:
     from tactile_manip.sensors.base import SensorFrame, SensorHealth, TactileSensor
@@ -48,11 +47,10 @@ if TYPE_CHECKING:
 MAGIC = b"tactile_manip recording\n"
 FORMAT_VERSION = 1
 RECORD = struct.Struct("<2sHd")
-CRC32 = struct.Struct("<I")
-TAG_FRAME, TAG_HEALTH, TAG_EVENT = b"FR", b"HL", b"EV"
+TAG_FRAME, TAG_HEALTH = b"FR", b"HL"
 
 
-class RecordingWriter:
+class RecordingWriter(FramedWriter):
     """Append records to a new recording file (see the module docstring for the layout).
 
     Args:
@@ -62,57 +60,17 @@ class RecordingWriter:
     """
 
     def __init__(self, path: str | Path, header: dict[str, Any], *, sync_every_s: float = 0.5) -> None:
-        self.path = Path(path)
-        self.sync_every_s = sync_every_s
-        head = {"format": "tactile_manip.recording", "format_version": FORMAT_VERSION,
-                "protocol_version": VERSION, "code_version": code_version(),
-                "created_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()), **header}
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        self._file = open(self.path, "wb")  # noqa: SIM115 - closed in close()
-        self._file.write(MAGIC + json.dumps(head).encode() + b"\n")
+        head = {"format": "tactile_manip.recording", "format_version": FORMAT_VERSION, "protocol_version": VERSION,
+                **header}
+        super().__init__(path, MAGIC, head, RECORD, sync_every_s=sync_every_s, sync_on_write=False)
         self.frames = 0
-        self.sync()
 
     def write_frame(self, t_host_s: float, wire: bytes) -> None:
-        self._write(TAG_FRAME, t_host_s, wire)
+        self.write_record(TAG_FRAME, t_host_s, wire)
         self.frames += 1
 
     def write_health(self, t_host_s: float, health: dict[str, Any]) -> None:
-        self._write(TAG_HEALTH, t_host_s, json.dumps(health, default=_json_default).encode())
-
-    def write_event(self, t_host_s: float, event: dict[str, Any]) -> None:
-        self._write(TAG_EVENT, t_host_s, json.dumps(event, default=_json_default).encode())
-
-    def sync(self) -> None:
-        """Push everything written so far to the disk."""
-        self._file.flush()
-        os.fsync(self._file.fileno())
-        self._last_sync = time.monotonic()
-
-    def maybe_sync(self) -> None:
-        if time.monotonic() - self._last_sync >= self.sync_every_s:
-            self.sync()
-
-    def close(self) -> None:
-        if not self._file.closed:
-            self.sync()
-            self._file.close()
-
-    def __enter__(self) -> RecordingWriter:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
-
-    def _write(self, tag: bytes, t_host_s: float, payload: bytes) -> None:
-        head = RECORD.pack(tag, len(payload), t_host_s)
-        self._file.write(head + payload + CRC32.pack(zlib.crc32(payload, zlib.crc32(head))))
-
-
-def _json_default(obj: Any) -> Any:
-    if isinstance(obj, np.generic):
-        return obj.item()
-    raise TypeError(f"{type(obj).__name__} is not JSON serialisable")
+        self.write_record(TAG_HEALTH, t_host_s, json.dumps(health, default=json_default).encode())
 
 
 @dataclass(frozen=True, eq=False)
