@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from tactile_manip.errors import ArmFault, GripperError, IKError, SafetyLimitError
+from tactile_manip.robot.base import GraspResult, GripperState
 from tactile_manip.robot.frames import angle_in_plane, hand_T_pad, rotate_pose_about, rotation_about, transform
 from tactile_manip.robot.safety import pose_error
 
@@ -221,7 +222,7 @@ def test_grasp_within_tolerance_holds_the_object_and_tells_listeners(twin, world
     result = gripper.grasp(0.032, 15.0, epsilon_inner_m=0.005, epsilon_outer_m=0.001)
     assert result.success and result.width_m == pytest.approx(0.03) and result.force_n == 15.0
     assert result.duration_s == pytest.approx((0.08 - 0.03) / 0.02)
-    assert gripper.state() == twin.GripperState(width_m=0.03, is_grasped=True)
+    assert gripper.state() == GripperState(width_m=0.03, is_grasped=True)
     (seen_obj, seen_hand_T_object, seen_force_n), = grasps
     assert seen_obj is obj and seen_force_n == 15.0
     centred = hand_T_object.copy()
@@ -239,7 +240,7 @@ def test_grasp_outside_the_width_tolerance_fails_without_holding(twin, world, gr
 
 
 def test_grasp_with_nothing_between_the_fingers_closes_fully(twin, arm, world, gripper):
-    assert gripper.grasp(0.03, 20.0) == twin.GraspResult(False, 0.0, 0.0, 0.08 / 0.02)
+    assert gripper.grasp(0.03, 20.0) == GraspResult(False, 0.0, 0.0, 0.08 / 0.02)
     gripper.open()
     obj, _ = _presented(twin, world)
     arm.move_cartesian(_lifted(arm.state().base_T_hand, 0.05))  # the hand moved away from the object
