@@ -3,35 +3,13 @@
 from __future__ import annotations
 
 import json
-import os
-import platform
-import sys
-import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-import scipy
+from tactile_manip.bench.machine import machine_info
 
-from tactile_manip.version import code_version
-
-
-def machine_info() -> dict[str, Any]:
-    """CPU model, core counts, interpreter and library versions, code version, time of the run."""
-    cpu = platform.processor() or "unknown"
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    usable = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
-    return {"cpu_model": cpu, "cpu_count": os.cpu_count(), "usable_cores": usable,
-            "python": sys.version.split()[0], "numpy": np.__version__, "scipy": scipy.__version__,
-            "platform": platform.platform(), "code_version": code_version(),
-            "time_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
+__all__ = ["machine_info", "publish"]
 
 
 def publish(report: dict[str, Any], out: str | Path, markdown: Callable[[dict[str, Any]], str]) -> None:

@@ -28,25 +28,9 @@ PERIOD_MS = 8.0  # the sensor's 125 Hz frame period
 
 def _untrained(preset: str, folder: Path) -> Path:
     """Export a randomly initialised model of ``preset`` (for timing only)."""
-    import torch
+    from tactile_manip.learning.eager import export_untrained
 
-    from tactile_manip.learning.export import export_onnx
-    from tactile_manip.learning.model import SuperMagCVAE
-    from tactile_manip.learning.model import preset as make_preset
-
-    model = SuperMagCVAE(make_preset(preset))
-    ckpt = folder / f"{preset}.pt"
-    torch.save({"model": model.state_dict(), "model_config": _plain(model.cfg), "input": {"clamp_ut": 500.0,
-                "axes": "xyz"}, "train_config": {"preset": preset}, "data_fingerprint": "untrained"}, ckpt)
-    out = folder / f"{preset}.onnx"
-    export_onnx(ckpt, out, pixel_mm=0.1)
-    return out
-
-
-def _plain(cfg) -> dict[str, Any]:
-    from tactile_manip.config import to_dict
-
-    return to_dict(cfg)
+    return export_untrained(preset, folder)
 
 
 def time_model(path: Path, *, threads: int, repeats: int, batch: int) -> dict[str, Any]:

@@ -32,6 +32,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "trials": ("tactile_manip.commands.trials", "run grasp-estimate-reorient trials per method and report"),
     "score": ("tactile_manip.commands.score", "re-score a saved trial run at another tolerance (no re-run)"),
     "collect": ("tactile_manip.commands.collect", "calibrate the VBTS and record synchronized MBTS/VBTS pairs"),
+    "bench": ("tactile_manip.commands.bench", "speed vs error of every method and runtime on this machine"),
 }
 
 

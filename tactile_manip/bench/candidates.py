@@ -1,0 +1,237 @@
+"""What the report measures: methods (baselines and exported models) times runtimes, as buildable candidates.
+
+A *method* is a way to turn a reading into a depth image (``bilinear``, a model file, a model averaged over
+the sensor's symmetries). A *candidate* is a method on one runtime: numpy for the baselines; for a model,
+onnxruntime with 1 thread and with all threads, onnxruntime on a dynamically int8-quantised copy, and torch
+eager from the training checkpoint. A model file that is missing is skipped with a note, never an error.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import logging
+import os
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from tactile_manip.bench.machine import usable_cores
+from tactile_manip.perception.reconstruct import Reconstructor, load_reconstructor, read_metadata
+from tactile_manip.trials.scene import MethodSpec
+
+RUNTIMES = ("ort-1", "ort-all", "ort-int8", "torch")
+BASELINE_NAMES = ("bilinear", "bicubic")
+
+
+@dataclass(frozen=True)
+class ModelEntry:
+    """An exported model to measure.
+
+    Attributes:
+        name: method name in the report (a word: letters, digits, ``_`` or ``-``).
+        path: the ``.onnx`` file.
+        checkpoint: its training checkpoint, for the torch-eager reference (None: no torch row).
+        symmetrized: also measure it averaged over the sensor's symmetries, as method ``<name>_sym``.
+        untrained_preset: when ``path`` is missing, export an untrained model of this preset instead
+            (latency only; its accuracy is reported as "n/a (untrained)").
+    """
+
+    name: str
+    path: Path
+    checkpoint: Path | None = None
+    symmetrized: bool = False
+    untrained_preset: str | None = None
+
+
+def default_models(root: str | Path = ".") -> list[ModelEntry]:
+    """The shipped model and the size variants on one 8-epoch recipe, and the paper preset (paths under ``root``)."""
+    r = Path(root)
+    return [ModelEntry("compact", r / "models/supermag_compact.onnx", r / "runs/compact/best.pt", symmetrized=True),
+            ModelEntry("small_8ep", r / "runs/variant_small/model.onnx", r / "runs/variant_small/best.pt"),
+            ModelEntry("compact_8ep", r / "runs/table1_full/model.onnx", r / "runs/table1_full/best.pt"),
+            ModelEntry("large_8ep", r / "runs/variant_large/model.onnx", r / "runs/variant_large/best.pt"),
+            ModelEntry("paper", r / "runs/paper/model.onnx", r / "runs/paper/best.pt", untrained_preset="paper")]
+
+
+def parse_model_spec(spec: str) -> ModelEntry:
+    """``NAME=PATH.onnx`` -> a :class:`ModelEntry` (its checkpoint: ``best.pt`` beside the file, if there)."""
+    name, sep, path = spec.partition("=")
+    if not sep or not name or not path:
+        raise ValueError(f"--model must be NAME=PATH, got {spec!r}")
+    MethodSpec(name, path)  # validates the name as the trials log needs it
+    checkpoint = Path(path).with_name("best.pt")
+    return ModelEntry(name, Path(path), checkpoint if checkpoint.is_file() else None)
+
+
+@dataclass
+class Candidate:
+    """One method on one runtime.
+
+    ``build(threads)`` makes the reconstructor; the timings use ``threads``, the accuracy passes may use
+    more (same outputs, checked). ``accuracy_key`` groups candidates that run the same numbers (the same
+    weights in fp32 on onnxruntime with any thread count, or in torch): accuracy is computed once per key
+    and shared once the outputs are checked to agree. ``trial_spec`` is the trials command's view of the
+    method (None: run trials with an estimator from ``build``).
+    """
+
+    method: str
+    runtime: str
+    build: Callable[[int], Reconstructor]
+    accuracy_key: str
+    threads: int = 1
+    accuracy_threads: int | None = None
+    parameters: int | None = None
+    file_mb: float | None = None
+    path: str | None = None
+    training: str = ""
+    untrained: bool = False
+    trial_spec: MethodSpec | None = None
+    notes: list[str] = field(default_factory=list)
+
+
+def baseline_candidates(names: tuple[str, ...] = BASELINE_NAMES) -> list[Candidate]:
+    """The interpolation baselines at 200x200 (the shipped fit, as ``tactile-manip evaluate`` fits them)."""
+    return [Candidate(n, "numpy", (lambda threads, n=n: load_reconstructor(n)), accuracy_key=n, parameters=2,
+                      training="linear fit (train split)", trial_spec=MethodSpec(n, n)) for n in names]
+
+
+def model_candidates(entry: ModelEntry, workdir: Path, *, runtimes: tuple[str, ...] = RUNTIMES,
+                     notes: list[str]) -> list[Candidate]:
+    """Candidates of one model on each runtime in ``runtimes``; what cannot run is skipped into ``notes``."""
+    path, untrained = entry.path, False
+    if not path.is_file():
+        if entry.untrained_preset is None:
+            notes.append(f"{entry.name}: skipped, {path} not found (train it and `tactile-manip export` it)")
+            return []
+        try:
+            from tactile_manip.learning.eager import export_untrained
+        except ImportError:
+            notes.append(f"{entry.name}: skipped, {path} not found and torch is not installed to export an "
+                         "untrained one for latency")
+            return []
+        path, untrained = export_untrained(entry.untrained_preset, workdir / "untrained"), True
+        entry = dataclasses.replace(entry, checkpoint=path.with_suffix(".pt"))  # torch runs the same weights
+        notes.append(f"{entry.name}: {entry.path} not found; an untrained {entry.untrained_preset} model was "
+                     "exported for latency only")
+    meta = read_metadata(path)
+    base = {"parameters": meta.get("parameters"), "training": "untrained" if untrained else training_note(path, meta),
+            "untrained": untrained}
+    methods = [(entry.name, False)] + ([(f"{entry.name}_sym", True)] if entry.symmetrized else [])
+    int8 = _int8_copy(path, workdir, entry.name, notes) if "ort-int8" in runtimes else None
+    out = []
+    for method, sym in methods:
+        for runtime in runtimes:
+            cand = _runtime_candidate(entry, method, sym, runtime, path, int8, notes)
+            if cand is not None:
+                cand.parameters, cand.training, cand.untrained = base["parameters"], base["training"], untrained
+                out.append(cand)
+    return out
+
+
+def _runtime_candidate(entry: ModelEntry, method: str, sym: bool, runtime: str, path: Path, int8: Path | None,
+                       notes: list[str]) -> Candidate | None:
+    def wrap(make: Callable[[int], Reconstructor]) -> Callable[[int], Reconstructor]:
+        if not sym:
+            return make
+        from tactile_manip.perception.symmetry import SymmetrizedReconstructor
+
+        return lambda threads: SymmetrizedReconstructor(make(threads))
+
+    fp32 = f"{method}:fp32"
+    if runtime in ("ort-1", "ort-all"):
+        threads = 1 if runtime == "ort-1" else usable_cores()
+        if runtime == "ort-all" and threads == 1:
+            return None  # one usable core: the same as ort-1
+        label = f"onnxruntime {threads} thread" + ("s" if threads > 1 else "")
+        return Candidate(method, label, wrap(lambda n: load_reconstructor(path, threads=n)), fp32,
+                         threads=threads, accuracy_threads=usable_cores(), file_mb=_mb(path), path=str(path),
+                         trial_spec=MethodSpec(method, str(path), symmetrize=sym))
+    if runtime == "ort-int8":
+        if int8 is None:
+            return None
+        return Candidate(method, "onnxruntime int8 1 thread", wrap(lambda n: load_reconstructor(int8, threads=n)),
+                         f"{method}:int8", accuracy_threads=usable_cores(), file_mb=_mb(int8), path=str(int8),
+                         trial_spec=MethodSpec(method, str(int8), symmetrize=sym))
+    if runtime == "torch":
+        if sym:
+            return None  # the reference is the model itself; 8 torch passes per reading would add nothing
+        if entry.checkpoint is None or not entry.checkpoint.is_file():
+            notes.append(f"{entry.name}: torch eager n/a (no checkpoint {entry.checkpoint or 'beside the file'})")
+            return None
+        try:
+            from tactile_manip.learning.eager import TorchReconstructor
+        except ImportError:
+            notes.append(f"{entry.name}: torch eager n/a (torch is not installed)")
+            return None
+        pixel_mm = float(read_metadata(path)["output"]["pixel_mm"])
+        ckpt = entry.checkpoint
+        return Candidate(method, "torch eager 1 thread",
+                         lambda n: TorchReconstructor(ckpt, threads=n, pixel_mm=pixel_mm), fp32, file_mb=_mb(ckpt),
+                         path=str(ckpt))
+    raise ValueError(f"unknown runtime {runtime!r}; known: {', '.join(RUNTIMES)}")
+
+
+def _int8_copy(path: Path, workdir: Path, name: str, notes: list[str]) -> Path | None:
+    """Dynamic int8 quantisation of ``path`` (weights int8, activations quantised at run time) into
+    ``workdir``; None with a note when it fails."""
+    out = workdir / "int8" / f"{name}.int8.onnx"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        from onnxruntime.quantization import QuantType, quantize_dynamic
+    except ImportError as e:
+        notes.append(f"{name}: int8 n/a (onnxruntime.quantization needs the onnx package: {e})")
+        return None
+    quiet = logging.getLogger()
+    level = quiet.level
+    quiet.setLevel(logging.ERROR)  # the quantiser logs a pre-processing advice on every call
+    try:
+        quantize_dynamic(str(path), str(out), weight_type=QuantType.QInt8)
+        read_metadata(out)  # the metadata must survive, or the reconstructor cannot load it
+    except Exception as e:  # noqa: BLE001 - the quantiser raises many types; the report records why
+        notes.append(f"{name}: int8 quantisation failed ({type(e).__name__}: {e})")
+        return None
+    finally:
+        quiet.setLevel(level)
+    notes.append(f"{name}: int8 {_where_int8_applies(out)}")
+    return out
+
+
+def _where_int8_applies(path: Path) -> str:
+    """Which layers the quantiser turned into integer ops, and which compute layers stayed float."""
+    from collections import Counter
+
+    import onnx
+
+    ops = Counter(n.op_type for n in onnx.load(str(path), load_external_data=False).graph.node)
+    done = {"ConvInteger": "Conv", "MatMulInteger": "Gemm/MatMul"}
+    applied = ", ".join(f"{ops[q]} {f}" for q, f in done.items() if ops[q]) or "no layer"
+    left = ", ".join(f"{ops[o]} {o}" for o in ("Conv", "ConvTranspose", "Gemm", "MatMul") if ops[o]) or "none"
+    return f"applies to {applied} (integer kernels); float compute layers left: {left}"
+
+
+def training_note(path: Path, meta: dict[str, Any]) -> str:
+    """How the model was trained, from the run's history next to the file (``history.json`` or
+    ``<stem>.history.json``), else from the training config in its metadata: "28 epochs", "4 optimizer steps"."""
+    for hist in (path.with_name(path.stem + ".history.json"), path.with_name("history.json")):
+        if hist.is_file():
+            try:
+                doc = json.loads(hist.read_text())
+                last = doc["history"][-1]
+            except (ValueError, KeyError, IndexError):
+                continue
+            if float(last.get("epoch_fraction", 1.0)) < 1.0:
+                steps = int(last.get("batches", 0))
+                return f"{steps} optimizer steps ({float(last['epoch_fraction']):.0%} of an epoch)"
+            return _epochs(int(doc.get("epochs_run", last.get("epoch", 0))))
+    epochs = meta.get("train_config", {}).get("epochs")
+    return f"{_epochs(int(epochs))} (config)" if epochs else "unknown"
+
+
+def _epochs(n: int) -> str:
+    return f"{n} epoch" + ("" if n == 1 else "s")
+
+
+def _mb(path: Path) -> float:
+    return round(os.path.getsize(path) / 1e6, 2)

@@ -1,0 +1,111 @@
+"""The report's pure parts: the Pareto front, the table cells, training notes, model specs, timings."""
+
+from __future__ import annotations
+
+import json
+import time
+
+import numpy as np
+import pytest
+
+from tactile_manip.bench.candidates import parse_model_spec, training_note
+from tactile_manip.bench.machine import other_load
+from tactile_manip.bench.report import fronts, markdown_table, pareto_front
+from tactile_manip.bench.timing import TimingBudget, batch_throughput, single_reading_ms
+from tactile_manip.perception.reconstruct import Reconstructor
+
+
+def test_pareto_front_keeps_only_points_no_faster_point_beats() -> None:
+    # (latency, PSNR): c is slower and worse than b; d is slowest but best
+    pts = [(1.0, 10.0), (3.0, 20.0), (4.0, 15.0), (9.0, 25.0)]
+    assert pareto_front(pts, higher_is_better=True) == [0, 1, 3]
+    # the same points with an error (lower is better): only the fastest, whose error is lowest, survives
+    assert pareto_front(pts, higher_is_better=False) == [0]
+
+
+def test_pareto_front_of_ties_keeps_the_better_of_equal_latencies_once() -> None:
+    assert pareto_front([(2.0, 5.0), (2.0, 7.0), (2.0, 7.0)], higher_is_better=True) == [1]
+    assert pareto_front([], higher_is_better=True) == []
+
+
+def test_fronts_use_only_one_thread_rows_with_a_value() -> None:
+    rows = [{"method": "a", "runtime": "numpy", "latency_p50_ms": 1.0, "psnr_db": 15.0, "angle_p95_deg": 80.0},
+            {"method": "m", "runtime": "onnxruntime 1 thread", "latency_p50_ms": 3.0, "psnr_db": 20.0,
+             "angle_p95_deg": 7.0},
+            {"method": "m", "runtime": "onnxruntime 2 threads", "latency_p50_ms": 0.1, "psnr_db": 30.0,
+             "angle_p95_deg": 1.0},
+            {"method": "p", "runtime": "onnxruntime 1 thread", "latency_p50_ms": 90.0, "psnr_db": None,
+             "angle_p95_deg": None}]
+    assert fronts(rows) == {"psnr_db": ["a", "m"], "angle_p95_deg": ["a", "m"]}
+
+
+def test_table_marks_an_untrained_model_and_missing_trials() -> None:
+    row = {"method": "paper", "runtime": "onnxruntime 1 thread", "training": "untrained", "parameters": 45_728_290,
+           "file_mb": 183.0, "latency_p50_ms": 100.0, "latency_p99_ms": 120.0, "throughput_rps": 10.0,
+           "pose_p50_ms": 101.0, "pose_p99_ms": 125.0, "untrained": True}
+    line = markdown_table([row]).splitlines()[2]
+    assert line.count("n/a (untrained)") == 4  # PSNR, SSIM, angle, trials
+    assert "45.73 M" in line and "100.00 / 120.00" in line
+    assert line.count("|") == 13
+
+
+def test_training_note_reads_the_run_history(tmp_path) -> None:
+    model = tmp_path / "model.onnx"
+    (tmp_path / "history.json").write_text(json.dumps(
+        {"epochs_run": 1, "history": [{"epoch": 1, "batches": 4, "epoch_fraction": 0.0714}]}))
+    assert training_note(model, {}) == "4 optimizer steps (7% of an epoch)"
+    (tmp_path / "history.json").write_text(json.dumps(
+        {"epochs_run": 8, "history": [{"epoch": 8, "batches": 56, "epoch_fraction": 1.0}]}))
+    assert training_note(model, {}) == "8 epochs"
+    (tmp_path / "history.json").unlink()
+    assert training_note(model, {"train_config": {"epochs": 28}}) == "28 epochs (config)"
+    assert training_note(model, {}) == "unknown"
+
+
+def test_model_spec_needs_name_and_path_and_finds_the_checkpoint(tmp_path) -> None:
+    (tmp_path / "best.pt").write_bytes(b"")
+    entry = parse_model_spec(f"mine={tmp_path / 'model.onnx'}")
+    assert entry.name == "mine" and entry.checkpoint == tmp_path / "best.pt"
+    assert parse_model_spec("x=elsewhere/model.onnx").checkpoint is None
+    for bad in ("nopath", "=a.onnx", "x=", "two words=a.onnx"):
+        with pytest.raises(ValueError):
+            parse_model_spec(bad)
+
+
+class _Sleeper(Reconstructor):
+    """Takes ``delay_s`` per call plus ``per_reading_s`` per reading; outputs zeros."""
+
+    output_shape = (4, 4)
+
+    def __init__(self, delay_s: float, per_reading_s: float = 0.0) -> None:
+        self.delay_s, self.per_reading_s = delay_s, per_reading_s
+
+    def _run(self, fields_ut):
+        time.sleep(self.delay_s + self.per_reading_s * len(fields_ut))
+        return np.zeros((len(fields_ut), 4, 4), np.float32), None
+
+
+def test_timings_stop_at_the_time_budget_but_not_before_min_calls() -> None:
+    readings = np.zeros((3, 4, 4, 3), np.float32)
+    budget = TimingBudget(max_calls=1000, min_calls=5, max_seconds=0.05, warmup=1, batch=8, batch_rounds=3)
+    slow = single_reading_ms(_Sleeper(0.02), readings, budget)
+    assert slow["latency_calls"] == 5 and slow["latency_p50_ms"] >= 20.0
+    fast = single_reading_ms(_Sleeper(0.0), readings, TimingBudget(max_calls=50, max_seconds=10.0))
+    assert fast["latency_calls"] == 50
+
+
+def test_throughput_drops_the_warm_up_batch_unless_it_alone_exceeds_the_budget() -> None:
+    readings = np.zeros((3, 4, 4, 3), np.float32)
+    quick = batch_throughput(_Sleeper(0.0, 1e-4), readings, TimingBudget(batch=8, batch_rounds=3, max_seconds=10.0))
+    assert quick["warm"] and quick["batch_rounds"] == 3 and quick["batch"] == 8
+    assert quick["throughput_rps"] == pytest.approx(1e4, rel=0.5)
+    slow = batch_throughput(_Sleeper(0.06), readings, TimingBudget(batch=8, batch_rounds=3, max_seconds=0.05))
+    assert not slow["warm"] and slow["batch_rounds"] == 1
+
+
+def test_other_load_is_the_busy_time_not_spent_by_this_process() -> None:
+    start = {"busy_s": 100.0, "steal_s": 1.0, "own_s": 10.0, "wall_s": 0.0}
+    end = {"busy_s": 130.0, "steal_s": 1.0, "own_s": 30.0, "wall_s": 10.0}
+    load = other_load(start, end)
+    assert load["other_processes_cores"] == pytest.approx(1.0) and load["steal_share"] == 0.0
+    assert other_load(None, end) is None and other_load(end, end) is None
