@@ -53,7 +53,7 @@ class BenchSettings:
 
     @classmethod
     def quick_settings(cls) -> BenchSettings:
-        """About a minute on two cores: 3 readings per object, 6 trials, short timings."""
+        """About 4 minutes on two cores (the paper preset takes most): 3 readings per object, 6 trials, 1 s timings."""
         return cls(per_object=3, trials=6, quick=True, parity_readings=8,
                    timing=TimingBudget(max_calls=60, min_calls=10, max_seconds=1.0, warmup=2, batch_rounds=2))
 

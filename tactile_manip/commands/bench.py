@@ -16,7 +16,7 @@ import sys
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", required=True, help="folder for report.md, report.json and pareto.png")
     p.add_argument("--quick", action="store_true",
-                   help="3 readings per test object, 6 trials, short timings (about a minute)")
+                   help="3 readings per test object, 6 trials, 1 s per timing (about 4 minutes on 2 cores)")
     p.add_argument("--model", action="append", default=[], metavar="NAME=PATH",
                    help="also measure this exported model (repeatable); its checkpoint is best.pt beside it")
     p.add_argument("--methods", default=None,
