@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from tactile_manip.errors import RecordingError
 from tactile_manip.version import code_version
 
 CRC32 = struct.Struct("<I")
@@ -91,3 +92,24 @@ class FramedWriter:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def read_header(data: bytes, path: Path, magic: bytes, kind: str, format_version: int) -> tuple[dict[str, Any], int]:
+    """The JSON header of a framed file's bytes and the offset of its first record.
+
+    Raises:
+        RecordingError: not a ``kind`` file (wrong magic), a missing or damaged header, or a newer format.
+    """
+    if not data.startswith(magic):
+        raise RecordingError(f"{path} is not a tactile_manip {kind} (it does not start with {magic!r})")
+    end = data.find(b"\n", len(magic))
+    try:
+        header = json.loads(data[len(magic):end]) if end > 0 else None
+    except ValueError:
+        header = None
+    if not isinstance(header, dict):
+        raise RecordingError(f"{path}: the header line is missing or damaged (was the writer killed at once?)")
+    if header.get("format_version", 0) > format_version:
+        raise RecordingError(f"{path} has {kind} format {header['format_version']}; this tactile_manip reads up "
+                             f"to {format_version}: upgrade tactile_manip")
+    return header, end + 1

@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 
 from tactile_manip.errors import RecordingError
-from tactile_manip.sensors.framed_file import CRC32, TAG_EVENT, FramedWriter, json_default
+from tactile_manip.sensors.framed_file import CRC32, TAG_EVENT, FramedWriter, json_default, read_header
 from tactile_manip.sim.dataset_io import DEPTH_SCALE_MM, FORMAT_VERSION as DATASET_VERSION, PairedDataset, SPLITS
 from tactile_manip.version import code_version
 
@@ -95,19 +95,8 @@ def read_pair_log(path: str | Path) -> PairLog:
         data = path.read_bytes()
     except FileNotFoundError as e:
         raise RecordingError(f"pair log not found: {path}") from e
-    if not data.startswith(MAGIC):
-        raise RecordingError(f"{path} is not a tactile_manip pair log (it does not start with {MAGIC!r})")
-    end = data.find(b"\n", len(MAGIC))
-    try:
-        header = json.loads(data[len(MAGIC):end]) if end > 0 else None
-    except ValueError:
-        header = None
-    if not isinstance(header, dict):
-        raise RecordingError(f"{path}: the header line is missing or damaged")
-    if header.get("format_version", 0) > FORMAT_VERSION:
-        raise RecordingError(f"{path} has pair-log format {header['format_version']}; this tactile_manip reads up "
-                             f"to {FORMAT_VERSION}: upgrade tactile_manip")
-    pos, pairs, events = end + 1, [], []
+    header, pos = read_header(data, path, MAGIC, "pair log", FORMAT_VERSION)
+    pairs, events = [], []
     while pos + RECORD.size + CRC32.size <= len(data):
         tag, length, _ = RECORD.unpack_from(data, pos)
         stop = pos + RECORD.size + length

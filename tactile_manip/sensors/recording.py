@@ -39,7 +39,7 @@ from tactile_manip.sensors.protocol import (
     decode_frame,
     encode_frame,
 )
-from tactile_manip.sensors.framed_file import CRC32, TAG_EVENT, FramedWriter, json_default
+from tactile_manip.sensors.framed_file import CRC32, TAG_EVENT, FramedWriter, json_default, read_header
 
 if TYPE_CHECKING:
     from tactile_manip.sensors.base import SensorFrame, SensorHealth, TactileSensor
@@ -149,19 +149,7 @@ def read_recording(path: str | Path) -> Recording:
 
 
 def _read_header(data: bytes, path: Path) -> tuple[dict[str, Any], int]:
-    if not data.startswith(MAGIC):
-        raise RecordingError(f"{path} is not a tactile_manip recording (it does not start with {MAGIC!r})")
-    end = data.find(b"\n", len(MAGIC))
-    try:
-        header = json.loads(data[len(MAGIC):end]) if end > 0 else None
-    except ValueError:
-        header = None
-    if not isinstance(header, dict):
-        raise RecordingError(f"{path}: the header line is missing or damaged (was the recorder killed at once?)")
-    if header.get("format_version", 0) > FORMAT_VERSION:
-        raise RecordingError(f"{path} has recording format {header['format_version']}; this tactile_manip "
-                             f"reads up to {FORMAT_VERSION}: upgrade tactile_manip")
-    return header, end + 1
+    return read_header(data, path, MAGIC, "recording", FORMAT_VERSION)
 
 
 def _assemble(path: Path, header: dict[str, Any], frames: list, health: list, events: list, *,
