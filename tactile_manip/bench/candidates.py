@@ -94,7 +94,7 @@ class Candidate:
 def baseline_candidates(names: tuple[str, ...] = BASELINE_NAMES) -> list[Candidate]:
     """The interpolation baselines at 200x200 (the shipped fit, as ``tactile-manip evaluate`` fits them)."""
     return [Candidate(n, "numpy", (lambda threads, n=n: load_reconstructor(n)), accuracy_key=n, parameters=2,
-                      training="linear fit (train split)", trial_spec=MethodSpec(n, n)) for n in names]
+                      training="linear fit (AK + R train split)", trial_spec=MethodSpec(n, n)) for n in names]
 
 
 def model_candidates(entry: ModelEntry, workdir: Path, *, runtimes: tuple[str, ...] = RUNTIMES,

@@ -35,8 +35,9 @@ def run(args: argparse.Namespace) -> int:
         data = load_dataset(args.data)
         readings = data.field_ut[data.indices("val")]
         pixel_mm = args.pixel_mm or float(data.metadata.get("pixel_mm", 0.1))
+        trained_on = sorted({str(data.object_names[i]) for i in data.object_index[data.indices("train")]})
         extra["training_data"] = {"path": str(args.data), "fingerprint": data.fingerprint(), "pairs": len(data),
-                                  "objects": data.object_names.tolist(),
+                                  "objects": data.object_names.tolist(), "objects_with_train_split": trained_on,
                                   "code_version": data.metadata.get("code_version")}
     metrics = json.loads(open(args.metrics).read()) if args.metrics else {}
     meta = export_onnx(args.checkpoint, args.out, pixel_mm=pixel_mm, metrics=metrics, extra=extra,
@@ -74,6 +75,7 @@ def _commands(args: argparse.Namespace) -> list[str]:
     from pathlib import Path
 
     run = Path(args.checkpoint).parent
-    return ["tactile-manip simulate --config configs/dataset/supermag.toml --out data/supermag.npz",
-            f"tactile-manip train --config configs/train/{run.name}.toml --data data/supermag.npz --out {run}",
-            f"tactile-manip export --checkpoint {args.checkpoint} --out {args.out} --data data/supermag.npz"]
+    data = Path(args.data or "data/supermag.npz")
+    return [f"tactile-manip simulate --config configs/dataset/{data.stem}.toml --out {data}",
+            f"tactile-manip train --config configs/train/{run.name}.toml --data {data} --out {run}",
+            f"tactile-manip export --checkpoint {args.checkpoint} --out {args.out} --data {data}"]

@@ -31,14 +31,14 @@ def model_card(meta: dict[str, Any], history: dict[str, Any], *, table_md: str =
         "",
         "## Training",
         f"- Data: {data.get('pairs', '?')} simulated pairs ({', '.join(data.get('objects', []))}), fingerprint "
-        f"`{meta['data_fingerprint']}`; trained on the `train` split of the objects "
-        f"{', '.join(tc['objects']) or 'marked trainval (the Allen key and the letter R)'}.",
+        f"`{meta['data_fingerprint']}`; trained on the `train` split of "
+        f"{', '.join(tc['objects']) or ', '.join(data.get('objects_with_train_split', [])) or 'every object'}.",
         f"- Recipe: AdamW lr {tc['lr']} ({tc['lr_schedule']} to {tc['lr_min']}), weight decay "
         f"{tc['weight_decay']}, batch {tc['batch_size']}, {tc['epochs']} epochs, negative ELBO with beta-NLL "
         f"(beta {tc['nll_beta']}) plus the prior-path term (weight {tc['prior_weight']}), symmetry augmentation "
         f"{'on' if tc['augment'] else 'off'}, seed {tc['seed']}.",
         f"- Architecture: {meta['parameters']:,} inference parameters; latent {mc['latent']}; decoder channels "
-        f"{mc['channels']}; full config in the file's metadata.",
+        f"{mc['channels']}; taxel-map path {mc.get('spatial', 0) or 'off'}; full config in the file's metadata.",
         f"- Ran {history['epochs_run']} epochs in {history['train_seconds'] / 60:.1f} min with "
         f"{history['threads']} torch threads{(' on ' + machine) if machine else ''}; best validation PSNR "
         f"{history['best_val_psnr']:.2f} dB at epoch {history['best_epoch']} (last epoch: "

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import math
+import textwrap
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -144,7 +145,7 @@ def gallery(path: str | Path, data: PairedDataset, methods: dict[str, Reconstruc
             ax.set_xticks([])
             ax.set_yticks([])
             if r == 0:
-                ax.set_title(title, fontsize=9)
+                ax.set_title(textwrap.fill(title, 24), fontsize=9)
             if c == 0:
                 ax.set_ylabel(f"{data.objects([i])[0]}\n({'unseen' if split == 'test' else 'seen'})", fontsize=8)
     fig.savefig(path, dpi=80)

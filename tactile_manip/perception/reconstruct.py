@@ -243,7 +243,8 @@ BASELINES: dict[str, type[InterpolationReconstructor]] = {"bilinear": BilinearRe
 
 
 def default_baseline_fit() -> dict[str, dict[str, Any]]:
-    """The shipped linear fits of the baselines (fitted on the default simulated training split)."""
+    """The shipped linear fits of the baselines (on the Allen key and letter R training presses of the default
+    dataset, as `tactile-manip evaluate --baseline-objects allen_key,letter_r` fits them)."""
     with resources.files("tactile_manip.data").joinpath("interpolation_fit.json").open() as f:
         return json.load(f)
 

@@ -41,3 +41,20 @@ def test_export_refuses_a_missing_checkpoint_in_one_line(tmp_path, capsys):
 def test_evaluate_refuses_a_bad_model_argument(tiny_data, tmp_path, capsys):
     assert main(["evaluate", "--data", str(tiny_data), "--model", "no-equals-sign", "--out", str(tmp_path)]) == 2
     assert "LABEL=PATH" in capsys.readouterr().err
+
+
+def test_evaluate_fits_the_baselines_on_the_named_objects_only(tiny_data, tmp_path, capsys):
+    from tactile_manip.sim.dataset_io import load_dataset
+
+    data = load_dataset(tiny_data)
+    first = str(data.objects(data.indices("train"))[0])
+    fits = {}
+    for objects in ("", first):
+        out = tmp_path / (objects or "all")
+        assert main(["evaluate", "--data", str(tiny_data), "--out", str(out), "--baseline-objects", objects]) == 0
+        fits[objects] = json.loads((out / "results.json").read_text())["baseline_fits"]["Bilinear"]
+    assert fits[""]["gain_mm_per_ut"] != fits[first]["gain_mm_per_ut"]
+    assert main(["evaluate", "--data", str(tiny_data), "--out", str(tmp_path / "x"),
+                 "--baseline-objects", "no_such_object"]) == 2
+    err = capsys.readouterr().err
+    assert "no training presses of no_such_object" in err
