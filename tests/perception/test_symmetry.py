@@ -91,7 +91,8 @@ def test_averaging_over_the_symmetries_sharpens_the_rod_angle() -> None:
         field = pair.press(rod, IndenterPose(*rng.uniform(-2, 2, 2), yaw), 10.5, rng, render_depth=False).field_ut
         for name, est in (("single", single), ("averaged", averaged)):
             errors[name].append(abs(wrap_axial(est.estimate(field).angle_rad - yaw)))
-    assert np.mean(errors["averaged"]) < 0.8 * np.mean(errors["single"])
+    assert np.mean(errors["averaged"]) < np.mean(errors["single"])
+    assert np.percentile(errors["averaged"], 90) <= np.percentile(errors["single"], 90)
     assert np.percentile(np.degrees(errors["averaged"]), 90) < 5.0
 
 
