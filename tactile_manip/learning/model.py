@@ -294,8 +294,9 @@ class SuperMagCVAE(nn.Module):
 def mean_and_spread(samples: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     """Mean and standard deviation (B, H, W) over the K samples of (B, K, H, W).
 
-    Written as two (1, K) x (K, H*W) products, which onnxruntime runs several times faster than the
-    ReduceMean nodes of ``mean``/``std`` on one thread (benchmarks/README.md), with the same numbers.
+    Written as two (1, K) x (K, H*W) products: onnxruntime 1.31 ran them in 0.08 ms against 0.68 ms for the
+    ReduceMean nodes of ``mean``/``std`` (one thread, K = 1, 200x200, on a loaded 2-core machine), with the
+    same numbers.
     """
     b, k, h, w = samples.shape
     weights = torch.full((1, 1, k), 1.0 / k, dtype=samples.dtype, device=samples.device)
