@@ -35,7 +35,7 @@ def run(args: argparse.Namespace) -> int:
         data = load_dataset(args.data)
         readings = data.field_ut[data.indices("val")]
         pixel_mm = args.pixel_mm or float(data.metadata.get("pixel_mm", 0.1))
-        trained_on = sorted({str(data.object_names[i]) for i in data.object_index[data.indices("train")]})
+        trained_on = sorted(set(data.objects(data.indices("train")).tolist()))
         extra["training_data"] = {"path": str(args.data), "fingerprint": data.fingerprint(), "pairs": len(data),
                                   "objects": data.object_names.tolist(), "objects_with_train_split": trained_on,
                                   "code_version": data.metadata.get("code_version")}
