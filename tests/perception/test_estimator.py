@@ -161,3 +161,15 @@ def test_saturated_chips_lower_the_confidence(supermag, pair) -> None:
     frames = supermag.estimate_frames([TactileReading(field, field, np.zeros_like(flags), t_host_s=0.0),
                                        TactileReading(field, field, flags, t_host_s=0.0)])
     assert frames.confidence == pytest.approx(clean.confidence * 14 / 16, rel=1e-6)
+
+
+def test_a_reading_without_a_contact_field_is_no_contact_whatever_the_model_draws(supermag) -> None:
+    rng = np.random.default_rng(0)
+    for field in (np.zeros((4, 4, 3)), rng.normal(0.0, 2.5, (4, 4, 3))):   # empty pad, chip noise only
+        est = supermag.estimate(field)
+        assert not est.defined and est.reason == "no contact field" and est.confidence == 0.0
+    trusting = TactilePoseEstimator(supermag.reconstructor, min_field_ut=0.0)
+    _, rec = trusting.estimate_with_image(np.zeros((4, 4, 3)))
+    assert rec.depth_mm.max() > 0.0  # the shipped model does draw something into an empty reading
+    with pytest.raises(ValueError, match="min_field_ut"):
+        TactilePoseEstimator(supermag.reconstructor, min_field_ut=float("nan"))
