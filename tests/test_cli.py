@@ -27,7 +27,7 @@ def at_root(monkeypatch):
 
 @pytest.fixture(scope="module")
 def dataset(tmp_path_factory) -> Path:
-    """A small dataset written by ``simulate`` (24 pairs, one worker), shared by the tests that read one."""
+    """A small dataset written by ``simulate`` (28 pairs, one worker), shared by the tests that read one."""
     out = tmp_path_factory.mktemp("cli") / "x.npz"
     with pytest.MonkeyPatch.context() as mp:
         mp.chdir(ROOT)
@@ -80,10 +80,11 @@ def test_params_markdown_is_a_table_of_every_parameter(capsys):
 
 def test_simulate_writes_a_loadable_dataset(dataset):
     data = load_dataset(dataset)
-    # 0.003 x 2025 -> 6 per paper object, at least one of each test object, 0.003 x 1600 -> 5 procedural
-    assert len(data) == 6 + 6 + 7 + 5
-    assert data.field_ut.shape == (24, 4, 4, 3) and data.depth_q.shape == (24, 200, 200)
-    assert list(data.split).count("test") == 7 and list(data.split).count("val") == 3
+    # 0.003 x 2025 -> 6 per paper object, at least one of each test object, 0.003 x 1600 -> 5 procedural,
+    # 0.003 x 1200 -> 4 wide procedural
+    assert len(data) == 6 + 6 + 7 + 5 + 4
+    assert data.field_ut.shape == (28, 4, 4, 3) and data.depth_q.shape == (28, 200, 200)
+    assert list(data.split).count("test") == 7 and list(data.split).count("val") == 4
     assert data.metadata["config"]["objects"][0]["count"] == 6
     assert data.metadata["workers"] == 1
     assert np.isfinite(data.field_ut).all() and data.depth_q.max() > 0
@@ -105,7 +106,7 @@ def test_simulate_force_overwrites(at_root, tmp_path, capsys):
                "--seed", "5", "--force"])
     assert rc == 0
     data = load_dataset(out)
-    assert len(data) == 10 and data.metadata["config"]["seed"] == 5
+    assert len(data) == 11 and data.metadata["config"]["seed"] == 5
     assert f"wrote {out}" in capsys.readouterr().out
 
 
@@ -160,7 +161,7 @@ def test_show_index_out_of_range(dataset, tmp_path, capsys):
     out = tmp_path / "c.png"
     assert main(["show", "--data", str(dataset), "--index", "99999", "--out", str(out)]) == 2
     err = _one_line_error(capsys, "show")
-    assert "--index must be in [0, 23]" in err and "99999" in err
+    assert "--index must be in [0, 27]" in err and "99999" in err
     assert not out.exists()
 
 

@@ -38,15 +38,18 @@ GROUPS = (LayerParams, ContactParams, VbtsParams, MagnetParams, ChipParams)
 def test_supermag_loads_into_typed_config():
     cfg = load_dataset_config(SUPERMAG)
     assert isinstance(cfg, DatasetConfig)
-    assert len(cfg.objects) == 10
-    assert sum(o.count for o in cfg.objects) == 6090
+    assert len(cfg.objects) == 11
+    assert sum(o.count for o in cfg.objects) == 7290
     assert [o.display_name for o in cfg.objects[:3]] == ["allen_key", "letter_r", "cylinder_3mm"]
-    assert [o.split for o in cfg.objects] == ["trainval"] * 2 + ["test"] * 7 + ["trainval"]
+    assert [o.split for o in cfg.objects] == ["trainval"] * 2 + ["test"] * 7 + ["trainval"] * 2
     assert cfg.objects[2].kwargs == {"size_mm": 3.0}
-    assert cfg.objects[-2].variants == 20 and cfg.objects[-2].kwargs == {"seed": 1000}
+    assert cfg.objects[8].variants == 20 and cfg.objects[8].kwargs == {"seed": 1000}
     # the procedural training shapes come from other seeds than the procedural test shapes
-    assert cfg.objects[-1].display_name == "procedural_train" and cfg.objects[-1].kwargs == {"seed": 5000}
-    assert cfg.objects[-1].variants == 400
+    train_shapes = cfg.objects[9]
+    assert train_shapes.display_name == "procedural_train" and train_shapes.kwargs == {"seed": 5000}
+    assert train_shapes.variants == 400
+    wide = cfg.objects[10]
+    assert wide.display_name == "procedural_wide" and wide.kwargs == {"seed": 7000, "size_mm": 26.0}
     assert cfg.poses == PoseRanges(offset_mm=5.0, yaw_deg=(-180.0, 180.0), tilt_deg=2.0, force_n=(10.0, 11.0))
     assert isinstance(cfg.poses.yaw_deg, tuple)  # TOML arrays become the annotated tuples
     assert cfg.sim == SimParams()  # the file sets no [sim] table
@@ -55,12 +58,14 @@ def test_supermag_loads_into_typed_config():
 def test_supermag_splits_match_the_paper():
     cfg = load_dataset_config(SUPERMAG)
     split = _splits(cfg)
-    assert split.shape == (6090,)
+    assert split.shape == (7290,)
     allen = split[:2025]
     assert (allen == "train").sum() == 1822 and (allen == "val").sum() == 203
     assert (allen[:1822] == "train").all()  # the validation tail is the last 203 presses
     assert ((split[:4050] == "train").sum(), (split[:4050] == "val").sum()) == (3644, 406)  # the paper's
-    assert ((split == "train").sum(), (split == "val").sum(), (split == "test").sum()) == (5084, 566, 440)
+    assert ((split == "train").sum(), (split == "val").sum(), (split == "test").sum()) == (6164, 686, 440)
+    # the extra training families come after the test objects: the first 6090 samples are the old dataset
+    assert (split[4050:4490] == "test").all() and (split[4490:] != "test").all()
 
 
 def test_config_round_trips_through_plain_dicts():

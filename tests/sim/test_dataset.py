@@ -1,7 +1,7 @@
 """Dataset generation and its file: worker-count independence, seeding, splits, round trip, loading errors.
 
 The simulator takes ~50-70 ms per pair and spawning workers ~2 s, so the generated datasets are tiny
-(``scaled(0.004)``: 29 pairs) and shared across tests.
+(``scaled(0.004)``: 34 pairs) and shared across tests.
 """
 
 from __future__ import annotations
@@ -53,7 +53,7 @@ def _assert_same_arrays(a: PairedDataset, b: PairedDataset) -> None:
 
 def test_shapes_and_dtypes(data, cfg):
     n = sum(o.count for o in cfg.objects)
-    assert n == 29 and len(data) == n
+    assert n == 34 and len(data) == n
     assert data.field_ut.shape == (n, 4, 4, 3) and data.field_ut.dtype == np.float32
     assert data.saturated.dtype == bool and not data.saturated.any()
     assert data.depth_q.shape == (n, 200, 200) and data.depth_q.dtype == np.uint8
@@ -98,7 +98,7 @@ def test_splits_follow_the_config(data, cfg):
             assert part == ["train"] * n_train + ["val"] * (spec.count - n_train)
         assert set(data.objects(np.arange(start, start + spec.count))) == {spec.display_name}
         start += spec.count
-    assert [len(data.indices(s)) for s in ("train", "val", "test")] == [19, 3, 7]
+    assert [len(data.indices(s)) for s in ("train", "val", "test")] == [23, 4, 7]
     assert list(data.object_names) == [o.display_name for o in cfg.objects]
 
 
