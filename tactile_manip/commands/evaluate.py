@@ -69,7 +69,7 @@ def _baseline_fit_indices(data, objects: str) -> np.ndarray:
     if unknown:
         raise ValueError(f"--baseline-objects: no training presses of {', '.join(unknown)} in this dataset; "
                          f"objects with training presses: {', '.join(sorted(trained))}")
-    return train[np.isin(data.objects(train), names)]
+    return data.indices("train", names)
 
 
 def _gallery_rows(data, split: str, seen_split: str) -> list[tuple[str, int]]:

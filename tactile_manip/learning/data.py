@@ -43,13 +43,7 @@ class InputSpec:
 
 def select(data: PairedDataset, split: str, objects: tuple[str, ...] = ()) -> np.ndarray:
     """Indices of ``split``, restricted to ``objects`` (by name) when given."""
-    idx = data.indices(split)
-    if objects:
-        unknown = set(objects) - set(data.object_names.tolist())
-        if unknown:
-            raise ValueError(f"objects {sorted(unknown)} are not in the dataset; it has "
-                             f"{data.object_names.tolist()}")
-        idx = idx[np.isin(data.objects(idx), objects)]
+    idx = data.indices(split, objects)
     if idx.size == 0:
         raise ValueError(f"no samples in split {split!r}" + (f" for objects {list(objects)}" if objects else ""))
     return idx

@@ -48,7 +48,7 @@ class TactilePoseEstimator:
         min_field_ut: a reading whose largest |field change| is below this is "no contact" whatever the
             reconstruction shows (0: trust the image). Chip noise peaks near 10 uT on the simulated pad and a
             10 N press gives 95 uT and more; a model never trained on empty readings may otherwise draw a
-            faint contact into one (the shipped model draws 0.65 mm into an all-zero reading).
+            faint contact into one (the shipped model draws 0.37 mm into an all-zero reading).
     """
 
     def __init__(self, reconstructor: Reconstructor, params: PoseParams | None = None, *,

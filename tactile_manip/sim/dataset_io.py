@@ -66,11 +66,18 @@ class PairedDataset:
         q = self.depth_q if index is None else self.depth_q[index]
         return q.astype(np.float32) * np.float32(self.depth_scale_mm)
 
-    def indices(self, split: str) -> np.ndarray:
-        """Sample indices of ``split`` ('train', 'val' or 'test'), ascending."""
+    def indices(self, split: str, objects: tuple[str, ...] | list[str] = ()) -> np.ndarray:
+        """Sample indices of ``split`` ('train', 'val' or 'test'), ascending; only of ``objects`` (names) if given."""
         if split not in SPLITS:
             raise ValueError(f"split must be one of {SPLITS}, got {split!r}")
-        return np.flatnonzero(self.split == split)
+        idx = np.flatnonzero(self.split == split)
+        if len(objects):
+            unknown = set(objects) - set(self.object_names.tolist())
+            if unknown:
+                raise ValueError(f"objects {sorted(unknown)} are not in the dataset; it has "
+                                 f"{self.object_names.tolist()}")
+            idx = idx[np.isin(self.objects(idx), list(objects))]
+        return idx
 
     def objects(self, index: np.ndarray | None = None) -> np.ndarray:
         """Object names (n,) of the samples at ``index`` (all when None)."""
