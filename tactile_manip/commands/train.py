@@ -16,6 +16,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--epochs", type=int, default=None, help="override the config's epochs")
     p.add_argument("--seed", type=int, default=None, help="override the config's seed")
     p.add_argument("--threads", type=int, default=None, help="torch CPU threads per process")
+    p.add_argument("--device", default=None, help="override the config's device: auto, cpu, cuda or cuda:N")
+    p.add_argument("--max-minutes", type=float, default=None,
+                   help="override the config's wall-time cap in minutes (0: none)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -24,9 +27,11 @@ def run(args: argparse.Namespace) -> int:
     require_torch()
     from tqdm import tqdm
 
-    from tactile_manip.learning.train import load_train_config, train, with_overrides
+    from tactile_manip.learning.train import load_train_config, resolve_device, train, with_overrides
 
-    cfg = with_overrides(load_train_config(args.config), epochs=args.epochs, seed=args.seed, threads=args.threads)
+    cfg = with_overrides(load_train_config(args.config), epochs=args.epochs, seed=args.seed, threads=args.threads,
+                         device=args.device, max_minutes=args.max_minutes)
+    resolve_device(cfg.device)  # a missing GPU is one line before any progress bar or output folder
     with tqdm(total=cfg.epochs, unit="epoch", desc=f"training {cfg.preset}") as bar:
         def progress(row: dict) -> None:
             bar.update(1)

@@ -57,6 +57,12 @@ class TensorPairs(torch.utils.data.Dataset):
         self.depth_q = torch.from_numpy(np.ascontiguousarray(data.depth_q[index]))
         self.depth_scale_mm = data.depth_scale_mm
 
+    def to(self, device: torch.device | str) -> TensorPairs:
+        """Move the split to ``device`` (once, before training: batches are then sliced there)."""
+        self.field = self.field.to(device)
+        self.depth_q = self.depth_q.to(device)
+        return self
+
     def __len__(self) -> int:
         return self.field.shape[0]
 

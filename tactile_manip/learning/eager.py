@@ -27,14 +27,20 @@ class TorchReconstructor(Reconstructor):
         threads: torch intra-op threads. torch has one process-wide setting, so this sets it for the
             whole process (as ``torch.set_num_threads`` does).
         pixel_mm: output pixel size, mm (the checkpoint does not store it; take it from the exported model).
+        device: torch device to run on ("cpu", "cuda", "cuda:N"); readings go in and images come out as
+            numpy on the host either way, so a GPU timing includes both copies.
     """
 
-    def __init__(self, checkpoint: str | Path, *, threads: int = 1, pixel_mm: float = 0.1) -> None:
+    def __init__(self, checkpoint: str | Path, *, threads: int = 1, pixel_mm: float = 0.1,
+                 device: str = "cpu") -> None:
         if threads < 1:
             raise ValueError(f"threads must be >= 1, got {threads}")
         torch.set_num_threads(int(threads))
+        self.device = torch.device(device)
+        if self.device.type == "cuda" and not torch.cuda.is_available():
+            raise ValueError(f"device {device!r}: torch sees no CUDA GPU")
         model, spec, payload = load_checkpoint(checkpoint)
-        self.graph = InferenceGraph(model, spec).eval()
+        self.graph = InferenceGraph(model, spec).eval().to(self.device)
         cfg = model.cfg
         self.input_shape = (cfg.taxel_rows, cfg.taxel_cols, 3)
         self.output_shape = (cfg.image_h, cfg.image_w)
@@ -44,10 +50,10 @@ class TorchReconstructor(Reconstructor):
         self.name = f"supermag-{payload['train_config'].get('preset', 'model')}-torch"
 
     def _run(self, fields_ut: np.ndarray) -> tuple[np.ndarray, None]:
-        eps = torch.zeros(len(fields_ut), 1, self.latent)
+        eps = torch.zeros(len(fields_ut), 1, self.latent, device=self.device)
         with torch.inference_mode():
-            depth, _ = self.graph(torch.from_numpy(np.ascontiguousarray(fields_ut)), eps)
-        return depth.numpy().astype(np.float32, copy=False), None
+            depth, _ = self.graph(torch.from_numpy(np.ascontiguousarray(fields_ut)).to(self.device), eps)
+        return depth.cpu().numpy().astype(np.float32, copy=False), None
 
 
 def export_untrained(preset_name: str, folder: str | Path, *, seed: int = 0, pixel_mm: float = 0.1) -> Path:

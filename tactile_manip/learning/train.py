@@ -1,7 +1,10 @@
 """Training of the SuperMag CVAE: AdamW on the negative ELBO, seeded, resumable, optionally data-parallel.
 
 Run through ``tactile-manip train`` (or ``torchrun ... -m tactile_manip train`` for DistributedDataParallel:
-gloo on CPU, nccl on GPU). Each epoch validates the prior-mean reconstruction (PSNR with the fixed 2 mm data
+gloo on CPU, nccl on GPU, one GPU per process by ``LOCAL_RANK``). ``device = "auto"`` trains on the GPU when
+torch sees one (the dataset split is moved there once; matrix products use TF32) and on the CPU otherwise;
+shuffling, augmentation and the latent noise are drawn on the CPU from the seeded generator, so the batches
+and their symmetries are the same on either device. Each epoch validates the prior-mean reconstruction (PSNR with the fixed 2 mm data
 range) and writes ``checkpoint.pt`` (everything needed to resume), ``best.pt`` (best validation PSNR),
 ``history.json`` and ``loss.png`` to the output folder. Early stopping ends the run when the validation
 PSNR has not improved for ``patience`` epochs; a NaN or infinite loss (checked at every step), or non-finite
@@ -15,6 +18,7 @@ import dataclasses
 import json
 import math
 import os
+import re
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -59,6 +63,7 @@ class TrainConfig:
     patience: int = 15                   # early stopping: epochs without a better validation PSNR
     seed: int = 0
     threads: int = 0                     # torch CPU threads per process (0: torch's default)
+    device: str = "auto"                 # "auto" (a GPU when torch sees one), "cpu", "cuda" or "cuda:N"
     max_minutes: float = 0.0             # stop after this wall time (0: no limit)
 
     def __post_init__(self) -> None:
@@ -79,6 +84,8 @@ class TrainConfig:
         if not (math.isfinite(self.kl_weight) and self.kl_weight >= 0):
             raise ValueError(f"kl_weight must be >= 0, got {self.kl_weight}")
         InputSpec(self.clamp_ut, self.axes)
+        if not re.fullmatch(r"auto|cpu|cuda(:\d+)?", self.device):
+            raise ValueError(f"device must be 'auto', 'cpu', 'cuda' or 'cuda:N', got {self.device!r}")
 
 
 def load_train_config(path: str | Path) -> TrainConfig:
@@ -100,6 +107,7 @@ def model_config(cfg: TrainConfig, data: PairedDataset) -> CVAEConfig:
 class _Dist:
     rank: int = 0
     world: int = 1
+    local_rank: int = 0
 
     @property
     def main(self) -> bool:
@@ -112,8 +120,25 @@ def _init_distributed() -> _Dist:
     if world <= 1:
         return _Dist()
     backend = "nccl" if torch.cuda.is_available() else "gloo"
+    local_rank = int(os.environ.get("LOCAL_RANK", "0"))
+    if backend == "nccl":
+        torch.cuda.set_device(local_rank)
     torch.distributed.init_process_group(backend)
-    return _Dist(torch.distributed.get_rank(), world)
+    return _Dist(torch.distributed.get_rank(), world, local_rank)
+
+
+def resolve_device(name: str, dist: _Dist | None = None) -> torch.device:
+    """The torch device of a ``TrainConfig.device`` (under torchrun, "auto" and "cuda" mean this process's GPU)."""
+    dist = dist or _Dist()
+    if name == "cpu" or (name == "auto" and not torch.cuda.is_available()):
+        return torch.device("cpu")
+    if not torch.cuda.is_available():
+        raise TrainingError(f"device {name!r}: torch sees no CUDA GPU (torch {torch.__version__}, "
+                            f"CUDA build {torch.version.cuda}); use device = \"cpu\" or \"auto\"")
+    index = int(name.split(":")[1]) if ":" in name else dist.local_rank
+    if index >= torch.cuda.device_count():
+        raise TrainingError(f"device {name!r}: torch sees {torch.cuda.device_count()} CUDA GPU(s)")
+    return torch.device("cuda", index)
 
 
 def train(cfg: TrainConfig, data_path: str | Path, out_dir: str | Path, *, resume: bool = False,
@@ -131,22 +156,28 @@ def _train(cfg: TrainConfig, data_path: Path, out: Path, resume: bool, progress,
     if cfg.threads:
         torch.set_num_threads(cfg.threads)
     torch.manual_seed(cfg.seed)
+    device = resolve_device(cfg.device, dist)
+    if device.type == "cuda":
+        torch.backends.cuda.matmul.allow_tf32 = True
+        torch.backends.cudnn.allow_tf32 = True
     data = load_dataset(data_path)
     spec = InputSpec(cfg.clamp_ut, cfg.axes)
     mcfg = model_config(cfg, data)
-    train_set = TensorPairs(data, select(data, "train", tuple(cfg.objects)))
-    val_set = TensorPairs(data, select(data, "val", tuple(cfg.objects)))
-    model = SuperMagCVAE(mcfg)
+    train_set = TensorPairs(data, select(data, "train", tuple(cfg.objects))).to(device)
+    val_set = TensorPairs(data, select(data, "val", tuple(cfg.objects))).to(device)
+    model = SuperMagCVAE(mcfg).to(device)
     opt = torch.optim.AdamW(model.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
     state = {"epoch": 0, "history": [], "best_psnr": -math.inf, "best_epoch": 0, "seconds": 0.0}
     out.mkdir(parents=True, exist_ok=True)
     if resume:
         state = _load_checkpoint(out / "checkpoint.pt", model, opt, mcfg)
+    state["device"] = torch.cuda.get_device_name(device) if device.type == "cuda" else "cpu"
     net = model
     if dist.world > 1:
         if torch.cuda.is_available():  # SyncBatchNorm needs a GPU; on CPU each process keeps its own statistics
             model = torch.nn.SyncBatchNorm.convert_sync_batchnorm(model)
-        net = torch.nn.parallel.DistributedDataParallel(model)
+        net = torch.nn.parallel.DistributedDataParallel(
+            model, device_ids=[device.index] if device.type == "cuda" else None)
     sampler_gen = torch.Generator().manual_seed(cfg.seed)
     schedule = _schedule(cfg)
     start = time.perf_counter() - state["seconds"]
@@ -213,6 +244,7 @@ def _train_epoch(net, opt, train_set: TensorPairs, cfg: TrainConfig, spec: Input
         if cfg.augment:
             field_ut, image = augment_batch(field_ut, image, gen)
         noise = torch.randn(cfg.batch_size, net_cfg.latent, generator=gen)[dist.rank * per_rank:][:per_rank]
+        noise = noise.to(field_ut.device)
         out = net(spec.scale(field_ut), image, noise)
         loss, stats = negative_elbo(out, image, kl_weight=cfg.kl_weight, nll_beta=cfg.nll_beta)
         if cfg.prior_weight > 0:  # Sohn et al. 2015: also train the path used at inference (z = prior mean)
@@ -247,7 +279,7 @@ def evaluate_split(model: SuperMagCVAE, pairs: TensorPairs, spec: InputSpec, *, 
     for b in range(0, len(pairs), batch):
         field_ut = pairs.field[b:b + batch]
         image = pairs.depth_q[b:b + batch].float() * pairs.depth_scale_mm
-        eps = torch.zeros(len(field_ut), 1, model.cfg.latent)
+        eps = torch.zeros(len(field_ut), 1, model.cfg.latent, device=field_ut.device)
         mean, _ = model.generate(spec.scale(field_ut), eps)
         mse = ((mean - image) ** 2).flatten(1).mean(1)
         se.append(mse)
@@ -283,7 +315,7 @@ def _write_history(out: Path, cfg: TrainConfig, mcfg: CVAEConfig, model, data: P
                "parameters": count_parameters(model),
                "inference_parameters": count_parameters(model, inference_only=True),
                "data_fingerprint": data.fingerprint(), "world_size": dist.world,
-               "threads": torch.get_num_threads(), "best_val_psnr": state["best_psnr"],
+               "threads": torch.get_num_threads(), "device": state.get("device", "cpu"), "best_val_psnr": state["best_psnr"],
                "best_epoch": state["best_epoch"], "epochs_run": state["epoch"],
                "train_seconds": round(state["seconds"], 1), "history": state["history"]}
     (out / "history.json").write_text(json.dumps(summary, indent=1))

@@ -10,7 +10,7 @@ import torch
 
 from tactile_manip.learning.export import export_onnx, load_checkpoint
 from tactile_manip.learning.model import SuperMagCVAE, count_parameters, preset
-from tactile_manip.learning.train import TrainConfig, TrainingError, train
+from tactile_manip.learning.train import TrainConfig, TrainingError, resolve_device, train
 from tactile_manip.perception.reconstruct import OnnxReconstructor
 from tactile_manip.sim.dataset_io import load_dataset
 
@@ -105,3 +105,36 @@ def test_wall_clock_cap_stops_mid_epoch_and_records_how_far(tiny_data, tmp_path)
     first = summary["history"][0]
     assert summary["epochs_run"] == 1 and first["epoch_fraction"] < 1.0
     assert (tmp_path / "checkpoint.pt").exists()  # a partial epoch still leaves a usable checkpoint
+
+
+@pytest.mark.parametrize("name", ["gpu", "cuda:x", "CUDA", ""])
+def test_bad_device_names_are_refused(name):
+    with pytest.raises(ValueError, match="device must be"):
+        TrainConfig(device=name)
+
+
+def test_device_resolution_and_a_clear_error_without_a_gpu(monkeypatch):
+    assert resolve_device("cpu") == torch.device("cpu")
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
+    assert resolve_device("auto") == torch.device("cpu")
+    with pytest.raises(TrainingError, match="no CUDA GPU"):
+        resolve_device("cuda:0")
+
+
+def test_cpu_run_records_its_device(tiny_data, tmp_path):
+    summary = train(TrainConfig(**{**TINY, "epochs": 1, "device": "cpu"}), tiny_data, tmp_path)
+    assert summary["device"] == "cpu"
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA GPU")
+def test_gpu_training_follows_the_cpu_run(tiny_data, tmp_path):
+    """Same seed, same batches, symmetries and noise: the GPU run tracks the CPU one (TF32 and cuDNN aside)."""
+    cfg = {**TINY, "epochs": 2}
+    cpu = train(TrainConfig(**cfg, device="cpu"), tiny_data, tmp_path / "cpu")
+    gpu = train(TrainConfig(**cfg, device="cuda"), tiny_data, tmp_path / "gpu")
+    assert gpu["device"] != "cpu"
+    for a, b in zip(cpu["history"], gpu["history"]):
+        assert b["loss"] == pytest.approx(a["loss"], rel=0.05)
+        assert b["val_psnr"] == pytest.approx(a["val_psnr"], abs=0.5)
+    model, _, _ = load_checkpoint(tmp_path / "gpu" / "best.pt")  # a GPU checkpoint loads on the CPU
+    assert next(model.parameters()).device.type == "cpu"

@@ -118,6 +118,21 @@ def test_a_config_file_with_an_extreme_rate_is_one_clear_line_at_the_cli(tmp_pat
     assert not out.exists()  # nothing written, let alone a NaN model
 
 
+def test_asking_for_a_gpu_that_is_not_there_is_one_clear_line(tmp_path, data, capsys, monkeypatch):
+    config = tmp_path / "tiny.toml"
+    config.write_text('preset = "small"\nepochs = 1\nbatch_size = 8\nthreads = 1\n')
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
+    out = tmp_path / "run"
+    assert main(["train", "--config", str(config), "--data", str(data), "--out", str(out), "--device", "cuda"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "no CUDA GPU" in err and "cpu" in err
+    assert not out.exists()
+    assert main(["train", "--config", str(config), "--data", str(data), "--out", str(out), "--device", "cpu",
+                 "--max-minutes", "5"]) == 0
+    summary = json.loads((out / "history.json").read_text())
+    assert summary["device"] == "cpu" and summary["train_config"]["max_minutes"] == 5.0
+
+
 # ---------------------------------------------------------------- divergence during training
 
 
