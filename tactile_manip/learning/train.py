@@ -4,10 +4,10 @@ Run through ``tactile-manip train`` (or ``torchrun ... -m tactile_manip train`` 
 gloo on CPU, nccl on GPU, one GPU per process by ``LOCAL_RANK``). ``device = "auto"`` trains on the GPU when
 torch sees one (the dataset split is moved there once; matrix products use TF32) and on the CPU otherwise;
 shuffling, augmentation and the latent noise are drawn on the CPU from the seeded generator, so the batches
-and their symmetries are the same on either device. Each epoch validates the prior-mean reconstruction (PSNR with the fixed 2 mm data
-range) and writes ``checkpoint.pt`` (everything needed to resume), ``best.pt`` (best validation PSNR),
-``history.json`` and ``loss.png`` to the output folder. Early stopping ends the run when the validation
-PSNR has not improved for ``patience`` epochs; a NaN or infinite loss (checked at every step), or non-finite
+and their symmetries are the same on either device. Each epoch validates the prior-mean reconstruction (PSNR
+with the fixed 2 mm data range) and writes ``checkpoint.pt`` (everything needed to resume), ``best.pt`` (best
+validation PSNR), ``history.json`` and ``loss.png`` to the output folder. Early stopping ends the run when the
+validation PSNR has not improved for ``patience`` epochs; a NaN or infinite loss (checked at every step), or non-finite
 weights or validation output (checked before each checkpoint), stops it with a ``TrainingError`` naming the
 epoch and the learning rate, and keeps the last good checkpoint.
 """
@@ -315,7 +315,8 @@ def _write_history(out: Path, cfg: TrainConfig, mcfg: CVAEConfig, model, data: P
                "parameters": count_parameters(model),
                "inference_parameters": count_parameters(model, inference_only=True),
                "data_fingerprint": data.fingerprint(), "world_size": dist.world,
-               "threads": torch.get_num_threads(), "device": state.get("device", "cpu"), "best_val_psnr": state["best_psnr"],
+               "threads": torch.get_num_threads(), "device": state.get("device", "cpu"),
+               "best_val_psnr": state["best_psnr"],
                "best_epoch": state["best_epoch"], "epochs_run": state["epoch"],
                "train_seconds": round(state["seconds"], 1), "history": state["history"]}
     (out / "history.json").write_text(json.dumps(summary, indent=1))
