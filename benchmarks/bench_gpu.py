@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import argparse
 import tempfile
-import time
 from pathlib import Path
 from typing import Any
 
@@ -28,31 +27,21 @@ PAPER_GPU_MS = 2.5  # SuperMag Sec. IV: one reading on an RTX 3090
 def time_checkpoint(path: Path, *, repeats: int, batch: int) -> dict[str, Any]:
     import torch
 
+    from tactile_manip.bench.timing import TimingBudget, batch_throughput, single_reading_ms
     from tactile_manip.learning.eager import TorchReconstructor
     from tactile_manip.learning.model import count_parameters
 
-    rec = TorchReconstructor(path, device="cuda")
-    rng = np.random.default_rng(0)
-    readings = rng.normal(0, 150, (repeats,) + rec.input_shape).astype(np.float32)
-    for r in readings[:50]:
-        rec.reconstruct(r)
-    ms = []
-    for r in readings:
-        t0 = time.perf_counter()
-        rec.reconstruct(r)  # ends with the copy back to the host, so the GPU work is done
-        ms.append((time.perf_counter() - t0) * 1e3)
-    block = readings[:batch]
-    rec.reconstruct_batch(block)
-    rounds = 20
-    t0 = time.perf_counter()
-    for _ in range(rounds):
-        rec.reconstruct_batch(block)
-    per_reading = (time.perf_counter() - t0) * 1e3 / (rounds * batch)
+    rec = TorchReconstructor(path, device="cuda")  # each call ends with the copy back: the GPU work is done
+    readings = np.random.default_rng(0).normal(0, 150, (repeats,) + rec.input_shape).astype(np.float32)
+    budget = TimingBudget(max_calls=repeats, min_calls=repeats, max_seconds=600.0, warmup=50, batch=batch,
+                          batch_rounds=20)
+    single = single_reading_ms(rec, readings, budget)
+    throughput = batch_throughput(rec, readings, budget)
     return {"checkpoint": str(path), "model": rec.name,
             "parameters": count_parameters(rec.graph.model, inference_only=True),
             "gpu": torch.cuda.get_device_name(rec.device), "torch": torch.__version__,
-            "p50_ms": float(np.percentile(ms, 50)), "p99_ms": float(np.percentile(ms, 99)),
-            "batch": batch, "batch_ms_per_reading": per_reading}
+            "p50_ms": single["latency_p50_ms"], "p99_ms": single["latency_p99_ms"],
+            "batch": batch, "batch_ms_per_reading": 1e3 / throughput["throughput_rps"]}
 
 
 def markdown(report: dict[str, Any]) -> str:

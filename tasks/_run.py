@@ -9,10 +9,10 @@ from __future__ import annotations
 
 import argparse
 import sys
-import time
 from pathlib import Path
 
 from tactile_manip.errors import TactileManipError
+from tactile_manip.trials.log import run_folder
 from tactile_manip.trials.runner import run_trials
 from tactile_manip.trials.scene import load_scene
 
@@ -24,14 +24,11 @@ def main(scene_file: str, description: str) -> None:
     parser.add_argument("--out", default=None, help="run folder (default: runs/trials/<scene>-<UTC time>)")
     parser.add_argument("--resume", action="store_true", help="continue a killed run in --out")
     args = parser.parse_args()
-    if args.resume and not args.out:
-        parser.error("--resume needs --out: the run folder to continue")
     try:
         scene = load_scene(scene_path)
-        stamp = time.strftime("%Y%m%dT%H%M%SZ", time.gmtime())
-        out = Path(args.out) if args.out else Path("runs") / "trials" / f"{scene.name}-{stamp}"
+        out = run_folder(scene.name, args.out, resume=args.resume)
         run_trials(scene, out, scene_path=scene_path, resume=args.resume)
-    except TactileManipError as exc:
+    except (TactileManipError, ValueError) as exc:
         print(f"{Path(sys.argv[0]).name}: error: {exc}", file=sys.stderr)
         raise SystemExit(2) from None
     print((out / "summary.md").read_text(), end="")

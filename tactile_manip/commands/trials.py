@@ -8,7 +8,6 @@ comparison) and plots. ``tactile-manip score OUT --tolerance-deg X`` re-scores i
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -23,8 +22,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     import dataclasses
-    import time
 
+    from tactile_manip.trials.log import run_folder
     from tactile_manip.trials.runner import run_trials
     from tactile_manip.trials.scene import load_scene
 
@@ -38,12 +37,7 @@ def run(args: argparse.Namespace) -> int:
         if unknown:
             raise ValueError(f"--methods: {unknown} not in the scene's methods {sorted(known)}")
         scene = dataclasses.replace(scene, methods=[known[m] for m in wanted])
-    if args.out:
-        out = Path(args.out)
-    elif args.resume:
-        raise ValueError("--resume needs --out: the run folder to continue")
-    else:
-        out = Path("runs") / "trials" / f"{scene.name}-{time.strftime('%Y%m%dT%H%M%SZ', time.gmtime())}"
+    out = run_folder(scene.name, args.out, resume=args.resume)
     summary = run_trials(scene, out, scene_path=args.config, resume=args.resume, progress=not args.quiet)
     md = out / "summary.md"
     if md.exists():

@@ -70,6 +70,19 @@ def canonical_config(config: Mapping[str, Any] | Any) -> dict[str, Any]:
         raise ValueError(f"a run config must be JSON-serialisable (finite numbers, str keys): {e}") from e
 
 
+def run_folder(scene_name: str, out: str | Path | None, *, resume: bool = False) -> Path:
+    """The folder of a trials run: ``out``, or a new ``runs/trials/<scene_name>-<UTC time>``.
+
+    Raises:
+        ValueError: ``resume`` without ``out`` (there is no run to continue).
+    """
+    if out:
+        return Path(out)
+    if resume:
+        raise ValueError("--resume needs --out: the run folder to continue")
+    return Path("runs") / "trials" / f"{scene_name}-{time.strftime('%Y%m%dT%H%M%SZ', time.gmtime())}"
+
+
 def trials_path(path: str | Path) -> Path:
     """The ``trials.jsonl`` of ``path`` (a run directory or the file itself); raises TrialLogError if absent."""
     path = Path(path)
