@@ -31,7 +31,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from tactile_manip.perception.evaluation import evaluate_methods, gallery, markdown_table, write_report
     from tactile_manip.perception.reconstruct import BASELINES, OnnxReconstructor
-    from tactile_manip.sim.dataset_io import load_dataset
+    from tactile_manip.data import load_dataset
 
     data = load_dataset(args.data)
     train = _baseline_fit_indices(data, args.baseline_objects)

@@ -25,7 +25,7 @@ def run(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
     from tactile_manip.sim.dataset import generate, load_dataset_config
-    from tactile_manip.sim.dataset_io import SPLITS, save_dataset
+    from tactile_manip.data import SPLITS, save_dataset
 
     out = Path(args.out)
     if out.exists() and not args.force:
@@ -45,7 +45,7 @@ def run(args: argparse.Namespace) -> int:
         data = generate(cfg, workers=workers, progress=bar.update)
     path = save_dataset(out, data)
     counts = ", ".join(f"{s} {len(data.indices(s))}" for s in SPLITS)
-    seconds = data.metadata["generation_seconds"]
+    seconds = data.provenance["generation_seconds"]
     print(f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB): {len(data)} pairs ({counts}) in {seconds:.1f} s, "
           f"{len(data) / seconds:.1f} pairs/s")
     return 0

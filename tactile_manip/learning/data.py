@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from tactile_manip.sim.dataset_io import PairedDataset
+from tactile_manip.data import PairedDataset
 
 AXIS_SETS = {"xyz": (0, 1, 2), "z": (2,)}
 
@@ -50,24 +50,29 @@ def select(data: PairedDataset, split: str, objects: tuple[str, ...] = ()) -> np
 
 
 class TensorPairs(torch.utils.data.Dataset):
-    """Readings (n, R, C, 3) float32 uT and depth images (n, H, W) uint8-quantised, from a dataset split."""
+    """Readings (n, R, C, A) float32 and images (n, H, W) as stored (uint8 depth stays uint8 in memory)."""
 
     def __init__(self, data: PairedDataset, index: np.ndarray) -> None:
-        self.field = torch.from_numpy(np.ascontiguousarray(data.field_ut[index]))
-        self.depth_q = torch.from_numpy(np.ascontiguousarray(data.depth_q[index]))
-        self.depth_scale_mm = data.depth_scale_mm
+        self.field = torch.from_numpy(np.ascontiguousarray(data.readings[index], dtype=np.float32))
+        self.stored = torch.from_numpy(np.ascontiguousarray(data.images[index]))
+        self.scale, self.offset = data.image.scale, data.image.offset
 
     def to(self, device: torch.device | str) -> TensorPairs:
         """Move the split to ``device`` (once, before training: batches are then sliced there)."""
         self.field = self.field.to(device)
-        self.depth_q = self.depth_q.to(device)
+        self.stored = self.stored.to(device)
         return self
+
+    def images(self, index: torch.Tensor | slice | int) -> torch.Tensor:
+        """Images at ``index`` in the image unit, float32."""
+        out = self.stored[index].float() * self.scale
+        return out + self.offset if self.offset else out
 
     def __len__(self) -> int:
         return self.field.shape[0]
 
     def __getitem__(self, i: int) -> tuple[torch.Tensor, torch.Tensor]:
-        return self.field[i], self.depth_q[i].float() * self.depth_scale_mm
+        return self.field[i], self.images(i)
 
 
 def dihedral(field_ut: torch.Tensor, image: torch.Tensor, k: int, mirror: bool

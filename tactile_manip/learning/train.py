@@ -33,7 +33,7 @@ from tactile_manip.learning.data import InputSpec, TensorPairs, augment_batch, s
 from tactile_manip.learning.model import (CVAEConfig, SuperMagCVAE, count_parameters, gaussian_nll, negative_elbo,
                                           preset)
 from tactile_manip.perception.metrics import DEPTH_RANGE_MM
-from tactile_manip.sim.dataset_io import PairedDataset, load_dataset
+from tactile_manip.data import PairedDataset, load_dataset
 
 
 class TrainingError(TactileManipError, RuntimeError):
@@ -94,8 +94,8 @@ def load_train_config(path: str | Path) -> TrainConfig:
 
 def model_config(cfg: TrainConfig, data: PairedDataset) -> CVAEConfig:
     """Architecture from the preset, with the taxel grid and image size read from the dataset."""
-    rows, cols, _ = data.field_ut.shape[1:]
-    h, w = data.depth_q.shape[1:]
+    rows, cols = data.grid
+    h, w = data.image_shape
     extra = {"latent": cfg.latent} if cfg.latent else {}
     if cfg.norm:
         extra["norm"] = cfg.norm
@@ -240,7 +240,7 @@ def _train_epoch(net, opt, train_set: TensorPairs, cfg: TrainConfig, spec: Input
             break
         batch = order[b:b + cfg.batch_size][dist.rank * per_rank:(dist.rank + 1) * per_rank]
         field_ut = train_set.field[batch]
-        image = train_set.depth_q[batch].float() * train_set.depth_scale_mm
+        image = train_set.images(batch)
         if cfg.augment:
             field_ut, image = augment_batch(field_ut, image, gen)
         noise = torch.randn(cfg.batch_size, net_cfg.latent, generator=gen)[dist.rank * per_rank:][:per_rank]
@@ -278,7 +278,7 @@ def evaluate_split(model: SuperMagCVAE, pairs: TensorPairs, spec: InputSpec, *, 
     se, psnrs = [], []
     for b in range(0, len(pairs), batch):
         field_ut = pairs.field[b:b + batch]
-        image = pairs.depth_q[b:b + batch].float() * pairs.depth_scale_mm
+        image = pairs.images(slice(b, b + batch))
         eps = torch.zeros(len(field_ut), 1, model.cfg.latent, device=field_ut.device)
         mean, _ = model.generate(spec.scale(field_ut), eps)
         mse = ((mean - image) ** 2).flatten(1).mean(1)

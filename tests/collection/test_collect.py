@@ -16,7 +16,7 @@ from tactile_manip.sensors.collect import CollectConfig, PairCollector
 from tactile_manip.sensors.force import FieldForce, FunctionForce, PressTrigger, ScriptForce
 from tactile_manip.sensors.contacts import Press
 from tactile_manip.sensors.pair_log import dataset_from_pair_logs, read_pair_log
-from tactile_manip.sim.dataset_io import load_dataset, save_dataset
+from tactile_manip.data import load_dataset, save_dataset
 from tactile_manip.sim.objects import IndenterPose
 from tactile_manip.sim.shapes import make_indenter
 

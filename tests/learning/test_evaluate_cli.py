@@ -44,7 +44,7 @@ def test_evaluate_refuses_a_bad_model_argument(tiny_data, tmp_path, capsys):
 
 
 def test_evaluate_fits_the_baselines_on_the_named_objects_only(tiny_data, tmp_path, capsys):
-    from tactile_manip.sim.dataset_io import load_dataset
+    from tactile_manip.data import load_dataset
 
     data = load_dataset(tiny_data)
     first = str(data.objects(data.indices("train"))[0])
