@@ -217,17 +217,17 @@ def _random_split(n: int, groups: np.ndarray | None, val_fraction: float, test_f
     ids = np.arange(n) if groups is None else groups
     unique, counts = np.unique(ids, return_counts=True)
     order = np.random.default_rng(seed).permutation(len(unique))
-    cum = np.cumsum(counts[order]) / n
-    label = np.where(cum <= test_fraction + 1e-12, "test",
-                     np.where(cum <= test_fraction + val_fraction + 1e-12, "val", "train"))
-    out = np.empty(n, dtype="U5")
-    out[:] = "train"
-    lookup = dict(zip(unique[order].tolist(), label.tolist()))
-    for u in unique.tolist():
-        out[ids == u] = lookup[u]
+    # whole groups in random order: test until it holds its share, then val, the rest train
+    targets, filled = {"test": test_fraction * n, "val": val_fraction * n}, {"test": 0, "val": 0}
+    lookup = {}
+    for u, c in zip(unique[order].tolist(), counts[order].tolist()):
+        part = next((s for s in ("test", "val") if filled[s] < targets[s]), "train")
+        filled[part] = filled.get(part, 0) + c
+        lookup[u] = part
+    out = np.array([lookup[u] for u in ids.tolist()], dtype="U5")
     if not np.any(out == "train"):
-        raise DatasetError(f"groups: {len(unique)} groups leave no group for training at val_fraction "
-                           f"{val_fraction:g} and test_fraction {test_fraction:g}")
+        raise DatasetError(f"groups: {len(unique)} groups leave none for training at val_fraction "
+                           f"{val_fraction:g} and test_fraction {test_fraction:g} (a split never cuts a group)")
     return out
 
 
