@@ -37,7 +37,9 @@ def run(args: argparse.Namespace) -> int:
         pixel_mm = args.pixel_mm or data.image.pixel_mm or 0.1
         trained_on = sorted(set(data.objects(data.indices("train")).tolist()))
         extra["training_data"] = {"path": str(args.data), "fingerprint": data.fingerprint(), "pairs": len(data),
-                                  "objects": data.object_names.tolist(), "objects_with_train_split": trained_on,
+                                  "objects": sorted(set(data.objects().tolist())),
+                                  "objects_with_train_split": trained_on, "source": data.provenance.get("source"),
+                                  "image": data.image.to_dict() | {"unit": data.image.unit},
                                   "code_version": data.provenance.get("code_version")}
     metrics = json.loads(open(args.metrics).read()) if args.metrics else {}
     meta = export_onnx(args.checkpoint, args.out, pixel_mm=pixel_mm, metrics=metrics, extra=extra,

@@ -27,7 +27,7 @@ def test_train_export_evaluate_round_trip(tiny_data, tmp_path, capsys):
     methods = [r["method"] for r in results["results"]]
     assert methods == ["Bilinear", "Bicubic", "Tiny"]
     assert all(r["psnr_db_mean"] > 0 and -1 <= r["ssim_mean"] <= 1 for r in results["results"])
-    assert results["psnr_data_range_mm"] == 2.0
+    assert results["psnr_data_range"] == 2.0 and results["image_unit"] == "mm"
     assert (out / "gallery.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert "| Tiny |" in (out / "table.md").read_text()
 
