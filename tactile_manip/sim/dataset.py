@@ -26,7 +26,7 @@ from tactile_manip.data import PairedDataset, depth_image_spec, quantise_depth
 from tactile_manip.sim.objects import Indenter, IndenterPose
 from tactile_manip.sim.shapes import SHAPES, make_indenter
 from tactile_manip.sim.pair import SensorPair
-from tactile_manip.sim.params import SimParams, randomise
+from tactile_manip.sim.params import SimParams, randomise, randomised_values
 from tactile_manip.version import code_version
 
 
@@ -163,11 +163,12 @@ def _simulate(task: _Task) -> dict[str, Any]:
         tilt_x_rad=math.radians(rng.uniform(-pr.tilt_deg, pr.tilt_deg)),
         tilt_y_rad=math.radians(rng.uniform(-pr.tilt_deg, pr.tilt_deg)))
     force = rng.uniform(*pr.force_n)
-    pair = _WORKER["pair"]
+    pair, drawn = _WORKER["pair"], {}
     if cfg.randomise_spread > 0:
-        pair = SensorPair(randomise(cfg.sim, rng, spread=cfg.randomise_spread), seed=cfg.sensor_seed)
+        params = randomise(cfg.sim, rng, spread=cfg.randomise_spread)
+        pair, drawn = SensorPair(params, seed=cfg.sensor_seed), {"sensor_params": randomised_values(params)}
     s = pair.press(_indenter(cfg.objects[task.spec], task.variant), pose, force, rng)
-    return {"field_ut": s.field_ut, "field_raw_ut": s.field_raw_ut, "saturated": s.saturated,
+    return {**drawn, "field_ut": s.field_ut, "field_raw_ut": s.field_raw_ut, "saturated": s.saturated,
             "depth_q": quantise_depth(s.depth_mm), "pose": [pose.x_mm, pose.y_mm, pose.yaw_rad,
                                                               pose.tilt_x_rad, pose.tilt_y_rad],
             "force_n": s.force_n, "approach_mm": s.approach_mm, "skin_approach_mm": s.skin_approach_mm,
@@ -230,6 +231,9 @@ def _assemble(cfg: DatasetConfig, tasks: list[_Task], results: list[dict[str, An
               "pose": stack("pose", np.float32), "force_n": stack("force_n", np.float32),
               "approach_mm": stack("approach_mm", np.float32),
               "skin_approach_mm": stack("skin_approach_mm", np.float32), "contact": stack("contact", bool)}
+    if cfg.randomise_spread > 0:  # each press on its own drawn sensor: record the draw (names in provenance)
+        provenance["sensor_param_names"] = list(results[0]["sensor_params"])
+        extras["sensor_params"] = np.array([list(r["sensor_params"].values()) for r in results], np.float32)
     return PairedDataset(
         readings=stack("field_ut", np.float32), images=stack("depth_q", np.uint8), split=_splits(cfg),
         image=depth_image_spec(cfg.sim.vbts.pixel_mm),

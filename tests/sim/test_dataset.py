@@ -219,3 +219,17 @@ def test_load_plain_npy_file(tmp_path):
     with path.open("wb") as f:
         np.save(f, np.zeros(3))
     assert "not a dataset archive" in _load_error(path)
+
+
+def test_randomised_sensors_are_recorded_per_sample():
+    spec = ObjectSpec("cylinder", count=4, kwargs={"size_mm": 3.0})
+    cfg = DatasetConfig(objects=[spec], randomise_spread=1.0, poses=PoseRanges(force_n=(2.0, 15.0)))
+    d = generate(cfg, workers=1)
+    names = d.provenance["sensor_param_names"]
+    draws = d.extra("sensor_params")
+    assert draws.shape == (4, len(names)) and "magnet.remanence_t" in names and "chip.noise_z_ut" in names
+    jr = draws[:, names.index("magnet.remanence_t")]
+    assert ((0.03 <= jr) & (jr <= 0.055)).all() and len(np.unique(jr)) == 4  # each press its own sensor
+    forces = d.extra("force_n")
+    assert ((2.0 <= forces) & (forces <= 15.0)).all()
+    assert not generate(dataclasses.replace(cfg, randomise_spread=0.0), workers=1).has("sensor_params")
