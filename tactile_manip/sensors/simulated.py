@@ -84,6 +84,16 @@ class SimulatedSensor(TactileSensor):
         self._static = change
         return change
 
+    def replace_pair(self, pair: SensorPair) -> None:
+        """Read another simulated sensor pair from the next frame on (say, a drawn skin per trial).
+
+        Its no-contact field differs from the old one's: take a new baseline (pad unloaded) before reading
+        contacts. The contact in place is cleared; cached contact solves belong to the old pair and are dropped.
+        """
+        self.clear_contact()
+        self._cache.clear()
+        self.pair = pair
+
     def clear_contact(self) -> None:
         """Nothing on the pad from the next frame on (stops a script too)."""
         self._script = None
@@ -156,7 +166,6 @@ class SimulatedSensor(TactileSensor):
         cpu0 = time.thread_time()
         rng = np.random.default_rng(self.config.seed)
         period = 1.0 / self.config.rate_hz
-        chips, baseline_field = self.pair.chips, self.pair.baseline_field_ut
         t0, k, seq = time.monotonic(), 0, 0
         while True:
             deadline = t0 + k * period
@@ -167,7 +176,8 @@ class SimulatedSensor(TactileSensor):
                 if wait < -REBASE_LATE_S:
                     t0 = time.monotonic() - k * period
                 if not self._stalled:
-                    m = chips.measure(baseline_field + self._change_at(deadline), rng)
+                    pair = self.pair  # read per frame: replace_pair swaps it while the thread runs
+                    m = pair.chips.measure(pair.baseline_field_ut + self._change_at(deadline), rng)
                     self._publish(m.raw_ut, m.saturated, seq=seq, t_host_s=time.monotonic(), t_device_s=k * period)
                     seq += 1
             except Exception as e:  # noqa: BLE001 - the thread must survive anything and report it
