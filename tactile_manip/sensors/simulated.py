@@ -88,10 +88,12 @@ class SimulatedSensor(TactileSensor):
         """Read another simulated sensor pair from the next frame on (say, a drawn skin per trial).
 
         Its no-contact field differs from the old one's: take a new baseline (pad unloaded) before reading
-        contacts. The contact in place is cleared; cached contact solves belong to the old pair and are dropped.
+        contacts. Its chips are rated by their own noise (the baseline's refusal threshold follows them). The
+        contact in place is cleared; cached contact solves belong to the old pair and are dropped.
         """
         self.clear_contact()
         self._cache.clear()
+        self._chip = dataclasses.replace(pair.params.chip, rate_hz=self.config.rate_hz)
         self.pair = pair
 
     def clear_contact(self) -> None:
