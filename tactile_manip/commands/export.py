@@ -39,7 +39,7 @@ def run(args: argparse.Namespace) -> int:
         extra["training_data"] = {"path": str(args.data), "fingerprint": data.fingerprint(), "pairs": len(data),
                                   "objects": sorted(set(data.objects().tolist())),
                                   "objects_with_train_split": trained_on, "source": data.provenance.get("source"),
-                                  "image": data.image.to_dict() | {"unit": data.image.unit},
+                                  "image": data.image.to_dict(),
                                   "code_version": data.provenance.get("code_version")}
     metrics = json.loads(open(args.metrics).read()) if args.metrics else {}
     meta = export_onnx(args.checkpoint, args.out, pixel_mm=pixel_mm, metrics=metrics, extra=extra,
