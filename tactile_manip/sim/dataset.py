@@ -96,8 +96,10 @@ class DatasetConfig:
             raise ValueError("objects: a dataset needs at least one [[objects]] entry")
 
     def scaled(self, factor: float) -> DatasetConfig:
-        """The same dataset with every object count multiplied by ``factor`` (at least 1 each)."""
-        objs = [dataclasses.replace(o, count=max(1, int(round(o.count * factor)))) for o in self.objects]
+        """The same dataset with every object count multiplied by ``factor``: at least 1 for an object that had
+        presses, and still 0 for one that had none (``count = 0`` switches an object off at any scale)."""
+        objs = [dataclasses.replace(o, count=max(1, int(round(o.count * factor))) if o.count else 0)
+                for o in self.objects]
         return dataclasses.replace(self, objects=objs)
 
 

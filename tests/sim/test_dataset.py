@@ -102,6 +102,12 @@ def test_splits_follow_the_config(data, cfg):
     assert list(data.object_names) == [o.display_name for o in cfg.objects]
 
 
+def test_scaling_keeps_a_zero_count_at_zero():
+    cfg = DatasetConfig(objects=[ObjectSpec("cylinder", count=0), ObjectSpec("letter_r", count=10)])
+    assert [o.count for o in cfg.scaled(5.0).objects] == [0, 50]
+    assert [o.count for o in cfg.scaled(0.01).objects] == [0, 1]  # a small scale keeps one press of the others
+
+
 def test_procedural_variants_are_different_shapes():
     spec = ObjectSpec("procedural", count=2, variants=2, kwargs={"seed": 3})
     d = generate(DatasetConfig(objects=[spec], poses=PoseRanges(offset_mm=0.0, tilt_deg=0.0)), workers=1)
