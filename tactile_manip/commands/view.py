@@ -31,6 +31,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from tactile_manip.checks import check_nonblank
+    from tactile_manip.commands.record import PORT_HINT
     from tactile_manip.sensors import (
         ReplaySensor,
         ReplaySensorConfig,
@@ -47,12 +49,14 @@ def run(args: argparse.Namespace) -> int:
 
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
-    if args.port:
-        sensor = SerialSensor(SerialSensorConfig(port=args.port, baudrate=args.baud))
-    elif args.replay:
-        sensor = ReplaySensor(ReplaySensorConfig(path=args.replay, loop=True))
-    else:
+    # dispatch on which flag was given, not on truthiness: an empty --port or --replay is an error, not --sim
+    if args.sim:
         sensor = SimulatedSensor()
+    elif args.replay is not None:
+        sensor = ReplaySensor(ReplaySensorConfig(path=check_nonblank("--replay", args.replay), loop=True))
+    else:
+        port = check_nonblank("--port", args.port, hint=PORT_HINT)
+        sensor = SerialSensor(SerialSensorConfig(port=port, baudrate=args.baud))
     with sensor:
         if not args.no_baseline:
             sensor.calibrate_baseline(args.baseline_frames)
