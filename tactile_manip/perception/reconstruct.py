@@ -6,7 +6,10 @@
   map upsampled to the output size and mapped to millimetres by a linear fit on training data.
 
 ``load_reconstructor("bilinear" | "bicubic" | PATH)`` builds one by name. All reject NaN/inf readings and
-wrong shapes with a ValueError naming the problem, and never return NaN.
+wrong shapes with a ValueError naming the problem, and never return NaN. All clamp a reading to the chip's
+range first (:data:`READING_LIMIT_UT`, see :func:`out_of_range`), so a value no MLX90393 can report (3e38 from
+a corrupt buffer) enters every reconstructor as the same bound; the estimator flags such channels and lowers
+the confidence.
 """
 
 from __future__ import annotations
@@ -23,9 +26,30 @@ import numpy as np
 from scipy import ndimage
 
 from tactile_manip.errors import TactileManipError
+from tactile_manip.sim.chip import full_scale_ut
+from tactile_manip.sim.params import ChipParams
 
 METADATA_KEY = "tactile_manip"
 SUPPORTED_FORMAT = 1
+# (3,) uT: the MLX90393's full scale per axis (x, y, z) at ReSkin's settings; no reading can exceed it
+READING_LIMIT_UT = full_scale_ut(ChipParams())
+
+
+def out_of_range(field_ut: np.ndarray) -> np.ndarray:
+    """Channels beyond the chip's full scale: bool array of ``field_ut``'s shape (..., 3), uT in.
+
+    Such a value did not come from a magnetometer (a corrupt buffer, a unit mix-up); every reconstructor
+    clamps it to :data:`READING_LIMIT_UT`, and :class:`~tactile_manip.perception.TactilePoseEstimator` counts
+    its chip as saturated. NaN is not flagged here (the reconstructors refuse it).
+    """
+    f = np.asarray(field_ut, dtype=np.float64)
+    with np.errstate(invalid="ignore"):
+        return np.abs(f) > _limit_for(f.shape)
+
+
+def _limit_for(shape: tuple[int, ...]) -> np.ndarray | float:
+    """The per-axis limit for readings of ``shape`` (the largest one when the last axis is not x, y, z)."""
+    return READING_LIMIT_UT if shape and shape[-1] == 3 else float(READING_LIMIT_UT.max())
 
 
 class ModelFileError(TactileManipError, ValueError):
@@ -63,8 +87,8 @@ class Reconstructor(abc.ABC):
         return self._run(fields)[0]
 
     def _check(self, field_ut: np.ndarray, *, batch: bool = False) -> np.ndarray:
-        # finiteness is checked before the float32 cast: a finite float64 beyond float32's range (1e300) is a
-        # huge reading, saturated to the float32 limit, not an infinite one
+        # finiteness is checked before the float32 cast and the clamp: a finite float64 beyond float32's range
+        # (1e300) is a huge reading, clamped to the chip's range like 3e38 or 1e6, not an infinite one
         f = np.asarray(field_ut, dtype=np.float64)
         want = ((None,) if batch else ()) + tuple(self.input_shape)
         if f.ndim != len(want) or any(w is not None and w != n for w, n in zip(want, f.shape)):
@@ -74,8 +98,8 @@ class Reconstructor(abc.ABC):
             bad = np.argwhere(~np.isfinite(f))[0].tolist()
             raise ValueError(f"{self.name}: reading contains NaN or infinite values (first at index {bad}); "
                              "drop the frame or re-read the sensor")
-        f32_max = float(np.finfo(np.float32).max)
-        return np.clip(f, -f32_max, f32_max).astype(np.float32)
+        limit = _limit_for(f.shape)
+        return np.clip(f, -limit, limit).astype(np.float32)
 
     @abc.abstractmethod
     def _run(self, fields_ut: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
