@@ -143,6 +143,34 @@ class OnnxReconstructor(Reconstructor):
         self.pixel_mm = float(out["pixel_mm"])
         self.latent = int(self.metadata["noise"]["shape"][2])
         self.name = f"supermag-{self.metadata.get('preset', 'model')}"
+        self._check_graph()
+
+    def _check_graph(self) -> None:
+        """Refuse a graph that is not the one its metadata describes (metadata copied onto another model):
+        input and output names, static dims and dtypes, then one all-zero reading for the output image size
+        (exported graphs leave it symbolic)."""
+        meta_in, meta_noise = self.metadata["input"], self.metadata["noise"]
+        want_in = {meta_in["name"]: ["N", *self.input_shape], meta_noise["name"]: ["N", "K", self.latent]}
+        want_out = {name: ["N", *self.output_shape] for name in self.metadata["output"]["names"]}
+        graph_in = {i.name: (i.shape, i.type) for i in self.session.get_inputs()}
+        graph_out = {o.name: (o.shape, o.type) for o in self.session.get_outputs()}
+        problem = _signature_mismatch(graph_in, graph_out, want_in, want_out)
+        if not problem:
+            zeros = {name: np.zeros([1 if isinstance(d, str) else d for d in dims], np.float32)
+                     for name, dims in want_in.items()}
+            try:
+                shapes = [tuple(np.shape(o)) for o in self.session.run(None, zeros)]
+            except Exception as e:  # onnxruntime's own exception types
+                shapes, problem = [], f"a graph that fails on one zero reading ({type(e).__name__})"
+            if not problem and shapes != [(1, *self.output_shape)] * len(want_out):
+                problem = f"outputs of shape {shapes} for one reading"
+        if problem:
+            raise ModelFileError(
+                f"{self.path}: the graph does not match its tactile_manip metadata ({problem}): the graph maps "
+                f"{_describe(graph_in)} -> {_describe(graph_out)}; the metadata describes "
+                f"{_describe({n: (d, 'tensor(float)') for n, d in want_in.items()})} -> "
+                f"{_describe({n: (d, 'tensor(float)') for n, d in want_out.items()})}; export the model again "
+                "with `tactile-manip export` (metadata copied onto another graph is refused)")
 
     def _run(self, fields_ut: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
         n = len(fields_ut)
@@ -154,6 +182,29 @@ class OnnxReconstructor(Reconstructor):
         if not (np.isfinite(depth).all() and np.isfinite(spread).all()):
             raise ModelFileError(f"{self.path}: the model produced non-finite output; the file may be corrupt")
         return depth, (spread if self.samples > 1 else None)
+
+
+def _signature_mismatch(graph_in: dict, graph_out: dict, want_in: dict, want_out: dict) -> str:
+    """What differs between a graph's (name -> (dims, type)) inputs/outputs and the wanted dims; "" if none.
+
+    Symbolic graph dims (str) match anything; the wanted "N" / "K" dims are free.
+    """
+    if set(graph_in) != set(want_in) or list(graph_out) != list(want_out):
+        return "other input/output names"
+    if any(t != "tensor(float)" for _, t in [*graph_in.values(), *graph_out.values()]):
+        return "a tensor that is not float32"
+    for name, (dims, _) in graph_in.items():
+        want = want_in[name]
+        if len(dims) != len(want) or any(isinstance(g, int) and isinstance(w, int) and g != w
+                                         for g, w in zip(dims, want)):
+            return f"input {name} of other dimensions"
+    return ""
+
+
+def _describe(tensors: dict) -> str:
+    """``(name [dims] dtype, ...)`` of a (name -> (dims, onnxruntime type)) mapping."""
+    return "(" + ", ".join(f"{n} {list(d)} {t.removeprefix('tensor(').rstrip(')')}"
+                           for n, (d, t) in tensors.items()) + ")"
 
 
 def read_metadata(path: str | Path) -> dict[str, Any]:

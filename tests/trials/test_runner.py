@@ -232,3 +232,14 @@ def test_the_operator_cell_needs_a_real_sensor_and_no_injected_faults() -> None:
         OperatorCell(_scene(), arm=object(), gripper=object())
     with pytest.raises(ConfigError, match="only in simulation"):
         OperatorCell(_scene(faults=FaultPlan(arm_fault_trials=[0])), arm=object(), gripper=object(), sensor=object())
+
+
+def test_a_model_whose_graph_does_not_match_its_metadata_stops_the_run_before_the_first_trial(
+        tmp_path, graph_with_shipped_metadata) -> None:
+    from tactile_manip.perception.reconstruct import ModelFileError
+
+    foreign = graph_with_shipped_metadata("identity")
+    scene = _scene(methods=[MethodSpec("bilinear", "bilinear", output_px=16), MethodSpec("copied", str(foreign))])
+    with pytest.raises(ModelFileError, match="does not match its tactile_manip metadata"):
+        run_trials(scene, tmp_path / "run", progress=False)
+    assert not (tmp_path / "run" / "trials.jsonl").exists()  # no trial ran, not even for the good method
