@@ -52,8 +52,10 @@ def run(args: argparse.Namespace) -> int:
                                      "data_fingerprint": data.fingerprint(),
                                      "baseline_fits": {k: methods[k].to_dict() for k in ("Bilinear", "Bicubic")},
                                      "psnr_data_range_mm": 2.0, "gallery_rows": rows})
-    gallery(f"{args.out}/gallery.png", data, methods, rows)
+    skipped = gallery(f"{args.out}/gallery.png", data, methods, rows)
     print(markdown_table(results), end="")
+    if skipped:
+        print(f"note: {', '.join(skipped)}: untrained (0 epochs in the model's metadata), left out of the gallery")
     print(f"wrote {args.out}/table.md, results.json, gallery.png")
     return 0
 
