@@ -11,7 +11,8 @@ import argparse
 from pathlib import Path
 
 
-PORT_HINT = ("name the board's serial port (`tactile-manip find-port` lists them), or pass --sim for the simulated sensor")
+PORT_HINT = ("name the board's serial port (`tactile-manip find-port` lists them), "
+             "or pass --sim for the simulated sensor")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
