@@ -13,7 +13,7 @@ tm() { python3 -m tactile_manip "$@"; }
 nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv,noheader
 python3 -c "import torch, onnxruntime; print('torch', torch.__version__, 'onnxruntime', onnxruntime.__version__)"
 [ -f data/supermag.npz ] || tm simulate --out data/supermag.npz
-python3 -c "from tactile_manip.sim.dataset_io import load_dataset as l; print('data fingerprint', l('data/supermag.npz').fingerprint())"
+python3 -c "from tactile_manip.data import load_dataset as l; print('data fingerprint', l('data/supermag.npz').fingerprint())"
 python3 -m pytest -q -p no:cacheprovider tests/learning/test_train.py -k "gpu or device"
 tm train --config configs/train/paper.toml --data data/supermag.npz --out runs/paper_gpu \
     --epochs "$epochs" --max-minutes 0 --device cuda 2>&1 | tr '\r' '\n' | sed '/^\s*$/d'

@@ -28,7 +28,7 @@ from tactile_manip.sensors.collect import CollectConfig, PairCollector
 from tactile_manip.sensors.collect_sim import SimulatedRig, calibrate_simulated, random_presses
 from tactile_manip.sensors.emulator import FaultConfig
 from tactile_manip.sensors.pair_log import dataset_from_pair_logs
-from tactile_manip.sim.dataset_io import save_dataset
+from tactile_manip.data import save_dataset
 from tactile_manip.sim.vbts import lookup_table
 
 OUT = Path("examples_out/collect")

@@ -11,7 +11,7 @@ import pytest
 
 from tactile_manip.cli import COMMANDS, main
 from tactile_manip.commands.demo import DEMO_OBJECTS
-from tactile_manip.sim.dataset_io import load_dataset
+from tactile_manip.data import load_dataset
 from tactile_manip.sim.params import SimParams, describe
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -83,11 +83,11 @@ def test_simulate_writes_a_loadable_dataset(dataset):
     # 0.003 x 2025 -> 6 per paper object, at least one of each test object, 0.003 x 1600 -> 5 procedural,
     # 0.003 x 1200 -> 4 wide procedural
     assert len(data) == 6 + 6 + 7 + 5 + 4
-    assert data.field_ut.shape == (28, 4, 4, 3) and data.depth_q.shape == (28, 200, 200)
+    assert data.field_ut.shape == (28, 4, 4, 3) and data.images.shape == (28, 200, 200)
     assert list(data.split).count("test") == 7 and list(data.split).count("val") == 4
-    assert data.metadata["config"]["objects"][0]["count"] == 6
-    assert data.metadata["workers"] == 1
-    assert np.isfinite(data.field_ut).all() and data.depth_q.max() > 0
+    assert data.provenance["config"]["objects"][0]["count"] == 6
+    assert data.provenance["workers"] == 1
+    assert np.isfinite(data.field_ut).all() and data.images.max() > 0
 
 
 def test_simulate_refuses_to_overwrite_without_force(at_root, dataset, capsys):
@@ -106,7 +106,7 @@ def test_simulate_force_overwrites(at_root, tmp_path, capsys):
                "--seed", "5", "--force"])
     assert rc == 0
     data = load_dataset(out)
-    assert len(data) == 11 and data.metadata["config"]["seed"] == 5
+    assert len(data) == 11 and data.provenance["config"]["seed"] == 5
     assert f"wrote {out}" in capsys.readouterr().out
 
 

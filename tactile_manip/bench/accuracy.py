@@ -20,13 +20,7 @@ import numpy as np
 
 from tactile_manip.perception.evaluation import ELONGATED, evaluate_methods
 from tactile_manip.perception.reconstruct import Reconstructor
-from tactile_manip.sim.dataset_io import PairedDataset, load_dataset
-
-
-def subset(data: PairedDataset, index: np.ndarray) -> PairedDataset:
-    """The samples ``index`` of ``data`` as a dataset of their own (same metadata and object names)."""
-    names = {f.name for f in dataclasses.fields(data)} - {"object_names", "metadata"}
-    return dataclasses.replace(data, **{n: getattr(data, n)[index] for n in names})
+from tactile_manip.data import PairedDataset, load_dataset
 
 
 def first_per_object(data: PairedDataset, split: str, per_object: int) -> np.ndarray:
@@ -61,7 +55,7 @@ def load_readings(data_path: str | Path | None, config_path: str | Path, *,
         data = load_dataset(data_path)
         source = {"source": f"{data_path} test split", "data_fingerprint": data.fingerprint()}
         if per_object is not None:
-            data = subset(data, first_per_object(data, "test", per_object))
+            data = data.subset(first_per_object(data, "test", per_object))
             source["source"] += f", first {per_object} per object"
     else:
         data = simulate_test_objects(config_path, per_object)

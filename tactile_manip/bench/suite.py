@@ -130,7 +130,7 @@ def _measure_all(candidates: Sequence[Candidate], data, scene, scene_path, setti
                  log: Callable[[str], None]) -> list[dict[str, Any]]:
     """One row per candidate, in order; a candidate that fails is a note."""
     test = data.indices("test")
-    readings = data.field_ut[test]
+    readings = data.readings[test]
     rods = readings[accuracy.rod_mask(data, test)]
     rods = rods if len(rods) else readings
     rows, shared = [], {}

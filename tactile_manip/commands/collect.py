@@ -200,7 +200,7 @@ def _record(args: argparse.Namespace) -> int:
         if bar is not None:
             bar.close()
     from tactile_manip.sensors.pair_log import dataset_from_pair_logs
-    from tactile_manip.sim.dataset_io import SPLITS, save_dataset
+    from tactile_manip.data import SPLITS, save_dataset
 
     data = dataset_from_pair_logs([log_path], test_objects=args.test_objects, validation_fraction=args.val_fraction)
     path = save_dataset(out, data)
@@ -274,7 +274,7 @@ def _record_real(args, config, calibration, log_path: Path, progress):
 
 def _finalize(args: argparse.Namespace) -> int:
     from tactile_manip.sensors.pair_log import dataset_from_pair_logs, read_pair_log
-    from tactile_manip.sim.dataset_io import SPLITS, save_dataset
+    from tactile_manip.data import SPLITS, save_dataset
 
     out = _fresh(Path(args.out), args.force)
     logs = [read_pair_log(p) for p in args.logs]

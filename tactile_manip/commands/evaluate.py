@@ -23,6 +23,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--inception-onnx", default=None,
                    help="Inception-v3 pool features as ONNX ((N,3,299,299) -> (N,2048)) to report a real FID")
     p.add_argument("--threads", type=int, default=1, help="onnxruntime threads per model (default 1)")
+    p.add_argument("--no-baselines", action="store_true", help="skip the bilinear and bicubic baselines")
+    p.add_argument("--baseline-channel", default=None, metavar="NAME",
+                   help="channel the baselines upsample (default: z of a magnetic reading, else the first)")
     p.add_argument("--baseline-objects", default="", metavar="NAME,NAME",
                    help="fit the interpolation baselines' depth scale on the training presses of these objects "
                         "only (default: every object with training presses)")
@@ -31,12 +34,16 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from tactile_manip.perception.evaluation import evaluate_methods, gallery, markdown_table, write_report
     from tactile_manip.perception.reconstruct import BASELINES, OnnxReconstructor
-    from tactile_manip.sim.dataset_io import load_dataset
+    from tactile_manip.data import load_dataset
 
     data = load_dataset(args.data)
-    train = _baseline_fit_indices(data, args.baseline_objects)
-    methods = {name.capitalize(): cls.fit(data.field_ut[train], data.depth_mm(train))
-               for name, cls in BASELINES.items()}
+    methods = {}
+    if not args.no_baselines:
+        train = _baseline_fit_indices(data, args.baseline_objects)
+        geometry = BASELINES["bilinear"].geometry(data.readings.shape, data.image_shape, data.image.pixel_mm,
+                                                  data.channels.index(args.baseline_channel))
+        methods = {name.capitalize(): cls.fit(data.readings[train], data.image_values(train), **geometry)
+                   for name, cls in BASELINES.items()}
     from tactile_manip.perception.symmetry import SymmetrizedReconstructor
 
     for option, specs in (("--model", args.model), ("--symmetrized", args.symmetrized)):
@@ -50,8 +57,10 @@ def run(args: argparse.Namespace) -> int:
     rows = _gallery_rows(data, args.split, "val")
     write_report(args.out, results, {"data": str(args.data), "split": args.split,
                                      "data_fingerprint": data.fingerprint(),
-                                     "baseline_fits": {k: methods[k].to_dict() for k in ("Bilinear", "Bicubic")},
-                                     "psnr_data_range_mm": 2.0, "gallery_rows": rows})
+                                     "baseline_fits": {k: methods[k].to_dict() for k in ("Bilinear", "Bicubic")
+                                                       if k in methods},
+                                     "psnr_data_range": data.image.data_range, "image_unit": data.image.unit,
+                                     "gallery_rows": rows})
     skipped = gallery(f"{args.out}/gallery.png", data, methods, rows)
     print(markdown_table(results), end="")
     if skipped:

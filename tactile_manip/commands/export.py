@@ -28,17 +28,19 @@ def run(args: argparse.Namespace) -> int:
 
     require_torch()
     from tactile_manip.learning.export import export_onnx
-    from tactile_manip.sim.dataset_io import load_dataset
+    from tactile_manip.data import load_dataset
 
     readings, pixel_mm, extra = None, args.pixel_mm or 0.1, {}
     if args.data:
         data = load_dataset(args.data)
-        readings = data.field_ut[data.indices("val")]
-        pixel_mm = args.pixel_mm or float(data.metadata.get("pixel_mm", 0.1))
+        readings = data.readings[data.indices("val")]
+        pixel_mm = args.pixel_mm or data.image.pixel_mm or 0.1
         trained_on = sorted(set(data.objects(data.indices("train")).tolist()))
         extra["training_data"] = {"path": str(args.data), "fingerprint": data.fingerprint(), "pairs": len(data),
-                                  "objects": data.object_names.tolist(), "objects_with_train_split": trained_on,
-                                  "code_version": data.metadata.get("code_version")}
+                                  "objects": sorted(set(data.objects().tolist())),
+                                  "objects_with_train_split": trained_on, "source": data.provenance.get("source"),
+                                  "image": data.image.to_dict(),
+                                  "code_version": data.provenance.get("code_version")}
     metrics = json.loads(open(args.metrics).read()) if args.metrics else {}
     meta = export_onnx(args.checkpoint, args.out, pixel_mm=pixel_mm, metrics=metrics, extra=extra,
                        check_readings=readings)

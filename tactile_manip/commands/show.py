@@ -36,16 +36,18 @@ def run(args: argparse.Namespace) -> int:
 
 def _from_dataset(args: argparse.Namespace):
     from tactile_manip.checks import check_nonblank
-    from tactile_manip.sim.dataset_io import load_dataset
+    from tactile_manip.data import load_dataset
 
     data = load_dataset(check_nonblank("--data", args.data))
     if not 0 <= args.index < len(data):
         raise ValueError(f"--index must be in [0, {len(data) - 1}], got {args.index}")
     i = args.index
-    x, y, yaw = data.pose[i, :3]
-    title = (f"{args.data} #{i}: {data.objects([i])[0]} ({data.split[i]}) at ({x:.1f}, {y:.1f}) mm, "
-             f"yaw {math.degrees(yaw):.0f} deg, {data.force_n[i]:.1f} N")
-    note = "" if data.contact[i] else f"sample {i} is an empty press: the object does not touch the pad"
+    title = f"{args.data} #{i}: {data.objects([i])[0]} ({data.split[i]})"
+    if data.has("pose") and data.has("force_n"):
+        x, y, yaw = data.extra("pose")[i, :3]
+        title += f" at ({x:.1f}, {y:.1f}) mm, yaw {math.degrees(yaw):.0f} deg, {data.extra('force_n')[i]:.1f} N"
+    empty = data.has("contact") and not data.extra("contact")[i]
+    note = f"sample {i} is an empty press: the object does not touch the pad" if empty else ""
     return data.field_ut[i], data.depth_mm([i])[0], title, note
 
 

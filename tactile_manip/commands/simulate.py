@@ -25,7 +25,7 @@ def run(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
     from tactile_manip.sim.dataset import generate, load_dataset_config
-    from tactile_manip.sim.dataset_io import SPLITS, save_dataset
+    from tactile_manip.data import SPLITS, save_dataset
 
     out = Path(args.out)
     if out.exists() and not args.force:
@@ -45,7 +45,7 @@ def run(args: argparse.Namespace) -> int:
         data = generate(cfg, workers=workers, progress=bar.update)
     path = save_dataset(out, data)
     counts = ", ".join(f"{s} {len(data.indices(s))}" for s in SPLITS)
-    seconds = data.metadata["generation_seconds"]
+    seconds = data.provenance["generation_seconds"]
     print(f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB): {len(data)} pairs ({counts}) in {seconds:.1f} s, "
           f"{len(data) / seconds:.1f} pairs/s")
     for note in _physics_notes(data, thickness_mm=cfg.sim.layer.thickness_mm):
@@ -58,10 +58,10 @@ def _physics_notes(data, *, thickness_mm: float) -> list[str]:
     import numpy as np
 
     notes = []
-    empty = int(np.count_nonzero(~data.contact))
+    empty = int(np.count_nonzero(~data.extra("contact")))
     if empty:
         notes.append(f"{empty} of {len(data)} presses do not touch the pad (empty: noise and drift only)")
-    deepest = np.maximum(data.approach_mm, data.skin_approach_mm)
+    deepest = np.maximum(data.extra("approach_mm"), data.extra("skin_approach_mm"))
     bottomed = int(np.count_nonzero(deepest >= thickness_mm))
     if bottomed:
         notes.append(f"{bottomed} of {len(data)} presses bottom out (approach >= the {thickness_mm:g} mm layer, "

@@ -13,24 +13,37 @@ def model_card(meta: dict[str, Any], history: dict[str, Any], *, table_md: str =
     tc, mc = meta["train_config"], meta["model_config"]
     last = history["history"][-1]
     data = meta.get("training_data", {})
+    inp, out = meta["input"], meta["output"]
+    channels = inp.get("channels", {"names": ["x", "y", "z"], "kind": "magnetic_vector", "unit": "uT"})
+    image_unit = out.get("image", {}).get("unit", "mm")
+    magnetic = channels["kind"] == "magnetic_vector" and channels["unit"] == "uT"
+    reading = (f"magnetic reading ({mc['taxel_rows']}x{mc['taxel_cols']} chips, 3 axes, microtesla, "
+               "baseline-subtracted)" if magnetic else
+               f"reading of {mc['taxel_rows']}x{mc['taxel_cols']} taxels x {len(channels['names'])} "
+               f"{channels['kind']} channels ({', '.join(channels['names'])}) in {channels['unit']}")
+    image = ("depth image (" + (f"{out['pixel_mm']} mm/px, " if out.get("pixel_mm") else "") + "mm of indentation)"
+             if image_unit == "mm" else f"image in {image_unit}")
+    scaling = (f"clamped to +-{inp['clamp_ut']} uT and scaled to [-1, 1] inside the graph" if not inp.get("offset")
+               else f"normalised per channel by the training split, clamped to +-{inp['clamp_std']} standard "
+                    "deviations and scaled to [-1, 1] inside the graph")
+    source = "simulated pairs" if str(data.get("source", "")).endswith("simulate") or "source" not in data \
+        else f"pairs ({data['source']})"
     lines = [
         f"# SuperMag CVAE, `{meta['preset']}` preset",
         "",
-        "Super-resolves one magnetic reading (4x4 MLX90393, 3 axes, microtesla, baseline-subtracted) into a "
-        f"{mc['image_h']}x{mc['image_w']} depth image ({meta['output']['pixel_mm']} mm/px, mm of indentation). "
+        f"Super-resolves one {reading} into a {mc['image_h']}x{mc['image_w']} {image}. "
         "Conditional VAE after SuperMag (IROS 2025); only the conditional prior and the decoder are in the "
         "ONNX file. Load it with `tactile_manip.perception.reconstruct.load_reconstructor(PATH)`.",
         "",
         "## Inputs and outputs",
-        f"- `field_ut` (B, {mc['taxel_rows']}, {mc['taxel_cols']}, 3) float32: {meta['input']['layout']}; "
-        f"{meta['input']['units']}; axes used: {meta['input']['axes_used']}; clamped to "
-        f"+-{meta['input']['clamp_ut']} uT and scaled to [-1, 1] inside the graph.",
+        f"- `field_ut` (B, {mc['taxel_rows']}, {mc['taxel_cols']}, {len(channels['names'])}) float32: "
+        f"{inp['layout']}; {inp['units']}; channels used: {inp['axes_used']}; {scaling}.",
         f"- `eps` (B, K, {mc['latent']}) float32: prior samples; zeros with K = 1 give the prior mean.",
         f"- `depth_mm`, `spread_mm` (B, {mc['image_h']}, {mc['image_w']}) float32: mean and spread over the K "
-        "samples.",
+        f"samples, in {image_unit}.",
         "",
         "## Training",
-        f"- Data: {data.get('pairs', '?')} simulated pairs ({', '.join(data.get('objects', []))}), fingerprint "
+        f"- Data: {data.get('pairs', '?')} {source} ({', '.join(data.get('objects', []))}), fingerprint "
         f"`{meta['data_fingerprint']}`; trained on the `train` split of "
         f"{', '.join(tc['objects']) or ', '.join(data.get('objects_with_train_split', [])) or 'every object'}.",
         f"- Recipe: AdamW lr {tc['lr']} ({tc['lr_schedule']} to {tc['lr_min']}), weight decay "
@@ -46,12 +59,17 @@ def model_card(meta: dict[str, Any], history: dict[str, Any], *, table_md: str =
         "",
     ]
     if table_md:
-        lines += ["## Table I on unseen objects (test split, PSNR/SSIM data range 2 mm)", "", table_md.strip(), ""]
+        rng = data.get("image", {})
+        span = f"{rng['data_range']:g} {rng['unit']}" if rng else "2 mm"
+        lines += [f"## Table I on unseen objects (test split, PSNR/SSIM data range {span})", "", table_md.strip(), ""]
     if commands:
         lines += ["## Reproduce", "", "```bash", *commands, "```", ""]
-    lines += ["## Limits", "",
-              "Trained on simulated data of one default sensor pair (see docs/simulator.md). A real sensor needs "
-              "its own paired data in the same dataset format, trained with the same commands.", ""]
+    limits = ("Trained on simulated data of one default sensor pair (see docs/simulator.md). A real sensor needs "
+              "its own paired data in the same dataset format, trained with the same commands."
+              if source == "simulated pairs" else
+              f"Trained on the {data.get('pairs', '?')} pairs of one dataset ({data.get('source')}); it knows only "
+              "that sensor and those contacts.")
+    lines += ["## Limits", "", limits, ""]
     if latency:
         lines += ["## Speed (onnxruntime, one reading)", "", latency.strip(), ""]
     return "\n".join(lines)

@@ -1,9 +1,11 @@
 """Export a trained CVAE to ONNX (prior + decoder only) with everything inference needs inside the file.
 
-The graph takes ``field_ut`` (B, R, C, 3) float32 microtesla, baseline-subtracted, and ``eps`` (B, K, Z)
-standard-normal samples, and returns ``depth_mm`` (B, H, W), the mean of the K decoded means, and
-``spread_mm`` (B, H, W), their standard deviation. Axis selection, the +-clamp and the scaling to [-1, 1]
-happen inside the graph, so the runtime cannot apply them differently from training. ``eps = 0`` with
+The graph takes ``field_ut`` (B, R, C, A) float32 readings (microtesla, baseline-subtracted, for the magnetic
+sensors; whatever unit the training data had otherwise) and ``eps`` (B, K, Z) standard-normal samples, and
+returns ``depth_mm`` (B, H, W), the mean of the K decoded means, and ``spread_mm`` (B, H, W), their standard
+deviation (in the training images' unit: mm of indentation for depth images). Channel selection, the
+normalisation, the clamp, the scaling to [-1, 1] and the map back to the image unit happen inside the graph,
+so the runtime cannot apply them differently from training. ``eps = 0`` with
 K = 1 gives the deterministic prior-mean reconstruction.
 
 The JSON under the metadata key ``tactile_manip`` holds: format version, input layout, units, axes, clamp and
@@ -24,7 +26,7 @@ import torch
 from torch import nn
 
 from tactile_manip.errors import TactileManipError
-from tactile_manip.learning.data import AXIS_SETS, InputSpec
+from tactile_manip.learning.data import InputSpec, OutputSpec
 from tactile_manip.learning.model import CVAEConfig, SuperMagCVAE, count_parameters
 from tactile_manip.version import __version__
 
@@ -40,19 +42,21 @@ class ExportError(TactileManipError, RuntimeError):
 class InferenceGraph(nn.Module):
     """What runs at inference: input scaling, prior, K decoder samples, mean and spread."""
 
-    def __init__(self, model: SuperMagCVAE, spec: InputSpec) -> None:
+    def __init__(self, model: SuperMagCVAE, spec: InputSpec, output: OutputSpec | None = None) -> None:
         super().__init__()
         self.model = model
-        self.axes = list(AXIS_SETS[spec.axes])
-        self.clamp_ut = float(spec.clamp_ut)
+        self.spec = spec
+        self.output = output or OutputSpec()
 
     def forward(self, field_ut: torch.Tensor, eps: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        x = field_ut[..., self.axes].clamp(-self.clamp_ut, self.clamp_ut) / self.clamp_ut
-        return self.model.generate(x.flatten(1), eps)
+        mean, spread = self.model.generate(self.spec.scale(field_ut), eps)
+        if self.output != OutputSpec():  # the identity adds no nodes to depth models
+            mean, spread = self.output.offset + self.output.scale * mean, self.output.scale * spread
+        return mean, spread
 
 
 def load_checkpoint(path: str | Path) -> tuple[SuperMagCVAE, InputSpec, dict[str, Any]]:
-    """Model (eval mode), input spec and the raw checkpoint payload from a training checkpoint."""
+    """Model (eval mode), input spec and the raw checkpoint payload (its "output" key: the OutputSpec)."""
     path = Path(path)
     if not path.is_file():
         raise ExportError(f"checkpoint not found: {path} (train one with `tactile-manip train`)")
@@ -73,8 +77,8 @@ def export_onnx(checkpoint: str | Path, out: str | Path, *, pixel_mm: float, met
 
     model, spec, payload = load_checkpoint(checkpoint)
     cfg = model.cfg
-    graph = InferenceGraph(model, spec).eval()
-    field = torch.zeros(2, cfg.taxel_rows, cfg.taxel_cols, 3)
+    graph = InferenceGraph(model, spec, OutputSpec(**payload.get("output", {}))).eval()
+    field = torch.zeros(2, cfg.taxel_rows, cfg.taxel_cols, spec.channels)
     eps = torch.zeros(2, 3, cfg.latent)
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -95,17 +99,27 @@ def export_onnx(checkpoint: str | Path, out: str | Path, *, pixel_mm: float, met
 def _metadata(model: SuperMagCVAE, spec: InputSpec, payload: dict, pixel_mm: float, metrics: dict,
               extra: dict) -> dict[str, Any]:
     cfg = model.cfg
+    data = payload.get("data", {})
+    channels = data.get("channels", {"names": ["x", "y", "z"], "kind": "magnetic_vector", "unit": "uT"})
+    image = data.get("image", {"unit": "mm"})
+    magnetic = channels["kind"] == "magnetic_vector" and channels["unit"] == "uT"
+    scaling = ("clamp to +-clamp_ut, divide by clamp_ut" if not spec.offset else
+               "subtract offset, divide by spread (per channel, training split), clamp to +-clamp_std, divide by "
+               "clamp_std")
     return {
         "format_version": FORMAT_VERSION,
         "package_version": __version__,
-        "input": {"name": "field_ut", "shape": ["batch", cfg.taxel_rows, cfg.taxel_cols, 3],
-                  "layout": "[row, col, axis], row 0 at +y, column 0 at -x, axes (x, y, z) of the pad frame",
-                  "units": "microtesla, baseline-subtracted", "axes_used": spec.axes, "clamp_ut": spec.clamp_ut,
-                  "scaling": "clamp to +-clamp_ut, divide by clamp_ut"},
+        "input": {"name": "field_ut", "shape": ["batch", cfg.taxel_rows, cfg.taxel_cols, spec.channels],
+                  "layout": f"[row, col, channel], row 0 at +y, column 0 at -x, channels {channels['names']}",
+                  "units": "microtesla, baseline-subtracted" if magnetic else channels["unit"],
+                  "channels": channels, "axes_used": spec.axes, "clamp_ut": spec.clamp_ut,
+                  "offset": list(spec.offset), "spread": list(spec.spread), "clamp_std": spec.clamp_std,
+                  "scaling": scaling},
         "noise": {"name": "eps", "shape": ["batch", "samples", cfg.latent], "distribution": "standard normal; "
                   "zeros with samples = 1 give the prior-mean reconstruction"},
         "output": {"names": ["depth_mm", "spread_mm"], "shape": ["batch", cfg.image_h, cfg.image_w],
-                   "units": "mm of indentation, >= 0", "pixel_mm": pixel_mm,
+                   "units": "mm of indentation, >= 0" if image["unit"] == "mm" else image["unit"],
+                   "image": image, "pixel_mm": pixel_mm,
                    "layout": "pixel (0, 0) at the (-x, +y) corner of the pad"},
         "preset": payload["train_config"]["preset"], "model_config": payload["model_config"],
         "train_config": payload["train_config"], "data_fingerprint": payload["data_fingerprint"],
@@ -127,7 +141,9 @@ def check_parity(graph: InferenceGraph, path: Path, readings: np.ndarray | None 
 
     cfg = graph.model.cfg
     rng = np.random.default_rng(0)
-    fields = [rng.normal(0, 150, (4, cfg.taxel_rows, cfg.taxel_cols, 3)).astype(np.float32)]
+    spec = graph.spec
+    centre, width = (np.asarray(spec.offset), np.asarray(spec.spread)) if spec.offset else (0.0, 150.0)
+    fields = [(centre + width * rng.normal(0, 1, (4, cfg.taxel_rows, cfg.taxel_cols, spec.channels))).astype(np.float32)]
     if readings is not None and len(readings):
         fields.append(np.asarray(readings[:16], dtype=np.float32))
     session = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
@@ -139,8 +155,9 @@ def check_parity(graph: InferenceGraph, path: Path, readings: np.ndarray | None 
                 ref = [t.numpy() for t in graph(torch.from_numpy(f), torch.from_numpy(eps))]
             got = session.run(None, {"field_ut": f, "eps": eps})
             worst = max(worst, *(float(np.abs(a - b).max()) for a, b in zip(ref, got)))
-    if not worst <= PARITY_TOLERANCE_MM:
+    tolerance = PARITY_TOLERANCE_MM * graph.output.scale  # 1e-4 of the image range for images not in mm
+    if not worst <= tolerance:
         path.unlink(missing_ok=True)
-        raise ExportError(f"ONNX output differs from torch by {worst:.3g} mm (> {PARITY_TOLERANCE_MM} mm); "
+        raise ExportError(f"ONNX output differs from torch by {worst:.3g} (> {tolerance:.3g}, image units); "
                           f"{path} was not kept")
     return worst

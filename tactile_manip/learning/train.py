@@ -29,11 +29,10 @@ import torch
 
 from tactile_manip.config import load_config, to_dict
 from tactile_manip.errors import TactileManipError
-from tactile_manip.learning.data import InputSpec, TensorPairs, augment_batch, select
+from tactile_manip.learning.data import InputSpec, OutputSpec, TensorPairs, augment_batch, select
 from tactile_manip.learning.model import (CVAEConfig, SuperMagCVAE, count_parameters, gaussian_nll, negative_elbo,
                                           preset)
-from tactile_manip.perception.metrics import DEPTH_RANGE_MM
-from tactile_manip.sim.dataset_io import PairedDataset, load_dataset
+from tactile_manip.data import PairedDataset, load_dataset
 
 
 class TrainingError(TactileManipError, RuntimeError):
@@ -50,6 +49,7 @@ class TrainConfig:
     axes: str = "xyz"                    # "xyz", or "z" for the z-axis-only variant
     objects: list[str] = field(default_factory=list)  # train only on these objects ([]: all)
     clamp_ut: float = 500.0              # input clamp, uT (SuperMag: +-500 scaled to [-1, 1])
+    clamp_std: float = 5.0               # input clamp of readings not in uT, standard deviations of the training split
     epochs: int = 60
     batch_size: int = 32                 # global batch (split across DDP processes)
     lr: float = 1e-4                     # AdamW learning rate (SuperMag: 1e-4, fixed)
@@ -83,7 +83,7 @@ class TrainConfig:
             raise ValueError(f"prior_weight must be >= 0, got {self.prior_weight}")
         if not (math.isfinite(self.kl_weight) and self.kl_weight >= 0):
             raise ValueError(f"kl_weight must be >= 0, got {self.kl_weight}")
-        InputSpec(self.clamp_ut, self.axes)
+        InputSpec(self.clamp_ut, self.axes, clamp_std=self.clamp_std)
         if not re.fullmatch(r"auto|cpu|cuda(:\d+)?", self.device):
             raise ValueError(f"device must be 'auto', 'cpu', 'cuda' or 'cuda:N', got {self.device!r}")
 
@@ -94,12 +94,12 @@ def load_train_config(path: str | Path) -> TrainConfig:
 
 def model_config(cfg: TrainConfig, data: PairedDataset) -> CVAEConfig:
     """Architecture from the preset, with the taxel grid and image size read from the dataset."""
-    rows, cols, _ = data.field_ut.shape[1:]
-    h, w = data.depth_q.shape[1:]
+    rows, cols = data.grid
+    h, w = data.image_shape
     extra = {"latent": cfg.latent} if cfg.latent else {}
     if cfg.norm:
         extra["norm"] = cfg.norm
-    return preset(cfg.preset, taxel_rows=rows, taxel_cols=cols, axes=len(InputSpec(cfg.clamp_ut, cfg.axes).axes),
+    return preset(cfg.preset, taxel_rows=rows, taxel_cols=cols, axes=data.channels.count if cfg.axes == "xyz" else 1,
                   image_h=h, image_w=w, **extra)
 
 
@@ -161,9 +161,10 @@ def _train(cfg: TrainConfig, data_path: Path, out: Path, resume: bool, progress,
         torch.backends.cuda.matmul.allow_tf32 = True
         torch.backends.cudnn.allow_tf32 = True
     data = load_dataset(data_path)
-    spec = InputSpec(cfg.clamp_ut, cfg.axes)
+    train_index = select(data, "train", tuple(cfg.objects))
+    spec = InputSpec.for_data(data, train_index, clamp_ut=cfg.clamp_ut, axes=cfg.axes, clamp_std=cfg.clamp_std)
     mcfg = model_config(cfg, data)
-    train_set = TensorPairs(data, select(data, "train", tuple(cfg.objects))).to(device)
+    train_set = TensorPairs(data, train_index).to(device)
     val_set = TensorPairs(data, select(data, "val", tuple(cfg.objects))).to(device)
     model = SuperMagCVAE(mcfg).to(device)
     opt = torch.optim.AdamW(model.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
@@ -240,9 +241,9 @@ def _train_epoch(net, opt, train_set: TensorPairs, cfg: TrainConfig, spec: Input
             break
         batch = order[b:b + cfg.batch_size][dist.rank * per_rank:(dist.rank + 1) * per_rank]
         field_ut = train_set.field[batch]
-        image = train_set.depth_q[batch].float() * train_set.depth_scale_mm
+        image = train_set.images(batch)
         if cfg.augment:
-            field_ut, image = augment_batch(field_ut, image, gen)
+            field_ut, image = augment_batch(field_ut, image, gen, vector=train_set.vector)
         noise = torch.randn(cfg.batch_size, net_cfg.latent, generator=gen)[dist.rank * per_rank:][:per_rank]
         noise = noise.to(field_ut.device)
         out = net(spec.scale(field_ut), image, noise)
@@ -273,24 +274,25 @@ def _train_epoch(net, opt, train_set: TensorPairs, cfg: TrainConfig, spec: Input
 @torch.no_grad()
 def evaluate_split(model: SuperMagCVAE, pairs: TensorPairs, spec: InputSpec, *, batch: int = 128
                    ) -> dict[str, float]:
-    """Prior-mean reconstruction of a split: MSE (mm^2) and mean PSNR (dB, data range 2 mm)."""
+    """Prior-mean reconstruction of a split: MSE (target units squared) and mean PSNR (dB, the images' range)."""
     model.eval()
     se, psnrs = [], []
     for b in range(0, len(pairs), batch):
         field_ut = pairs.field[b:b + batch]
-        image = pairs.depth_q[b:b + batch].float() * pairs.depth_scale_mm
+        image = pairs.images(slice(b, b + batch))
         eps = torch.zeros(len(field_ut), 1, model.cfg.latent, device=field_ut.device)
         mean, _ = model.generate(spec.scale(field_ut), eps)
         mse = ((mean - image) ** 2).flatten(1).mean(1)
         se.append(mse)
-        psnrs.append(10 * torch.log10(DEPTH_RANGE_MM**2 / mse.clamp_min(1e-12)))
+        psnrs.append(10 * torch.log10(pairs.data_range**2 / mse.clamp_min(1e-12)))
     return {"mse": float(torch.cat(se).mean()), "psnr": float(torch.cat(psnrs).mean())}
 
 
 def _save_checkpoint(path: Path, model, opt, mcfg: CVAEConfig, cfg: TrainConfig, spec: InputSpec,
                      data: PairedDataset, state: dict) -> None:
     payload = {"model": model.state_dict(), "optimizer": opt.state_dict(), "model_config": to_dict(mcfg),
-               "train_config": to_dict(cfg), "input": to_dict(spec), "data_fingerprint": data.fingerprint(),
+               "train_config": to_dict(cfg), "input": to_dict(spec), "output": to_dict(OutputSpec.for_data(data)),
+               "data": data.describe(), "data_fingerprint": data.fingerprint(),
                "state": state}
     tmp = path.with_name(path.name + ".partial")
     torch.save(payload, tmp)

@@ -22,7 +22,7 @@ import numpy as np
 from tactile_manip.perception import metrics
 from tactile_manip.perception.pose import angle_from_image, wrap_axial
 from tactile_manip.perception.reconstruct import Reconstructor
-from tactile_manip.sim.dataset_io import PairedDataset
+from tactile_manip.data import PairedDataset
 
 ELONGATED = ("cylinder", "hex_bar", "square_bar")
 
@@ -51,17 +51,18 @@ def evaluate_methods(data: PairedDataset, methods: dict[str, Reconstructor], *, 
                      inception_onnx: str | Path | None = None) -> tuple[list[MethodResult], dict[str, np.ndarray]]:
     """Run every method on ``split``; returns the results and each method's predictions (N, H, W)."""
     idx = data.indices(split)
-    truth = data.depth_mm(idx)
+    truth = data.image_values(idx)
     names = data.objects(idx)
     fid_features = _inception_features(inception_onnx) if inception_onnx else None
     truth_feats = fid_features(truth) if fid_features else None
     results, predictions = [], {}
     for label, method in methods.items():
         t0 = time.perf_counter()
-        pred = method.reconstruct_batch(data.field_ut[idx])
+        pred = method.reconstruct_batch(data.readings[idx])
         seconds = (time.perf_counter() - t0) / len(idx)
         predictions[label] = pred
-        p, s = metrics.psnr(pred, truth), metrics.ssim(pred, truth)
+        L = data.image.data_range
+        p, s = metrics.psnr(pred, truth, data_range=L), metrics.ssim(pred, truth, data_range=L)
         per_object = {str(n): {"psnr_db": float(np.mean(p[names == n])), "ssim": float(np.mean(s[names == n])),
                                "count": int(np.sum(names == n))} for n in np.unique(names)}
         fid = metrics.frechet_distance(fid_features(pred), truth_feats) if fid_features else None
@@ -74,15 +75,17 @@ def evaluate_methods(data: PairedDataset, methods: dict[str, Reconstructor], *, 
 def _angle_errors(data: PairedDataset, idx: np.ndarray, pred: np.ndarray) -> dict[str, float]:
     """PCA angle error (deg) on the elongated objects of the split: median, p95, fraction undefined."""
     names = data.objects(idx)
+    if not data.has("pose") or data.image.pixel_mm is None:
+        return {}
     rods = np.array([any(str(n).startswith(e) for e in ELONGATED) for n in names])
     errors, undefined = [], 0
     for i in np.flatnonzero(rods):
-        est = angle_from_image(pred[i], pixel_mm=float(data.metadata.get("pixel_mm", 0.1)))
+        est = angle_from_image(pred[i], pixel_mm=data.image.pixel_mm)
         if not est.defined:
             undefined += 1
             errors.append(90.0)  # an undefined angle counts as the worst error
             continue
-        errors.append(abs(math.degrees(wrap_axial(est.angle_rad - float(data.pose[idx[i], 2])))))
+        errors.append(abs(math.degrees(wrap_axial(est.angle_rad - float(data.extra("pose")[idx[i], 2])))))
     if not errors:
         return {}
     e = np.asarray(errors)
@@ -146,29 +149,29 @@ def gallery(path: str | Path, data: PairedDataset, methods: dict[str, Reconstruc
 
 def gallery_figure(data: PairedDataset, methods: dict[str, Reconstructor], rows: list[tuple[str, int]]):
     """Figure like the paper's gallery: one row per (split, dataset index), columns ground truth then each
-    method, reconstructed here for just those readings, on one depth scale (0-2 mm, its colour bar at the
-    right). Untrained models (:func:`untrained`) are left out. Returns (figure, labels left out)."""
+    method, reconstructed here for just those readings, on one scale (the images' value range, 0-2 mm for
+    depth; its colour bar at the right). Untrained models (:func:`untrained`) are left out. Returns (figure, labels left out)."""
     from tactile_manip.plots import _pyplot
 
     skipped = [label for label, m in methods.items() if untrained(m)]
     methods = {label: m for label, m in methods.items() if label not in skipped}
     plt = _pyplot()
     index = np.array([i for _, i in rows])
-    preds = {label: m.reconstruct_batch(data.field_ut[index]) for label, m in methods.items()}
+    preds = {label: m.reconstruct_batch(data.readings[index]) for label, m in methods.items()}
     fig, axes = plt.subplots(len(rows), len(methods) + 1, figsize=(2.2 * (len(methods) + 1) + 0.9, 2.2 * len(rows)),
                              constrained_layout=True, squeeze=False)
     for r, (split, i) in enumerate(rows):
-        images = [data.depth_mm([i])[0]] + [preds[m][r] for m in methods]
+        images = [data.image_values([i])[0]] + [preds[m][r] for m in methods]
         for c, (img, title) in enumerate(zip(images, ["ground truth (VBTS)"] + list(methods))):
             ax = axes[r, c]
-            im = ax.imshow(img, cmap="viridis", vmin=0, vmax=metrics.DEPTH_RANGE_MM)
+            im = ax.imshow(img, cmap="viridis", vmin=data.image.value_min, vmax=data.image.value_max)
             ax.set_xticks([])
             ax.set_yticks([])
             if r == 0:
                 ax.set_title(textwrap.fill(title, 24), fontsize=9)
             if c == 0:
                 ax.set_ylabel(f"{data.objects([i])[0]}\n({'unseen' if split == 'test' else 'seen'})", fontsize=8)
-    fig.colorbar(im, ax=axes, shrink=min(1.0, 3.0 / len(rows)), label="depth [mm] (every panel)")
+    fig.colorbar(im, ax=axes, shrink=min(1.0, 3.0 / len(rows)), label=("depth [mm]" if data.image.unit == "mm" else data.image.unit) + " (every panel)")
     plt.close(fig)  # the caller saves it; closing only drops pyplot's reference
     return fig, skipped
 

@@ -86,6 +86,10 @@ class Reconstructor(abc.ABC):
             return np.empty((0, *self.output_shape), np.float32)
         return self._run(fields)[0]
 
+    #: readings are MLX90393 fields in uT (clamped to the chip's full scale); False for models trained on
+    #: another sensor's readings (tactile-manip import), whose values pass as they are
+    magnetic_ut: bool = True
+
     def _check(self, field_ut: np.ndarray, *, batch: bool = False) -> np.ndarray:
         # finiteness is checked before the float32 cast and the clamp: a finite float64 beyond float32's range
         # (1e300) is a huge reading, clamped to the chip's range like 3e38 or 1e6, not an infinite one
@@ -98,6 +102,8 @@ class Reconstructor(abc.ABC):
             bad = np.argwhere(~np.isfinite(f))[0].tolist()
             raise ValueError(f"{self.name}: reading contains NaN or infinite values (first at index {bad}); "
                              "drop the frame or re-read the sensor")
+        if not self.magnetic_ut:  # another sensor's readings (pF, counts): the MLX90393's range means nothing
+            return f.astype(np.float32)
         limit = _limit_for(f.shape)
         return np.clip(f, -limit, limit).astype(np.float32)
 
@@ -143,6 +149,8 @@ class OnnxReconstructor(Reconstructor):
         self.pixel_mm = float(out["pixel_mm"])
         self.latent = int(self.metadata["noise"]["shape"][2])
         self.name = f"supermag-{self.metadata.get('preset', 'model')}"
+        channels = self.metadata["input"].get("channels", {"kind": "magnetic_vector", "unit": "uT"})
+        self.magnetic_ut = channels["kind"] == "magnetic_vector" and channels["unit"] == "uT"
         self._check_graph()
 
     def _check_graph(self) -> None:
@@ -252,37 +260,56 @@ def _parse_metadata(path: Path, raw: str | None) -> dict[str, Any]:
 
 
 class InterpolationReconstructor(Reconstructor):
-    """Baseline: the z-axis map upsampled to the output size, then ``depth = max(gain * b + offset, 0)``.
+    """Baseline: one channel's map (z of a magnetic reading) upsampled to the output size, then
+    ``depth = max(gain * b + offset, 0)``.
 
-    The upsampling maps each output pixel centre to chip-grid coordinates (chips at pitch ``pitch_mm``,
-    centred on the pad) and interpolates with a spline of ``order`` (1: bilinear, 3: bicubic), holding the
-    edge values beyond the outer chips. ``gain`` (mm/uT) and ``offset`` (mm) come from :meth:`fit`.
+    The upsampling maps each output pixel centre to taxel-grid coordinates (taxels at pitch ``pitch_mm``, one
+    value or (rows, columns), centred on the pad) and interpolates with a spline of ``order`` (1: bilinear,
+    3: bicubic), holding the edge values beyond the outer taxels. ``gain`` (mm/uT for the magnetic sensor:
+    image unit per reading unit) and ``offset`` come from :meth:`fit`.
     """
 
     order = 1
 
     def __init__(self, *, gain_mm_per_ut: float, offset_mm: float, output_shape: tuple[int, int] = (200, 200),
-                 pixel_mm: float = 0.1, pitch_mm: float = 5.0, input_shape: tuple[int, int, int] = (4, 4, 3)) -> None:
+                 pixel_mm: float = 0.1, pitch_mm: float | tuple[float, float] = 5.0,
+                 input_shape: tuple[int, int, int] = (4, 4, 3), channel: int = 2) -> None:
         if not (np.isfinite(gain_mm_per_ut) and np.isfinite(offset_mm)):
             raise ValueError(f"{self.name}: gain and offset must be finite, got {gain_mm_per_ut}, {offset_mm}")
         self.gain, self.offset = float(gain_mm_per_ut), float(offset_mm)
-        self.output_shape, self.pixel_mm, self.pitch_mm = tuple(output_shape), float(pixel_mm), float(pitch_mm)
+        self.output_shape, self.pixel_mm = tuple(output_shape), float(pixel_mm)
+        pitch = np.broadcast_to(np.asarray(pitch_mm, float), (2,))
+        self.pitch_mm = float(pitch[0]) if pitch[0] == pitch[1] else (float(pitch[0]), float(pitch[1]))
         self.input_shape = tuple(input_shape)
+        if not 0 <= channel < self.input_shape[-1]:
+            raise ValueError(f"{self.name}: channel {channel} is not one of the reading's {self.input_shape[-1]}")
+        self.channel = int(channel)
         self._coords = self._grid_coords()
+
+    @classmethod
+    def geometry(cls, readings_shape: tuple[int, ...], image_shape: tuple[int, int], pixel_mm: float | None,
+                 channel: int) -> dict[str, Any]:
+        """Constructor arguments for taxels spread evenly over the image (as on the simulated pad: 4 chips at
+        5 mm over 200 px of 0.1 mm); an unknown pixel size counts in pixels."""
+        (rows, cols, chans), (h, w) = tuple(readings_shape[-3:]), image_shape
+        px = pixel_mm or 1.0
+        return {"pixel_mm": px, "pitch_mm": (h * px / rows, w * px / cols), "input_shape": (rows, cols, chans),
+                "channel": channel}
 
     def _grid_coords(self) -> np.ndarray:
         h, w = self.output_shape
         rows, cols = self.input_shape[:2]
+        pitch_row, pitch_col = np.broadcast_to(np.asarray(self.pitch_mm, float), (2,))
         x = (np.arange(w) - (w - 1) / 2) * self.pixel_mm
         y = -(np.arange(h) - (h - 1) / 2) * self.pixel_mm
-        col = x / self.pitch_mm + (cols - 1) / 2
-        row = -y / self.pitch_mm + (rows - 1) / 2
+        col = x / pitch_col + (cols - 1) / 2
+        row = -y / pitch_row + (rows - 1) / 2
         rr, cc = np.meshgrid(row, col, indexing="ij")
         return np.stack([rr, cc])
 
     def upsample(self, fields_ut: np.ndarray) -> np.ndarray:
-        """(N, R, C, 3) -> (N, H, W) upsampled z-axis maps in uT."""
-        return np.stack([ndimage.map_coordinates(f[..., 2].astype(np.float64), self._coords, order=self.order,
+        """(N, R, C, A) -> (N, H, W) upsampled maps of ``channel`` (z: the magnetic field's z axis, uT)."""
+        return np.stack([ndimage.map_coordinates(f[..., self.channel].astype(np.float64), self._coords, order=self.order,
                                                  mode="nearest") for f in fields_ut])
 
     def _run(self, fields_ut: np.ndarray) -> tuple[np.ndarray, None]:
@@ -300,7 +327,8 @@ class InterpolationReconstructor(Reconstructor):
 
     def to_dict(self) -> dict[str, Any]:
         return {"gain_mm_per_ut": self.gain, "offset_mm": self.offset, "output_shape": list(self.output_shape),
-                "pixel_mm": self.pixel_mm, "pitch_mm": self.pitch_mm, "input_shape": list(self.input_shape)}
+                "pixel_mm": self.pixel_mm, "pitch_mm": self.pitch_mm, "input_shape": list(self.input_shape),
+                "channel": self.channel}
 
 
 class BilinearReconstructor(InterpolationReconstructor):

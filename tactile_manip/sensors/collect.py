@@ -42,7 +42,7 @@ from tactile_manip.sensors.force import ForceSource, PressTrigger
 from tactile_manip.sensors.pair_log import PairLogWriter, PairRecord
 from tactile_manip.sensors.sync import DeviceClock, Match, StreamPairer
 from tactile_manip.sensors.vbts_calibration import VbtsCalibration, check_reference_clear
-from tactile_manip.sim.dataset_io import quantise_depth
+from tactile_manip.data import quantise_depth
 
 
 @dataclass(frozen=True)

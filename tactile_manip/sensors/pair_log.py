@@ -11,7 +11,7 @@ Tags: ``PR`` a pair: u16 JSON length | JSON (times, sequence numbers, force, obj
 float32 | field_raw_ut float32 | saturated uint8 | zlib-compressed depth_q uint8 (0.01 mm units); ``EV`` a
 JSON event (reference, baseline, trigger, unpaired frame, stop). The writer appends only and fsyncs at least
 every ``sync_every_s``; the reader stops at the first incomplete or damaged record (a crash's torn tail).
-:func:`dataset_from_pair_logs` turns one or more logs into a :class:`~tactile_manip.sim.dataset_io.PairedDataset`
+:func:`dataset_from_pair_logs` turns one or more logs into a :class:`~tactile_manip.data.PairedDataset`
 that ``tactile-manip train`` and ``evaluate`` read unchanged.
 """
 
@@ -31,7 +31,7 @@ import numpy as np
 
 from tactile_manip.errors import RecordingError
 from tactile_manip.sensors.framed_file import CRC32, TAG_EVENT, FramedWriter, json_default, read_header
-from tactile_manip.sim.dataset_io import DEPTH_SCALE_MM, FORMAT_VERSION as DATASET_VERSION, PairedDataset, SPLITS
+from tactile_manip.data import DEPTH_SCALE_MM, SPLITS, PairedDataset, depth_image_spec
 from tactile_manip.version import code_version
 
 MAGIC = b"tactile_manip pairs\n"
@@ -154,22 +154,23 @@ def dataset_from_pair_logs(logs: Sequence[PairLog | str | Path], *, test_objects
     depth_q = np.stack([p.depth_q for p in pairs])
     dts = np.array([abs(p.info["dt_s"]) for p in pairs])
     first = logs[0].header
-    meta = {"format_version": DATASET_VERSION, "depth_scale_mm": DEPTH_SCALE_MM,
-            "pixel_mm": first.get("pixel_mm", 0.1), "field_axes": ["x", "y", "z"], "field_unit": "uT",
-            "source": "tactile-manip collect", "logs": [str(log.path) for log in logs],
-            "collection": [log.header for log in logs], "test_objects": list(test_objects),
-            "sync": {"pairs": len(pairs), "max_abs_dt_s": float(dts.max()), "mean_abs_dt_s": float(dts.mean()),
-                     "tolerance_s": max(float(log.header.get("config", {}).get("tolerance_s", math.nan))
-                                        for log in logs)},
-            "code_version": code_version(), "created_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
+    provenance = {
+        "source": "tactile-manip collect", "logs": [str(log.path) for log in logs],
+        "collection": [log.header for log in logs], "test_objects": list(test_objects),
+        "sync": {"pairs": len(pairs), "max_abs_dt_s": float(dts.max()), "mean_abs_dt_s": float(dts.mean()),
+                 "tolerance_s": max(float(log.header.get("config", {}).get("tolerance_s", math.nan)) for log in logs)},
+        "code_version": code_version(), "created_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
+    extras = {
+        "field_raw_ut": np.stack([p.field_raw_ut for p in pairs]), "saturated": np.stack([p.saturated for p in pairs]),
+        "pose": pose, "force_n": force,
+        "approach_mm": depth_q.reshape(len(pairs), -1).max(axis=1).astype(np.float32) * np.float32(DEPTH_SCALE_MM),
+        "skin_approach_mm": np.full(len(pairs), np.nan, np.float32),
+        "contact": np.array([bool(p.info.get("contact", True)) for p in pairs])}
     return PairedDataset(
-        field_ut=np.stack([p.field_ut for p in pairs]), field_raw_ut=np.stack([p.field_raw_ut for p in pairs]),
-        saturated=np.stack([p.saturated for p in pairs]), depth_q=depth_q,
+        readings=np.stack([p.field_ut for p in pairs]), images=depth_q, split=split,
+        image=depth_image_spec(float(first.get("pixel_mm", 0.1))),
         object_index=np.array([unique.index(n) for n in names], np.int16), object_names=np.array(unique),
-        split=split, pose=pose, force_n=force,
-        approach_mm=depth_q.reshape(len(pairs), -1).max(axis=1).astype(np.float32) * np.float32(DEPTH_SCALE_MM),
-        skin_approach_mm=np.full(len(pairs), np.nan, np.float32),
-        contact=np.array([bool(p.info.get("contact", True)) for p in pairs]), metadata=meta)
+        extras=extras, provenance=provenance)
 
 
 def _splits(names: list[str], test: set[str], validation_fraction: float) -> np.ndarray:

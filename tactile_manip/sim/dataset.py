@@ -22,7 +22,7 @@ from typing import Any, Literal
 import numpy as np
 
 from tactile_manip.config import load_config, to_dict
-from tactile_manip.sim.dataset_io import FORMAT_VERSION, DEPTH_SCALE_MM, PairedDataset, quantise_depth
+from tactile_manip.data import PairedDataset, depth_image_spec, quantise_depth
 from tactile_manip.sim.objects import Indenter, IndenterPose
 from tactile_manip.sim.shapes import SHAPES, make_indenter
 from tactile_manip.sim.pair import SensorPair
@@ -229,16 +229,15 @@ def _assemble(cfg: DatasetConfig, tasks: list[_Task], results: list[dict[str, An
 
     names = [o.display_name for o in cfg.objects]
     unique = list(dict.fromkeys(names))
-    meta = {"format_version": FORMAT_VERSION, "depth_scale_mm": DEPTH_SCALE_MM,
-            "pixel_mm": cfg.sim.vbts.pixel_mm, "field_axes": ["x", "y", "z"], "field_unit": "uT",
-            "config": to_dict(cfg), "code_version": code_version(),
-            "created_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
-            "generation_seconds": round(seconds, 2), "workers": workers}
+    provenance = {"source": "tactile-manip simulate", "config": to_dict(cfg), "code_version": code_version(),
+                  "created_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+                  "generation_seconds": round(seconds, 2), "workers": workers}
+    extras = {"field_raw_ut": stack("field_raw_ut", np.float32), "saturated": stack("saturated", bool),
+              "pose": stack("pose", np.float32), "force_n": stack("force_n", np.float32),
+              "approach_mm": stack("approach_mm", np.float32),
+              "skin_approach_mm": stack("skin_approach_mm", np.float32), "contact": stack("contact", bool)}
     return PairedDataset(
-        field_ut=stack("field_ut", np.float32), field_raw_ut=stack("field_raw_ut", np.float32),
-        saturated=stack("saturated", bool), depth_q=stack("depth_q", np.uint8),
+        readings=stack("field_ut", np.float32), images=stack("depth_q", np.uint8), split=_splits(cfg),
+        image=depth_image_spec(cfg.sim.vbts.pixel_mm),
         object_index=np.array([unique.index(names[t.spec]) for t in tasks], dtype=np.int16),
-        object_names=np.array(unique), split=_splits(cfg), pose=stack("pose", np.float32),
-        force_n=stack("force_n", np.float32), approach_mm=stack("approach_mm", np.float32),
-        skin_approach_mm=stack("skin_approach_mm", np.float32), contact=stack("contact", bool),
-        metadata=meta)
+        object_names=np.array(unique), extras=extras, provenance=provenance)

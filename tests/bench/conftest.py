@@ -15,7 +15,7 @@ DATASET_CONFIG = ROOT / "configs" / "dataset" / "supermag.toml"
 def bench_data(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """One simulated press of each unseen test object of the SuperMag config (7 readings), as a dataset file."""
     from tactile_manip.bench.accuracy import simulate_test_objects
-    from tactile_manip.sim.dataset_io import save_dataset
+    from tactile_manip.data import save_dataset
 
     return save_dataset(tmp_path_factory.mktemp("bench") / "unseen.npz", simulate_test_objects(DATASET_CONFIG, 1))
 

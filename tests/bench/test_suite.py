@@ -15,7 +15,7 @@ from tactile_manip.bench.suite import SHARE_TOLERANCE_MM, BenchSettings, run_ben
 from tactile_manip.bench.timing import TimingBudget
 from tactile_manip.perception.evaluation import evaluate_methods
 from tactile_manip.perception.reconstruct import load_reconstructor
-from tactile_manip.sim.dataset_io import load_dataset
+from tactile_manip.data import load_dataset
 from tactile_manip.trials.scene import load_scene
 
 ROOT = Path(__file__).resolve().parents[2]

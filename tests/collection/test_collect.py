@@ -16,7 +16,7 @@ from tactile_manip.sensors.collect import CollectConfig, PairCollector
 from tactile_manip.sensors.force import FieldForce, FunctionForce, PressTrigger, ScriptForce
 from tactile_manip.sensors.contacts import Press
 from tactile_manip.sensors.pair_log import dataset_from_pair_logs, read_pair_log
-from tactile_manip.sim.dataset_io import load_dataset, save_dataset
+from tactile_manip.data import load_dataset, save_dataset
 from tactile_manip.sim.objects import IndenterPose
 from tactile_manip.sim.shapes import make_indenter
 
@@ -98,8 +98,8 @@ def test_dataset_from_logs_has_the_simulators_format_and_splits(tmp_path, write_
     back = load_dataset(save_dataset(tmp_path / "d.npz", data))
     assert len(back) == 23 and back.object_names.tolist() == ["allen_key", "letter_r", "rod"]
     assert [len(back.indices(s)) for s in ("train", "val", "test")] == [16, 4, 3]
-    assert back.depth_q.dtype == np.uint8 and back.depth_q.shape == (23, 200, 200)
-    assert np.isnan(back.pose).all() and back.metadata["sync"]["max_abs_dt_s"] == pytest.approx(0.002)
+    assert back.images.dtype == np.uint8 and back.images.shape == (23, 200, 200)
+    assert np.isnan(back.extra("pose")).all() and back.provenance["sync"]["max_abs_dt_s"] == pytest.approx(0.002)
     with pytest.raises(ValueError, match="no pairs"):
         dataset_from_pair_logs([write_log(tmp_path / "e.tmpairs", [])])
 
@@ -132,7 +132,7 @@ def test_a_still_press_gives_pairs_with_the_simulators_content(devices, calibrat
     for i in range(3):
         assert np.sqrt(np.mean((data.depth_mm(i) - imprint) ** 2)) < 0.03
         assert np.abs(data.field_ut[i] - change).max() < 25.0  # chip noise and quantisation only
-    assert data.object_names.tolist() == ["allen_key"] and data.force_n[0] == pytest.approx(10.5)
+    assert data.object_names.tolist() == ["allen_key"] and data.extra("force_n")[0] == pytest.approx(10.5)
 
 
 def test_a_camera_that_stops_ends_the_run_with_a_clear_error_and_a_readable_log(devices, calibration, tmp_path):

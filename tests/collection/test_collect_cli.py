@@ -11,7 +11,7 @@ import pytest
 
 from tactile_manip.cli import main
 from tactile_manip.sensors.pair_log import read_pair_log
-from tactile_manip.sim.dataset_io import load_dataset
+from tactile_manip.data import load_dataset
 
 
 def _one_line_error(capsys, *needles: str) -> str:

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from tactile_manip.sim.dataset_io import FORMAT_VERSION, PairedDataset, quantise_depth, save_dataset
+from tactile_manip.data import PairedDataset, depth_image_spec, quantise_depth, save_dataset
 
 
 def synthetic_dataset(n_per_object: int = 24, *, grid=(4, 4), image=(32, 32), seed: int = 0) -> PairedDataset:
@@ -27,11 +27,9 @@ def synthetic_dataset(n_per_object: int = 24, *, grid=(4, 4), image=(32, 32), se
             splits.append("test" if k == 2 else ("val" if i >= n_per_object * 3 // 4 else "train"))
     n = len(fields)
     return PairedDataset(
-        field_ut=np.asarray(fields), field_raw_ut=np.asarray(fields), saturated=np.zeros((n,) + grid + (3,), bool),
-        depth_q=np.asarray(depths), object_index=np.asarray(obj, np.int16), object_names=np.array(names),
-        split=np.array(splits), pose=np.zeros((n, 5), np.float32), force_n=np.full(n, 10.0, np.float32),
-        approach_mm=np.ones(n, np.float32), skin_approach_mm=np.ones(n, np.float32), contact=np.ones(n, bool),
-        metadata={"format_version": FORMAT_VERSION, "depth_scale_mm": 0.01, "pixel_mm": 0.5})
+        readings=np.asarray(fields), images=np.asarray(depths), split=np.array(splits), image=depth_image_spec(0.5),
+        object_index=np.asarray(obj, np.int16), object_names=np.array(names),
+        extras={"pose": np.zeros((n, 5), np.float32), "force_n": np.full(n, 10.0, np.float32)})
 
 
 @pytest.fixture(scope="session")

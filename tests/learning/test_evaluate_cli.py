@@ -28,7 +28,7 @@ def test_train_export_evaluate_round_trip(tiny_data, tmp_path, capsys):
     methods = [r["method"] for r in results["results"]]
     assert methods == ["Bilinear", "Bicubic", "Tiny"]
     assert all(r["psnr_db_mean"] > 0 and -1 <= r["ssim_mean"] <= 1 for r in results["results"])
-    assert results["psnr_data_range_mm"] == 2.0
+    assert results["psnr_data_range"] == 2.0 and results["image_unit"] == "mm"
     assert (out / "gallery.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert "| Tiny |" in (out / "table.md").read_text()
     assert "left out of the gallery" not in capsys.readouterr().out
@@ -46,7 +46,7 @@ def test_evaluate_refuses_a_bad_model_argument(tiny_data, tmp_path, capsys):
 
 
 def test_evaluate_fits_the_baselines_on_the_named_objects_only(tiny_data, tmp_path, capsys):
-    from tactile_manip.sim.dataset_io import load_dataset
+    from tactile_manip.data import load_dataset
 
     data = load_dataset(tiny_data)
     first = str(data.objects(data.indices("train"))[0])

@@ -12,7 +12,7 @@ from tactile_manip.learning.export import export_onnx, load_checkpoint
 from tactile_manip.learning.model import SuperMagCVAE, count_parameters, preset
 from tactile_manip.learning.train import TrainConfig, TrainingError, resolve_device, train
 from tactile_manip.perception.reconstruct import OnnxReconstructor
-from tactile_manip.sim.dataset_io import load_dataset
+from tactile_manip.data import load_dataset
 
 TINY = dict(preset="small", batch_size=8, lr=3e-3, epochs=6, patience=50, threads=1, seed=0)
 

@@ -31,16 +31,14 @@ class ExportedModel:
 
 
 def _tiny_dataset(rows: int, cols: int, h: int, w: int, n: int = 6):
-    from tactile_manip.sim.dataset_io import PairedDataset
+    from tactile_manip.data import PairedDataset, depth_image_spec
 
     rng = np.random.default_rng(0)
     field = rng.normal(0.0, 100.0, (n, rows, cols, 3)).astype(np.float32)
     return PairedDataset(
-        field_ut=field, field_raw_ut=field.copy(), saturated=np.zeros(field.shape, bool),
-        depth_q=rng.integers(0, 50, (n, h, w), dtype=np.uint8), object_index=np.zeros(n, np.int16),
-        object_names=np.array(["bar"]), split=np.array(["train"] * (n - 2) + ["val", "test"]),
-        pose=np.zeros((n, 5), np.float32), force_n=np.ones(n, np.float32), approach_mm=np.ones(n, np.float32),
-        skin_approach_mm=np.ones(n, np.float32), contact=np.ones(n, bool), metadata={"format_version": 1})
+        readings=field, images=rng.integers(0, 50, (n, h, w), dtype=np.uint8),
+        split=np.array(["train"] * (n - 2) + ["val", "test"]), image=depth_image_spec(),
+        object_index=np.zeros(n, np.int16), object_names=np.array(["bar"]))
 
 
 def _export(tmp: Path, *, rows: int, cols: int, h: int, w: int, pixel_mm: float) -> ExportedModel:

@@ -314,7 +314,7 @@ def test_load_reconstructor_uses_the_shipped_fit(name: str) -> None:
     out = rec.reconstruct(np.zeros((4, 4, 3), np.float32))
     assert out.spread_mm is None
     np.testing.assert_allclose(out.depth_mm, max(fit["offset_mm"], 0.0), rtol=1e-6)
-    assert rec.to_dict() == {**fit, "output_shape": list(rec.output_shape), "input_shape": [4, 4, 3]}
+    assert rec.to_dict() == {**fit, "output_shape": list(rec.output_shape), "input_shape": [4, 4, 3], "channel": 2}
 
 
 def test_load_reconstructor_rejects_an_unknown_name() -> None:

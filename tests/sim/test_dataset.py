@@ -17,13 +17,13 @@ import pytest
 from tactile_manip.config import from_dict, to_dict
 from tactile_manip.errors import DatasetError
 from tactile_manip.sim.dataset import DatasetConfig, ObjectSpec, PoseRanges, generate, load_dataset_config
-from tactile_manip.sim.dataset_io import FORMAT_VERSION, PairedDataset, load_dataset, save_dataset
+from tactile_manip.data import FORMAT_VERSION, PairedDataset, load_dataset, save_dataset
 from tactile_manip.version import __version__, code_version
 
 ROOT = Path(__file__).resolve().parents[2]
 SUPERMAG = ROOT / "configs" / "dataset" / "supermag.toml"
-ARRAYS = ("field_ut", "field_raw_ut", "saturated", "depth_q", "object_index", "object_names", "split", "pose",
-          "force_n", "approach_mm", "skin_approach_mm", "contact")
+ARRAYS = ("readings", "images", "object_index", "object_names", "split")
+EXTRAS = ("field_raw_ut", "saturated", "pose", "force_n", "approach_mm", "skin_approach_mm", "contact")
 
 
 @pytest.fixture(scope="module")
@@ -42,8 +42,9 @@ def saved(data, tmp_path_factory) -> Path:
 
 
 def _assert_same_arrays(a: PairedDataset, b: PairedDataset) -> None:
-    for name in ARRAYS:
-        x, y = getattr(a, name), getattr(b, name)
+    pairs = [(name, getattr(a, name), getattr(b, name)) for name in ARRAYS]
+    pairs += [(name, a.extra(name), b.extra(name)) for name in EXTRAS]
+    for name, x, y in pairs:
         assert x.dtype == y.dtype and x.shape == y.shape, name
         np.testing.assert_array_equal(x, y, err_msg=name)
 
@@ -55,20 +56,20 @@ def test_shapes_and_dtypes(data, cfg):
     n = sum(o.count for o in cfg.objects)
     assert n == 34 and len(data) == n
     assert data.field_ut.shape == (n, 4, 4, 3) and data.field_ut.dtype == np.float32
-    assert data.saturated.dtype == bool and not data.saturated.any()
-    assert data.depth_q.shape == (n, 200, 200) and data.depth_q.dtype == np.uint8
-    assert data.pose.shape == (n, 5) and data.force_n.shape == (n,)
-    contact = data.contact
+    assert data.extra("saturated").dtype == bool and not data.extra("saturated").any()
+    assert data.images.shape == (n, 200, 200) and data.images.dtype == np.uint8
+    assert data.extra("pose").shape == (n, 5) and data.extra("force_n").shape == (n,)
+    contact = data.extra("contact")
     assert contact.sum() >= n // 2  # offsets of +-5 mm mostly land on the pad
-    assert ((data.force_n[contact] >= 10.0) & (data.force_n[contact] <= 11.0)).all()
-    assert np.abs(data.pose[:, :2]).max() <= 5.0
+    assert ((data.extra("force_n")[contact] >= 10.0) & (data.extra("force_n")[contact] <= 11.0)).all()
+    assert np.abs(data.extra("pose")[:, :2]).max() <= 5.0
 
 
 def test_worker_count_does_not_change_the_data(data, cfg):
     parallel = generate(cfg, workers=2)
     _assert_same_arrays(data, parallel)
     assert parallel.fingerprint() == data.fingerprint()
-    assert parallel.metadata["workers"] == 2
+    assert parallel.provenance["workers"] == 2
 
 
 def test_sample_depends_only_on_seed_and_index(data, cfg):
@@ -76,13 +77,13 @@ def test_sample_depends_only_on_seed_and_index(data, cfg):
     first = generate(dataclasses.replace(cfg, objects=cfg.objects[:1]), workers=1)
     k = cfg.objects[0].count
     np.testing.assert_array_equal(first.field_ut, data.field_ut[:k])
-    np.testing.assert_array_equal(first.depth_q, data.depth_q[:k])
+    np.testing.assert_array_equal(first.images, data.images[:k])
 
 
 def test_a_different_seed_changes_the_readings(data, cfg):
     other = generate(dataclasses.replace(cfg, seed=1), workers=1)
     assert other.fingerprint() != data.fingerprint()
-    assert not np.array_equal(other.pose, data.pose)
+    assert not np.array_equal(other.extra("pose"), data.extra("pose"))
     assert np.abs(other.field_ut - data.field_ut).max() > 1.0  # microtesla, well above rounding
     np.testing.assert_array_equal(other.split, data.split)  # splits come from the config, not the seed
 
@@ -119,27 +120,27 @@ def test_simulate_notes_empty_and_bottomed_out_presses(data):
     from tactile_manip.commands.simulate import _physics_notes
 
     assert _physics_notes(data, thickness_mm=2.5) == []  # the small default dataset is inside the model
-    thin = 0.5 * float(np.maximum(data.approach_mm, data.skin_approach_mm).max())
+    thin = 0.5 * float(np.maximum(data.extra("approach_mm"), data.extra("skin_approach_mm")).max())
     notes = _physics_notes(data, thickness_mm=thin)
     assert len(notes) == 1 and "bottom out" in notes[0] and f"{len(data)} presses" in notes[0]
-    empty = dataclasses.replace(data, contact=np.zeros(len(data), bool))
+    empty = dataclasses.replace(data, extras={**data.extras, "contact": np.zeros(len(data), bool)})
     assert f"{len(data)} of {len(data)} presses do not touch the pad" in _physics_notes(empty, thickness_mm=2.5)[0]
 
 
 def test_procedural_variants_are_different_shapes():
     spec = ObjectSpec("procedural", count=2, variants=2, kwargs={"seed": 3})
     d = generate(DatasetConfig(objects=[spec], poses=PoseRanges(offset_mm=0.0, tilt_deg=0.0)), workers=1)
-    assert d.contact.all()
-    assert not np.array_equal(d.depth_q[0] > 0, d.depth_q[1] > 0)
+    assert d.extra("contact").all()
+    assert not np.array_equal(d.images[0] > 0, d.images[1] > 0)
 
 
 def test_depth_mm_is_float32_within_the_quantised_range(data):
     depth = data.depth_mm()
-    assert depth.dtype == np.float32 and depth.shape == data.depth_q.shape
+    assert depth.dtype == np.float32 and depth.shape == data.images.shape
     assert depth.min() >= 0.0 and depth.max() <= 2.55 + 1e-6
     assert depth.max() > 0.5  # 10 N presses indent the gel by ~0.75-1.7 mm
-    np.testing.assert_allclose(data.depth_mm([3])[0], data.depth_q[3] * 0.01, rtol=1e-6)
-    assert not depth[~data.contact].any()  # no contact, no depth
+    np.testing.assert_allclose(data.depth_mm([3])[0], data.images[3] * 0.01, rtol=1e-6)
+    assert not depth[~data.extra("contact")].any()  # no contact, no depth
 
 
 # ---------------------------------------------------------------- the file
@@ -149,10 +150,12 @@ def test_save_load_round_trip(data, saved, cfg):
     loaded = load_dataset(saved)
     _assert_same_arrays(data, loaded)
     assert loaded.fingerprint() == data.fingerprint()
-    meta = loaded.metadata
-    assert meta["format_version"] == FORMAT_VERSION
+    meta = loaded.provenance
     assert meta["code_version"] == code_version() and meta["code_version"].startswith(__version__)
-    assert meta["depth_scale_mm"] == 0.01 == loaded.depth_scale_mm
+    assert loaded.image.scale == 0.01 and loaded.image.unit == "mm" and loaded.image.data_range == 2.0
+    assert loaded.channels.kind == "magnetic_vector" and loaded.channels.unit == "uT"
+    with np.load(saved, allow_pickle=False) as z:
+        assert json.loads(str(z["metadata"]))["format_version"] == FORMAT_VERSION
     assert meta["config"] == json.loads(json.dumps(to_dict(cfg)))
     assert from_dict(DatasetConfig, meta["config"]) == cfg  # a file tells how to regenerate it
 
@@ -208,14 +211,14 @@ def test_load_truncated_file(saved, tmp_path):
 
 
 def test_load_npz_missing_arrays(saved, tmp_path):
-    msg = _load_error(_rewrite(saved, tmp_path / "m.npz", depth_q=None, pose=None))
-    assert "missing arrays" in msg and "depth_q" in msg and "pose" in msg
+    msg = _load_error(_rewrite(saved, tmp_path / "m.npz", images=None, split=None))
+    assert "missing arrays" in msg and "images" in msg and "split" in msg
 
 
 def test_load_wrong_format_version(saved, tmp_path):
     path = _rewrite(saved, tmp_path / "v.npz", metadata=_metadata_with(saved, format_version=FORMAT_VERSION + 1))
     msg = _load_error(path)
-    assert f"format version {FORMAT_VERSION + 1}" in msg and f"reads {FORMAT_VERSION}" in msg
+    assert f"format version {FORMAT_VERSION + 1}" in msg and f"reads 1 and {FORMAT_VERSION}" in msg
 
 
 def test_load_metadata_not_json(saved, tmp_path):
@@ -224,7 +227,7 @@ def test_load_metadata_not_json(saved, tmp_path):
 
 
 def test_load_inconsistent_lengths(saved, data, tmp_path):
-    msg = _load_error(_rewrite(saved, tmp_path / "n.npz", force_n=data.force_n[:-1]))
+    msg = _load_error(_rewrite(saved, tmp_path / "n.npz", extra__force_n=data.extra("force_n")[:-1]))
     assert "force_n" in msg and f"{len(data)} samples" in msg
 
 

@@ -30,7 +30,7 @@ from tactile_manip.cli import main
 from tactile_manip.errors import ConfigError
 from tactile_manip.learning import train as train_module
 from tactile_manip.learning.train import TrainConfig, TrainingError, load_train_config, train, with_overrides
-from tactile_manip.sim.dataset_io import FORMAT_VERSION, PairedDataset, quantise_depth, save_dataset
+from tactile_manip.data import PairedDataset, depth_image_spec, quantise_depth, save_dataset
 
 TINY = dict(preset="small", batch_size=8, epochs=4, patience=50, threads=1, seed=0, weight_decay=0.0)
 STEPS_PER_EPOCH = 2  # 18 training pairs in batches of 8
@@ -54,12 +54,10 @@ def _tiny_dataset(n_per_object: int = 12, size: int = 16) -> PairedDataset:
             splits.append("test" if k == 2 else ("val" if i >= n_per_object * 3 // 4 else "train"))
     n = len(fields)
     return PairedDataset(
-        field_ut=np.asarray(fields), field_raw_ut=np.asarray(fields), saturated=np.zeros((n, 4, 4, 3), bool),
-        depth_q=np.asarray(depths), object_index=np.asarray(obj, np.int16),
-        object_names=np.array(["allen_key", "letter_r", "cylinder_3mm"]), split=np.array(splits),
-        pose=np.zeros((n, 5), np.float32), force_n=np.full(n, 10.0, np.float32), approach_mm=np.ones(n, np.float32),
-        skin_approach_mm=np.ones(n, np.float32), contact=np.ones(n, bool),
-        metadata={"format_version": FORMAT_VERSION, "depth_scale_mm": 0.01, "pixel_mm": 1.25})
+        readings=np.asarray(fields), images=np.asarray(depths), split=np.array(splits),
+        image=depth_image_spec(1.25), object_index=np.asarray(obj, np.int16),
+        object_names=np.array(["allen_key", "letter_r", "cylinder_3mm"]),
+        extras={"pose": np.zeros((n, 5), np.float32), "force_n": np.full(n, 10.0, np.float32)})
 
 
 @pytest.fixture(scope="module")

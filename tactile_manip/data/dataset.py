@@ -1,0 +1,164 @@
+"""A paired dataset in memory: readings with named channels, images with a unit, splits, groups, extras.
+
+Shapes (N samples):
+
+- ``readings`` (N, R, C, A) float32: one reading per sample, R x C taxels of A channels (``channels``);
+- ``images`` (N, H, W): the stored image values (any real dtype; ``image`` maps them to its unit);
+- ``split`` (N,) str in ``SPLITS``;
+- ``object_index`` (N,) int16 into ``object_names`` (K,) str, optional: what was pressed (per-object tables,
+  training-object filters);
+- ``groups`` (N,) int64, optional: samples that belong together (one contact, one participant); a split never
+  cuts a group;
+- ``extras``: optional per-sample arrays the producer has, e.g. ``pose`` (N, 5) ``[x_mm, y_mm, yaw_rad,
+  tilt_x_rad, tilt_y_rad]``, ``force_n``, ``approach_mm``, ``skin_approach_mm``, ``contact`` (bool),
+  ``field_raw_ut`` and ``saturated`` (N, R, C, A);
+- ``provenance``: JSON-able dict (who made it, from what config, code version, time).
+
+This module imports numpy only: the simulator, the collection pipeline and :func:`~tactile_manip.data.imports.
+from_arrays` produce datasets; training, evaluation and the commands consume them.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from tactile_manip.data.spec import ChannelSpec, ImageSpec
+from tactile_manip.errors import DatasetError
+
+SPLITS = ("train", "val", "test")
+
+
+@dataclass(frozen=True, eq=False)
+class PairedDataset:
+    """Arrays of a paired dataset (see the module docstring for shapes and units)."""
+
+    readings: np.ndarray
+    images: np.ndarray
+    split: np.ndarray
+    channels: ChannelSpec = field(default_factory=ChannelSpec)
+    image: ImageSpec = field(default_factory=ImageSpec)
+    object_index: np.ndarray | None = None
+    object_names: np.ndarray | None = None
+    groups: np.ndarray | None = None
+    extras: dict[str, np.ndarray] = field(default_factory=dict)
+    provenance: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        n = len(self)
+        if self.readings.ndim != 4 or self.readings.shape[-1] != self.channels.count:
+            raise DatasetError(f"readings: expected shape (N, rows, cols, {self.channels.count}) for channels "
+                               f"{list(self.channels.names)}, got {self.readings.shape}")
+        if self.images.ndim != 3 or self.images.shape[0] != n:
+            raise DatasetError(f"images: expected shape ({n}, H, W), got {self.images.shape}")
+        if self.split.shape != (n,):
+            raise DatasetError(f"split: expected shape ({n},), got {self.split.shape}")
+        if (self.object_index is None) != (self.object_names is None):
+            raise DatasetError("object_index and object_names come together (both or neither)")
+        if self.object_index is not None and self.object_index.shape != (n,):
+            raise DatasetError(f"object_index: expected shape ({n},), got {self.object_index.shape}")
+        if self.groups is not None and self.groups.shape != (n,):
+            raise DatasetError(f"groups: expected shape ({n},), got {self.groups.shape}")
+        bad = [k for k, a in self.extras.items() if a.shape[:1] != (n,)]
+        if bad:
+            raise DatasetError(f"extras {bad} do not have {n} samples like readings")
+
+    def __len__(self) -> int:
+        return int(self.readings.shape[0])
+
+    # --- geometry ------------------------------------------------------------------------------------------
+    @property
+    def grid(self) -> tuple[int, int]:
+        """Taxel rows and columns (R, C)."""
+        return int(self.readings.shape[1]), int(self.readings.shape[2])
+
+    @property
+    def image_shape(self) -> tuple[int, int]:
+        """Image height and width (H, W), pixels."""
+        return int(self.images.shape[1]), int(self.images.shape[2])
+
+    # --- values --------------------------------------------------------------------------------------------
+    def image_values(self, index: np.ndarray | slice | None = None) -> np.ndarray:
+        """Images (n, H, W) float32 in the image unit for ``index`` (all samples when None)."""
+        stored = self.images if index is None else self.images[index]
+        out = stored.astype(np.float32) * np.float32(self.image.scale)
+        return out + np.float32(self.image.offset) if self.image.offset else out
+
+    def depth_mm(self, index: np.ndarray | slice | None = None) -> np.ndarray:
+        """Depth images (n, H, W) float32 in mm: :meth:`image_values` of a dataset whose images are in mm."""
+        if self.image.unit != "mm":
+            raise DatasetError(f"the images are in {self.image.unit!r}, not depth in mm: use image_values()")
+        return self.image_values(index)
+
+    @property
+    def field_ut(self) -> np.ndarray:
+        """Readings (N, R, C, 3) in microtesla, for a dataset of magnetic readings in uT."""
+        if self.channels.kind != "magnetic_vector" or self.channels.unit != "uT":
+            raise DatasetError(f"the readings are {self.channels.kind} in {self.channels.unit!r}, not a magnetic "
+                               f"field in uT: use .readings")
+        return self.readings
+
+    def has(self, name: str) -> bool:
+        """Whether the producer stored the per-sample extra ``name`` (e.g. ``"pose"``)."""
+        return name in self.extras
+
+    def extra(self, name: str) -> np.ndarray:
+        """The per-sample extra ``name``; DatasetError naming what the dataset has when it is absent."""
+        if name not in self.extras:
+            have = ", ".join(sorted(self.extras)) or "none"
+            raise DatasetError(f"the dataset has no {name!r} per sample (its extras: {have})")
+        return self.extras[name]
+
+    # --- selection -----------------------------------------------------------------------------------------
+    def indices(self, split: str, objects: tuple[str, ...] | list[str] = ()) -> np.ndarray:
+        """Sample indices of ``split`` ('train', 'val' or 'test'), ascending; only of ``objects`` (names) if given."""
+        if split not in SPLITS:
+            raise ValueError(f"split must be one of {SPLITS}, got {split!r}")
+        idx = np.flatnonzero(self.split == split)
+        if len(objects):
+            known = [] if self.object_names is None else self.object_names.tolist()
+            unknown = set(objects) - set(known)
+            if unknown:
+                raise ValueError(f"objects {sorted(unknown)} are not in the dataset; it has {known}")
+            idx = idx[np.isin(self.objects(idx), list(objects))]
+        return idx
+
+    def objects(self, index: np.ndarray | None = None) -> np.ndarray:
+        """Object names (n,) of the samples at ``index`` (all when None); "all" when the data names none."""
+        if self.object_index is None:
+            n = len(self) if index is None else len(np.arange(len(self))[index])
+            return np.full(n, "all")
+        idx = self.object_index if index is None else self.object_index[index]
+        return self.object_names[idx]
+
+    def subset(self, index: np.ndarray) -> PairedDataset:
+        """The samples ``index`` as a dataset of their own (same specs, object names and provenance)."""
+        def take(a: np.ndarray | None) -> np.ndarray | None:
+            return None if a is None else a[index]
+
+        return PairedDataset(readings=self.readings[index], images=self.images[index], split=self.split[index],
+                             channels=self.channels, image=self.image, object_index=take(self.object_index),
+                             object_names=self.object_names, groups=take(self.groups),
+                             extras={k: v[index] for k, v in self.extras.items()}, provenance=self.provenance)
+
+    def fingerprint(self) -> str:
+        """SHA-256 (first 16 hex) over readings, stored images, splits and objects: identifies training data.
+
+        Over the same bytes as format version 1 hashed, so a file converted from it keeps its fingerprint.
+        """
+        h = hashlib.sha256()
+        parts = [self.readings, self.images, self.split.astype("U5")]
+        parts += [a for a in (self.object_index, self.groups) if a is not None]
+        for a in parts:
+            h.update(np.ascontiguousarray(a).tobytes())
+        return h.hexdigest()[:16]
+
+    def describe(self) -> dict[str, Any]:
+        """What the data is, for model metadata and reports (JSON-able)."""
+        return {"samples": len(self), "grid": list(self.grid), "channels": self.channels.to_dict(),
+                "image_shape": list(self.image_shape), "image": self.image.to_dict(),
+                "splits": {s: int(np.sum(self.split == s)) for s in SPLITS}, "fingerprint": self.fingerprint(),
+                "source": self.provenance.get("source", "unknown")}

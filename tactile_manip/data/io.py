@@ -1,0 +1,151 @@
+"""The paired dataset file: one compressed ``.npz`` of arrays plus a JSON metadata string.
+
+Format version 2 (written by :func:`save_dataset`):
+
+- ``readings`` (N, R, C, A), ``images`` (N, H, W), ``split`` (N,) str;
+- ``object_index`` (N,) int16 and ``object_names`` (K,) str, optional; ``groups`` (N,) int64, optional;
+- ``extra__<name>``: one per-sample extra each (``pose``, ``force_n``, ``field_raw_ut``, ...);
+- ``metadata`` () str: JSON ``{"format_version": 2, "channels": {...}, "image": {...}, "provenance": {...}}``.
+
+Format version 1 (``tactile-manip simulate`` and ``collect`` before the dataset layer) is still read:
+``field_ut`` -> magnetic readings in uT, ``depth_q`` -> depth images in mm (``depth_scale_mm`` per level, data
+range 2 mm, the range every metric used then), its simulator fields -> extras. Files are data: they are read
+with ``allow_pickle=False``.
+"""
+
+from __future__ import annotations
+
+import json
+import zipfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from tactile_manip.data.dataset import PairedDataset
+from tactile_manip.data.spec import ChannelSpec, ImageSpec
+from tactile_manip.errors import DatasetError
+
+FORMAT_VERSION = 2
+DEPTH_SCALE_MM = 0.01       # the simulator's and collection's uint8 depth storage: 0.01 mm per level
+DEPTH_RANGE_MM = 2.0        # data range of depth images in mm (DTact saturates near 1.9 mm)
+_EXTRA = "extra__"
+_V1_REQUIRED = ("field_ut", "field_raw_ut", "saturated", "depth_q", "object_index", "object_names", "split",
+                "pose", "force_n", "approach_mm", "skin_approach_mm", "contact", "metadata")
+_V1_EXTRAS = ("field_raw_ut", "saturated", "pose", "force_n", "approach_mm", "skin_approach_mm", "contact")
+
+
+def depth_image_spec(pixel_mm: float | None = 0.1) -> ImageSpec:
+    """The image spec of depth images stored as uint8 hundredths of a millimetre."""
+    return ImageSpec(unit="mm", data_range=DEPTH_RANGE_MM, value_min=0.0, pixel_mm=pixel_mm, scale=DEPTH_SCALE_MM)
+
+
+def quantise_depth(depth_mm: np.ndarray) -> np.ndarray:
+    """Depth (mm) -> uint8 in units of ``DEPTH_SCALE_MM`` (saturating at 2.55 mm)."""
+    return np.clip(np.rint(np.asarray(depth_mm) / DEPTH_SCALE_MM), 0, 255).astype(np.uint8)
+
+
+def dataset_path(path: str | Path) -> Path:
+    """The path :func:`save_dataset` writes for ``path`` (``.npz`` appended if missing)."""
+    path = Path(path)
+    return path if path.suffix == ".npz" else path.with_name(path.name + ".npz")
+
+
+def save_dataset(path: str | Path, data: PairedDataset) -> Path:
+    """Write ``data`` to ``path`` (``.npz`` appended if missing) atomically: a temp file, then rename."""
+    path = dataset_path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    arrays: dict[str, np.ndarray] = {"readings": data.readings, "images": data.images, "split": data.split}
+    for name in ("object_index", "object_names", "groups"):
+        if getattr(data, name) is not None:
+            arrays[name] = getattr(data, name)
+    arrays.update({_EXTRA + k: v for k, v in data.extras.items()})
+    meta = {"format_version": FORMAT_VERSION, "channels": data.channels.to_dict(), "image": data.image.to_dict(),
+            "provenance": data.provenance}
+    arrays["metadata"] = np.array(json.dumps(meta))
+    tmp = path.with_name(path.name + ".partial")
+    with tmp.open("wb") as f:
+        np.savez_compressed(f, **arrays)
+    tmp.replace(path)
+    return path
+
+
+def load_dataset(path: str | Path) -> PairedDataset:
+    """Read a dataset written by :func:`save_dataset` (format 2) or by earlier versions (format 1).
+
+    Raises:
+        DatasetError: missing file, not an npz, not a dataset of ours, missing arrays, inconsistent lengths,
+            or a newer format.
+    """
+    path = Path(path)
+    if path.is_dir():
+        raise DatasetError(f"{path} is a directory, not a dataset file (.npz)")
+    if not path.is_file():
+        raise DatasetError(f"dataset not found: {path} (make one with `tactile-manip simulate --out {path}` "
+                           f"or `tactile-manip import ... --out {path}`)")
+    try:
+        z = np.load(path, allow_pickle=False)
+        if not isinstance(z, np.lib.npyio.NpzFile):
+            raise DatasetError(f"{path}: holds a single array, not a dataset archive (.npz); "
+                               f"`tactile-manip import` makes a dataset from arrays")
+        with z:
+            if "metadata" not in z.files:
+                raise DatasetError(f"{path}: not a tactile_manip dataset (no 'metadata' entry; it holds "
+                                   f"{sorted(z.files)[:8]}); `tactile-manip import` makes one from arrays")
+            meta = _metadata(path, z["metadata"])
+            version = meta.get("format_version")
+            if version in (1, FORMAT_VERSION):
+                try:
+                    return (_from_v1 if version == 1 else _from_v2)(path, z, meta)
+                except DatasetError as e:
+                    raise e if str(path) in str(e) else DatasetError(f"{path}: {e}") from e
+            raise DatasetError(f"{path}: dataset format version {version!r}, this code reads 1 and {FORMAT_VERSION}")
+    except DatasetError:
+        raise
+    except (zipfile.BadZipFile, ValueError, OSError, EOFError, KeyError) as e:
+        raise DatasetError(f"{path}: cannot read as a dataset (.npz): {e}") from e
+
+
+def _metadata(path: Path, entry: np.ndarray) -> dict[str, Any]:
+    try:
+        meta = json.loads(str(entry))
+    except json.JSONDecodeError as e:
+        raise DatasetError(f"{path}: metadata is not valid JSON: {e}") from e
+    if not isinstance(meta, dict):
+        raise DatasetError(f"{path}: metadata is not a JSON object")
+    return meta
+
+
+def _from_v2(path: Path, z: np.lib.npyio.NpzFile, meta: dict[str, Any]) -> PairedDataset:
+    missing = [k for k in ("readings", "images", "split") if k not in z.files]
+    if missing:
+        raise DatasetError(f"{path}: not a tactile_manip dataset, missing arrays {missing}")
+    optional = {k: (z[k] if k in z.files else None) for k in ("object_index", "object_names", "groups")}
+    extras = {k[len(_EXTRA):]: z[k] for k in z.files if k.startswith(_EXTRA)}
+    try:
+        channels, image = ChannelSpec.from_dict(meta["channels"]), ImageSpec.from_dict(meta["image"])
+    except (KeyError, TypeError, ValueError) as e:
+        raise DatasetError(f"{path}: metadata does not describe channels and images: {e}") from e
+    return PairedDataset(readings=z["readings"], images=z["images"], split=z["split"], channels=channels,
+                         image=image, extras=extras, provenance=dict(meta.get("provenance", {})), **optional)
+
+
+def _from_v1(path: Path, z: np.lib.npyio.NpzFile, meta: dict[str, Any]) -> PairedDataset:
+    missing = [k for k in _V1_REQUIRED if k not in z.files]
+    if missing:
+        raise DatasetError(f"{path}: not a tactile_manip dataset, missing arrays {missing}")
+    arrays = {k: z[k] for k in _V1_REQUIRED if k != "metadata"}
+    n = arrays["field_ut"].shape[0]
+    bad = [k for k, a in arrays.items() if k != "object_names" and a.shape[:1] != (n,)]
+    if bad:
+        raise DatasetError(f"{path}: arrays {bad} do not have {n} samples like field_ut")
+    image = ImageSpec(unit="mm", data_range=DEPTH_RANGE_MM, pixel_mm=float(meta.get("pixel_mm", 0.1)),
+                      scale=float(meta.get("depth_scale_mm", DEPTH_SCALE_MM)))
+    provenance = {k: v for k, v in meta.items() if k not in ("format_version", "depth_scale_mm", "pixel_mm",
+                                                              "field_axes", "field_unit")}
+    provenance["read_from_format"] = 1
+    return PairedDataset(
+        readings=arrays["field_ut"], images=arrays["depth_q"], split=arrays["split"],
+        channels=ChannelSpec(names=tuple(meta.get("field_axes", ("x", "y", "z")))), image=image,
+        object_index=arrays["object_index"], object_names=arrays["object_names"],
+        extras={k: arrays[k] for k in _V1_EXTRAS}, provenance=provenance)
