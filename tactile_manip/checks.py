@@ -58,3 +58,14 @@ def check_choice(name: str, value: str, allowed: Sequence[str]) -> str:
     if value not in allowed:
         raise ValueError(f"{name} must be one of {list(allowed)}, got {value!r}")
     return value
+
+
+def check_nonblank(name: str, value: str, *, hint: str = "") -> str:
+    """Return ``value`` after checking it is a string with something other than whitespace in it.
+
+    An empty string is falsy, so code that tests ``if value:`` would quietly take another branch (an empty
+    ``--port`` once meant the simulated sensor); callers check here first. ``hint`` says what to give instead.
+    """
+    if not isinstance(value, str) or not value.strip():
+        raise ValueError(f"{name} must not be empty, got {value!r}" + (f": {hint}" if hint else ""))
+    return value

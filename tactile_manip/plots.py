@@ -5,7 +5,9 @@ matplotlib is imported inside the functions, so importing this module is free.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -22,20 +24,73 @@ def _pyplot():
     return plt
 
 
-def plot_field(ax, field_ut: np.ndarray, *, pitch_mm: float = 5.0, title: str = "") -> None:
-    """Draw a (4, 4, 3) reading on ``ax``: z as a heat map, (x, y) as arrows at the chip positions."""
+@dataclass(frozen=True, eq=False)
+class FieldArtists:
+    """What :func:`plot_field` drew, for updating in place (``view``): heat map, arrows, arrow key, colour bar."""
+
+    image: Any
+    arrows: Any
+    key: Any
+    colorbar: Any
+    pitch_mm: float
+
+
+def plot_field(ax, field_ut: np.ndarray, *, pitch_mm: float = 5.0, title: str = "") -> FieldArtists:
+    """Draw a (4, 4, 3) reading on ``ax``: z as a heat map, (x, y) as arrows at the chip positions, with an
+    arrow of known length (the key, below the axes) and a labelled colour bar."""
     f = np.asarray(field_ut, dtype=np.float64)
     half = 2 * pitch_mm
-    lim = max(float(np.abs(f[..., 2]).max()), 1e-9)
-    im = ax.imshow(f[..., 2], cmap="RdBu_r", vmin=-lim, vmax=lim, extent=(-half, half, -half, half))
+    im = ax.imshow(f[..., 2], cmap="RdBu_r", extent=(-half, half, -half, half))
     c = (np.arange(4) - 1.5) * pitch_mm
     x, y = np.meshgrid(c, -c)
-    scale = max(float(np.hypot(f[..., 0], f[..., 1]).max()), 1e-9) / (0.45 * pitch_mm)
-    ax.quiver(x, y, f[..., 0], f[..., 1], angles="xy", scale_units="xy", scale=scale, color="k", width=0.012)
+    arrows = ax.quiver(x, y, f[..., 0], f[..., 1], angles="xy", scale_units="xy", scale=1.0, color="k",
+                       width=0.012)
+    # the key sits in a strip below the pad, inside the axes, so every layout keeps room for it
+    ax.set_ylim(-half - 0.6 * pitch_mm, half)
+    key = ax.quiverkey(arrows, X=-half + 0.2 * pitch_mm, Y=-half - 0.3 * pitch_mm, U=1.0, label="",
+                       labelpos="E", coordinates="data", fontproperties={"size": 9})
     ax.set_title(title or "field: z (colour), x-y (arrows)")
     ax.set_xlabel("x [mm]")
     ax.set_ylabel("y [mm]")
-    ax.figure.colorbar(im, ax=ax, label="B_z [uT]", shrink=0.8)
+    artists = FieldArtists(im, arrows, key, _colorbar(ax, im, "B_z [uT]"), pitch_mm)
+    set_field_ranges(artists, z_range_ut=float(np.abs(f[..., 2]).max()),
+                     xy_range_ut=float(np.hypot(f[..., 0], f[..., 1]).max()))
+    return artists
+
+
+def set_field_ranges(artists: FieldArtists, *, z_range_ut: float, xy_range_ut: float) -> None:
+    """Colour scale +-``z_range_ut`` and arrows scaled so ``xy_range_ut`` spans 0.45 pitch; the key shows the
+    largest 1-2-5 value (uT) not above the range, drawn at the same scale."""
+    z, xy = max(z_range_ut, 1e-9), max(xy_range_ut, 1e-9)
+    artists.image.set_clim(-z, z)
+    artists.arrows.scale = xy / (0.45 * artists.pitch_mm)
+    step = nice_step(xy)
+    artists.key.U = step
+    artists.key.text.set_text(f"{step:g} uT (x-y)")
+
+
+def nice_step(value: float) -> float:
+    """The largest of 1, 2, 5 x 10^k that is <= ``value`` (> 0), e.g. 180 -> 100, 260 -> 200."""
+    exp = 10.0 ** np.floor(np.log10(value))
+    return float(max(m * exp for m in (1.0, 2.0, 5.0) if m * exp <= value * (1 + 1e-12)))
+
+
+def annotate_cells(ax, image, values: np.ndarray, *, fmt: str = "{:.0f}") -> None:
+    """Write each value of a (R, C) heat map in its cell, white on dark cells and black on light ones."""
+    rgba = image.cmap(image.norm(values))
+    # relative luminance (Rec. 709 weights) of each cell's colour decides the text colour
+    luminance = rgba[..., :3] @ np.array([0.2126, 0.7152, 0.0722])
+    for (r, c), v in np.ndenumerate(values):
+        ax.text(c, r, fmt.format(v), ha="center", va="center", fontsize=7,
+                color="white" if luminance[r, c] < 0.5 else "black")
+
+
+def _colorbar(ax, image, label: str):
+    """A colour bar right of ``ax``, labelled on top: a label along the bar's far side would sit next to the
+    neighbouring panel's axis label and read as that panel's."""
+    bar = ax.figure.colorbar(image, ax=ax, shrink=0.8)
+    bar.ax.set_title(label, fontsize=9, loc="left")
+    return bar
 
 
 def plot_depth(ax, depth_mm: np.ndarray, *, pixel_mm: float = 0.1, title: str = "depth",
@@ -48,7 +103,7 @@ def plot_depth(ax, depth_mm: np.ndarray, *, pixel_mm: float = 0.1, title: str = 
     ax.set_title(title)
     ax.set_xlabel("x [mm]")
     ax.set_ylabel("y [mm]")
-    ax.figure.colorbar(im, ax=ax, label="depth [mm]", shrink=0.8)
+    _colorbar(ax, im, "depth [mm]")
 
 
 def sample_figure(field_ut: np.ndarray, depth_mm: np.ndarray | None, *, title: str = "",
@@ -65,12 +120,13 @@ def sample_figure(field_ut: np.ndarray, depth_mm: np.ndarray | None, *, title: s
     for ax, i in zip(axes[2:], range(3)):
         lim = max(float(np.abs(f[..., i]).max()), 1e-9)
         im = ax.imshow(f[..., i], cmap="RdBu_r", vmin=-lim, vmax=lim)
-        for (r, c), v in np.ndenumerate(f[..., i]):
-            ax.text(c, r, f"{v:.0f}", ha="center", va="center", fontsize=7)
-        ax.set_title(f"B_{AXES[i]} [uT] (row 0 = +y)")
+        annotate_cells(ax, im, f[..., i])
+        ax.set_title(f"B_{AXES[i]} per chip (row 0 = +y)")
+        ax.set_xlabel("column")
+        ax.set_ylabel("row")
         ax.set_xticks(range(4))
         ax.set_yticks(range(4))
-        fig.colorbar(im, ax=ax, shrink=0.8)
+        _colorbar(ax, im, f"B_{AXES[i]} [uT]")
     if title:
         fig.suptitle(title)
     if path is not None:

@@ -49,6 +49,8 @@ class AngleEstimate:
         centroid_mm: contact centroid (x, y) in the pad frame, mm.
         area_mm2: contact area, mm^2.
         reason: why the angle is undefined ("" when defined).
+        saturated_chips: chips with an axis at the ADC rail or beyond the chip's range (clamped before the
+            reconstruction); the confidence is scaled by the fraction of chips without.
         timings_s: named durations of the estimate's stages in s (e.g. "reconstruct", "pose", "total"; and
             "age", from the reading's arrival to the estimate), empty when not measured.
     """
@@ -59,4 +61,5 @@ class AngleEstimate:
     centroid_mm: tuple[float, float] = (0.0, 0.0)
     area_mm2: float = 0.0
     reason: str = ""
+    saturated_chips: int = 0
     timings_s: dict[str, float] = field(default_factory=dict, compare=False)

@@ -157,6 +157,23 @@ def test_show_simulated_press(tmp_path):
     _assert_png(out)
 
 
+def test_show_refuses_a_force_that_bottoms_out(tmp_path, capsys):
+    out = tmp_path / "f.png"
+    assert main(["show", "--object", "letter_r", "--force-n", "1e6", "--out", str(out)]) == 2
+    err = _one_line_error(capsys, "show")
+    assert "into the 2.5 mm layer" in err and "smaller force" in err
+    assert not out.exists()
+
+
+def test_show_notes_an_object_off_the_pad(tmp_path, capsys):
+    out = tmp_path / "g.png"
+    assert main(["show", "--object", "letter_r", "--x-mm", "30", "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "note: letter_r at (30, 0) mm does not touch the 20 mm pad" in printed
+    assert main(["show", "--object", "letter_r", "--out", str(out)]) == 0
+    assert "note:" not in capsys.readouterr().out  # a normal press has no note
+
+
 def test_show_index_out_of_range(dataset, tmp_path, capsys):
     out = tmp_path / "c.png"
     assert main(["show", "--data", str(dataset), "--index", "99999", "--out", str(out)]) == 2

@@ -16,6 +16,10 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from tactile_manip.commands.record import PORT_HINT
+
+CAMERA_HINT = "give the VBTS camera's OpenCV index or device path, or pass --sim for the simulated camera"
+
 
 def _csv(text: str) -> list[str]:
     return [s.strip() for s in text.split(",") if s.strip()]
@@ -85,6 +89,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     fin.add_argument("--force", action="store_true", help="overwrite an existing output file")
 
 
+def check_nonblank(name: str, value: str, *, hint: str) -> str:
+    from tactile_manip.checks import check_nonblank as check  # numpy stays out of `--help`
+
+    return check(name, value, hint=hint)
+
+
 def run(args: argparse.Namespace) -> int:
     from tactile_manip.errors import SensorError
 
@@ -127,6 +137,7 @@ def _calibrate(args: argparse.Namespace) -> int:
 
         if args.corners is None:
             raise ValueError("--corners is required with a real camera (the pad's four corners in the image)")
+        check_nonblank("--camera", args.camera, hint=CAMERA_HINT)
         device = int(args.camera) if args.camera.isdigit() else args.camera
         with OpenCVCamera(OpenCVCameraConfig(device=device)) as camera:
             input("clear the pad (nothing touching it), then press Enter ")
@@ -159,6 +170,8 @@ def _record(args: argparse.Namespace) -> int:
     from tactile_manip.sensors.collect import CollectConfig
     from tactile_manip.sensors.vbts_calibration import VbtsCalibration
 
+    if not args.sim:  # checked before any file is touched; an empty --port is not --sim
+        check_nonblank("--port", args.port, hint=PORT_HINT)
     out = _fresh(Path(args.out), args.force)
     log_path = _fresh(out.with_suffix(".tmpairs"), args.force)
     if args.presses < 1:
@@ -236,8 +249,9 @@ def _record_real(args, config, calibration, log_path: Path, progress):
     from tactile_manip.sensors.config import SerialSensorConfig
     from tactile_manip.sensors.serial_sensor import SerialSensor
 
-    if not args.camera:
+    if args.camera is None:
         raise ValueError("--port needs --camera (the VBTS camera's OpenCV index or device path)")
+    check_nonblank("--camera", args.camera, hint=CAMERA_HINT)
     device = int(args.camera) if args.camera.isdigit() else args.camera
     h, w = calibration.alignment.camera_shape
     stop = threading.Event()

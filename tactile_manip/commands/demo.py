@@ -36,7 +36,7 @@ def run(args: argparse.Namespace) -> int:
     for name, kwargs in DEMO_OBJECTS:
         pose = IndenterPose(x_mm=rng.uniform(-2, 2), y_mm=rng.uniform(-2, 2), yaw_rad=rng.uniform(-math.pi, math.pi))
         t0 = time.perf_counter()
-        s = pair.press(make_indenter(name, **kwargs), pose, args.force_n, rng)
+        s = pair.press(make_indenter(name, **kwargs), pose, args.force_n, rng).check_within_layer()
         ms = (time.perf_counter() - t0) * 1e3
         print(f"{name:<14}{s.approach_mm:>8.2f}{s.skin_approach_mm:>9.2f}{float(s.depth_mm.max()):>11.2f}"
               f"{float(np.abs(s.field_ut).max()):>13.0f}{ms:>7.0f}")

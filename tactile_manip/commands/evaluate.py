@@ -61,8 +61,10 @@ def run(args: argparse.Namespace) -> int:
                                                        if k in methods},
                                      "psnr_data_range": data.image.data_range, "image_unit": data.image.unit,
                                      "gallery_rows": rows})
-    gallery(f"{args.out}/gallery.png", data, methods, rows)
+    skipped = gallery(f"{args.out}/gallery.png", data, methods, rows)
     print(markdown_table(results), end="")
+    if skipped:
+        print(f"note: {', '.join(skipped)}: untrained (0 epochs in the model's metadata), left out of the gallery")
     print(f"wrote {args.out}/table.md, results.json, gallery.png")
     return 0
 

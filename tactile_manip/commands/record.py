@@ -11,6 +11,10 @@ import argparse
 from pathlib import Path
 
 
+PORT_HINT = ("name the board's serial port (`tactile-manip find-port` lists them), "
+             "or pass --sim for the simulated sensor")
+
+
 def add_arguments(p: argparse.ArgumentParser) -> None:
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--port", help="serial port of the board (or the emulator's path)")
@@ -31,6 +35,7 @@ def run(args: argparse.Namespace) -> int:
     import sys
     import threading
 
+    from tactile_manip.checks import check_nonblank
     from tactile_manip.sensors import Recorder, SerialSensor, SerialSensorConfig, SimulatedSensor, parse_press
 
     out = Path(args.out)
@@ -42,10 +47,11 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError(f"--seconds must be > 0, got {args.seconds}")
     if args.press and not args.sim:
         raise ValueError("--press scripts the simulated sensor: use it with --sim")
-    if args.port:
-        sensor = SerialSensor(SerialSensorConfig(port=args.port, baudrate=args.baud))
-    else:
+    if args.sim:
         sensor = SimulatedSensor()
+    else:  # an empty --port is refused here, never read as "no port" (that once recorded the simulated sensor)
+        port = check_nonblank("--port", args.port, hint=PORT_HINT)
+        sensor = SerialSensor(SerialSensorConfig(port=port, baudrate=args.baud))
     presses = [parse_press(s) for s in args.press]
     stop = threading.Event()
     previous = signal.signal(signal.SIGTERM, lambda *_: stop.set())

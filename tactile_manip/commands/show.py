@@ -23,19 +23,22 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from tactile_manip.plots import sample_figure
 
-    if args.data:
-        field, depth, title = _from_dataset(args)
+    if args.data is not None:  # not truthiness: an empty --data is an error, not a simulated press
+        field, depth, title, note = _from_dataset(args)
     else:
-        field, depth, title = _from_simulation(args)
+        field, depth, title, note = _from_simulation(args)
     sample_figure(field, depth, title=title, path=args.out)
+    if note:
+        print(f"note: {note}")
     print(f"wrote {Path(args.out)}")
     return 0
 
 
 def _from_dataset(args: argparse.Namespace):
+    from tactile_manip.checks import check_nonblank
     from tactile_manip.data import load_dataset
 
-    data = load_dataset(args.data)
+    data = load_dataset(check_nonblank("--data", args.data))
     if not 0 <= args.index < len(data):
         raise ValueError(f"--index must be in [0, {len(data) - 1}], got {args.index}")
     i = args.index
@@ -43,7 +46,9 @@ def _from_dataset(args: argparse.Namespace):
     if data.has("pose") and data.has("force_n"):
         x, y, yaw = data.extra("pose")[i, :3]
         title += f" at ({x:.1f}, {y:.1f}) mm, yaw {math.degrees(yaw):.0f} deg, {data.extra('force_n')[i]:.1f} N"
-    return data.field_ut[i], data.depth_mm([i])[0], title
+    empty = data.has("contact") and not data.extra("contact")[i]
+    note = f"sample {i} is an empty press: the object does not touch the pad" if empty else ""
+    return data.field_ut[i], data.depth_mm([i])[0], title, note
 
 
 def _from_simulation(args: argparse.Namespace):
@@ -54,7 +59,12 @@ def _from_simulation(args: argparse.Namespace):
     from tactile_manip.sim.pair import SensorPair
 
     pose = IndenterPose(x_mm=args.x_mm, y_mm=args.y_mm, yaw_rad=math.radians(args.yaw_deg))
-    s = SensorPair().press(make_indenter(args.object), pose, args.force_n, np.random.default_rng(args.seed))
+    pair = SensorPair()
+    s = pair.press(make_indenter(args.object), pose, args.force_n, np.random.default_rng(args.seed))
+    s.check_within_layer()  # 1e6 N would report a 7254 mm approach into the 2.5 mm layer
     title = (f"{args.object} at ({args.x_mm:.1f}, {args.y_mm:.1f}) mm, yaw {args.yaw_deg:.0f} deg, "
              f"{args.force_n:.1f} N: approach {s.approach_mm:.2f} mm (gel), {s.skin_approach_mm:.2f} mm (skin)")
-    return s.field_ut, s.depth_mm, title
+    note = "" if s.contact else (
+        f"{args.object} at ({args.x_mm:g}, {args.y_mm:g}) mm does not touch the {pair.params.layer.size_mm:g} mm "
+        "pad (pad centre at (0, 0)): an empty press, noise and drift only")
+    return s.field_ut, s.depth_mm, title, note

@@ -48,5 +48,24 @@ def run(args: argparse.Namespace) -> int:
     seconds = data.provenance["generation_seconds"]
     print(f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB): {len(data)} pairs ({counts}) in {seconds:.1f} s, "
           f"{len(data) / seconds:.1f} pairs/s")
+    for note in _physics_notes(data, thickness_mm=cfg.sim.layer.thickness_mm):
+        print(f"note: {note}")
     return 0
+
+
+def _physics_notes(data, *, thickness_mm: float) -> list[str]:
+    """Samples the config made outside the model's range: empty presses, and presses that bottom out."""
+    import numpy as np
+
+    notes = []
+    empty = int(np.count_nonzero(~data.extra("contact")))
+    if empty:
+        notes.append(f"{empty} of {len(data)} presses do not touch the pad (empty: noise and drift only)")
+    deepest = np.maximum(data.extra("approach_mm"), data.extra("skin_approach_mm"))
+    bottomed = int(np.count_nonzero(deepest >= thickness_mm))
+    if bottomed:
+        notes.append(f"{bottomed} of {len(data)} presses bottom out (approach >= the {thickness_mm:g} mm layer, "
+                     f"up to {deepest.max():.3g} mm): the elastic layer model does not hold there; lower "
+                     "poses.force_n or use blunter objects")
+    return notes
 

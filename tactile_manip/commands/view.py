@@ -31,6 +31,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from tactile_manip.checks import check_nonblank
+    from tactile_manip.commands.record import PORT_HINT
     from tactile_manip.sensors import (
         ReplaySensor,
         ReplaySensorConfig,
@@ -47,12 +49,14 @@ def run(args: argparse.Namespace) -> int:
 
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
-    if args.port:
-        sensor = SerialSensor(SerialSensorConfig(port=args.port, baudrate=args.baud))
-    elif args.replay:
-        sensor = ReplaySensor(ReplaySensorConfig(path=args.replay, loop=True))
-    else:
+    # dispatch on which flag was given, not on truthiness: an empty --port or --replay is an error, not --sim
+    if args.sim:
         sensor = SimulatedSensor()
+    elif args.replay is not None:
+        sensor = ReplaySensor(ReplaySensorConfig(path=check_nonblank("--replay", args.replay), loop=True))
+    else:
+        port = check_nonblank("--port", args.port, hint=PORT_HINT)
+        sensor = SerialSensor(SerialSensorConfig(port=port, baudrate=args.baud))
     with sensor:
         if not args.no_baseline:
             sensor.calibrate_baseline(args.baseline_frames)
@@ -84,9 +88,7 @@ class FieldView:
 
         self.plt, self.sensor = plt, sensor
         self.fig, self.ax = plt.subplots(figsize=(6.4, 5.6), constrained_layout=True)
-        plot_field(self.ax, np.zeros((4, 4, 3)))
-        self.image = self.ax.images[-1]
-        self.arrows = self.ax.collections[-1]
+        self.artists = plot_field(self.ax, np.zeros((4, 4, 3)))
         self.z_range = self.xy_range = RANGE_FLOOR_UT
         self.frames = 0
         self.last = None
@@ -96,6 +98,7 @@ class FieldView:
         import numpy as np
 
         from tactile_manip.errors import SensorTimeoutError
+        from tactile_manip.plots import set_field_ranges
 
         try:
             r = self.sensor.read_latest(max_age_s=0.5)
@@ -107,10 +110,9 @@ class FieldView:
         # ranges follow the field up at once and relax slowly, so the scale does not flicker
         self.z_range = max(RANGE_FLOOR_UT, float(np.abs(f[..., 2]).max()), 0.97 * self.z_range)
         self.xy_range = max(RANGE_FLOOR_UT, float(np.hypot(f[..., 0], f[..., 1]).max()), 0.97 * self.xy_range)
-        self.image.set_data(f[..., 2])
-        self.image.set_clim(-self.z_range, self.z_range)
-        self.arrows.scale = self.xy_range / (0.45 * 5.0)  # the longest arrow spans 0.45 pitch (plot_field's rule)
-        self.arrows.set_UVC(f[..., 0], f[..., 1])
+        self.artists.image.set_data(f[..., 2])
+        self.artists.arrows.set_UVC(f[..., 0], f[..., 1])
+        set_field_ranges(self.artists, z_range_ut=self.z_range, xy_range_ut=self.xy_range)  # colours, arrows, key
         h = self.sensor.health()
         kind = "field" if self.sensor.baseline is not None else "raw field"
         self.ax.set_title(f"{self.sensor.source}: {kind}, seq {r.seq}, {h.rate_hz:.0f} Hz, "

@@ -17,6 +17,7 @@ write a file that disagrees with torch.
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 from typing import Any
 
@@ -122,8 +123,16 @@ def _metadata(model: SuperMagCVAE, spec: InputSpec, payload: dict, pixel_mm: flo
                    "layout": "pixel (0, 0) at the (-x, +y) corner of the pad"},
         "preset": payload["train_config"]["preset"], "model_config": payload["model_config"],
         "train_config": payload["train_config"], "data_fingerprint": payload["data_fingerprint"],
+        "training": _training_record(payload.get("state", {})),
         "parameters": count_parameters(model, inference_only=True), "metrics": metrics, **extra,
     }
+
+
+def _training_record(state: dict) -> dict[str, Any]:
+    """How far the checkpoint was trained (``epochs_run`` 0: untrained weights; galleries leave it out)."""
+    best = state.get("best_psnr")
+    return {"epochs_run": int(state.get("epoch", 0)), "best_epoch": int(state.get("best_epoch", 0)),
+            "best_val_psnr_db": float(best) if best is not None and math.isfinite(best) else None}
 
 
 def check_parity(graph: InferenceGraph, path: Path, readings: np.ndarray | None = None) -> float:

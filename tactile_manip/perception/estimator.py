@@ -16,9 +16,11 @@ and per-stage timings. It can average several consecutive frames and stream esti
 
 Confidence: the PCA's ``1 - lambda_minor / lambda_major``; when the reconstructor draws several prior samples
 (``OnnxReconstructor(samples=K)``), it is multiplied by the samples' agreement on the contact,
-``clip(1 - mean(spread) / mean(depth), 0, 1)`` over the contact pixels; and when a
-:class:`~tactile_manip.types.TactileReading` flags saturated channels (a chip at its ADC rail reports a bound,
-not a measurement), by the fraction of chips with no saturated axis.
+``clip(1 - mean(spread) / mean(depth), 0, 1)`` over the contact pixels; and when channels are saturated (a
+:class:`~tactile_manip.types.TactileReading` flags a chip at its ADC rail, or any reading, array or not, holds
+a value beyond the chip's full scale, which every reconstructor clamps: see
+:func:`~tactile_manip.perception.reconstruct.out_of_range`), by the fraction of chips with no saturated axis.
+The estimate's ``saturated_chips`` counts those chips.
 """
 
 from __future__ import annotations
@@ -31,7 +33,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from tactile_manip.perception.pose import PoseParams, angle_from_image
-from tactile_manip.perception.reconstruct import Reconstruction, Reconstructor
+from tactile_manip.perception.reconstruct import Reconstruction, Reconstructor, out_of_range
 from tactile_manip.types import AngleEstimate, TactileReading
 
 if TYPE_CHECKING:  # the sensors layer is only needed for type hints here
@@ -76,9 +78,16 @@ class TactilePoseEstimator:
 
     def estimate_with_image(self, reading: TactileReading | np.ndarray) -> tuple[AngleEstimate, Reconstruction]:
         """Like :meth:`estimate`, also returning the reconstruction (depth and spread) it used."""
+        if isinstance(reading, TactileReading):
+            return self._estimate(reading.field_ut, reading.saturated, reading)
+        return self._estimate(reading, None, None)
+
+    def _estimate(self, field: np.ndarray, saturated: np.ndarray | None, reading: TactileReading | None
+                  ) -> tuple[AngleEstimate, Reconstruction]:
+        """One estimate from ``field`` (R, C, 3) uT; ``saturated`` (R, C, 3) flags from the sensor or None;
+        ``reading`` (the newest frame, or None) dates the estimate."""
         t0 = time.perf_counter()
-        field = reading.field_ut if isinstance(reading, TactileReading) else reading
-        rec = self.reconstructor.reconstruct(field)
+        rec = self.reconstructor.reconstruct(field)  # refuses NaN / inf, clamps values beyond the chip's range
         t1 = time.perf_counter()
         if np.max(np.abs(field)) < self.min_field_ut:  # NaN fails this test and stays with the reconstructor
             est = AngleEstimate(0.0, 0.0, False, reason="no contact field")
@@ -86,13 +95,17 @@ class TactilePoseEstimator:
             est = angle_from_image(rec.depth_mm, pixel_mm=self.reconstructor.pixel_mm, params=self.params)
         if est.defined and rec.spread_mm is not None:
             est = replace(est, confidence=est.confidence * _sample_agreement(rec, self.params.threshold_mm))
-        if est.defined and isinstance(reading, TactileReading):
-            est = replace(est, confidence=est.confidence * _unsaturated_fraction(reading.saturated))
+        flags = out_of_range(field)
+        if saturated is not None:
+            flags |= np.asarray(saturated, dtype=bool)
+        chips = int(flags.any(axis=-1).sum())
+        if est.defined and chips:
+            est = replace(est, confidence=est.confidence * _unsaturated_fraction(flags))
         t2 = time.perf_counter()
         timings = {"reconstruct": t1 - t0, "pose": t2 - t1, "total": t2 - t0}
-        if isinstance(reading, TactileReading):
+        if reading is not None:
             timings["age"] = time.monotonic() - reading.t_host_s
-        return replace(est, timings_s=timings), rec
+        return replace(est, saturated_chips=chips, timings_s=timings), rec
 
     def estimate_frames(self, readings: Sequence[TactileReading | np.ndarray]) -> AngleEstimate:
         """Angle from the mean of several consecutive readings of one static contact (less chip noise)."""
@@ -102,14 +115,12 @@ class TactilePoseEstimator:
         shapes = {f.shape for f in fields}
         if len(shapes) != 1:
             raise ValueError(f"readings of different shapes cannot be averaged: {sorted(shapes)}")
-        est = self.estimate(np.mean(np.stack(fields).astype(np.float64), axis=0))
-        flags = [r.saturated for r in readings if isinstance(r, TactileReading)]
-        if est.defined and flags:
-            est = replace(est, confidence=est.confidence * _unsaturated_fraction(np.logical_or.reduce(flags)))
+        stacked = np.stack(fields).astype(np.float64)
+        # a channel saturated (or out of range) in any frame is saturated in the mean
+        flags = [r.saturated for r in readings if isinstance(r, TactileReading)] + list(out_of_range(stacked))
         last = readings[-1]
-        if isinstance(last, TactileReading):
-            est.timings_s["age"] = time.monotonic() - last.t_host_s
-        return est
+        return self._estimate(np.mean(stacked, axis=0), np.logical_or.reduce(flags),
+                              last if isinstance(last, TactileReading) else None)[0]
 
     def read(self, sensor: TactileSensor, *, frames: int = 1, timeout_s: float = 0.1) -> AngleEstimate:
         """Estimate from the next ``frames`` new frames of ``sensor`` (frames that arrived before the call are

@@ -187,30 +187,51 @@ def group_tables(results: list[MethodResult]) -> str:
     return "\n".join(out) + ("\n" if out else "")
 
 
+def untrained(reconstructor: Reconstructor) -> bool:
+    """True for an exported model whose metadata says it was never trained (0 epochs run).
+
+    Files exported before the ``training`` record existed, and the baselines, count as trained.
+    """
+    inner = getattr(reconstructor, "inner", reconstructor)  # a SymmetrizedReconstructor's model
+    record = getattr(inner, "metadata", {}).get("training")
+    return record is not None and int(record.get("epochs_run", 0)) == 0
+
+
 def gallery(path: str | Path, data: PairedDataset, methods: dict[str, Reconstructor],
-            rows: list[tuple[str, int]]) -> None:
+            rows: list[tuple[str, int]]) -> list[str]:
+    """Write :func:`gallery_figure` to ``path`` (PNG); returns the labels of the untrained models left out."""
+    fig, skipped = gallery_figure(data, methods, rows)
+    fig.savefig(path, dpi=80)
+    return skipped
+
+
+def gallery_figure(data: PairedDataset, methods: dict[str, Reconstructor], rows: list[tuple[str, int]]):
     """Figure like the paper's gallery: one row per (split, dataset index), columns ground truth then each
-    method, reconstructed here for just those readings."""
+    method, reconstructed here for just those readings, on one scale (the images' value range, 0-2 mm for
+    depth; its colour bar at the right). Untrained models (:func:`untrained`) are left out. Returns (figure, labels left out)."""
     from tactile_manip.plots import _pyplot
 
+    skipped = [label for label, m in methods.items() if untrained(m)]
+    methods = {label: m for label, m in methods.items() if label not in skipped}
     plt = _pyplot()
     index = np.array([i for _, i in rows])
     preds = {label: m.reconstruct_batch(data.readings[index]) for label, m in methods.items()}
-    fig, axes = plt.subplots(len(rows), len(methods) + 1, figsize=(2.2 * (len(methods) + 1), 2.2 * len(rows)),
+    fig, axes = plt.subplots(len(rows), len(methods) + 1, figsize=(2.2 * (len(methods) + 1) + 0.9, 2.2 * len(rows)),
                              constrained_layout=True, squeeze=False)
     for r, (split, i) in enumerate(rows):
         images = [data.image_values([i])[0]] + [preds[m][r] for m in methods]
         for c, (img, title) in enumerate(zip(images, ["ground truth (VBTS)"] + list(methods))):
             ax = axes[r, c]
-            ax.imshow(img, cmap="viridis", vmin=data.image.value_min, vmax=data.image.value_max)
+            im = ax.imshow(img, cmap="viridis", vmin=data.image.value_min, vmax=data.image.value_max)
             ax.set_xticks([])
             ax.set_yticks([])
             if r == 0:
                 ax.set_title(textwrap.fill(title, 24), fontsize=9)
             if c == 0:
                 ax.set_ylabel(f"{data.objects([i])[0]}\n({'unseen' if split == 'test' else 'seen'})", fontsize=8)
-    fig.savefig(path, dpi=80)
-    plt.close(fig)
+    fig.colorbar(im, ax=axes, shrink=min(1.0, 3.0 / len(rows)), label=("depth [mm]" if data.image.unit == "mm" else data.image.unit) + " (every panel)")
+    plt.close(fig)  # the caller saves it; closing only drops pyplot's reference
+    return fig, skipped
 
 
 def write_report(out: str | Path, results: list[MethodResult], meta: dict[str, Any]) -> None:

@@ -6,7 +6,10 @@
   map upsampled to the output size and mapped to millimetres by a linear fit on training data.
 
 ``load_reconstructor("bilinear" | "bicubic" | PATH)`` builds one by name. All reject NaN/inf readings and
-wrong shapes with a ValueError naming the problem, and never return NaN.
+wrong shapes with a ValueError naming the problem, and never return NaN. All clamp a reading to the chip's
+range first (:data:`READING_LIMIT_UT`, see :func:`out_of_range`), so a value no MLX90393 can report (3e38 from
+a corrupt buffer) enters every reconstructor as the same bound; the estimator flags such channels and lowers
+the confidence.
 """
 
 from __future__ import annotations
@@ -23,9 +26,30 @@ import numpy as np
 from scipy import ndimage
 
 from tactile_manip.errors import TactileManipError
+from tactile_manip.sim.chip import full_scale_ut
+from tactile_manip.sim.params import ChipParams
 
 METADATA_KEY = "tactile_manip"
 SUPPORTED_FORMAT = 1
+# (3,) uT: the MLX90393's full scale per axis (x, y, z) at ReSkin's settings; no reading can exceed it
+READING_LIMIT_UT = full_scale_ut(ChipParams())
+
+
+def out_of_range(field_ut: np.ndarray) -> np.ndarray:
+    """Channels beyond the chip's full scale: bool array of ``field_ut``'s shape (..., 3), uT in.
+
+    Such a value did not come from a magnetometer (a corrupt buffer, a unit mix-up); every reconstructor
+    clamps it to :data:`READING_LIMIT_UT`, and :class:`~tactile_manip.perception.TactilePoseEstimator` counts
+    its chip as saturated. NaN is not flagged here (the reconstructors refuse it).
+    """
+    f = np.asarray(field_ut, dtype=np.float64)
+    with np.errstate(invalid="ignore"):
+        return np.abs(f) > _limit_for(f.shape)
+
+
+def _limit_for(shape: tuple[int, ...]) -> np.ndarray | float:
+    """The per-axis limit for readings of ``shape`` (the largest one when the last axis is not x, y, z)."""
+    return READING_LIMIT_UT if shape and shape[-1] == 3 else float(READING_LIMIT_UT.max())
 
 
 class ModelFileError(TactileManipError, ValueError):
@@ -62,9 +86,13 @@ class Reconstructor(abc.ABC):
             return np.empty((0, *self.output_shape), np.float32)
         return self._run(fields)[0]
 
+    #: readings are MLX90393 fields in uT (clamped to the chip's full scale); False for models trained on
+    #: another sensor's readings (tactile-manip import), whose values pass as they are
+    magnetic_ut: bool = True
+
     def _check(self, field_ut: np.ndarray, *, batch: bool = False) -> np.ndarray:
-        # finiteness is checked before the float32 cast: a finite float64 beyond float32's range (1e300) is a
-        # huge reading, saturated to the float32 limit, not an infinite one
+        # finiteness is checked before the float32 cast and the clamp: a finite float64 beyond float32's range
+        # (1e300) is a huge reading, clamped to the chip's range like 3e38 or 1e6, not an infinite one
         f = np.asarray(field_ut, dtype=np.float64)
         want = ((None,) if batch else ()) + tuple(self.input_shape)
         if f.ndim != len(want) or any(w is not None and w != n for w, n in zip(want, f.shape)):
@@ -74,8 +102,10 @@ class Reconstructor(abc.ABC):
             bad = np.argwhere(~np.isfinite(f))[0].tolist()
             raise ValueError(f"{self.name}: reading contains NaN or infinite values (first at index {bad}); "
                              "drop the frame or re-read the sensor")
-        f32_max = float(np.finfo(np.float32).max)
-        return np.clip(f, -f32_max, f32_max).astype(np.float32)
+        if not self.magnetic_ut:  # another sensor's readings (pF, counts): the MLX90393's range means nothing
+            return f.astype(np.float32)
+        limit = _limit_for(f.shape)
+        return np.clip(f, -limit, limit).astype(np.float32)
 
     @abc.abstractmethod
     def _run(self, fields_ut: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
@@ -119,6 +149,36 @@ class OnnxReconstructor(Reconstructor):
         self.pixel_mm = float(out["pixel_mm"])
         self.latent = int(self.metadata["noise"]["shape"][2])
         self.name = f"supermag-{self.metadata.get('preset', 'model')}"
+        channels = self.metadata["input"].get("channels", {"kind": "magnetic_vector", "unit": "uT"})
+        self.magnetic_ut = channels["kind"] == "magnetic_vector" and channels["unit"] == "uT"
+        self._check_graph()
+
+    def _check_graph(self) -> None:
+        """Refuse a graph that is not the one its metadata describes (metadata copied onto another model):
+        input and output names, static dims and dtypes, then one all-zero reading for the output image size
+        (exported graphs leave it symbolic)."""
+        meta_in, meta_noise = self.metadata["input"], self.metadata["noise"]
+        want_in = {meta_in["name"]: ["N", *self.input_shape], meta_noise["name"]: ["N", "K", self.latent]}
+        want_out = {name: ["N", *self.output_shape] for name in self.metadata["output"]["names"]}
+        graph_in = {i.name: (i.shape, i.type) for i in self.session.get_inputs()}
+        graph_out = {o.name: (o.shape, o.type) for o in self.session.get_outputs()}
+        problem = _signature_mismatch(graph_in, graph_out, want_in, want_out)
+        if not problem:
+            zeros = {name: np.zeros([1 if isinstance(d, str) else d for d in dims], np.float32)
+                     for name, dims in want_in.items()}
+            try:
+                shapes = [tuple(np.shape(o)) for o in self.session.run(None, zeros)]
+            except Exception as e:  # onnxruntime's own exception types
+                shapes, problem = [], f"a graph that fails on one zero reading ({type(e).__name__})"
+            if not problem and shapes != [(1, *self.output_shape)] * len(want_out):
+                problem = f"outputs of shape {shapes} for one reading"
+        if problem:
+            raise ModelFileError(
+                f"{self.path}: the graph does not match its tactile_manip metadata ({problem}): the graph maps "
+                f"{_describe(graph_in)} -> {_describe(graph_out)}; the metadata describes "
+                f"{_describe({n: (d, 'tensor(float)') for n, d in want_in.items()})} -> "
+                f"{_describe({n: (d, 'tensor(float)') for n, d in want_out.items()})}; export the model again "
+                "with `tactile-manip export` (metadata copied onto another graph is refused)")
 
     def _run(self, fields_ut: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
         n = len(fields_ut)
@@ -130,6 +190,29 @@ class OnnxReconstructor(Reconstructor):
         if not (np.isfinite(depth).all() and np.isfinite(spread).all()):
             raise ModelFileError(f"{self.path}: the model produced non-finite output; the file may be corrupt")
         return depth, (spread if self.samples > 1 else None)
+
+
+def _signature_mismatch(graph_in: dict, graph_out: dict, want_in: dict, want_out: dict) -> str:
+    """What differs between a graph's (name -> (dims, type)) inputs/outputs and the wanted dims; "" if none.
+
+    Symbolic graph dims (str) match anything; the wanted "N" / "K" dims are free.
+    """
+    if set(graph_in) != set(want_in) or list(graph_out) != list(want_out):
+        return "other input/output names"
+    if any(t != "tensor(float)" for _, t in [*graph_in.values(), *graph_out.values()]):
+        return "a tensor that is not float32"
+    for name, (dims, _) in graph_in.items():
+        want = want_in[name]
+        if len(dims) != len(want) or any(isinstance(g, int) and isinstance(w, int) and g != w
+                                         for g, w in zip(dims, want)):
+            return f"input {name} of other dimensions"
+    return ""
+
+
+def _describe(tensors: dict) -> str:
+    """``(name [dims] dtype, ...)`` of a (name -> (dims, onnxruntime type)) mapping."""
+    return "(" + ", ".join(f"{n} {list(d)} {t.removeprefix('tensor(').rstrip(')')}"
+                           for n, (d, t) in tensors.items()) + ")"
 
 
 def read_metadata(path: str | Path) -> dict[str, Any]:

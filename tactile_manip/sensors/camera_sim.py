@@ -230,7 +230,8 @@ class SimulatedCamera(Camera):
         rng = np.random.default_rng(0)  # the press's chip noise is not used
         levels = []
         for f in forces_n:
-            imprint = self.pair.press(indenter, pose, float(f), rng, render_depth=False).imprint_mm
+            sample = self.pair.press(indenter, pose, float(f), rng, render_depth=False).check_within_layer()
+            imprint = sample.imprint_mm
             touch = imprint > 0
             # imprint = prot - level wherever it is positive: recover the level on the simulator's own datum
             levels.append(float(np.median(prot_grid[touch] - imprint[touch])) if touch.any() else np.inf)

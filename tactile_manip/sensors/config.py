@@ -68,7 +68,7 @@ class SerialSensorConfig:
     baseline: BaselineConfig = field(default_factory=BaselineConfig)
 
     def __post_init__(self) -> None:
-        if not isinstance(self.port, str) or not self.port:
+        if not isinstance(self.port, str) or not self.port.strip():
             raise ValueError(f"SerialSensorConfig.port must be a device path, got {self.port!r}; "
                              "run `tactile-manip find-port` to list candidates")
         _positive(self, "baudrate", "read_timeout_s", "connect_timeout_s", "reconnect_min_s", "reconnect_max_s",
@@ -106,7 +106,7 @@ class ReplaySensorConfig:
     baseline: BaselineConfig = field(default_factory=BaselineConfig)
 
     def __post_init__(self) -> None:
-        if not isinstance(self.path, str) or not self.path:
+        if not isinstance(self.path, str) or not self.path.strip():
             raise ValueError(f"ReplaySensorConfig.path must name a recording file, got {self.path!r}")
         if self.pace not in ("recorded", "on_demand"):
             raise ValueError(f"ReplaySensorConfig.pace must be 'recorded' or 'on_demand', got {self.pace!r}")

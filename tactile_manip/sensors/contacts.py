@@ -69,11 +69,14 @@ class Press:
 
 def field_change_levels(pair: SensorPair, indenter: Indenter, pose: IndenterPose, forces_n: Sequence[float],
                         rng: np.random.Generator) -> np.ndarray:
-    """Noise-free field change (L, 4, 4, 3) in uT (pad axes) at each force; 0 N gives zeros."""
+    """Noise-free field change (L, 4, 4, 3) in uT (pad axes) at each force; 0 N gives zeros.
+
+    Raises SimulationError when a force pushes the object through the layer (it would bottom out)."""
     out = np.zeros((len(forces_n), 4, 4, 3))
     for i, f in enumerate(forces_n):
         if f > 0:
-            out[i] = pair.press(indenter, pose, float(f), rng, render_depth=False).field_change_ut
+            sample = pair.press(indenter, pose, float(f), rng, render_depth=False).check_within_layer()
+            out[i] = sample.field_change_ut
     return out
 
 

@@ -66,6 +66,10 @@ class SimulatedSensor(TactileSensor):
 
         Returns:
             (4, 4, 3) float64 noise-free field change in uT, pad axes (the ground truth of the reading).
+
+        Raises:
+            ValueError: a negative or non-finite force.
+            SimulationError: the force pushes the object through the layer (it would bottom out).
         """
         force = check_finite_scalar("force_n", force_n, low=0.0)
         key = (indenter, pose, force)
@@ -74,7 +78,8 @@ class SimulatedSensor(TactileSensor):
             change = np.zeros((4, 4, 3))
             if force > 0:
                 rng = np.random.default_rng(self.config.seed)  # the press's own noise is not used
-                change = self.pair.press(indenter, pose, force, rng, render_depth=False).field_change_ut
+                sample = self.pair.press(indenter, pose, force, rng, render_depth=False).check_within_layer()
+                change = sample.field_change_ut
                 change = change.astype(np.float64)
             self._cache[key] = change
             if len(self._cache) > CACHE_SIZE:

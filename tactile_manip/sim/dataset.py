@@ -94,10 +94,16 @@ class DatasetConfig:
             raise ValueError(f"randomise_spread must be in [0, 1], got {self.randomise_spread}")
         if not self.objects:
             raise ValueError("objects: a dataset needs at least one [[objects]] entry")
+        half_pad_mm = self.sim.layer.size_mm / 2.0
+        if self.poses.offset_mm > half_pad_mm:
+            raise ValueError(f"poses.offset_mm = {self.poses.offset_mm:g} puts object centres off the "
+                             f"{self.sim.layer.size_mm:g} mm pad (empty presses); it must be <= {half_pad_mm:g}")
 
     def scaled(self, factor: float) -> DatasetConfig:
-        """The same dataset with every object count multiplied by ``factor`` (at least 1 each)."""
-        objs = [dataclasses.replace(o, count=max(1, int(round(o.count * factor)))) for o in self.objects]
+        """The same dataset with every object count multiplied by ``factor``: at least 1 for an object that had
+        presses, and still 0 for one that had none (``count = 0`` switches an object off at any scale)."""
+        objs = [dataclasses.replace(o, count=max(1, int(round(o.count * factor))) if o.count else 0)
+                for o in self.objects]
         return dataclasses.replace(self, objects=objs)
 
 

@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from tactile_manip.checks import check_finite_scalar
+from tactile_manip.errors import SimulationError
 from tactile_manip.sim.chip import ChipArray
 from tactile_manip.sim.contact import ContactSolution, solve_contact
 from tactile_manip.sim.mbts import MagneticSkin
@@ -54,6 +55,9 @@ class PairedSample:
         pressure: pressure summary on the magnetic skin.
         object_name, pose, params: everything used to make the sample.
         t_s: time within a sequence (0 for a single press).
+        bottomed_out: the approach into either layer reached its thickness: the object would press on the
+            rigid base, where the elastic layer model (and so the whole sample) no longer holds.
+            :meth:`check_within_layer` turns it into an error for callers that ask for one press.
     """
 
     field_ut: np.ndarray
@@ -72,6 +76,17 @@ class PairedSample:
     pose: IndenterPose
     params: SimParams = field(repr=False)
     t_s: float = 0.0
+    bottomed_out: bool = False
+
+    def check_within_layer(self) -> PairedSample:
+        """Return the sample, or raise :class:`SimulationError` when it bottomed out (see ``bottomed_out``)."""
+        if self.bottomed_out:
+            deepest = max(self.approach_mm, self.skin_approach_mm)
+            raise SimulationError(
+                f"{self.force_n:g} N drives {self.object_name} {deepest:.4g} mm into the "
+                f"{self.params.layer.thickness_mm:g} mm layer: past its thickness the object bottoms out on the "
+                "rigid base, outside the elastic layer model; use a smaller force (10-11 N is the gripper's)")
+        return self
 
 
 class SensorPair:
@@ -98,8 +113,9 @@ class SensorPair:
         """Press ``indenter`` at ``pose`` with ``force_n`` on both pads and read both sensors.
 
         An object entirely off the pad gives a valid sample with ``contact=False``, zero depth and a
-        reading of noise and drift only. ``render_depth=False`` skips the VBTS pipeline (``depth_mm`` is
-        None) for jobs that need no ground truth.
+        reading of noise and drift only. A force that pushes the object through the layer's thickness gives a
+        sample with ``bottomed_out=True`` (call ``check_within_layer()`` to refuse it). ``render_depth=False``
+        skips the VBTS pipeline (``depth_mm`` is None) for jobs that need no ground truth.
 
         Raises:
             ValueError: ``force_n`` not finite and > 0.
@@ -156,7 +172,8 @@ class SensorPair:
             saturated=m.saturated, field_change_ut=change_ut.astype(np.float32), depth_mm=depth,
             imprint_mm=imprint.astype(np.float32), contact_mask=imprint > 0, contact=bool(imprint.any()),
             approach_mm=delta_v, skin_approach_mm=delta_m, force_n=force if touching else 0.0,
-            pressure=summary, object_name=indenter.name, pose=pose, params=p, t_s=t_s)
+            pressure=summary, object_name=indenter.name, pose=pose, params=p, t_s=t_s,
+            bottomed_out=max(delta_v, delta_m) >= p.layer.thickness_mm)
 
     def _gaps(self, indenter: Indenter, pose: IndenterPose) -> tuple[np.ndarray, np.ndarray]:
         """Initial gaps (mm, NaN off the object) on the contact grid and the image grid, same datum."""

@@ -5,7 +5,8 @@ Files, written to the given folder (``TAG`` is empty for the run's own report an
 
     summary{TAG}.json                run info, tolerance, per-method results, paired comparisons, per object
     summary{TAG}.md                  the same as markdown tables
-    errors{TAG}.png                  histogram of |error| (deg) per method over executed trials, tolerance line
+    errors{TAG}.png                  histogram of |error| (deg) per method over executed trials, tolerance line:
+                                     a 0-10 deg zoom and the whole range on a log count axis
     success_vs_tolerance{TAG}.png    success rate vs tolerance 0-20 deg, Wilson 95 % bands, tolerance marked
 
 matplotlib is imported inside the plotting functions, so importing this module is free.
@@ -26,6 +27,8 @@ from tactile_manip.trials.stats import RunSummary, success_vs_tolerance, summari
 
 SWEEP_MAX_DEG = 20.0
 SWEEP_STEP_DEG = 0.1
+ZOOM_DEG = 10.0  # the error histogram's left panel: where methods that mostly succeed differ
+LINE_STYLES = ("-", "--", ":", "-.")  # one per method, so overlapping outlines stay apart in grey print too
 RUN_KEYS = ("run_id", "config_hash", "code_version", "started_utc")  # copied from run.json into the summary
 
 
@@ -94,7 +97,22 @@ def markdown_summary(summary: RunSummary, *, title: str = "Reorientation trials"
 
 def plot_errors(path: str | Path, records: Sequence[TrialRecord], tolerance_rad: float, *,
                 title: str = "") -> None:
-    """Histogram of |error| (deg) per method over executed trials, with the tolerance as a dashed line."""
+    """Write :func:`errors_figure` to ``path`` (PNG)."""
+    from tactile_manip.plots import _pyplot
+
+    plt = _pyplot()
+    fig = errors_figure(records, tolerance_rad, title=title)
+    try:
+        fig.savefig(path, dpi=100)
+    finally:
+        plt.close(fig)
+
+
+def errors_figure(records: Sequence[TrialRecord], tolerance_rad: float, *, title: str = ""):
+    """|error| (deg) per method over executed trials, tolerance dashed, as two panels: a zoom on the first
+    ``ZOOM_DEG`` (0.25 deg bins, where the methods that succeed differ) and the whole range on a log count
+    axis (1 deg bins, so a tail of single trials shows). Methods are step outlines in distinct line styles;
+    the legend gives each one's count, median and how many trials lie beyond the zoom."""
     from tactile_manip.plots import _pyplot
 
     plt = _pyplot()
@@ -102,22 +120,39 @@ def plot_errors(path: str | Path, records: Sequence[TrialRecord], tolerance_rad:
     errors_deg = {m: np.degrees([abs(r.error_rad) for r in records if r.method == m and r.outcome == "done"])
                   for m in methods}
     tol_deg = math.degrees(tolerance_rad)
+    zoom = max(ZOOM_DEG, 2.0 * tol_deg)
     top = max([SWEEP_MAX_DEG, tol_deg * 1.2, *(float(e.max()) for e in errors_deg.values() if e.size)])
-    bins = np.linspace(0.0, math.ceil(top), min(90, math.ceil(top)) + 1)
-    fig, ax = plt.subplots(figsize=(7, 4), constrained_layout=True)
-    try:
-        for m, e in errors_deg.items():
-            label = f"{m} ({e.size} executed)" if e.size else f"{m} (no executed trial)"
-            ax.hist(e, bins=bins, histtype="step", linewidth=2, label=label)
-        ax.axvline(tol_deg, color="k", linestyle="--", label=f"tolerance {tol_deg:.6g} deg")
+    fig, (near, far) = plt.subplots(1, 2, figsize=(11, 4.2), constrained_layout=True,
+                                    gridspec_kw={"width_ratios": [3, 2]})
+    for k, (m, e) in enumerate(errors_deg.items()):
+        style = {"histtype": "step", "linewidth": 2, "linestyle": LINE_STYLES[k % len(LINE_STYLES)],
+                 "color": f"C{k}"}
+        near.hist(e, bins=np.linspace(0.0, zoom, int(round(zoom / 0.25)) + 1), **style,
+                  label=_error_label(m, e, zoom))
+        far.hist(e, bins=np.linspace(0.0, math.ceil(top), min(90, math.ceil(top)) + 1), **style)
+    for ax in (near, far):
+        ax.axvline(tol_deg, color="k", linestyle="--", linewidth=1, label=f"tolerance {tol_deg:.6g} deg")
         ax.set_xlabel("|final - target| [deg]")
-        ax.set_ylabel("trials")
-        ax.yaxis.get_major_locator().set_params(integer=True)
-        ax.set_title(f"{title}: final error" if title else "final error")
-        ax.legend()
-        fig.savefig(path, dpi=100)
-    finally:
-        plt.close(fig)
+    near.set_xlim(0.0, zoom)
+    near.set_ylabel("trials")
+    near.yaxis.get_major_locator().set_params(integer=True)
+    near.set_title(f"0-{zoom:g} deg (0.25 deg bins; the legend counts those beyond)", fontsize=10)
+    far.set_xlim(0.0, math.ceil(top))
+    if any(e.size for e in errors_deg.values()):  # a log axis needs one count to show
+        far.set_yscale("log")
+    far.set_ylabel("trials (log)")
+    far.set_title("whole range (1 deg bins)", fontsize=10)
+    near.legend(fontsize=8, loc="upper right")
+    fig.suptitle(f"{title}: final error" if title else "final error")
+    return fig
+
+
+def _error_label(method: str, errors_deg: np.ndarray, zoom_deg: float) -> str:
+    if not errors_deg.size:
+        return f"{method}: no executed trial"
+    beyond = int(np.count_nonzero(errors_deg > zoom_deg))
+    return (f"{method}: {errors_deg.size} executed, median {np.median(errors_deg):.2g} deg, "
+            f"{beyond} beyond {zoom_deg:g} deg")
 
 
 def plot_success_vs_tolerance(path: str | Path, records: Sequence[TrialRecord], tolerance_rad: float, *,

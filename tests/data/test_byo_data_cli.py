@@ -128,3 +128,20 @@ def test_bad_split_group_and_kind_are_one_line(tmp_path, capsys):
     with pytest.raises(SystemExit):  # argparse refuses an unknown channel kind before any work
         main(base + ["--channel-kind", "vector"])
     assert "invalid choice: 'vector'" in capsys.readouterr().err
+
+
+def test_readings_of_another_sensor_are_not_clamped_to_the_magnetometers_range(arrays, tmp_path, capsys):
+    from tactile_manip.perception.reconstruct import OnnxReconstructor
+
+    rng = np.random.default_rng(3)
+    readings, images = _blobs(40, (4, 4), (40, 40), rng)
+    np.save(tmp_path / "r.npy", 50_000.0 + 10_000.0 * readings)  # raw counts far beyond 10584 (the chip's z range)
+    np.save(tmp_path / "i.npy", images)
+    data = tmp_path / "counts.npz"
+    assert main(["import", "--readings", str(tmp_path / "r.npy"), "--images", str(tmp_path / "i.npy"),
+                 "--reading-unit", "counts", "--image-unit", "fraction", "--data-range", "1", "--out", str(data)]) == 0
+    got = _train_export_evaluate(data, tmp_path, capsys)
+    rec = OnnxReconstructor(tmp_path / "m.onnx")
+    assert not rec.magnetic_ut and got["meta"]["input"]["offset"][0] > 40_000
+    low, high = np.full((4, 4, 1), 50_000.0), np.full((4, 4, 1), 60_000.0)
+    assert not np.array_equal(rec.reconstruct(low).depth_mm, rec.reconstruct(high).depth_mm)

@@ -20,6 +20,7 @@ def test_train_export_evaluate_round_trip(tiny_data, tmp_path, capsys):
                  "--card", str(tmp_path / "card.md")]) == 0
     meta = read_metadata(model)
     assert meta["training_data"]["fingerprint"] == meta["data_fingerprint"]
+    assert 1 <= meta["training"]["epochs_run"] <= 2  # trained, so it goes into the gallery
     assert "SuperMag CVAE" in (tmp_path / "card.md").read_text()
     out = tmp_path / "eval"
     assert main(["evaluate", "--data", str(tiny_data), "--model", f"Tiny={model}", "--out", str(out)]) == 0
@@ -30,6 +31,7 @@ def test_train_export_evaluate_round_trip(tiny_data, tmp_path, capsys):
     assert results["psnr_data_range"] == 2.0 and results["image_unit"] == "mm"
     assert (out / "gallery.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert "| Tiny |" in (out / "table.md").read_text()
+    assert "left out of the gallery" not in capsys.readouterr().out
 
 
 def test_export_refuses_a_missing_checkpoint_in_one_line(tmp_path, capsys):

@@ -76,6 +76,12 @@ def _export(tmp: Path, *, rows: int, cols: int, h: int, w: int, pixel_mm: float)
 
 
 @pytest.fixture(scope="session")
+def data_4x4():
+    """Six random pairs in onnx_4x4's shapes (4x4x3 readings, 40x40 images)."""
+    return _tiny_dataset(4, 4, 40, 40)
+
+
+@pytest.fixture(scope="session")
 def onnx_4x4(tmp_path_factory: pytest.TempPathFactory) -> ExportedModel:
     """A 4x4x3-taxel model with 40x40 images of 0.5 mm pixels."""
     return _export(tmp_path_factory.mktemp("onnx_4x4"), rows=4, cols=4, h=40, w=40, pixel_mm=0.5)

@@ -173,3 +173,43 @@ def test_a_reading_without_a_contact_field_is_no_contact_whatever_the_model_draw
     assert rec.depth_mm.max() > 0.0  # the shipped model does draw something into an empty reading
     with pytest.raises(ValueError, match="min_field_ut"):
         TactilePoseEstimator(supermag.reconstructor, min_field_ut=float("nan"))
+
+
+@pytest.mark.parametrize("value", [3e38, -3e38, 1e6])
+def test_a_value_beyond_the_chips_range_is_clamped_flagged_and_lowers_the_confidence(supermag, pair, value) -> None:
+    from tactile_manip.perception.reconstruct import READING_LIMIT_UT, out_of_range
+
+    field = _rod_field(pair, 25.0).astype(np.float64)
+    clean = supermag.estimate(field)
+    bad = field.copy()
+    bad[1, 2, 2] = value                                     # one channel, e.g. a corrupt buffer
+    clamped = field.copy()
+    clamped[1, 2, 2] = np.sign(value) * READING_LIMIT_UT[2]  # what every reconstructor sees instead
+    assert out_of_range(bad).sum() == 1 and not out_of_range(clamped).any()
+    est = supermag.estimate(bad)
+    assert est.saturated_chips == 1 and clean.saturated_chips == 0
+    assert est.confidence == pytest.approx(supermag.estimate(clamped).confidence * 15 / 16)
+    assert est.confidence < clean.confidence
+    # the same flag through the frame average
+    frames = supermag.estimate_frames([field, bad])
+    assert frames.saturated_chips == 1
+
+
+@pytest.mark.parametrize("name", ["bilinear", "bicubic"])
+def test_baselines_clamp_to_the_same_range_as_the_model(pair, name) -> None:
+    from tactile_manip.perception.reconstruct import READING_LIMIT_UT
+
+    rec = load_reconstructor(name)
+    field = _rod_field(pair, 25.0).astype(np.float64)
+    bad, clamped = field.copy(), field.copy()
+    bad[0, 0, 2], clamped[0, 0, 2] = -3e38, -READING_LIMIT_UT[2]
+    np.testing.assert_array_equal(rec.reconstruct(bad).depth_mm, rec.reconstruct(clamped).depth_mm)
+    assert np.isfinite(rec.reconstruct(bad).depth_mm).all()
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
+def test_nan_and_infinite_values_still_raise(supermag, pair, bad) -> None:
+    field = _rod_field(pair, 25.0).astype(np.float64)
+    field[3, 0, 1] = bad
+    with pytest.raises(ValueError, match="NaN or infinite values"):
+        supermag.estimate(field)

@@ -339,3 +339,19 @@ def test_baseline_rejects_wrong_shapes_and_non_finite_readings(name: str) -> Non
 def test_baseline_rejects_a_non_finite_fit() -> None:
     with pytest.raises(ValueError, match="must be finite"):
         BilinearReconstructor(gain_mm_per_ut=float("nan"), offset_mm=0.0)
+
+
+@pytest.mark.parametrize("kind, problem", [("identity", "other input/output names"),
+                                           ("input_dims", "input field_ut of other dimensions"),
+                                           ("image_size", r"outputs of shape \[\(1, 100, 100\)")])
+def test_metadata_copied_onto_another_graph_is_refused(graph_with_shipped_metadata, kind, problem) -> None:
+    path = graph_with_shipped_metadata(kind)
+    read_metadata(path)  # the metadata alone looks fine
+    with pytest.raises(ModelFileError, match=problem) as err:
+        load_reconstructor(path)
+    message = str(err.value)
+    assert "\n" not in message and str(path) in message
+    # names both sides: what the graph has and what the metadata describes
+    assert "the graph maps (" in message and "the metadata describes (field_ut ['N', 4, 4, 3] float" in message
+    if kind == "identity":
+        assert "x [1, 48] float" in message

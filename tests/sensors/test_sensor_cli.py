@@ -109,3 +109,19 @@ def test_live_view_without_a_display_says_what_to_do(capsys, monkeypatch):
     monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
     assert main(["view", "--sim"]) == 2
     assert "--snapshot" in _one_line_error(capsys, "view")
+
+
+@pytest.mark.parametrize("argv", [
+    ["record", "--port", "", "--out", "{tmp}/r.tmrec", "--seconds", "0.2"],
+    ["record", "--port", "  ", "--out", "{tmp}/r.tmrec", "--seconds", "0.2"],
+    ["view", "--port", "", "--snapshot", "{tmp}/v.png", "--seconds", "0.2"],
+    ["view", "--replay", "", "--snapshot", "{tmp}/v.png", "--seconds", "0.2"],
+    ["collect", "run", "--port", "", "--camera", "0", "--calibration", "{tmp}/c.npz", "--out", "{tmp}/d.npz"],
+    ["collect", "calibrate", "--camera", "", "--corners", "0,0 1,0 1,1 0,1", "--ball-radius-mm", "3",
+     "--out", "{tmp}/c.npz"],
+])
+def test_an_empty_port_or_path_is_an_error_not_the_simulated_sensor(argv, tmp_path, capsys):
+    assert main([a.replace("{tmp}", str(tmp_path)) for a in argv]) == 2
+    message = _one_line_error(capsys, argv[0])
+    assert "must not be empty" in message
+    assert list(tmp_path.iterdir()) == []  # nothing recorded, nothing created

@@ -43,6 +43,15 @@ def test_set_contact_puts_the_true_field_on_the_readings(pair):
         assert np.abs(s.wait_new(2.0).field_ut).max() < 15.0
 
 
+def test_a_contact_that_bottoms_out_is_refused(pair):
+    from tactile_manip.errors import SimulationError
+
+    with SimulatedSensor(pair=pair) as s:
+        with pytest.raises(SimulationError, match="bottoms out"):
+            s.set_contact(make_indenter("letter_r"), IndenterPose(), 1e6)
+        assert s.contact_field_ut is None or not np.any(s.contact_field_ut)  # nothing was put on the pad
+
+
 def test_same_seed_same_frames_other_seed_other_frames(pair):
     def first_frames(seed):
         s = SimulatedSensor(SimulatedSensorConfig(seed=seed), pair=pair)

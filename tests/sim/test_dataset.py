@@ -103,6 +103,30 @@ def test_splits_follow_the_config(data, cfg):
     assert list(data.object_names) == [o.display_name for o in cfg.objects]
 
 
+def test_scaling_keeps_a_zero_count_at_zero():
+    cfg = DatasetConfig(objects=[ObjectSpec("cylinder", count=0), ObjectSpec("letter_r", count=10)])
+    assert [o.count for o in cfg.scaled(5.0).objects] == [0, 50]
+    assert [o.count for o in cfg.scaled(0.01).objects] == [0, 1]  # a small scale keeps one press of the others
+
+
+def test_pose_ranges_that_put_the_object_off_the_pad_are_refused():
+    objects = [ObjectSpec("letter_r", count=1)]
+    DatasetConfig(objects=objects, poses=PoseRanges(offset_mm=10.0))  # up to the pad's edge is fine
+    with pytest.raises(ValueError, match=r"poses.offset_mm = 12 puts object centres off the 20 mm pad.*<= 10"):
+        DatasetConfig(objects=objects, poses=PoseRanges(offset_mm=12.0))
+
+
+def test_simulate_notes_empty_and_bottomed_out_presses(data):
+    from tactile_manip.commands.simulate import _physics_notes
+
+    assert _physics_notes(data, thickness_mm=2.5) == []  # the small default dataset is inside the model
+    thin = 0.5 * float(np.maximum(data.extra("approach_mm"), data.extra("skin_approach_mm")).max())
+    notes = _physics_notes(data, thickness_mm=thin)
+    assert len(notes) == 1 and "bottom out" in notes[0] and f"{len(data)} presses" in notes[0]
+    empty = dataclasses.replace(data, extras={**data.extras, "contact": np.zeros(len(data), bool)})
+    assert f"{len(data)} of {len(data)} presses do not touch the pad" in _physics_notes(empty, thickness_mm=2.5)[0]
+
+
 def test_procedural_variants_are_different_shapes():
     spec = ObjectSpec("procedural", count=2, variants=2, kwargs={"seed": 3})
     d = generate(DatasetConfig(objects=[spec], poses=PoseRanges(offset_mm=0.0, tilt_deg=0.0)), workers=1)

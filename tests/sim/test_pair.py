@@ -110,6 +110,17 @@ def test_object_off_the_pad_is_a_valid_no_contact_sample(pair):
     assert np.isfinite(s.field_ut).all()
 
 
+def test_a_force_past_the_layer_is_flagged_and_refused_on_request(pair):
+    from tactile_manip.errors import SimulationError
+
+    normal = pair.press(make_indenter("letter_r"), CENTRE, 10.0, np.random.default_rng(0), render_depth=False)
+    assert not normal.bottomed_out and normal.check_within_layer() is normal
+    crushed = pair.press(make_indenter("letter_r"), CENTRE, 1e6, np.random.default_rng(0), render_depth=False)
+    assert crushed.bottomed_out and crushed.approach_mm > pair.params.layer.thickness_mm
+    with pytest.raises(SimulationError, match=r"1e\+06 N drives letter_r \d+ mm into the 2.5 mm layer"):
+        crushed.check_within_layer()
+
+
 def test_same_rng_same_sample(pair):
     a = pair.press(make_indenter("allen_key"), CENTRE, 10.0, np.random.default_rng(5))
     b = pair.press(make_indenter("allen_key"), CENTRE, 10.0, np.random.default_rng(5))

@@ -15,6 +15,7 @@ from __future__ import annotations
 import math
 import warnings
 from collections.abc import Callable
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -193,9 +194,11 @@ def test_a_chip_stuck_at_zero_barely_moves_the_shipped_models_angle(estimators, 
 @pytest.mark.parametrize("name", ["supermag", "supermag-x4", "bilinear", "bilinear16"])
 def test_a_dead_chip_gives_a_finite_estimate(estimators, pair, rod_readings, rail_ut, chip, stuck, name):
     """A chip's three axes stuck at 0 or at the int16 rail (raw), in a real reading. Expected: finite, confidence
-    in [0, 1], defined or a reason; for the shipped model, exactly the estimate with that chip at the clamp
-    (a stuck rail is no worse than a saturated chip). The angle itself may be off (up to ~30 degrees
-    measured with a railed chip), which is why the sensor's saturation flags matter."""
+    in [0, 1], defined or a reason; for the shipped model, exactly the estimate with that chip at the clamp,
+    except that an axis whose baseline-subtracted value lies beyond the chip's full scale flags the chip as
+    saturated (confidence x 15/16), as the sensor's flag would (a stuck rail is no worse than a saturated
+    chip). The angle itself may be off (up to ~30 degrees measured with a railed chip), which is why the
+    sensor's saturation flags matter."""
     est = estimators(name)
     for reading in rod_readings.values():
         dead = reading.astype(np.float64)
@@ -207,7 +210,10 @@ def test_a_dead_chip_gives_a_finite_estimate(estimators, pair, rod_readings, rai
         _assert_sane(got)
         if name == "supermag" and stuck != "zero":  # (4 random prior samples: no equality)
             assert np.abs(dead[chip]).min() > 500.0
-            _same(got, est.estimate(np.clip(dead, -500.0, 500.0)))
+            clamped = est.estimate(np.clip(dead, -500.0, 500.0))
+            flagged = int((np.abs(dead[chip]) > rail_ut).any())
+            assert got.saturated_chips == flagged
+            _same(got, replace(clamped, confidence=clamped.confidence * (1.0 - flagged / 16)))
 
 
 # ---------------------------------------------------------------- NaN and infinity

@@ -258,3 +258,14 @@ def test_drawn_sensors_differ_per_trial_are_shared_by_methods_and_are_recalibrat
         assert np.abs(unloaded).max() < 60.0  # the new baseline holds: only chip noise, no stale offset
     nominal = _run(_scene(trials=1))
     assert "sensor" not in nominal[0].extra
+
+
+def test_a_model_whose_graph_does_not_match_its_metadata_stops_the_run_before_the_first_trial(
+        tmp_path, graph_with_shipped_metadata) -> None:
+    from tactile_manip.perception.reconstruct import ModelFileError
+
+    foreign = graph_with_shipped_metadata("identity")
+    scene = _scene(methods=[MethodSpec("bilinear", "bilinear", output_px=16), MethodSpec("copied", str(foreign))])
+    with pytest.raises(ModelFileError, match="does not match its tactile_manip metadata"):
+        run_trials(scene, tmp_path / "run", progress=False)
+    assert not (tmp_path / "run" / "trials.jsonl").exists()  # no trial ran, not even for the good method

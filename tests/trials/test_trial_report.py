@@ -85,6 +85,23 @@ def test_report_with_a_tag_and_a_method_that_never_executed(tmp_path):
         assert (tmp_path / name).stat().st_size > 0
 
 
+def test_the_error_histogram_zooms_on_small_errors_and_tells_methods_apart():
+    from tactile_manip.trials.report import errors_figure
+
+    fig = errors_figure(paired_run(), math.radians(5.0), title="Test run")
+    near, far = fig.axes
+    assert near.get_xlim() == (0.0, 10.0) and far.get_xlim()[1] >= 30.0   # a 0-10 deg zoom, the whole range
+    assert far.get_yscale() == "log"                                     # a tail of single trials shows
+    for ax in (near, far):
+        styles = [p.get_linestyle() for p in ax.patches]
+        assert len(styles) == 2 and styles[0] != styles[1]                  # one outline per method, styled apart
+        assert any(line.get_xdata()[0] == pytest.approx(5.0) for line in ax.lines)  # the tolerance in both
+    labels = [t.get_text() for t in near.get_legend().get_texts()]
+    assert labels[0] == "supermag: 6 executed, median 2.5 deg, 0 beyond 10 deg"
+    assert labels[1] == "bilinear: 3 executed, median 12 deg, 2 beyond 10 deg"
+    assert labels[2] == "tolerance 5 deg"
+
+
 def test_importing_the_trial_modules_pulls_in_no_matplotlib():
     code = ("import sys, tactile_manip.trials, tactile_manip.trials.log, tactile_manip.trials.stats, "
             "tactile_manip.trials.report, tactile_manip.commands.score\n"

@@ -1,0 +1,52 @@
+"""Fixtures shared across layers: ONNX graphs carrying the shipped model's metadata (for load-time checks)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+SHIPPED_MODEL = Path(__file__).resolve().parents[1] / "models" / "supermag_compact.onnx"
+
+
+@pytest.fixture
+def graph_with_shipped_metadata(tmp_path: Path) -> Callable[[str], Path]:
+    """Factory: a small foreign ONNX graph with the shipped model's metadata_props copied onto it.
+
+    ``kind``: "identity" (one x (1, 48) -> y Identity node, the names and layout of another model),
+    "input_dims" (our names, field_ut (N, 5, 5, 3)), "image_size" (our names and inputs, 100x100 outputs).
+    """
+    onnx = pytest.importorskip("onnx")
+    from onnx import TensorProto, helper, numpy_helper
+
+    props = [(p.key, p.value) for p in onnx.load(str(SHIPPED_MODEL), load_external_data=False).metadata_props]
+
+    def make(kind: str) -> Path:
+        if kind == "identity":
+            inputs = [helper.make_tensor_value_info("x", TensorProto.FLOAT, [1, 48])]
+            outputs = [helper.make_tensor_value_info("y", TensorProto.FLOAT, [1, 48])]
+            nodes = [helper.make_node("Identity", ["x"], ["y"])]
+        else:
+            rows = 5 if kind == "input_dims" else 4
+            side = 100 if kind == "image_size" else 200
+            inputs = [helper.make_tensor_value_info("field_ut", TensorProto.FLOAT, ["batch", rows, 4, 3]),
+                      helper.make_tensor_value_info("eps", TensorProto.FLOAT, ["batch", "samples", 32])]
+            outputs = [helper.make_tensor_value_info(n, TensorProto.FLOAT, ["batch", "h", "w"])
+                       for n in ("depth_mm", "spread_mm")]
+            image = numpy_helper.from_array(np.zeros((1, side, side), np.float32), "image")
+            nodes = [helper.make_node("Constant", [], ["c"], value=image),
+                     helper.make_node("Identity", ["c"], ["depth_mm"]),
+                     helper.make_node("Identity", ["c"], ["spread_mm"])]
+        model = helper.make_model(helper.make_graph(nodes, kind, inputs, outputs),
+                                  opset_imports=[helper.make_opsetid("", 17)])
+        for key, value in props:
+            entry = model.metadata_props.add()
+            entry.key, entry.value = key, value
+        onnx.checker.check_model(model)
+        path = tmp_path / f"{kind}.onnx"
+        onnx.save(model, str(path))
+        return path
+
+    return make
