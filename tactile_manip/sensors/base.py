@@ -22,7 +22,8 @@ import numpy as np
 from tactile_manip.checks import check_array
 from tactile_manip.errors import SensorDisconnectedError, SensorError, SensorTimeoutError
 from tactile_manip.sensors.baseline import Baseline, baseline_from_frames, noise_thresholds_ut
-from tactile_manip.sensors.config import BaselineConfig
+from tactile_manip.sensors.config import BaselineConfig, DriftConfig
+from tactile_manip.sensors.layout import SUPERMAG_4X4, BoardLayout
 from tactile_manip.sim.params import ChipParams
 from tactile_manip.types import TactileReading
 
@@ -45,6 +46,7 @@ class SensorHealth:
     seq_resets: int                   # counter repeats or jumps backwards (device restarted)
     crc_errors: int = 0               # candidate frames rejected by the CRC
     version_errors: int = 0           # syncs followed by an unknown protocol version
+    frame_errors: int = 0             # candidate frames refused by a length/value check (formats without CRC)
     resync_bytes: int = 0             # bytes skipped to find the next good frame
     dropped_at_start: int = 0         # frames discarded right after each (re)open
     reconnects: int = 0               # successful reopens after an error
@@ -110,7 +112,9 @@ class FrameSubscription:
 
 
 class TactileSensor(abc.ABC):
-    """A 4x4x3 magnetic tactile sensor delivering :class:`~tactile_manip.types.TactileReading` frames.
+    """A magnetic tactile sensor delivering :class:`~tactile_manip.types.TactileReading` frames.
+
+    Readings have the shape of the sensor's board layout (:attr:`layout`): (4, 4, 3) for the SuperMag board.
 
     Contract, the same for every backend:
 
@@ -127,9 +131,12 @@ class TactileSensor(abc.ABC):
       (a serial backend reconnects).
     """
 
-    def __init__(self, *, source: str, chip: ChipParams, buffer_frames: int, baseline: BaselineConfig) -> None:
+    def __init__(self, *, source: str, chip: ChipParams, buffer_frames: int, baseline: BaselineConfig,
+                 layout: BoardLayout = SUPERMAG_4X4, drift: DriftConfig | None = None) -> None:
         self._source = source
         self._chip = chip
+        self._layout = layout
+        self._drift_config = drift or DriftConfig()
         self._baseline_config = baseline
         self._cond = threading.Condition()
         self._ring: collections.deque[TactileReading] = collections.deque(maxlen=buffer_frames)
@@ -175,6 +182,11 @@ class TactileSensor(abc.ABC):
     def chip(self) -> ChipParams:
         """Chip settings (LSBs, rail, rated noise) used to convert and to judge baselines."""
         return self._chip
+
+    @property
+    def layout(self) -> BoardLayout:
+        """Where the board's chips sit and which reading cells they feed (readings are ``layout.shape``)."""
+        return self._layout
 
     @property
     def is_connected(self) -> bool:
@@ -321,8 +333,8 @@ class TactileSensor(abc.ABC):
         return self.calibrate_baseline(self._rezero_frames, timeout_s=timeout_s)
 
     def set_baseline(self, offset_ut: object) -> Baseline:
-        """Use a known (4, 4, 3) offset in uT, e.g. a saved baseline or a simulator's expected one."""
-        offset = check_array("offset_ut", offset_ut, shape=(4, 4, 3)).astype(np.float32)
+        """Use a known offset in uT of the reading's shape (``layout.shape``, (4, 4, 3) for SuperMag)."""
+        offset = check_array("offset_ut", offset_ut, shape=self._layout.shape).astype(np.float32)
         return self._use_baseline(Baseline(offset_ut=offset, noise_ut=np.zeros_like(offset), frames=0,
                                            t_host_s=time.monotonic()))
 
@@ -353,7 +365,7 @@ class TactileSensor(abc.ABC):
     def _publish(self, raw_ut: np.ndarray, saturated: np.ndarray, *, seq: int, t_host_s: float,
                  t_device_s: float = math.nan, status: int = 0, temperature_c: np.ndarray | None = None,
                  wire: bytes | None = None) -> TactileReading:
-        """Make a reading from a raw (4, 4, 3) float32 field and hand it to readers (producer thread)."""
+        """Make a reading from a raw ``layout.shape`` float32 field and hand it to readers (producer thread)."""
         raw_ut.flags.writeable = False
         saturated.flags.writeable = False
         with self._cond:
