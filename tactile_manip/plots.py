@@ -23,13 +23,13 @@ def _pyplot():
 
 
 def plot_field(ax, field_ut: np.ndarray, *, pitch_mm: float = 5.0, title: str = "") -> None:
-    """Draw a (4, 4, 3) reading on ``ax``: z as a heat map, (x, y) as arrows at the chip positions."""
+    """Draw a (rows, cols, 3) reading on ``ax``: z as a heat map, (x, y) as arrows at the cell centres."""
     f = np.asarray(field_ut, dtype=np.float64)
-    half = 2 * pitch_mm
+    rows, cols = f.shape[:2]
+    half_x, half_y = cols * pitch_mm / 2, rows * pitch_mm / 2
     lim = max(float(np.abs(f[..., 2]).max()), 1e-9)
-    im = ax.imshow(f[..., 2], cmap="RdBu_r", vmin=-lim, vmax=lim, extent=(-half, half, -half, half))
-    c = (np.arange(4) - 1.5) * pitch_mm
-    x, y = np.meshgrid(c, -c)
+    im = ax.imshow(f[..., 2], cmap="RdBu_r", vmin=-lim, vmax=lim, extent=(-half_x, half_x, -half_y, half_y))
+    x, y = np.meshgrid((np.arange(cols) - (cols - 1) / 2) * pitch_mm, ((rows - 1) / 2 - np.arange(rows)) * pitch_mm)
     scale = max(float(np.hypot(f[..., 0], f[..., 1]).max()), 1e-9) / (0.45 * pitch_mm)
     ax.quiver(x, y, f[..., 0], f[..., 1], angles="xy", scale_units="xy", scale=scale, color="k", width=0.012)
     ax.set_title(title or "field: z (colour), x-y (arrows)")

@@ -11,6 +11,8 @@ import argparse
 import math
 import time
 
+from tactile_manip.commands.serial_options import add_serial_options, serial_config
+
 DEFAULT_SIM_PRESS = "letter_r,t=0.3,force=10,yaw=20,rise=0.4,hold=0.6"
 RANGE_FLOOR_UT = 20.0  # the colour and arrow scales never zoom in below this, so idle noise looks like noise
 
@@ -22,12 +24,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     src.add_argument("--replay", metavar="FILE", help="a recording from `tactile-manip record`")
     p.add_argument("--press", action="append", default=[], metavar="SPEC",
                    help=f"with --sim: scripted press (repeatable; default {DEFAULT_SIM_PRESS!r})")
-    p.add_argument("--baud", type=int, default=921600, help="baud rate (default 921600)")
     p.add_argument("--no-baseline", action="store_true", help="show raw fields (no baseline at start)")
     p.add_argument("--baseline-frames", type=int, default=125, help="frames averaged for the baseline (125)")
     p.add_argument("--fps", type=float, default=20.0, help="display refresh rate (default 20)")
     p.add_argument("--snapshot", metavar="PNG", help="run headless and save the last frame to this PNG")
     p.add_argument("--seconds", type=float, default=2.0, help="with --snapshot: how long to read first, s")
+    add_serial_options(p, src)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -35,7 +37,6 @@ def run(args: argparse.Namespace) -> int:
         ReplaySensor,
         ReplaySensorConfig,
         SerialSensor,
-        SerialSensorConfig,
         SimulatedSensor,
         parse_press,
     )
@@ -47,8 +48,8 @@ def run(args: argparse.Namespace) -> int:
 
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
-    if args.port:
-        sensor = SerialSensor(SerialSensorConfig(port=args.port, baudrate=args.baud))
+    if args.port or args.serial_number:
+        sensor = SerialSensor(serial_config(args))
     elif args.replay:
         sensor = ReplaySensor(ReplaySensorConfig(path=args.replay, loop=True))
     else:
@@ -84,7 +85,8 @@ class FieldView:
 
         self.plt, self.sensor = plt, sensor
         self.fig, self.ax = plt.subplots(figsize=(6.4, 5.6), constrained_layout=True)
-        plot_field(self.ax, np.zeros((4, 4, 3)))
+        self.pitch_mm = sensor.layout.pitch_mm
+        plot_field(self.ax, np.zeros(sensor.layout.shape), pitch_mm=self.pitch_mm)
         self.image = self.ax.images[-1]
         self.arrows = self.ax.collections[-1]
         self.z_range = self.xy_range = RANGE_FLOOR_UT
@@ -109,7 +111,7 @@ class FieldView:
         self.xy_range = max(RANGE_FLOOR_UT, float(np.hypot(f[..., 0], f[..., 1]).max()), 0.97 * self.xy_range)
         self.image.set_data(f[..., 2])
         self.image.set_clim(-self.z_range, self.z_range)
-        self.arrows.scale = self.xy_range / (0.45 * 5.0)  # the longest arrow spans 0.45 pitch (plot_field's rule)
+        self.arrows.scale = self.xy_range / (0.45 * self.pitch_mm)  # the longest arrow spans 0.45 pitch (plot_field)
         self.arrows.set_UVC(f[..., 0], f[..., 1])
         h = self.sensor.health()
         kind = "field" if self.sensor.baseline is not None else "raw field"

@@ -189,6 +189,11 @@ class TactileSensor(abc.ABC):
         return self._layout
 
     @property
+    def wire_format(self) -> str:
+        """The format of the wire bytes this sensor publishes (frames without bytes are recorded as "supermag")."""
+        return "supermag"
+
+    @property
     def is_connected(self) -> bool:
         return self._connected
 

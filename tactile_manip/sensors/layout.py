@@ -53,11 +53,13 @@ class BoardLayout:
         name: the layout's name, stored in recordings and model metadata.
         grid: (rows, cols) of the reading.
         chips: one placement per chip, in the order the firmware sends them.
+        pitch_mm: distance between neighbouring reading cells, mm (for plots).
     """
 
     name: str
     grid: tuple[int, int]
     chips: tuple[ChipPlacement, ...]
+    pitch_mm: float
     _index: np.ndarray = field(init=False, repr=False)
     _rot: np.ndarray = field(init=False, repr=False)
     _identity: bool = field(init=False, repr=False)
@@ -116,6 +118,13 @@ class BoardLayout:
         out[self._index] = np.einsum("nij,nj->ni", self._rot, chips)
         return out.reshape(self.shape)
 
+    def chips_from_reading(self, reading_ut: np.ndarray) -> np.ndarray:
+        """The inverse of :meth:`reading_from_chips`: (rows, cols, 3) pad-axes field -> (n_chips, 3) chip axes."""
+        r = np.asarray(reading_ut, dtype=np.float32).reshape(-1, 3)
+        if self._identity:
+            return r.copy()
+        return np.einsum("nji,nj->ni", self._rot, r[self._index])
+
     def saturation_from_chips(self, saturated: np.ndarray) -> np.ndarray:
         """(n_chips, 3) bool in chip axes -> (rows, cols, 3) bool: a pad channel is saturated if any chip channel
         it is made of is."""
@@ -138,18 +147,19 @@ class BoardLayout:
 
 def grid_layout(name: str, *, rows: int, cols: int, pitch_mm: float) -> BoardLayout:
     """Chips row-major over a rows x cols grid centred on the pad, axes along the pad's (the SuperMag board)."""
-    chips = tuple(ChipPlacement(cell=(r, c), position_mm=((c - (cols - 1) / 2) * pitch_mm, ((rows - 1) / 2 - r) * pitch_mm))
+    chips = tuple(ChipPlacement(cell=(r, c),
+                                position_mm=((c - (cols - 1) / 2) * pitch_mm, ((rows - 1) / 2 - r) * pitch_mm))
                   for r in range(rows) for c in range(cols))
-    return BoardLayout(name=name, grid=(rows, cols), chips=chips)
+    return BoardLayout(name=name, grid=(rows, cols), chips=chips, pitch_mm=pitch_mm)
 
 
-def cross_layout(name: str, *, pitch_mm: float, rotations_deg: tuple[float, ...] = (90.0, 90.0, 180.0, -90.0, 0.0)
-                 ) -> BoardLayout:
+def cross_layout(name: str, *, pitch_mm: float,
+                 rotations_deg: tuple[float, ...] = (90.0, 90.0, 180.0, -90.0, 0.0)) -> BoardLayout:
     """The five-chip cross (centre, left, right, up, down) in a 3x3 reading (the ReSkin/AnySkin boards)."""
     cells = ((1, 1), (1, 0), (1, 2), (0, 1), (2, 1))
     chips = tuple(ChipPlacement(cell=cell, position_mm=((cell[1] - 1) * pitch_mm, (1 - cell[0]) * pitch_mm),
                                 rotation_deg=rot) for cell, rot in zip(cells, rotations_deg, strict=True))
-    return BoardLayout(name=name, grid=(3, 3), chips=chips)
+    return BoardLayout(name=name, grid=(3, 3), chips=chips, pitch_mm=pitch_mm)
 
 
 SUPERMAG_4X4 = grid_layout("supermag-4x4", rows=4, cols=4, pitch_mm=5.0)

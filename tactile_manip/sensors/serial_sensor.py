@@ -56,6 +56,10 @@ class SerialSensor(TactileSensor):
         self._thread: threading.Thread | None = None
         self._reset_link_counters()
 
+    @property
+    def wire_format(self) -> str:
+        return self.config.wire_format
+
     # ------------------------------------------------------------------ TactileSensor hooks
 
     def _open(self) -> None:
