@@ -26,6 +26,7 @@ from tactile_manip.errors import TactileManipError
 
 METADATA_KEY = "tactile_manip"
 SUPPORTED_FORMAT = 1
+DEFAULT_BOARD_LAYOUT = "supermag-4x4"  # the board every shipped model was trained on (sensors/layout.py)
 
 
 class ModelFileError(TactileManipError, ValueError):
@@ -42,9 +43,14 @@ class Reconstruction:
 
 
 class Reconstructor(abc.ABC):
-    """Reading (R, C, 3) microtesla, baseline-subtracted -> depth image (H, W) in mm."""
+    """Reading (R, C, 3) microtesla, baseline-subtracted -> depth image (H, W) in mm.
+
+    ``board_layout`` names the sensor board (``tactile_manip.sensors.layout``) whose readings it was made for;
+    :meth:`check_layout` refuses readings of another board.
+    """
 
     name: str = "reconstructor"
+    board_layout: str = DEFAULT_BOARD_LAYOUT
     input_shape: tuple[int, int, int] = (4, 4, 3)
     output_shape: tuple[int, int] = (200, 200)
     pixel_mm: float = 0.1
@@ -54,6 +60,12 @@ class Reconstructor(abc.ABC):
         t0 = time.perf_counter()
         depth, spread = self._run(self._check(field_ut)[None])
         return Reconstruction(depth[0], None if spread is None else spread[0], time.perf_counter() - t0)
+
+    def check_layout(self, layout: str) -> None:
+        """Refuse readings of board layout ``layout`` unless it is the one this reconstructor was made for."""
+        if layout != self.board_layout:
+            raise ValueError(f"{self.name} takes readings of the {self.board_layout!r} board layout, but the sensor "
+                             f"has the {layout!r} layout: train or export a model for that board")
 
     def reconstruct_batch(self, fields_ut: np.ndarray) -> np.ndarray:
         """(N, R, C, 3) readings -> (N, H, W) float32 depth images."""
@@ -69,7 +81,8 @@ class Reconstructor(abc.ABC):
         want = ((None,) if batch else ()) + tuple(self.input_shape)
         if f.ndim != len(want) or any(w is not None and w != n for w, n in zip(want, f.shape)):
             shape = "(N, " + ", ".join(map(str, self.input_shape)) + ")" if batch else str(self.input_shape)
-            raise ValueError(f"{self.name}: expected readings of shape {shape}, got {f.shape}")
+            raise ValueError(f"{self.name}: expected readings of shape {shape}, got {f.shape} (it takes readings "
+                             f"of the {self.board_layout} board layout)")
         if not np.isfinite(f).all():
             bad = np.argwhere(~np.isfinite(f))[0].tolist()
             raise ValueError(f"{self.name}: reading contains NaN or infinite values (first at index {bad}); "
@@ -119,6 +132,8 @@ class OnnxReconstructor(Reconstructor):
         self.pixel_mm = float(out["pixel_mm"])
         self.latent = int(self.metadata["noise"]["shape"][2])
         self.name = f"supermag-{self.metadata.get('preset', 'model')}"
+        # models exported before board layouts existed were all trained on the SuperMag board
+        self.board_layout = str(self.metadata.get("board_layout", DEFAULT_BOARD_LAYOUT))
 
     def _run(self, fields_ut: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
         n = len(fields_ut)
