@@ -23,6 +23,7 @@ from tactile_manip.checks import check_array
 from tactile_manip.errors import SensorDisconnectedError, SensorError, SensorTimeoutError
 from tactile_manip.sensors.baseline import Baseline, baseline_from_frames, noise_thresholds_ut
 from tactile_manip.sensors.config import BaselineConfig, DriftConfig
+from tactile_manip.sensors.drift import BaselineState
 from tactile_manip.sensors.layout import SUPERMAG_4X4, BoardLayout
 from tactile_manip.sim.params import ChipParams
 from tactile_manip.types import TactileReading
@@ -57,6 +58,11 @@ class SensorHealth:
     last_error: str = ""              # the last error the producer thread caught, or ""
     last_status: int = 0              # device status bits of the newest frame
     uptime_s: float = 0.0             # time since connect(), s
+    baseline_tracking: bool = False   # the baseline is following a quiet pad right now (DriftConfig.track)
+    baseline_updates: int = 0         # frames the tracked baseline moved on since it was set
+    baseline_moved_ut: float = 0.0    # largest change of the tracked offset since it was set, uT
+    common_mode_ut: tuple[float, float, float] = (math.nan, math.nan, math.nan)  # median field over chips, x y z, uT
+    stray_field: bool = False         # all chips shifted together beyond DriftConfig.common_mode_ut (magnet, steel)
 
 
 class SensorFrame(NamedTuple):
@@ -136,7 +142,7 @@ class TactileSensor(abc.ABC):
         self._source = source
         self._chip = chip
         self._layout = layout
-        self._drift_config = drift or DriftConfig()
+        self._state = BaselineState(drift or DriftConfig(), layout)
         self._baseline_config = baseline
         self._cond = threading.Condition()
         self._ring: collections.deque[TactileReading] = collections.deque(maxlen=buffer_frames)
@@ -330,6 +336,8 @@ class TactileSensor(abc.ABC):
         saturated = np.stack([r.saturated for r in got])
         thresholds = noise_thresholds_ut(self._baseline_config, self._chip)
         baseline = baseline_from_frames(raw, saturated, thresholds, source=self._source)
+        if all(r.temperature_c is not None for r in got):  # the reference of temperature compensation
+            baseline = dataclasses.replace(baseline, temperature_c=np.mean([r.temperature_c for r in got], axis=0))
         self._rezero_frames = n
         return self._use_baseline(baseline)
 
@@ -357,13 +365,14 @@ class TactileSensor(abc.ABC):
             base = dict(frames=self._frames, seq_gaps=self._gaps, frames_missed=self._missed,
                         seq_resets=self._resets, last_status=self._last_status)
             newest = self._ring[-1].t_host_s if self._ring else None
+            drift = self._state.health(self._ring[-1].field_ut if self._ring else None)
         rate = (len(times) - 1) / (times[-1] - times[0]) if len(times) > 2 and times[-1] > times[0] else math.nan
         uptime = now - self._t_connect if self._connected else 0.0
         link = {"link_up": self._connected, **self._link_health()}
         cpu = link.get("reader_cpu_s", 0.0)
         return SensorHealth(source=self._source, connected=self._connected, rate_hz=rate,
                             last_frame_age_s=math.inf if newest is None else now - newest, uptime_s=uptime,
-                            reader_cpu_fraction=cpu / uptime if uptime > 0 else 0.0, **base, **link)
+                            reader_cpu_fraction=cpu / uptime if uptime > 0 else 0.0, **base, **link, **drift)
 
     # ------------------------------------------------------------------ for backends
 
@@ -374,8 +383,10 @@ class TactileSensor(abc.ABC):
         raw_ut.flags.writeable = False
         saturated.flags.writeable = False
         with self._cond:
-            reading = TactileReading(field_ut=self._field(raw_ut), field_raw_ut=raw_ut, saturated=saturated,
-                                     t_host_s=t_host_s, t_device_s=t_device_s, seq=seq, temperature_c=temperature_c)
+            reading = TactileReading(field_ut=self._state.field(raw_ut, temperature_c), field_raw_ut=raw_ut,
+                                     saturated=saturated, t_host_s=t_host_s, t_device_s=t_device_s, seq=seq,
+                                     temperature_c=temperature_c)
+            self._state.observe(raw_ut, reading.field_ut)
             if self._last_seq is not None and not self._new_session:
                 step = seq - self._last_seq
                 if step > 1:
@@ -409,20 +420,14 @@ class TactileSensor(abc.ABC):
                         f"a baseline needs {n} frames but only {len(got)} arrived in {timeout_s:.1f} s")) from None
         return got
 
-    def _field(self, raw_ut: np.ndarray) -> np.ndarray:
-        """``raw - offset`` under the current baseline (lock held), read-only."""
-        if self._baseline is None:
-            return raw_ut
-        field = raw_ut - self._baseline.offset_ut
-        field.flags.writeable = False
-        return field
-
     def _use_baseline(self, baseline: Baseline | None) -> Baseline | None:
         """Switch baselines and re-express the buffered readings, so every reading returned from now on uses it."""
         with self._cond:
             self._baseline = baseline
+            self._state.set(None if baseline is None else baseline.offset_ut,
+                            None if baseline is None else baseline.temperature_c)
             for i, r in enumerate(self._ring):
-                self._ring[i] = dataclasses.replace(r, field_ut=self._field(r.field_raw_ut))
+                self._ring[i] = dataclasses.replace(r, field_ut=self._state.field(r.field_raw_ut, r.temperature_c))
         return baseline
 
     def _start_session(self) -> None:

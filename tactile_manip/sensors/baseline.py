@@ -30,12 +30,14 @@ class Baseline:
         noise_ut: (R, C, 3) float32 per-channel standard deviation over the frames, uT (zeros when set by hand).
         frames: number of frames averaged (0 when set by hand).
         t_host_s: host monotonic time when it was taken, s.
+        temperature_c: (R, C) mean chip temperatures over the frames, degC, or None when they sent none.
     """
 
     offset_ut: np.ndarray
     noise_ut: np.ndarray
     frames: int
     t_host_s: float
+    temperature_c: np.ndarray | None = None
 
 
 def noise_thresholds_ut(config: BaselineConfig, chip: ChipParams) -> np.ndarray:
