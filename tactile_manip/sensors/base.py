@@ -383,10 +383,12 @@ class TactileSensor(abc.ABC):
         raw_ut.flags.writeable = False
         saturated.flags.writeable = False
         with self._cond:
-            reading = TactileReading(field_ut=self._state.field(raw_ut, temperature_c), field_raw_ut=raw_ut,
-                                     saturated=saturated, t_host_s=t_host_s, t_device_s=t_device_s, seq=seq,
-                                     temperature_c=temperature_c)
-            self._state.observe(raw_ut, reading.field_ut)
+            state = self._state
+            field = raw_ut if state.offset_ut is None else state.field(raw_ut, temperature_c)
+            reading = TactileReading(field_ut=field, field_raw_ut=raw_ut, saturated=saturated, t_host_s=t_host_s,
+                                     t_device_s=t_device_s, seq=seq, temperature_c=temperature_c)
+            if state.config.track:
+                state.observe(raw_ut, field)
             if self._last_seq is not None and not self._new_session:
                 step = seq - self._last_seq
                 if step > 1:

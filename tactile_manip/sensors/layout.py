@@ -110,10 +110,13 @@ class BoardLayout:
         return out.reshape(*self.grid, 2)
 
     def reading_from_chips(self, chips_ut: np.ndarray) -> np.ndarray:
-        """(n_chips, 3) fields in chip axes, firmware order -> (rows, cols, 3) float32 in pad axes (unused cells 0)."""
-        chips = np.asarray(chips_ut, dtype=np.float32)
+        """(n_chips, 3) fields in chip axes, firmware order -> (rows, cols, 3) float32 in pad axes (unused cells 0).
+
+        On an identity layout a float32 input comes back as a view (the default board's frames cost a reshape).
+        """
         if self._identity:
-            return chips.reshape(self.shape)
+            return np.asarray(chips_ut, dtype=np.float32).reshape(self.shape)
+        chips = np.asarray(chips_ut, dtype=np.float32)
         out = np.zeros((self.grid[0] * self.grid[1], 3), np.float32)
         out[self._index] = np.einsum("nij,nj->ni", self._rot, chips)
         return out.reshape(self.shape)
@@ -131,6 +134,8 @@ class BoardLayout:
         sat = np.asarray(saturated, dtype=bool)
         if self._identity:
             return sat.reshape(self.shape)
+        if not sat.any():  # the usual case, without the channel mixing below
+            return np.zeros(self.shape, bool)
         out = np.zeros((self.grid[0] * self.grid[1], 3), bool)
         out[self._index] = np.einsum("nij,nj->ni", np.abs(self._rot) > 0, sat.astype(np.float32)) > 0
         return out.reshape(self.shape)
