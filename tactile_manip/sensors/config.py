@@ -127,9 +127,13 @@ class SerialSensorConfig:
         if not self.layout:
             object.__setattr__(self, "layout", DEFAULT_LAYOUTS[self.wire_format])
         try:
-            get_layout(self.layout)
+            n_chips = get_layout(self.layout).n_chips
         except ValueError as e:
             raise ValueError(f"SerialSensorConfig.layout: {e}") from None
+        n_coeff = len(self.drift.temperature_coeff_ut_per_c)
+        if n_coeff and n_coeff != 3 * n_chips:
+            raise ValueError(f"SerialSensorConfig.drift.temperature_coeff_ut_per_c has {n_coeff} values; the "
+                             f"{self.layout} board needs 3 per chip ({3 * n_chips})")
         for name in ("dtr", "rts", "exclusive", "reconnect"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"SerialSensorConfig.{name} must be true or false, got {getattr(self, name)!r}")

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tactile_manip.sensors import SimulatedSensor, SimulatedSensorConfig
+from tactile_manip.sensors import SerialSensorConfig, SimulatedSensor, SimulatedSensorConfig
 from tactile_manip.sensors.config import DriftConfig
 from tactile_manip.sensors.drift import BaselineState
 from tactile_manip.sensors.layout import ANYSKIN_5, SUPERMAG_4X4
@@ -73,6 +73,8 @@ def test_temperature_compensation_uses_per_chip_coefficients_in_firmware_order()
         BaselineState(DriftConfig(temperature_coeff_ut_per_c=(1.0, 2.0, 3.0)), ANYSKIN_5)
     with pytest.raises(ValueError, match="3 values"):
         DriftConfig(temperature_coeff_ut_per_c=(1.0, 2.0))
+    with pytest.raises(ValueError, match="supermag-4x4 board needs 3 per chip \\(48\\)"):
+        SerialSensorConfig(port="/dev/ttyUSB0", drift=DriftConfig(temperature_coeff_ut_per_c=(0.0,) * 15))
 
 
 def test_stray_field_flags_a_common_shift_not_a_local_press():
