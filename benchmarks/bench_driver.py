@@ -81,7 +81,8 @@ def bench_decoder(n: int) -> dict[str, float]:
 def bench_wire_formats(n: int) -> dict[str, dict[str, float]]:
     """Per wire format: its decoder alone (bytes -> chip fields in uT) and the reader's whole path (decoder,
     board layout, publish), microseconds per frame, one read per frame."""
-    streams = {"supermag": ("supermag-4x4", _stream(n, temperature=False)), "anyskin": ("anyskin-5", _anyskin_stream(n))}
+    streams = {"supermag": ("supermag-4x4", _stream(n, temperature=False)),
+               "anyskin": ("anyskin-5", _anyskin_stream(n))}
     out = {}
     for name, (layout, frames) in streams.items():
         n_chips = 16 if name == "supermag" else 5

@@ -47,10 +47,12 @@ static const uint16_t CONF2 = (0u << 5) | (2u << 2) | 0u;  // RES_XYZ 0, DIG_FIL
 static const float TEMP_LSB_PER_C = 45.2f;                 // datasheet: 45.2 LSB/degC around TREF at 25 degC
 
 static SPISettings spi_settings(SPI_HZ, MSBFIRST, SPI_MODE3);
-static uint16_t tref[SM_N_CHIPS];
 static sm_frame_t frame;
 static uint8_t wire[SM_FRAME_LEN_T];
 static uint32_t next_us;
+
+#if !SM_SELF_TEST // the chip driver; the self-test build streams the pattern without touching the bus
+static uint16_t tref[SM_N_CHIPS]; // TREF register of each chip (temperature at 25 degC)
 
 static void select_chip(int chip)
 {
@@ -139,12 +141,14 @@ static bool read_chip(int chip)
     return true;
 }
 
+#endif // !SM_SELF_TEST
+
 void setup()
 {
     Serial.setTxBufferSize(1024); // two frames: a slow host read never blocks the 8 ms loop for long
     Serial.begin(BAUD);
     pinMode(PIN_ENABLE, OUTPUT);
-    deselect();
+    digitalWrite(PIN_ENABLE, HIGH); // no chip selected
     for (int b = 0; b < 4; ++b) {
         pinMode(PIN_ADDR[b], OUTPUT);
     }

@@ -80,7 +80,8 @@ def baseline_from_frames(raw_ut: np.ndarray, saturated: np.ndarray, thresholds_u
         limits = ", ".join(f"{AXES[i]} {thresholds_ut[i]:.1f}" for i in range(3))
         raise CalibrationError(
             f"baseline refused on {source}: noise {std[r, c, a]:.1f} uT on chip ({r}, {c}) axis {AXES[a]} exceeds "
-            f"the {thresholds_ut[a]:.1f} uT threshold ({noisy} of {std.size} channels over; max std per axis: {per_axis} uT; "
+            f"the {thresholds_ut[a]:.1f} uT threshold ({noisy} of {std.size} channels over; max std per axis: "
+            f"{per_axis} uT; "
             f"thresholds: {limits} uT). Is something touching the pad? Release it and call rezero(); if this "
             "sensor is simply noisier, raise BaselineConfig.max_noise_ut")
     return Baseline(offset_ut=raw.mean(axis=0).astype(np.float32), noise_ut=std.astype(np.float32),

@@ -9,9 +9,10 @@ Layout (version 1)::
 
 Tags: ``FR`` a wire frame exactly as received, in the header's ``wire_format`` (``supermag``, the default:
 sync to CRC-16 with seq, device time, status, raw counts, temperatures; ``anyskin``: one float32 line of
-the header's ``layout`` chips, whose sequence is the record order), ``HL`` a JSON health snapshot, ``EV`` a JSON event. ``t_host_s`` is the recording host's
-``time.monotonic()`` when the frame became available. The writer flushes and ``fsync``s every
-``sync_every_s`` (0.5 s by default), so a killed recorder leaves every frame up to that long before the kill;
+the header's ``layout`` chips, whose sequence is the record order), ``HL`` a JSON health snapshot, ``EV`` a
+JSON event. ``t_host_s`` is the recording host's ``time.monotonic()`` when the frame became available. The
+writer flushes and ``fsync``s every ``sync_every_s`` (0.5 s by default), so a killed recorder leaves every
+frame up to that long before the kill;
 the reader stops at the first incomplete or damaged record (the torn tail of a crash) and reports its size.
 """
 

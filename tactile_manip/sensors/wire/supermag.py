@@ -60,7 +60,9 @@ class SuperMagDecoder(WireDecoder):
 
     def _convert(self, f: Frame) -> ChipFrame:
         counts = f.counts.reshape(N_CHIPS, 3)
-        temps = None if f.temperature_raw is None else f.temperature_raw.reshape(N_CHIPS) * np.float32(TEMPERATURE_LSB_C)
+        temps = None
+        if f.temperature_raw is not None:
+            temps = f.temperature_raw.reshape(N_CHIPS) * np.float32(TEMPERATURE_LSB_C)
         return ChipFrame(self._scale.to_ut(counts), (counts >= self._rail) | (counts <= -self._rail), f.seq,
                          f.t_mcu_us, f.status, temps, f.raw)
 
