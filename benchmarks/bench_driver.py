@@ -1,4 +1,4 @@
-"""Serial driver benchmark: decoder cost per frame, emulator-write -> wait_new latency, reader CPU at 125 Hz.
+"""Serial driver benchmark: decoder cost per frame (each wire format), emulator-write -> wait_new latency, reader CPU.
 
 Run from the repository root (Linux: the emulator needs a pty)::
 
@@ -26,6 +26,9 @@ from benchmarks._common import machine_info, publish
 from tactile_manip.errors import SensorTimeoutError
 from tactile_manip.sensors import SerialSensor, SerialSensorConfig
 from tactile_manip.sensors.protocol import FrameDecoder, encode_frame
+from tactile_manip.sensors.wire import WIRE_FORMATS, make_decoder
+from tactile_manip.sensors.wire.anyskin import pack_frame
+from tactile_manip.sim.params import ChipParams
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_OUT = ROOT / "benchmarks" / "results" / "driver.json"
@@ -37,6 +40,11 @@ def _stream(n: int, *, temperature: bool) -> list[bytes]:
     temps = np.full((4, 4), 2500) if temperature else None
     return [encode_frame(rng.integers(-20000, 20000, (4, 4, 3)), seq=i, t_mcu_us=8000 * i, temperature_raw=temps)
             for i in range(n)]
+
+
+def _anyskin_stream(n: int) -> list[bytes]:
+    rng = np.random.default_rng(0)
+    return [pack_frame(rng.uniform(24.0, 26.0, 5), rng.normal(0.0, 2000.0, (5, 3))) for _ in range(n)]
 
 
 def _best_us(fn, frames: list[bytes], repeats: int = 5) -> float:
@@ -66,7 +74,38 @@ def bench_decoder(n: int) -> dict[str, float]:
             s._on_bytes(f, now)  # noqa: SLF001
 
     return {"decode_us": _best_us(decode, plain), "decode_with_temperature_us": _best_us(decode, with_t),
-            "decode_convert_publish_us": _best_us(pipeline, plain), "frames": n}
+            "decode_convert_publish_us": _best_us(pipeline, plain), "frames": n,
+            "wire_formats": bench_wire_formats(n)}
+
+
+def bench_wire_formats(n: int) -> dict[str, dict[str, float]]:
+    """Per wire format: its decoder alone (bytes -> chip fields in uT) and the reader's whole path (decoder,
+    board layout, publish), microseconds per frame, one read per frame."""
+    streams = {"supermag": ("supermag-4x4", _stream(n, temperature=False)),
+               "anyskin": ("anyskin-5", _anyskin_stream(n))}
+    out = {}
+    for name, (layout, frames) in streams.items():
+        n_chips = 16 if name == "supermag" else 5
+
+        def decode(fs: list[bytes], name: str = name, n_chips: int = n_chips) -> None:
+            d = make_decoder(name, n_chips=n_chips, chip=ChipParams())
+            if name == "anyskin":
+                d.feed(b"\r\n")  # mid-stream start: the line ending before the first frame
+            for f in fs:
+                d.feed(f)
+
+        def pipeline(fs: list[bytes], name: str = name) -> None:
+            s = SerialSensor(SerialSensorConfig(port="unused", wire_format=name))
+            s._connected = True  # noqa: SLF001 - drive the reader's path without a port
+            now = time.monotonic()
+            s._on_bytes(b"\r\n" if name == "anyskin" else b"", now)  # noqa: SLF001
+            for f in fs:
+                s._on_bytes(f, now)  # noqa: SLF001
+
+        out[name] = {"layout": layout, "frame_bytes": len(frames[0]), "decode_us": _best_us(decode, frames),
+                     "decode_layout_publish_us": _best_us(pipeline, frames)}
+    assert set(out) == set(WIRE_FORMATS), "a wire format without a benchmark"
+    return out
 
 
 def _percentiles(x_ms: list[float]) -> dict[str, float]:
@@ -159,6 +198,9 @@ def markdown(report: dict[str, Any]) -> str:
              f"| decode, 110-byte frame | {d['decode_us']:.2f} us/frame | < 10 us{met['decode_us']} |",
              f"| decode, 142-byte frame (temperatures) | {d['decode_with_temperature_us']:.2f} us/frame | |",
              f"| decode + convert + publish (the reader's work) | {d['decode_convert_publish_us']:.2f} us/frame | |",
+             *[f"| wire format {name} ({w['frame_bytes']}-byte frame, {w['layout']}): decoder / decoder + layout + "
+               f"publish | {w['decode_us']:.2f} / {w['decode_layout_publish_us']:.2f} us/frame | |"
+               for name, w in d["wire_formats"].items()],
              f"| emulator write -> available to wait_new, p50 / p99 / max | {la['p50']:.3f} / {la['p99']:.3f} / "
              f"{la['max']:.3f} ms | p99 < 2 ms{met['latency_p99_ms']} |",
              f"| emulator write -> wait_new returned, p50 / p99 / max | {lr['p50']:.3f} / {lr['p99']:.3f} / "

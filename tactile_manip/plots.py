@@ -1,4 +1,4 @@
-"""Figures of tactile data: the 4x4x3 magnetic field and depth images (matplotlib, Agg backend).
+"""Figures of tactile data: the (rows, cols, 3) magnetic field and depth images (matplotlib, Agg backend).
 
 matplotlib is imported inside the functions, so importing this module is free.
 """
@@ -36,18 +36,18 @@ class FieldArtists:
 
 
 def plot_field(ax, field_ut: np.ndarray, *, pitch_mm: float = 5.0, title: str = "") -> FieldArtists:
-    """Draw a (4, 4, 3) reading on ``ax``: z as a heat map, (x, y) as arrows at the chip positions, with an
-    arrow of known length (the key, below the axes) and a labelled colour bar."""
+    """Draw a (rows, cols, 3) reading on ``ax``: z as a heat map, (x, y) as arrows at the cell centres, with an
+    arrow of known length (the key, below the pad) and a labelled colour bar."""
     f = np.asarray(field_ut, dtype=np.float64)
-    half = 2 * pitch_mm
-    im = ax.imshow(f[..., 2], cmap="RdBu_r", extent=(-half, half, -half, half))
-    c = (np.arange(4) - 1.5) * pitch_mm
-    x, y = np.meshgrid(c, -c)
+    rows, cols = f.shape[:2]
+    half_x, half_y = cols * pitch_mm / 2, rows * pitch_mm / 2
+    im = ax.imshow(f[..., 2], cmap="RdBu_r", extent=(-half_x, half_x, -half_y, half_y))
+    x, y = np.meshgrid((np.arange(cols) - (cols - 1) / 2) * pitch_mm, ((rows - 1) / 2 - np.arange(rows)) * pitch_mm)
     arrows = ax.quiver(x, y, f[..., 0], f[..., 1], angles="xy", scale_units="xy", scale=1.0, color="k",
                        width=0.012)
     # the key sits in a strip below the pad, inside the axes, so every layout keeps room for it
-    ax.set_ylim(-half - 0.6 * pitch_mm, half)
-    key = ax.quiverkey(arrows, X=-half + 0.2 * pitch_mm, Y=-half - 0.3 * pitch_mm, U=1.0, label="",
+    ax.set_ylim(-half_y - 0.6 * pitch_mm, half_y)
+    key = ax.quiverkey(arrows, X=-half_x + 0.2 * pitch_mm, Y=-half_y - 0.3 * pitch_mm, U=1.0, label="",
                        labelpos="E", coordinates="data", fontproperties={"size": 9})
     ax.set_title(title or "field: z (colour), x-y (arrows)")
     ax.set_xlabel("x [mm]")

@@ -16,7 +16,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from tactile_manip.commands.record import PORT_HINT
+from tactile_manip.commands.serial_options import PORT_HINT
 
 CAMERA_HINT = "give the VBTS camera's OpenCV index or device path, or pass --sim for the simulated camera"
 

@@ -20,10 +20,13 @@ def run(args: argparse.Namespace) -> int:
               "user in the 'dialout' group? (`--all` lists every port; the emulator prints its own path)",
               file=sys.stderr)
         return 1
-    print(f"{'port':<24}{'likely':<8}description")
+    print(f"{'port':<24}{'likely':<8}{'open with':<12}description")
     for p in ports:
-        print(f"{p.device:<24}{'yes' if p.likely else '':<8}{p.description}"
+        dtr = "--dtr high" if p.native_usb else ("--dtr low" if p.likely else "")
+        print(f"{p.device:<24}{'yes' if p.likely else '':<8}{dtr:<12}{p.description}"
               + (f"  [{p.bridge}]" if p.bridge else "") + (f"  {p.hwid}" if p.hwid and p.hwid != "n/a" else ""))
-    print("\nopen one with e.g. `tactile-manip view --port PORT`; ESP32 boards usually show a CP210x, CH340/CH9102 "
-          "or Espressif USB bridge")
+    print("\nopen one with e.g. `tactile-manip view --port PORT`, or by its serial number (SER= above, kept across "
+          "replugs) with `--serial-number SN`. ESP32 boards usually show a CP210x, CH340/CH9102 or FTDI bridge "
+          "(DTR low, the default); native-USB boards (SAMD21 on ReSkin/AnySkin, Espressif USB) need `--dtr high`, "
+          "and AnySkin boards `--wire-format anyskin`")
     return 0

@@ -10,9 +10,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-
-PORT_HINT = ("name the board's serial port (`tactile-manip find-port` lists them), "
-             "or pass --sim for the simulated sensor")
+from tactile_manip.commands.serial_options import add_serial_options, serial_config
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -21,13 +19,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     src.add_argument("--sim", action="store_true", help="record the simulated sensor instead")
     p.add_argument("--out", required=True, help="recording file to write (e.g. data/rec.tmrec)")
     p.add_argument("--seconds", type=float, default=None, help="stop after this long (default: until Ctrl-C)")
-    p.add_argument("--baud", type=int, default=921600, help="baud rate (default 921600)")
     p.add_argument("--press", action="append", default=[], metavar="SPEC",
                    help="with --sim: scripted press, as for `tactile-manip emulate` (repeatable)")
     p.add_argument("--sync-every-s", type=float, default=0.5, help="flush and fsync at least this often, s")
     p.add_argument("--health-every-s", type=float, default=1.0, help="health record (and status line) period, s")
     p.add_argument("--force", action="store_true", help="overwrite an existing output file")
     p.add_argument("--quiet", action="store_true", help="no status line per health record")
+    add_serial_options(p, src)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -35,8 +33,7 @@ def run(args: argparse.Namespace) -> int:
     import sys
     import threading
 
-    from tactile_manip.checks import check_nonblank
-    from tactile_manip.sensors import Recorder, SerialSensor, SerialSensorConfig, SimulatedSensor, parse_press
+    from tactile_manip.sensors import Recorder, SerialSensor, SimulatedSensor, parse_press
 
     out = Path(args.out)
     if out.exists() and not args.force:
@@ -49,9 +46,8 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError("--press scripts the simulated sensor: use it with --sim")
     if args.sim:
         sensor = SimulatedSensor()
-    else:  # an empty --port is refused here, never read as "no port" (that once recorded the simulated sensor)
-        port = check_nonblank("--port", args.port, hint=PORT_HINT)
-        sensor = SerialSensor(SerialSensorConfig(port=port, baudrate=args.baud))
+    else:  # an empty --port is refused by serial_config, never read as "no port" (that once recorded --sim)
+        sensor = SerialSensor(serial_config(args))
     presses = [parse_press(s) for s in args.press]
     stop = threading.Event()
     previous = signal.signal(signal.SIGTERM, lambda *_: stop.set())

@@ -11,6 +11,8 @@ import argparse
 import math
 import time
 
+from tactile_manip.commands.serial_options import add_serial_options, serial_config
+
 DEFAULT_SIM_PRESS = "letter_r,t=0.3,force=10,yaw=20,rise=0.4,hold=0.6"
 RANGE_FLOOR_UT = 20.0  # the colour and arrow scales never zoom in below this, so idle noise looks like noise
 
@@ -22,22 +24,20 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     src.add_argument("--replay", metavar="FILE", help="a recording from `tactile-manip record`")
     p.add_argument("--press", action="append", default=[], metavar="SPEC",
                    help=f"with --sim: scripted press (repeatable; default {DEFAULT_SIM_PRESS!r})")
-    p.add_argument("--baud", type=int, default=921600, help="baud rate (default 921600)")
     p.add_argument("--no-baseline", action="store_true", help="show raw fields (no baseline at start)")
     p.add_argument("--baseline-frames", type=int, default=125, help="frames averaged for the baseline (125)")
     p.add_argument("--fps", type=float, default=20.0, help="display refresh rate (default 20)")
     p.add_argument("--snapshot", metavar="PNG", help="run headless and save the last frame to this PNG")
     p.add_argument("--seconds", type=float, default=2.0, help="with --snapshot: how long to read first, s")
+    add_serial_options(p, src)
 
 
 def run(args: argparse.Namespace) -> int:
     from tactile_manip.checks import check_nonblank
-    from tactile_manip.commands.record import PORT_HINT
     from tactile_manip.sensors import (
         ReplaySensor,
         ReplaySensorConfig,
         SerialSensor,
-        SerialSensorConfig,
         SimulatedSensor,
         parse_press,
     )
@@ -54,9 +54,8 @@ def run(args: argparse.Namespace) -> int:
         sensor = SimulatedSensor()
     elif args.replay is not None:
         sensor = ReplaySensor(ReplaySensorConfig(path=check_nonblank("--replay", args.replay), loop=True))
-    else:
-        port = check_nonblank("--port", args.port, hint=PORT_HINT)
-        sensor = SerialSensor(SerialSensorConfig(port=port, baudrate=args.baud))
+    else:  # --port or --serial-number: an empty one is refused by serial_config
+        sensor = SerialSensor(serial_config(args))
     with sensor:
         if not args.no_baseline:
             sensor.calibrate_baseline(args.baseline_frames)
@@ -88,7 +87,8 @@ class FieldView:
 
         self.plt, self.sensor = plt, sensor
         self.fig, self.ax = plt.subplots(figsize=(6.4, 5.6), constrained_layout=True)
-        self.artists = plot_field(self.ax, np.zeros((4, 4, 3)))
+        self.pitch_mm = sensor.layout.pitch_mm
+        self.artists = plot_field(self.ax, np.zeros(sensor.layout.shape), pitch_mm=self.pitch_mm)
         self.z_range = self.xy_range = RANGE_FLOOR_UT
         self.frames = 0
         self.last = None

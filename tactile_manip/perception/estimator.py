@@ -131,6 +131,7 @@ class TactilePoseEstimator:
         """
         if not isinstance(frames, int) or frames < 1:
             raise ValueError(f"frames must be a positive integer, got {frames!r}")
+        self.reconstructor.check_layout(sensor.layout.name)
         readings = _fresh_frames(sensor, frames, timeout_s)
         return self.estimate_frames(readings)
 
@@ -139,8 +140,10 @@ class TactilePoseEstimator:
         """Yield one estimate per new frame of ``sensor``, at the sensor's rate (frames that arrive while an
         estimate is computed are skipped, so the stream never falls behind).
 
-        Stops after ``max_estimates`` (None: never); raises SensorTimeoutError when the sensor stalls.
+        Stops after ``max_estimates`` (None: never); raises SensorTimeoutError when the sensor stalls, and
+        ValueError (naming both) when the sensor's board layout is not the reconstructor's.
         """
+        self.reconstructor.check_layout(sensor.layout.name)
         count = 0
         while max_estimates is None or count < max_estimates:
             yield self.estimate(sensor.wait_new(timeout_s))

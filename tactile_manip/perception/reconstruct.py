@@ -50,6 +50,7 @@ def out_of_range(field_ut: np.ndarray) -> np.ndarray:
 def _limit_for(shape: tuple[int, ...]) -> np.ndarray | float:
     """The per-axis limit for readings of ``shape`` (the largest one when the last axis is not x, y, z)."""
     return READING_LIMIT_UT if shape and shape[-1] == 3 else float(READING_LIMIT_UT.max())
+DEFAULT_BOARD_LAYOUT = "supermag-4x4"  # the board every shipped model was trained on (sensors/layout.py)
 
 
 class ModelFileError(TactileManipError, ValueError):
@@ -66,9 +67,14 @@ class Reconstruction:
 
 
 class Reconstructor(abc.ABC):
-    """Reading (R, C, 3) microtesla, baseline-subtracted -> depth image (H, W) in mm."""
+    """Reading (R, C, 3) microtesla, baseline-subtracted -> depth image (H, W) in mm.
+
+    ``board_layout`` names the sensor board (``tactile_manip.sensors.layout``) whose readings it was made for;
+    :meth:`check_layout` refuses readings of another board.
+    """
 
     name: str = "reconstructor"
+    board_layout: str = DEFAULT_BOARD_LAYOUT
     input_shape: tuple[int, int, int] = (4, 4, 3)
     output_shape: tuple[int, int] = (200, 200)
     pixel_mm: float = 0.1
@@ -78,6 +84,12 @@ class Reconstructor(abc.ABC):
         t0 = time.perf_counter()
         depth, spread = self._run(self._check(field_ut)[None])
         return Reconstruction(depth[0], None if spread is None else spread[0], time.perf_counter() - t0)
+
+    def check_layout(self, layout: str) -> None:
+        """Refuse readings of board layout ``layout`` unless it is the one this reconstructor was made for."""
+        if layout != self.board_layout:
+            raise ValueError(f"{self.name} takes readings of the {self.board_layout!r} board layout, but the sensor "
+                             f"has the {layout!r} layout: train or export a model for that board")
 
     def reconstruct_batch(self, fields_ut: np.ndarray) -> np.ndarray:
         """(N, R, C, 3) readings -> (N, H, W) float32 depth images."""
@@ -97,7 +109,8 @@ class Reconstructor(abc.ABC):
         want = ((None,) if batch else ()) + tuple(self.input_shape)
         if f.ndim != len(want) or any(w is not None and w != n for w, n in zip(want, f.shape)):
             shape = "(N, " + ", ".join(map(str, self.input_shape)) + ")" if batch else str(self.input_shape)
-            raise ValueError(f"{self.name}: expected readings of shape {shape}, got {f.shape}")
+            raise ValueError(f"{self.name}: expected readings of shape {shape}, got {f.shape} (it takes readings "
+                             f"of the {self.board_layout} board layout)")
         if not np.isfinite(f).all():
             bad = np.argwhere(~np.isfinite(f))[0].tolist()
             raise ValueError(f"{self.name}: reading contains NaN or infinite values (first at index {bad}); "
@@ -151,6 +164,8 @@ class OnnxReconstructor(Reconstructor):
         self.name = f"supermag-{self.metadata.get('preset', 'model')}"
         channels = self.metadata["input"].get("channels", {"kind": "magnetic_vector", "unit": "uT"})
         self.magnetic_ut = channels["kind"] == "magnetic_vector" and channels["unit"] == "uT"
+        # models exported before board layouts existed were all trained on the SuperMag board
+        self.board_layout = str(self.metadata.get("board_layout", DEFAULT_BOARD_LAYOUT))
         self._check_graph()
 
     def _check_graph(self) -> None:

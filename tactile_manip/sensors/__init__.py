@@ -3,8 +3,11 @@
 - :class:`TactileSensor`: the contract (connect, ``read_latest``, ``wait_new``, ``window``, baseline, health);
 - backends :class:`SerialSensor` (pyserial, imported on connect), :class:`SimulatedSensor`,
   :class:`ReplaySensor`, each built from its config dataclass or by :func:`make_sensor`;
-- :mod:`~tactile_manip.sensors.protocol`: the wire codec; :mod:`~tactile_manip.sensors.emulator`: the
-  firmware emulator on a pty; :mod:`~tactile_manip.sensors.recording`: crash-safe recordings.
+- :mod:`~tactile_manip.sensors.protocol`: the SuperMag wire codec; :mod:`~tactile_manip.sensors.wire`: the
+  wire formats of the serial backend (supermag, anyskin); :mod:`~tactile_manip.sensors.layout`: board layouts;
+  :mod:`~tactile_manip.sensors.drift`: baseline tracking, temperature, stray fields;
+  :mod:`~tactile_manip.sensors.emulator`: the firmware emulator on a pty; :mod:`~tactile_manip.sensors.recording`:
+  crash-safe recordings.
 
 Importing this package does not import pyserial or matplotlib. See ``docs/sensors.md``.
 """
@@ -15,12 +18,14 @@ from tactile_manip.sensors.baseline import Baseline
 from tactile_manip.sensors.config import (
     BACKENDS,
     BaselineConfig,
+    DriftConfig,
     ReplaySensorConfig,
     SerialSensorConfig,
     SimulatedSensorConfig,
     make_sensor,
 )
 from tactile_manip.sensors.contacts import ContactTimeline, Press, parse_press
+from tactile_manip.sensors.layout import LAYOUTS, BoardLayout, ChipPlacement, get_layout
 from tactile_manip.sensors.recording import Recorder, Recording, RecordingWriter, read_recording
 from tactile_manip.sensors.replay import ReplaySensor
 from tactile_manip.sensors.serial_sensor import SerialSensor
@@ -30,7 +35,11 @@ __all__ = [
     "BACKENDS",
     "Baseline",
     "BaselineConfig",
+    "BoardLayout",
+    "ChipPlacement",
     "ContactTimeline",
+    "DriftConfig",
+    "LAYOUTS",
     "FrameSubscription",
     "Press",
     "Recorder",
@@ -46,6 +55,7 @@ __all__ = [
     "SimulatedSensor",
     "SimulatedSensorConfig",
     "TactileSensor",
+    "get_layout",
     "make_sensor",
     "parse_press",
     "read_recording",

@@ -22,7 +22,9 @@ import numpy as np
 from tactile_manip.checks import check_array
 from tactile_manip.errors import SensorDisconnectedError, SensorError, SensorTimeoutError
 from tactile_manip.sensors.baseline import Baseline, baseline_from_frames, noise_thresholds_ut
-from tactile_manip.sensors.config import BaselineConfig
+from tactile_manip.sensors.config import BaselineConfig, DriftConfig
+from tactile_manip.sensors.drift import BaselineState
+from tactile_manip.sensors.layout import SUPERMAG_4X4, BoardLayout
 from tactile_manip.sim.params import ChipParams
 from tactile_manip.types import TactileReading
 
@@ -45,6 +47,7 @@ class SensorHealth:
     seq_resets: int                   # counter repeats or jumps backwards (device restarted)
     crc_errors: int = 0               # candidate frames rejected by the CRC
     version_errors: int = 0           # syncs followed by an unknown protocol version
+    frame_errors: int = 0             # candidate frames refused by a length/value check (formats without CRC)
     resync_bytes: int = 0             # bytes skipped to find the next good frame
     dropped_at_start: int = 0         # frames discarded right after each (re)open
     reconnects: int = 0               # successful reopens after an error
@@ -55,6 +58,11 @@ class SensorHealth:
     last_error: str = ""              # the last error the producer thread caught, or ""
     last_status: int = 0              # device status bits of the newest frame
     uptime_s: float = 0.0             # time since connect(), s
+    baseline_tracking: bool = False   # the baseline is following a quiet pad right now (DriftConfig.track)
+    baseline_updates: int = 0         # frames the tracked baseline moved on since it was set
+    baseline_moved_ut: float = 0.0    # largest change of the tracked offset since it was set, uT
+    common_mode_ut: tuple[float, float, float] = (math.nan, math.nan, math.nan)  # median field over chips, x y z, uT
+    stray_field: bool = False         # all chips shifted together beyond DriftConfig.common_mode_ut (magnet, steel)
 
 
 class SensorFrame(NamedTuple):
@@ -110,7 +118,9 @@ class FrameSubscription:
 
 
 class TactileSensor(abc.ABC):
-    """A 4x4x3 magnetic tactile sensor delivering :class:`~tactile_manip.types.TactileReading` frames.
+    """A magnetic tactile sensor delivering :class:`~tactile_manip.types.TactileReading` frames.
+
+    Readings have the shape of the sensor's board layout (:attr:`layout`): (4, 4, 3) for the SuperMag board.
 
     Contract, the same for every backend:
 
@@ -127,9 +137,12 @@ class TactileSensor(abc.ABC):
       (a serial backend reconnects).
     """
 
-    def __init__(self, *, source: str, chip: ChipParams, buffer_frames: int, baseline: BaselineConfig) -> None:
+    def __init__(self, *, source: str, chip: ChipParams, buffer_frames: int, baseline: BaselineConfig,
+                 layout: BoardLayout = SUPERMAG_4X4, drift: DriftConfig | None = None) -> None:
         self._source = source
         self._chip = chip
+        self._layout = layout
+        self._state = BaselineState(drift or DriftConfig(), layout)
         self._baseline_config = baseline
         self._cond = threading.Condition()
         self._ring: collections.deque[TactileReading] = collections.deque(maxlen=buffer_frames)
@@ -175,6 +188,16 @@ class TactileSensor(abc.ABC):
     def chip(self) -> ChipParams:
         """Chip settings (LSBs, rail, rated noise) used to convert and to judge baselines."""
         return self._chip
+
+    @property
+    def layout(self) -> BoardLayout:
+        """Where the board's chips sit and which reading cells they feed (readings are ``layout.shape``)."""
+        return self._layout
+
+    @property
+    def wire_format(self) -> str:
+        """The format of the wire bytes this sensor publishes (frames without bytes are recorded as "supermag")."""
+        return "supermag"
 
     @property
     def is_connected(self) -> bool:
@@ -313,6 +336,8 @@ class TactileSensor(abc.ABC):
         saturated = np.stack([r.saturated for r in got])
         thresholds = noise_thresholds_ut(self._baseline_config, self._chip)
         baseline = baseline_from_frames(raw, saturated, thresholds, source=self._source)
+        if all(r.temperature_c is not None for r in got):  # the reference of temperature compensation
+            baseline = dataclasses.replace(baseline, temperature_c=np.mean([r.temperature_c for r in got], axis=0))
         self._rezero_frames = n
         return self._use_baseline(baseline)
 
@@ -321,8 +346,8 @@ class TactileSensor(abc.ABC):
         return self.calibrate_baseline(self._rezero_frames, timeout_s=timeout_s)
 
     def set_baseline(self, offset_ut: object) -> Baseline:
-        """Use a known (4, 4, 3) offset in uT, e.g. a saved baseline or a simulator's expected one."""
-        offset = check_array("offset_ut", offset_ut, shape=(4, 4, 3)).astype(np.float32)
+        """Use a known offset in uT of the reading's shape (``layout.shape``, (4, 4, 3) for SuperMag)."""
+        offset = check_array("offset_ut", offset_ut, shape=self._layout.shape).astype(np.float32)
         return self._use_baseline(Baseline(offset_ut=offset, noise_ut=np.zeros_like(offset), frames=0,
                                            t_host_s=time.monotonic()))
 
@@ -340,25 +365,30 @@ class TactileSensor(abc.ABC):
             base = dict(frames=self._frames, seq_gaps=self._gaps, frames_missed=self._missed,
                         seq_resets=self._resets, last_status=self._last_status)
             newest = self._ring[-1].t_host_s if self._ring else None
+            drift = self._state.health(self._ring[-1].field_ut if self._ring else None)
         rate = (len(times) - 1) / (times[-1] - times[0]) if len(times) > 2 and times[-1] > times[0] else math.nan
         uptime = now - self._t_connect if self._connected else 0.0
         link = {"link_up": self._connected, **self._link_health()}
         cpu = link.get("reader_cpu_s", 0.0)
         return SensorHealth(source=self._source, connected=self._connected, rate_hz=rate,
                             last_frame_age_s=math.inf if newest is None else now - newest, uptime_s=uptime,
-                            reader_cpu_fraction=cpu / uptime if uptime > 0 else 0.0, **base, **link)
+                            reader_cpu_fraction=cpu / uptime if uptime > 0 else 0.0, **base, **link, **drift)
 
     # ------------------------------------------------------------------ for backends
 
     def _publish(self, raw_ut: np.ndarray, saturated: np.ndarray, *, seq: int, t_host_s: float,
                  t_device_s: float = math.nan, status: int = 0, temperature_c: np.ndarray | None = None,
                  wire: bytes | None = None) -> TactileReading:
-        """Make a reading from a raw (4, 4, 3) float32 field and hand it to readers (producer thread)."""
+        """Make a reading from a raw ``layout.shape`` float32 field and hand it to readers (producer thread)."""
         raw_ut.flags.writeable = False
         saturated.flags.writeable = False
         with self._cond:
-            reading = TactileReading(field_ut=self._field(raw_ut), field_raw_ut=raw_ut, saturated=saturated,
-                                     t_host_s=t_host_s, t_device_s=t_device_s, seq=seq, temperature_c=temperature_c)
+            state = self._state
+            field = raw_ut if state.offset_ut is None else state.field(raw_ut, temperature_c)
+            reading = TactileReading(field_ut=field, field_raw_ut=raw_ut, saturated=saturated, t_host_s=t_host_s,
+                                     t_device_s=t_device_s, seq=seq, temperature_c=temperature_c)
+            if state.config.track:
+                state.observe(raw_ut, field)
             if self._last_seq is not None and not self._new_session:
                 step = seq - self._last_seq
                 if step > 1:
@@ -392,20 +422,14 @@ class TactileSensor(abc.ABC):
                         f"a baseline needs {n} frames but only {len(got)} arrived in {timeout_s:.1f} s")) from None
         return got
 
-    def _field(self, raw_ut: np.ndarray) -> np.ndarray:
-        """``raw - offset`` under the current baseline (lock held), read-only."""
-        if self._baseline is None:
-            return raw_ut
-        field = raw_ut - self._baseline.offset_ut
-        field.flags.writeable = False
-        return field
-
     def _use_baseline(self, baseline: Baseline | None) -> Baseline | None:
         """Switch baselines and re-express the buffered readings, so every reading returned from now on uses it."""
         with self._cond:
             self._baseline = baseline
+            self._state.set(None if baseline is None else baseline.offset_ut,
+                            None if baseline is None else baseline.temperature_c)
             for i, r in enumerate(self._ring):
-                self._ring[i] = dataclasses.replace(r, field_ut=self._field(r.field_raw_ut))
+                self._ring[i] = dataclasses.replace(r, field_ut=self._state.field(r.field_raw_ut, r.temperature_c))
         return baseline
 
     def _start_session(self) -> None:

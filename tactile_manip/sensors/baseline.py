@@ -26,16 +26,18 @@ class Baseline:
     """A no-contact offset and how it was measured.
 
     Attributes:
-        offset_ut: (4, 4, 3) float32 mean raw field, uT; readings report ``raw - offset_ut``.
-        noise_ut: (4, 4, 3) float32 per-channel standard deviation over the frames, uT (zeros when set by hand).
+        offset_ut: (R, C, 3) float32 mean raw field, uT (the reading's shape); readings report ``raw - offset_ut``.
+        noise_ut: (R, C, 3) float32 per-channel standard deviation over the frames, uT (zeros when set by hand).
         frames: number of frames averaged (0 when set by hand).
         t_host_s: host monotonic time when it was taken, s.
+        temperature_c: (R, C) mean chip temperatures over the frames, degC, or None when they sent none.
     """
 
     offset_ut: np.ndarray
     noise_ut: np.ndarray
     frames: int
     t_host_s: float
+    temperature_c: np.ndarray | None = None
 
 
 def noise_thresholds_ut(config: BaselineConfig, chip: ChipParams) -> np.ndarray:
@@ -53,8 +55,8 @@ def baseline_from_frames(raw_ut: np.ndarray, saturated: np.ndarray, thresholds_u
     """Average idle frames into a :class:`Baseline`, or refuse them.
 
     Args:
-        raw_ut: (N, 4, 4, 3) raw fields, uT, N >= 2.
-        saturated: (N, 4, 4, 3) bool, channels at the rail.
+        raw_ut: (N, R, C, 3) raw fields, uT, N >= 2 ((N, 4, 4, 3) for the SuperMag board).
+        saturated: (N, R, C, 3) bool, channels at the rail.
         thresholds_ut: (3,) largest accepted per-channel std for the x, y, z axes, uT.
         source: names the sensor in messages.
 
@@ -63,8 +65,8 @@ def baseline_from_frames(raw_ut: np.ndarray, saturated: np.ndarray, thresholds_u
             names the worst channel, its noise, the threshold and what to do.
     """
     raw = np.asarray(raw_ut, dtype=np.float64)
-    if raw.ndim != 4 or raw.shape[1:] != (4, 4, 3) or raw.shape[0] < 2:
-        raise ValueError(f"raw_ut: expected shape (N >= 2, 4, 4, 3), got {raw.shape}")
+    if raw.ndim != 4 or raw.shape[-1] != 3 or raw.shape[0] < 2:
+        raise ValueError(f"raw_ut: expected shape (N >= 2, rows, cols, 3), got {raw.shape}")
     if np.asarray(saturated).any():
         r, c, a = np.argwhere(np.asarray(saturated).any(axis=0))[0]
         raise CalibrationError(f"baseline refused on {source}: chip ({r}, {c}) axis {AXES[a]} is saturated; "
@@ -78,7 +80,8 @@ def baseline_from_frames(raw_ut: np.ndarray, saturated: np.ndarray, thresholds_u
         limits = ", ".join(f"{AXES[i]} {thresholds_ut[i]:.1f}" for i in range(3))
         raise CalibrationError(
             f"baseline refused on {source}: noise {std[r, c, a]:.1f} uT on chip ({r}, {c}) axis {AXES[a]} exceeds "
-            f"the {thresholds_ut[a]:.1f} uT threshold ({noisy} of 48 channels over; max std per axis: {per_axis} uT; "
+            f"the {thresholds_ut[a]:.1f} uT threshold ({noisy} of {std.size} channels over; max std per axis: "
+            f"{per_axis} uT; "
             f"thresholds: {limits} uT). Is something touching the pad? Release it and call rezero(); if this "
             "sensor is simply noisier, raise BaselineConfig.max_noise_ut")
     return Baseline(offset_ut=raw.mean(axis=0).astype(np.float32), noise_ut=std.astype(np.float32),

@@ -50,12 +50,54 @@ class BaselineConfig:
 
 
 @dataclass(frozen=True)
+class DriftConfig:
+    """Opt-in slow tracking of the baseline while the pad is unloaded, and the stray-field warning.
+
+    Tracking rule: after a baseline is set, a frame counts as *quiet* when every channel of its field
+    (``raw - offset``) is within ``quiet_ut``; once ``quiet_frames`` consecutive frames were quiet, each
+    further quiet frame moves the offset towards the raw field by ``rate`` (an exponential average). Any
+    loud frame stops tracking until ``quiet_frames`` quiet frames have passed again, so a press is never
+    learnt into the baseline. Common-mode warning: when the median over chips of each axis has moved more than
+    ``common_mode_ut`` from the baseline (all chips shifted together: a magnet or steel nearby, not a press),
+    ``health().stray_field`` is set.
+    """
+
+    track: bool = False                # update the baseline while the pad is quiet (off: the baseline is fixed)
+    quiet_ut: float = 15.0             # a frame is quiet when every |field| channel is below this, uT
+    quiet_frames: int = 125            # quiet frames in a row before tracking starts (125 = 1 s at 125 Hz)
+    rate: float = 0.002                # fraction of the way to the raw field per quiet frame (~4 s time constant)
+    common_mode_ut: float = 30.0       # warn when the median field of every chip moved this much together, uT
+    temperature_coeff_ut_per_c: tuple[float, ...] = ()  # per-chip field drift with temperature (x, y, z per
+    # chip in firmware order, flattened; uT/degC), subtracted relative to the baseline's temperature; () = off
+
+    def __post_init__(self) -> None:
+        _positive(self, "quiet_ut", "common_mode_ut")
+        if not isinstance(self.quiet_frames, int) or self.quiet_frames < 1:
+            raise ValueError(f"DriftConfig.quiet_frames must be an integer >= 1, got {self.quiet_frames!r}")
+        if not isinstance(self.rate, (int, float)) or not 0.0 < self.rate <= 1.0:
+            raise ValueError(f"DriftConfig.rate must be in (0, 1], got {self.rate!r}")
+        object.__setattr__(self, "temperature_coeff_ut_per_c", tuple(float(c) for c in self.temperature_coeff_ut_per_c))
+        if len(self.temperature_coeff_ut_per_c) % 3:
+            raise ValueError("DriftConfig.temperature_coeff_ut_per_c must hold 3 values (x, y, z) per chip, got "
+                             f"{len(self.temperature_coeff_ut_per_c)}")
+
+
+@dataclass(frozen=True)
 class SerialSensorConfig:
-    """The real sensor (or the firmware emulator) on a serial port."""
+    """The real sensor (or the firmware emulator) on a serial port.
+
+    The board is named by ``port`` (a device path) or by ``serial_number`` (its USB serial number, looked up
+    among the connected ports on every (re)open, so a pad keeps its name across replugs and reboots).
+    """
 
     backend: ClassVar[str] = "serial"
     port: str = ""                     # device path, e.g. /dev/ttyUSB0 or the emulator's pty
+    serial_number: str = ""            # USB serial number of the board, instead of port
     baudrate: int = 921600             # bit/s; 115200 cannot carry 125 Hz x 16 chips
+    wire_format: str = "supermag"      # byte format: "supermag" (firmware/) or "anyskin" (ReSkin/AnySkin sketch)
+    layout: str = ""                   # board layout (chip order, positions, rotations); "" = the format's default
+    dtr: bool = False                  # DTR level held while open: low for ESP32 boards behind a USB bridge
+    rts: bool = False                  # RTS level held while open (high on both for native-USB boards, e.g. SAMD21)
     read_timeout_s: float = 0.05       # a blocking read returns after this long without bytes, s
     exclusive: bool = True             # lock the port so a second program cannot read half the bytes
     drop_first_frames: int = 3         # frames discarded after every (re)open (stale or mid-reset data)
@@ -66,17 +108,46 @@ class SerialSensorConfig:
     buffer_frames: int = 512           # ring buffer length, frames (~4 s at 125 Hz)
     chip: ChipParams = field(default_factory=ChipParams)  # LSBs and rail for counts -> uT, rated noise
     baseline: BaselineConfig = field(default_factory=BaselineConfig)
+    drift: DriftConfig = field(default_factory=DriftConfig)
 
     def __post_init__(self) -> None:
-        if not isinstance(self.port, str) or not self.port.strip():
-            raise ValueError(f"SerialSensorConfig.port must be a device path, got {self.port!r}; "
+        from tactile_manip.sensors.layout import get_layout
+        from tactile_manip.sensors.wire import DEFAULT_LAYOUTS, WIRE_FORMATS
+
+        for name in ("port", "serial_number"):
+            if not isinstance(getattr(self, name), str):
+                raise ValueError(f"SerialSensorConfig.{name} must be a string, got {getattr(self, name)!r}")
+        if bool(self.port.strip()) == bool(self.serial_number.strip()):  # whitespace names no port either
+            raise ValueError(f"SerialSensorConfig needs exactly one of port (a device path) and serial_number, got "
+                             f"port={self.port!r}, serial_number={self.serial_number!r}; "
                              "run `tactile-manip find-port` to list candidates")
+        if self.wire_format not in WIRE_FORMATS:
+            raise ValueError(f"SerialSensorConfig.wire_format must be one of {', '.join(WIRE_FORMATS)}, "
+                             f"got {self.wire_format!r}")
+        if not self.layout:
+            object.__setattr__(self, "layout", DEFAULT_LAYOUTS[self.wire_format])
+        try:
+            n_chips = get_layout(self.layout).n_chips
+        except ValueError as e:
+            raise ValueError(f"SerialSensorConfig.layout: {e}") from None
+        n_coeff = len(self.drift.temperature_coeff_ut_per_c)
+        if n_coeff and n_coeff != 3 * n_chips:
+            raise ValueError(f"SerialSensorConfig.drift.temperature_coeff_ut_per_c has {n_coeff} values; the "
+                             f"{self.layout} board needs 3 per chip ({3 * n_chips})")
+        for name in ("dtr", "rts", "exclusive", "reconnect"):
+            if not isinstance(getattr(self, name), bool):
+                raise ValueError(f"SerialSensorConfig.{name} must be true or false, got {getattr(self, name)!r}")
         _positive(self, "baudrate", "read_timeout_s", "connect_timeout_s", "reconnect_min_s", "reconnect_max_s",
                   "buffer_frames")
         _positive(self, "drop_first_frames", allow_zero=True)
         if self.reconnect_max_s < self.reconnect_min_s:
             raise ValueError(f"SerialSensorConfig.reconnect_max_s ({self.reconnect_max_s}) must be >= "
                              f"reconnect_min_s ({self.reconnect_min_s})")
+
+    @property
+    def source(self) -> str:
+        """What the sensor is called in messages and recordings: the port, or ``usb-serial:NUMBER``."""
+        return self.port or f"usb-serial:{self.serial_number}"
 
 
 @dataclass(frozen=True)

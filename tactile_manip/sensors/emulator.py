@@ -18,6 +18,11 @@ and counted (as a USB bridge does), so a missing reader never stalls the schedul
 ``time.monotonic_ns() // 1000`` (system-wide on Linux) in ``t_mcu_us`` just before each write, which lets a
 reader on the same machine measure the write-to-read latency.
 
+``wire_format="anyskin"`` streams the ReSkin/AnySkin binary sketch's bytes instead (five chips, float32
+t, x, y, z each, then CRLF; :mod:`tactile_manip.sensors.wire.anyskin`): the simulator models the SuperMag pad,
+so each chip of the ``anyskin-5`` cross gets the simulated field interpolated (bilinearly, over the 4x4
+chips) at its position and turned into its own axes, and a temperature of 25 degC with 0.1 degC noise.
+
 Run it with ``tactile-manip emulate`` (or ``python -m tactile_manip.sensors.emulator``).
 """
 
@@ -35,7 +40,9 @@ from typing import Literal
 import numpy as np
 
 from tactile_manip.sensors.contacts import ContactTimeline, Press
+from tactile_manip.sensors.layout import ANYSKIN_5, BoardLayout
 from tactile_manip.sensors.protocol import encode_frame
+from tactile_manip.sensors.wire.anyskin import pack_frame
 from tactile_manip.sim.pair import SensorPair
 
 REBASE_LATE_S = 0.25  # a tick this late restarts the schedule instead of bursting to catch up
@@ -81,8 +88,11 @@ class EmulatorConfig:
     duration_s: float | None = None        # stop after this long, s (None: no limit)
     clock: Literal["device", "host"] = "device"  # t_mcu_us: time on the schedule, or host monotonic at write
     period_s: float | None = None          # repeat the press script with this period, s
+    wire_format: Literal["supermag", "anyskin"] = "supermag"  # the bytes: our frames or the AnySkin sketch's
 
     def __post_init__(self) -> None:
+        if self.wire_format not in ("supermag", "anyskin"):
+            raise ValueError(f"EmulatorConfig.wire_format must be 'supermag' or 'anyskin', got {self.wire_format!r}")
         if not self.rate_hz > 0:
             raise ValueError(f"EmulatorConfig.rate_hz must be > 0, got {self.rate_hz}")
         if self.clock not in ("device", "host"):
@@ -110,6 +120,20 @@ class EmulatorReport:
     tx_overflow_bytes: int = 0
     late_rebases: int = 0
     last_seq: int = -1
+
+
+def anyskin_frame(field_4x4_ut: np.ndarray, layout: BoardLayout, rng: np.random.Generator) -> bytes:
+    """An AnySkin sketch frame of ``layout``'s chips from a (4, 4, 3) pad field at 5 mm pitch (interpolated)."""
+    pos = layout.positions_mm()                              # (rows, cols, 2), NaN where no chip
+    col = np.clip(np.nan_to_num(pos[..., 0]) / 5.0 + 1.5, 0.0, 3.0)  # fractional 4x4 grid coordinates
+    row = np.clip(1.5 - np.nan_to_num(pos[..., 1]) / 5.0, 0.0, 3.0)
+    c0, r0 = np.minimum(col.astype(int), 2), np.minimum(row.astype(int), 2)
+    fc, fr = (col - c0)[..., None], (row - r0)[..., None]
+    f = np.asarray(field_4x4_ut, np.float64)
+    reading = ((1 - fr) * ((1 - fc) * f[r0, c0] + fc * f[r0, c0 + 1])
+               + fr * ((1 - fc) * f[r0 + 1, c0] + fc * f[r0 + 1, c0 + 1]))
+    temps = 25.0 + 0.1 * rng.standard_normal(layout.n_chips)
+    return pack_frame(temps, layout.chips_from_reading(reading))
 
 
 class FirmwareEmulator:
@@ -202,7 +226,10 @@ class FirmwareEmulator:
     def frame_bytes(self, seq: int, t_rel_s: float, noise_rng: np.random.Generator) -> bytes:
         """The undamaged frame ``seq`` at stream time ``t_rel_s`` (fresh noise from ``noise_rng``)."""
         change = self._timeline.change_at(t_rel_s) if self._timeline is not None else 0.0
-        counts = self.pair.chips.measure(self.pair.baseline_field_ut + change, noise_rng).counts
+        measured = self.pair.chips.measure(self.pair.baseline_field_ut + change, noise_rng)
+        if self.config.wire_format == "anyskin":
+            return anyskin_frame(measured.raw_ut, ANYSKIN_5, noise_rng)
+        counts = measured.counts
         temps = None
         if self.config.temperature:
             temps = np.rint(2500 + 10 * noise_rng.standard_normal((4, 4))).astype(np.int16)  # 25 C, 0.1 C noise

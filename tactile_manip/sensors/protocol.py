@@ -145,6 +145,7 @@ class DecoderStats:
         frames: frames accepted.
         crc_errors: candidate frames (sync, known version, complete) whose CRC did not match.
         version_errors: syncs followed by a version byte this decoder does not read.
+        frame_errors: candidate frames refused by a length or value check (wire formats without a CRC).
         resync_bytes: bytes skipped while looking for a good frame (including dropped buffer tails).
         bytes_in: bytes fed in total.
     """
@@ -152,6 +153,7 @@ class DecoderStats:
     frames: int = 0
     crc_errors: int = 0
     version_errors: int = 0
+    frame_errors: int = 0
     resync_bytes: int = 0
     bytes_in: int = 0
 

@@ -7,10 +7,12 @@ Layout (version 1)::
     records  tag (2 bytes) | payload length u16 | t_host_s f64 | payload | crc32 u32, little-endian;
              the CRC-32 (zlib) covers tag, length, time and payload.
 
-Tags: ``FR`` a wire frame exactly as received (sync to CRC-16: seq, device time, status, raw counts,
-temperatures), ``HL`` a JSON health snapshot, ``EV`` a JSON event. ``t_host_s`` is the recording host's
-``time.monotonic()`` when the frame became available. The writer flushes and ``fsync``s every
-``sync_every_s`` (0.5 s by default), so a killed recorder leaves every frame up to that long before the kill;
+Tags: ``FR`` a wire frame exactly as received, in the header's ``wire_format`` (``supermag``, the default:
+sync to CRC-16 with seq, device time, status, raw counts, temperatures; ``anyskin``: one float32 line of
+the header's ``layout`` chips, whose sequence is the record order), ``HL`` a JSON health snapshot, ``EV`` a
+JSON event. ``t_host_s`` is the recording host's ``time.monotonic()`` when the frame became available. The
+writer flushes and ``fsync``s every ``sync_every_s`` (0.5 s by default), so a killed recorder leaves every
+frame up to that long before the kill;
 the reader stops at the first incomplete or damaged record (the torn tail of a crash) and reports its size.
 """
 
@@ -40,6 +42,9 @@ from tactile_manip.sensors.protocol import (
     encode_frame,
 )
 from tactile_manip.sensors.framed_file import CRC32, TAG_EVENT, FramedWriter, json_default, read_header
+from tactile_manip.sensors.layout import DEFAULT_LAYOUT, get_layout
+from tactile_manip.sensors.wire import make_decoder
+from tactile_manip.sim.params import ChipParams
 
 if TYPE_CHECKING:
     from tactile_manip.sensors.base import SensorFrame, SensorHealth, TactileSensor
@@ -84,11 +89,13 @@ class Recording:
         seq: (N,) int64 frame counter, unwrapped.
         t_device_s: (N,) device clock, unwrapped, s.
         status: (N,) uint16 device status bits.
-        counts: (N, 4, 4, 3) int16 raw counts.
+        counts: (N, 4, 4, 3) int16 raw counts, or None for wire formats that send microtesla (see ``raw_ut``).
         temperature_c: (N, 4, 4) float32 chip temperatures (NaN where a frame had none), or None.
         health: health snapshots, each a dict with its ``t_host_s``.
         events: events, each a dict with its ``t_host_s``.
         truncated_bytes: bytes after the last complete record (a crash's torn tail), 0 for a clean file.
+        raw_ut: (N, R, C, 3) float32 raw fields of formats that send microtesla (``counts`` is None then).
+        saturated_mask: (N, R, C, 3) bool saturation of those formats, else None (derived from counts).
     """
 
     path: Path
@@ -102,6 +109,8 @@ class Recording:
     health: list[dict[str, Any]] = field(default_factory=list)
     events: list[dict[str, Any]] = field(default_factory=list)
     truncated_bytes: int = 0
+    raw_ut: np.ndarray | None = None
+    saturated_mask: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.seq)
@@ -111,9 +120,20 @@ class Recording:
         chip = self.header["chip"]
         return CountScale(chip["lsb_xy_ut"], chip["lsb_z_ut"], chip.get("saturation_counts", 32767))
 
+    @property
+    def layout_name(self) -> str:
+        """The board layout the frames were recorded with (recordings before layouts existed: supermag-4x4)."""
+        return self.header.get("layout", DEFAULT_LAYOUT)
+
     def field_raw_ut(self) -> np.ndarray:
-        """(N, 4, 4, 3) float32 raw fields in uT (counts times the recorded LSBs)."""
-        return self.scale.to_ut(self.counts)
+        """(N, R, C, 3) float32 raw fields in uT (counts times the recorded LSBs, or as the wire sent them)."""
+        return self.raw_ut if self.counts is None else self.scale.to_ut(self.counts)
+
+    def saturated(self) -> np.ndarray:
+        """(N, R, C, 3) bool, channels at the rail."""
+        if self.counts is None:
+            return self.saturated_mask
+        return self.scale.saturated(self.counts)
 
 
 def read_recording(path: str | Path) -> Recording:
@@ -128,6 +148,7 @@ def read_recording(path: str | Path) -> Recording:
     except FileNotFoundError as e:
         raise RecordingError(f"recording not found: {path}") from e
     header, pos = _read_header(data, path)
+    decode = _record_decoder(header, path)
     frames, health, events = [], [], []
     while pos + RECORD.size + CRC32.size <= len(data):
         tag, length, t_host = RECORD.unpack_from(data, pos)
@@ -139,7 +160,7 @@ def read_recording(path: str | Path) -> Recording:
         payload = data[pos + RECORD.size:end]
         if tag == TAG_FRAME:
             try:
-                frames.append((t_host, decode_frame(payload)))
+                frames.append((t_host, decode(payload)))
             except ProtocolError:
                 break
         elif tag in (TAG_HEALTH, TAG_EVENT):
@@ -152,8 +173,24 @@ def _read_header(data: bytes, path: Path) -> tuple[dict[str, Any], int]:
     return read_header(data, path, MAGIC, "recording", FORMAT_VERSION)
 
 
+def _record_decoder(header: dict[str, Any], path: Path) -> Callable[[bytes], Any]:
+    """How this file's FR payloads decode: the SuperMag codec, or the header's wire format on its layout."""
+    fmt = header.get("wire_format", "supermag")
+    if fmt == "supermag":
+        return decode_frame
+    try:
+        layout = get_layout(header.get("layout", ""))
+        chip = header.get("chip", {})
+        params = ChipParams(**{k: chip[k] for k in ("lsb_xy_ut", "lsb_z_ut", "saturation_counts") if k in chip})
+        return make_decoder(fmt, n_chips=layout.n_chips, chip=params).decode_record
+    except ValueError as e:
+        raise RecordingError(f"{path}: cannot read its frames: {e}") from None
+
+
 def _assemble(path: Path, header: dict[str, Any], frames: list, health: list, events: list, *,
               truncated: int) -> Recording:
+    if header.get("wire_format", "supermag") != "supermag":
+        return _assemble_fields(path, header, frames, health, events, truncated=truncated)
     n = len(frames)
     seq, clock = Unwrapper(16), Unwrapper(32)
     counts = np.empty((n, 4, 4, 3), np.int16)
@@ -170,10 +207,31 @@ def _assemble(path: Path, header: dict[str, Any], frames: list, health: list, ev
                      temperature_c=temps, health=health, events=events, truncated_bytes=truncated)
 
 
+def _assemble_fields(path: Path, header: dict[str, Any], frames: list, health: list, events: list, *,
+                     truncated: int) -> Recording:
+    """A recording of a format that sends microtesla and no counter: sequence = record order, no device time."""
+    layout = get_layout(header["layout"])
+    n = len(frames)
+    raw = np.zeros((n, *layout.shape), np.float32)
+    sat = np.zeros((n, *layout.shape), bool)
+    temps = None if not any(f.temperature_c is not None for _, f in frames) else np.full((n, *layout.grid), np.nan,
+                                                                                          np.float32)
+    for i, (_, f) in enumerate(frames):
+        raw[i] = layout.reading_from_chips(f.field_ut)
+        sat[i] = layout.saturation_from_chips(f.saturated)
+        if temps is not None and f.temperature_c is not None:
+            temps[i] = layout.cells_from_chips(f.temperature_c)
+    return Recording(path=path, header=header, t_host_s=np.array([t for t, _ in frames], np.float64),
+                     seq=np.arange(n, dtype=np.int64), t_device_s=np.full(n, np.nan),
+                     status=np.array([f.status for _, f in frames], np.uint16), counts=None, temperature_c=temps,
+                     health=health, events=events, truncated_bytes=truncated, raw_ut=raw, saturated_mask=sat)
+
+
 def recording_header(sensor: TactileSensor, **extra: Any) -> dict[str, Any]:
-    """Header fields describing ``sensor``: source, backend and chip settings."""
+    """Header fields describing ``sensor``: source, backend, chip settings, wire format and board layout."""
     chip = sensor.chip
-    return {"source": sensor.source, "backend": type(sensor).__name__,
+    return {"source": sensor.source, "backend": type(sensor).__name__, "wire_format": sensor.wire_format,
+            "layout": sensor.layout.name,
             "chip": {"lsb_xy_ut": chip.lsb_xy_ut, "lsb_z_ut": chip.lsb_z_ut,
                      "saturation_counts": chip.saturation_counts, "noise_xy_ut": chip.noise_xy_ut,
                      "noise_z_ut": chip.noise_z_ut, "rate_hz": chip.rate_hz},
@@ -238,6 +296,9 @@ class Recorder:
         wire = item.wire
         if wire is None:
             r = item.reading
+            if r.field_raw_ut.shape != (4, 4, 3):
+                raise RecordingError(f"{self.sensor.source} gives {r.field_raw_ut.shape} readings without wire "
+                                     "bytes; only SuperMag (4, 4, 3) readings can be re-encoded into a recording")
             temps = None if r.temperature_c is None else np.rint(r.temperature_c / TEMPERATURE_LSB_C).astype(np.int16)
             t_us = int(round(r.t_device_s * 1e6)) if math.isfinite(r.t_device_s) else 0
             wire = encode_frame(self._scale.to_counts(r.field_raw_ut), seq=r.seq, t_mcu_us=t_us, status=item.status,

@@ -19,6 +19,7 @@ import numpy as np
 from tactile_manip.errors import RecordingError, SensorTimeoutError
 from tactile_manip.sensors.base import TactileSensor
 from tactile_manip.sensors.config import ReplaySensorConfig
+from tactile_manip.sensors.layout import get_layout
 from tactile_manip.sensors.recording import Recording, read_recording
 from tactile_manip.sim.params import ChipParams
 from tactile_manip.types import TactileReading
@@ -56,8 +57,12 @@ class ReplaySensor(TactileSensor):
         chip = rec.header.get("chip", {})
         known = {f.name for f in dataclasses.fields(ChipParams)}
         self._chip = dataclasses.replace(ChipParams(), **{k: v for k, v in chip.items() if k in known})
+        try:
+            self._layout = get_layout(rec.layout_name)
+        except ValueError as e:
+            raise RecordingError(f"{self.config.path}: {e}") from None
         self.recording, self._next = rec, 0
-        self._scale = rec.scale
+        self._field_ut, self._saturated = rec.field_raw_ut(), rec.saturated()
         self._seq_span = int(rec.seq[-1] - rec.seq[0]) + 1
         self._period_s = float(np.median(np.diff(rec.t_host_s))) if len(rec) > 1 else 1.0 / self._chip.rate_hz
         self._start_session()
@@ -110,11 +115,9 @@ class ReplaySensor(TactileSensor):
         rec, i = self.recording, self._next
         loop, j = divmod(i, len(rec))
         self._next = i + 1
-        counts = rec.counts[j]
-        rail = self._scale.saturation_counts
         temps = None if rec.temperature_c is None else rec.temperature_c[j].copy()
         loop_s = rec.t_device_s[-1] - rec.t_device_s[0] + self._period_s
-        return self._publish(self._scale.to_ut(counts), (counts >= rail) | (counts <= -rail),
+        return self._publish(self._field_ut[j].copy(), self._saturated[j].copy(),
                              seq=int(rec.seq[j]) + loop * self._seq_span, t_host_s=time.monotonic(),
                              t_device_s=float(rec.t_device_s[j]) + loop * loop_s, status=int(rec.status[j]),
                              temperature_c=temps)

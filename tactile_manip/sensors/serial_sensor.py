@@ -1,24 +1,30 @@
 """The serial backend: the real MBTS board (or the firmware emulator's pty) read with pyserial.
 
 A reader thread blocks in ``Serial.read`` with a timeout (no busy loop), feeds the bytes to the protocol
-decoder and publishes each valid frame. The port is opened exclusively with DTR and RTS held low (ESP32
-boards reset, or enter their bootloader, when the host raises them), the first frames after every (re)open
-are dropped, and an error on the port closes it and reopens it with exponential back-off. pyserial is
+decoder of the configured wire format (:mod:`tactile_manip.sensors.wire`) and publishes each valid frame
+through the board layout (:mod:`tactile_manip.sensors.layout`). The port is opened exclusively with DTR and
+RTS at the configured levels (low by default: ESP32 boards behind a USB bridge reset, or enter their
+bootloader, when the host raises them; native-USB boards such as the SAMD21 only write once DTR is high),
+found by its device path or by its USB serial number on every (re)open; the first frames after every
+(re)open are dropped, and an error on the port closes it and reopens it with exponential back-off. Formats
+without a counter or clock get a host-side sequence (+1 per frame) and a NaN device time. pyserial is
 imported on ``connect()`` only, so ``import tactile_manip.sensors`` works without it.
 """
 
 from __future__ import annotations
 
+import math
 import threading
 import time
 from typing import Any
 
-import numpy as np
 
 from tactile_manip.errors import SensorDisconnectedError, SensorTimeoutError
 from tactile_manip.sensors.base import TactileSensor
 from tactile_manip.sensors.config import SerialSensorConfig
-from tactile_manip.sensors.protocol import TEMPERATURE_LSB_C, CountScale, Frame, FrameDecoder, Unwrapper
+from tactile_manip.sensors.layout import get_layout
+from tactile_manip.sensors.protocol import Unwrapper
+from tactile_manip.sensors.wire import ChipFrame, make_decoder
 
 
 def import_serial() -> Any:
@@ -41,15 +47,18 @@ class SerialSensor(TactileSensor):
     """
 
     def __init__(self, config: SerialSensorConfig) -> None:
-        super().__init__(source=config.port, chip=config.chip, buffer_frames=config.buffer_frames,
-                         baseline=config.baseline)
+        super().__init__(source=config.source, chip=config.chip, buffer_frames=config.buffer_frames,
+                         baseline=config.baseline, layout=get_layout(config.layout), drift=config.drift)
         self.config = config
-        self._scale = CountScale.from_chip(config.chip)
         self._stop = threading.Event()
         self._port_lock = threading.Lock()
         self._port: Any = None
         self._thread: threading.Thread | None = None
         self._reset_link_counters()
+
+    @property
+    def wire_format(self) -> str:
+        return self.config.wire_format
 
     # ------------------------------------------------------------------ TactileSensor hooks
 
@@ -60,7 +69,7 @@ class SerialSensor(TactileSensor):
         self._port = self._open_port(serial)
         self._begin_session()
         self._thread = threading.Thread(target=self._run, args=(serial,), daemon=True,
-                                        name=f"tactile-serial {self.config.port}")
+                                        name=f"tactile-serial {self.config.source}")
         self._thread.start()
         with self._cond:
             if self._cond.wait_for(lambda: self._frames > 0, timeout=self.config.connect_timeout_s):
@@ -82,7 +91,8 @@ class SerialSensor(TactileSensor):
     def _link_health(self) -> dict[str, Any]:
         st = self._decoder.stats
         return {"link_up": self._connected and self._port is not None, "crc_errors": st.crc_errors,
-                "version_errors": st.version_errors, "resync_bytes": st.resync_bytes,
+                "version_errors": st.version_errors, "frame_errors": st.frame_errors,
+                "resync_bytes": st.resync_bytes,
                 "dropped_at_start": self._dropped, "reconnects": self._reconnects, "reader_cpu_s": self._cpu_s,
                 "last_error": self._last_error}
 
@@ -131,17 +141,17 @@ class SerialSensor(TactileSensor):
                 continue
             self._publish_frame(frame, t_host_s)
 
-    def _publish_frame(self, f: Frame, t_host_s: float) -> None:
-        seq, _ = self._seq.update(f.seq)
-        t_us, _ = self._clock.update(f.t_mcu_us)
-        counts = f.counts
-        rail = self._scale.saturation_counts
-        temps = None
-        if f.temperature_raw is not None:
-            temps = f.temperature_raw * np.float32(TEMPERATURE_LSB_C)
-        self._publish(self._scale.to_ut(counts), (counts >= rail) | (counts <= -rail), seq=seq,
-                      t_host_s=t_host_s, t_device_s=t_us * 1e-6, status=f.status, temperature_c=temps,
-                      wire=f.raw)
+    def _publish_frame(self, f: ChipFrame, t_host_s: float) -> None:
+        layout = self.layout
+        if f.seq is None:  # the format has no counter: count frames on the host
+            self._host_seq += 1
+            seq = self._host_seq
+        else:
+            seq, _ = self._seq.update(f.seq)
+        t_device_s = math.nan if f.t_device_us is None else self._clock.update(f.t_device_us)[0] * 1e-6
+        temps = None if f.temperature_c is None else layout.cells_from_chips(f.temperature_c)
+        self._publish(layout.reading_from_chips(f.field_ut), layout.saturation_from_chips(f.saturated), seq=seq,
+                      t_host_s=t_host_s, t_device_s=t_device_s, status=f.status, temperature_c=temps, wire=f.raw)
 
     # ------------------------------------------------------------------ the port
 
@@ -151,16 +161,27 @@ class SerialSensor(TactileSensor):
         port.baudrate = cfg.baudrate
         port.timeout = cfg.read_timeout_s
         port.exclusive = cfg.exclusive
-        port.dtr = False  # applied on open: ESP32 boards reset (or enter the bootloader) on DTR/RTS high
-        port.rts = False
-        port.port = cfg.port
+        # applied on open: ESP32 boards reset (or enter the bootloader) on DTR/RTS high, native-USB boards
+        # (SAMD21) stay silent until DTR is high
+        port.dtr = cfg.dtr
+        port.rts = cfg.rts
+        port.port = self._device()
         try:
             port.open()
         except (serial.SerialException, OSError, ValueError) as e:
             raise SensorDisconnectedError(
-                f"cannot open {cfg.port}: {e}. Is the board plugged in? `tactile-manip find-port` lists the "
+                f"cannot open {port.port}: {e}. Is the board plugged in? `tactile-manip find-port` lists the "
                 "ports; if another program holds this one (the port is opened exclusively), close it") from e
         return port
+
+    def _device(self) -> str:
+        """The device path to open: the configured port, or the port that has the configured serial number now."""
+        cfg = self.config
+        if cfg.port:
+            return cfg.port
+        from tactile_manip.sensors.ports import device_for_serial_number  # ports imports this module
+
+        return device_for_serial_number(cfg.serial_number)
 
     def _reopen(self, serial: Any) -> bool:
         try:
@@ -193,9 +214,11 @@ class SerialSensor(TactileSensor):
         self._start_session()
 
     def _reset_link_counters(self) -> None:
-        self._decoder = FrameDecoder()
-        self._seq = Unwrapper(16)
-        self._clock = Unwrapper(32)
+        cfg = self.config
+        self._decoder = make_decoder(cfg.wire_format, n_chips=self.layout.n_chips, chip=cfg.chip)
+        self._seq = Unwrapper(self._decoder.seq_bits or 16)
+        self._clock = Unwrapper(self._decoder.clock_bits or 32)
+        self._host_seq = -1
         self._to_drop = 0
         self._dropped = self._reconnects = self._failed_reopens = 0
         self._cpu_s = 0.0
@@ -205,12 +228,11 @@ class SerialSensor(TactileSensor):
         cfg, st = self.config, self._decoder.stats
         if st.bytes_in == 0:
             why = "no bytes at all: is the board powered and running the streaming firmware?"
-        elif st.version_errors > st.crc_errors:
-            why = (f"{st.bytes_in} bytes but {st.version_errors} frames of another protocol version: update the "
-                   "firmware or tactile_manip so both speak version 1")
+            if not cfg.dtr:
+                why += (" A native-USB board (SAMD21, as on AnySkin) only writes once the host raises DTR: "
+                        "set dtr=True (`--dtr high`).")
         else:
-            why = (f"{st.bytes_in} bytes but no valid frame ({st.crc_errors} CRC errors): is the baud rate "
-                   f"{cfg.baudrate} right, and is this the sensor's port?")
+            why = f"{self._decoder.no_frame_hint()} (wire format {cfg.wire_format!r}, baud rate {cfg.baudrate})."
         err = f" (last error: {self._last_error})" if self._last_error else ""
-        return (f"opened {cfg.port} but no valid frame arrived in {cfg.connect_timeout_s:.1f} s: {why} "
+        return (f"opened {cfg.source} but no valid frame arrived in {cfg.connect_timeout_s:.1f} s: {why} "
                 f"`tactile-manip find-port` lists the ports{err}")

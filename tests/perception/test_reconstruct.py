@@ -355,3 +355,36 @@ def test_metadata_copied_onto_another_graph_is_refused(graph_with_shipped_metada
     assert "the graph maps (" in message and "the metadata describes (field_ut ['N', 4, 4, 3] float" in message
     if kind == "identity":
         assert "x [1, 48] float" in message
+
+
+def test_models_name_their_board_layout_and_refuse_another(onnx_4x4, onnx_5x6):
+    from tactile_manip.perception.estimator import TactilePoseEstimator
+    from tactile_manip.sensors import SerialSensor, SerialSensorConfig
+
+    model = OnnxReconstructor(onnx_4x4.path)
+    assert model.board_layout == "supermag-4x4" and OnnxReconstructor(onnx_5x6.path).board_layout == "grid-5x6"
+    model.check_layout("supermag-4x4")
+    with pytest.raises(ValueError, match="'supermag-4x4' board layout, but the sensor has the 'anyskin-5' layout"):
+        model.check_layout("anyskin-5")
+    with pytest.raises(ValueError, match=r"\(4, 4, 3\), got \(3, 3, 3\) \(it takes readings of the supermag-4x4"):
+        model.reconstruct(np.zeros((3, 3, 3)))
+    # the estimator checks the sensor's layout before reading a frame (this sensor is never connected)
+    anyskin = SerialSensor(SerialSensorConfig(port="/dev/null-x", wire_format="anyskin"))
+    with pytest.raises(ValueError, match="anyskin-5"):
+        TactilePoseEstimator(load_reconstructor("bilinear")).read(anyskin)
+
+
+def test_a_model_without_a_board_layout_in_its_metadata_is_a_supermag_model(onnx_4x4, tmp_path):
+    import onnx
+
+    from tactile_manip.perception.reconstruct import METADATA_KEY
+
+    proto = onnx.load(str(onnx_4x4.path))
+    for prop in proto.metadata_props:
+        if prop.key == METADATA_KEY:
+            meta = json.loads(prop.value)
+            meta.pop("board_layout")
+            prop.value = json.dumps(meta)
+    old = tmp_path / "old.onnx"
+    onnx.save(proto, str(old))
+    assert OnnxReconstructor(old).board_layout == "supermag-4x4"

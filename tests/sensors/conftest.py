@@ -98,6 +98,15 @@ def streaming_emulator(tmp_path_factory):
 
 
 @pytest.fixture(scope="session")
+def anyskin_emulator(tmp_path_factory):
+    """One emulator streaming the ReSkin/AnySkin binary sketch's bytes for the whole session."""
+    e = EmulatorProcess(["--duration-s", "900", "--linger-s", "0", "--seed", "6", "--wire-format", "anyskin"],
+                        tmp_path_factory.mktemp("emulator") / "anyskin.log")
+    yield e
+    e.stop()
+
+
+@pytest.fixture(scope="session")
 def sim_recording(tmp_path_factory) -> Path:
     """About 1.2 s of the simulated sensor at 125 Hz, recorded with the Recorder."""
     from tactile_manip.sensors import Recorder, SimulatedSensor, SimulatedSensorConfig

@@ -1,6 +1,7 @@
 """The TactileSensor contract, one test body run against every backend.
 
 ``serial`` is the real pyserial driver reading the firmware emulator (another process) through a pty,
+``serial-anyskin`` the same driver reading the emulator's ReSkin/AnySkin stream (5 chips, no counter or clock),
 ``simulated`` the in-process simulator, ``replay`` a recording played at its recorded pace.
 """
 
@@ -24,13 +25,16 @@ from tactile_manip.sensors import (
     make_sensor,
 )
 
-BACKENDS = ("serial", "simulated", "replay")
+BACKENDS = ("serial", "serial-anyskin", "simulated", "replay")
 
 
 def _factory(kind: str, request):
     if kind == "serial":
         path = request.getfixturevalue("streaming_emulator").path
         return lambda: make_sensor(SerialSensorConfig(port=path))
+    if kind == "serial-anyskin":
+        path = request.getfixturevalue("anyskin_emulator").path
+        return lambda: make_sensor(SerialSensorConfig(port=path, wire_format="anyskin"))
     if kind == "simulated":
         return lambda: make_sensor(SimulatedSensorConfig(seed=3))
     path = str(request.getfixturevalue("sim_recording"))
@@ -68,13 +72,17 @@ def test_constructor_does_no_io_and_readers_need_a_connection(make):
 def test_readings_follow_the_documented_layout(make):
     with make() as s:
         r = s.wait_new(timeout_s=2.0)
-        assert r.shape == (4, 4, 3)
+        assert r.shape == s.layout.shape == ((3, 3, 3) if s.wire_format == "anyskin" else (4, 4, 3))
         assert r.field_ut.dtype == np.float32 and r.field_raw_ut.dtype == np.float32 and r.saturated.dtype == bool
         assert np.isfinite(r.field_raw_ut).all() and not r.saturated.any()
         assert np.array_equal(r.field_ut, r.field_raw_ut)               # no baseline yet: raw == field
-        assert 1000 < float(np.abs(r.field_raw_ut[..., 2]).mean()) < 20000  # the magnet's idle field, uT
-        assert r.t_host_s <= time.monotonic() and np.isfinite(r.t_device_s)
-        assert r.temperature_c is None
+        assert 1000 < float(np.abs(r.field_raw_ut[s.layout.mask, 2]).mean()) < 20000  # the magnet's idle field, uT
+        assert r.t_host_s <= time.monotonic()
+        if s.wire_format == "anyskin":  # no device clock on this wire; temperatures always sent
+            assert np.isnan(r.t_device_s) and r.temperature_c.shape == s.layout.grid
+            assert not r.field_raw_ut[~s.layout.mask].any()             # cells without a chip stay 0
+        else:
+            assert np.isfinite(r.t_device_s) and r.temperature_c is None
         with pytest.raises(ValueError):
             r.field_ut[0, 0, 0] = 1.0                                   # readings are immutable
 
@@ -126,7 +134,7 @@ def test_baseline_rezero_and_clear(make):
         s.clear_baseline()
         r = s.wait_new(2.0)
         assert np.array_equal(r.field_ut, r.field_raw_ut)
-        s.set_baseline(np.zeros((4, 4, 3)))
+        s.set_baseline(np.zeros(s.layout.shape))
         assert np.array_equal(s.read_latest(1.0).field_ut, s.read_latest(1.0).field_raw_ut)
         with pytest.raises(ValueError, match="shape"):
             s.set_baseline(np.zeros(48))

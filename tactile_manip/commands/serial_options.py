@@ -1,0 +1,43 @@
+"""The serial-port options shared by the commands that open a board (`record`, `view`)."""
+
+from __future__ import annotations
+
+import argparse
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from tactile_manip.sensors import SerialSensorConfig
+
+PORT_HINT = ("name the board's serial port (`tactile-manip find-port` lists them), "
+             "or pass --sim for the simulated sensor")
+WIRE_FORMATS = ("supermag", "anyskin")  # mirrors tactile_manip.sensors.wire.WIRE_FORMATS (checked in the tests)
+
+
+def add_serial_options(p: argparse.ArgumentParser, source: argparse._MutuallyExclusiveGroup) -> None:
+    """``--serial-number`` joins the command's source group; the port options get their own group."""
+    source.add_argument("--serial-number", metavar="SN",
+                        help="the board's USB serial number instead of --port (kept across replugs; see find-port)")
+    g = p.add_argument_group("serial port")
+    g.add_argument("--baud", type=int, default=921600, help="baud rate (default 921600)")
+    g.add_argument("--wire-format", choices=WIRE_FORMATS, default="supermag",
+                   help="the board's bytes: supermag (firmware/, default) or anyskin (ReSkin/AnySkin binary sketch)")
+    g.add_argument("--layout", default="",
+                   help="board layout (supermag-4x4, anyskin-5); default: the wire format's own board")
+    g.add_argument("--dtr", choices=("low", "high"), default="low",
+                   help="DTR level while open: low for ESP32 boards behind a USB bridge (default), high for "
+                        "native-USB boards such as the SAMD21 on AnySkin, which only write once DTR is high")
+    g.add_argument("--rts", choices=("low", "high"), default="low", help="RTS level while open (default low)")
+
+
+def serial_config(args: argparse.Namespace) -> SerialSensorConfig:
+    """The SerialSensorConfig the options describe (ValueError naming a bad value; an empty --port or
+    --serial-number is refused, never read as "no port")."""
+    from tactile_manip.checks import check_nonblank
+    from tactile_manip.sensors import SerialSensorConfig
+
+    for flag, value in (("--port", args.port), ("--serial-number", args.serial_number)):
+        if value is not None:
+            check_nonblank(flag, value, hint=PORT_HINT)
+    return SerialSensorConfig(port=args.port or "", serial_number=args.serial_number or "", baudrate=args.baud,
+                              wire_format=args.wire_format, layout=args.layout, dtr=args.dtr == "high",
+                              rts=args.rts == "high")

@@ -1,0 +1,181 @@
+"""Board layouts: where each chip of a board sits in the pad frame and which cell of the reading it feeds.
+
+Readings keep the ``(rows, cols, 3)`` layout of DESIGN.md section 4 (row 0 at +y, column 0 at -x, axes in
+the pad frame). A board's firmware sends its chips in its own order, each chip in its own axes; a
+:class:`BoardLayout` lists the chips in that order, each with its reading cell, its position (mm) and its
+rotation about the pad normal, and turns a ``(n_chips, 3)`` frame into a reading. Cells no chip feeds stay 0
+and are False in :attr:`BoardLayout.mask`.
+
+Two layouts ship (:data:`LAYOUTS`):
+
+- ``supermag-4x4``: 16 chips at 5 mm pitch, chip ``i`` at cell ``(i // 4, i % 4)``, axes already in the pad
+  frame (what ``firmware/`` sends), x, y in {-7.5, -2.5, 2.5, 7.5} mm. The default; its conversion is a
+  reshape, so the SuperMag pipeline does no extra work.
+- ``anyskin-5``: the five-chip cross of the ReSkin/AnySkin boards in a (3, 3, 3) reading. The firmware order
+  is centre, left, right, up, down (as the published AnySkin visualiser draws them); they feed cells
+  (1, 1), (1, 0), (1, 2), (0, 1), (2, 1), the four corners are unused (0, masked). Each chip's axes are
+  turned into the pad frame by the in-plane angle the visualiser applies to that chip (-90, -90, 180, 90,
+  0 degrees in its y-down screen axes, i.e. 90, 90, 180, -90, 0 degrees counter-clockwise in the pad's
+  y-up frame). The pitch (``ANYSKIN_PITCH_MM``) is an estimate of the board, not a datasheet figure:
+  measure yours and build a layout with :func:`cross_layout` if it differs.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+ANYSKIN_PITCH_MM = 7.0  # centre-to-neighbour chip distance of the 5X board (estimate, see the module docstring)
+
+
+@dataclass(frozen=True)
+class ChipPlacement:
+    """One chip of a board, in firmware order.
+
+    Attributes:
+        cell: (row, col) of the reading this chip feeds.
+        position_mm: (x, y) of the chip centre in the pad frame, mm.
+        rotation_deg: counter-clockwise angle about the pad normal from the chip's axes to the pad's axes, deg
+            (a field along the chip's +x reads along pad direction (cos, sin) of this angle).
+    """
+
+    cell: tuple[int, int]
+    position_mm: tuple[float, float]
+    rotation_deg: float = 0.0
+
+
+@dataclass(frozen=True, eq=False)
+class BoardLayout:
+    """A board's chips (firmware order) mapped onto a ``grid`` of reading cells.
+
+    Attributes:
+        name: the layout's name, stored in recordings and model metadata.
+        grid: (rows, cols) of the reading.
+        chips: one placement per chip, in the order the firmware sends them.
+        pitch_mm: distance between neighbouring reading cells, mm (for plots).
+    """
+
+    name: str
+    grid: tuple[int, int]
+    chips: tuple[ChipPlacement, ...]
+    pitch_mm: float
+    _index: np.ndarray = field(init=False, repr=False)
+    _rot: np.ndarray = field(init=False, repr=False)
+    _identity: bool = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        rows, cols = self.grid
+        if not self.name or rows < 1 or cols < 1 or not self.chips:
+            raise ValueError(f"BoardLayout needs a name, a grid >= (1, 1) and chips, got {self.name!r}, "
+                             f"{self.grid}, {len(self.chips)} chips")
+        cells = [c.cell for c in self.chips]
+        for cell in cells:
+            if not (0 <= cell[0] < rows and 0 <= cell[1] < cols):
+                raise ValueError(f"BoardLayout {self.name!r}: cell {cell} is outside the {rows}x{cols} grid")
+        if len(set(cells)) != len(cells):
+            raise ValueError(f"BoardLayout {self.name!r}: two chips feed the same cell")
+        index = np.array([r * cols + c for r, c in cells], dtype=np.intp)
+        angles = np.deg2rad([c.rotation_deg for c in self.chips])
+        cos, sin = np.cos(angles), np.sin(angles)
+        rot = np.zeros((len(self.chips), 3, 3))
+        rot[:, 0, 0], rot[:, 0, 1], rot[:, 1, 0], rot[:, 1, 1], rot[:, 2, 2] = cos, -sin, sin, cos, 1.0
+        rot[np.abs(rot) < 1e-12] = 0.0  # exact zeros for right angles, so saturation maps channel to channel
+        object.__setattr__(self, "_index", index)
+        object.__setattr__(self, "_rot", rot.astype(np.float32))
+        identity = len(self.chips) == rows * cols and bool((index == np.arange(rows * cols)).all()) \
+            and not angles.any()
+        object.__setattr__(self, "_identity", identity)
+
+    @property
+    def n_chips(self) -> int:
+        return len(self.chips)
+
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        """The reading's shape, (rows, cols, 3)."""
+        return (*self.grid, 3)
+
+    @property
+    def mask(self) -> np.ndarray:
+        """(rows, cols) bool, True at the cells a chip feeds."""
+        m = np.zeros(self.grid[0] * self.grid[1], bool)
+        m[self._index] = True
+        return m.reshape(self.grid)
+
+    def positions_mm(self) -> np.ndarray:
+        """(rows, cols, 2) chip centres (x, y) in the pad frame, mm; NaN at unused cells."""
+        out = np.full((self.grid[0] * self.grid[1], 2), np.nan)
+        out[self._index] = [c.position_mm for c in self.chips]
+        return out.reshape(*self.grid, 2)
+
+    def reading_from_chips(self, chips_ut: np.ndarray) -> np.ndarray:
+        """(n_chips, 3) fields in chip axes, firmware order -> (rows, cols, 3) float32 in pad axes (unused cells 0).
+
+        On an identity layout a float32 input comes back as a view (the default board's frames cost a reshape).
+        """
+        if self._identity:
+            return np.asarray(chips_ut, dtype=np.float32).reshape(self.shape)
+        chips = np.asarray(chips_ut, dtype=np.float32)
+        out = np.zeros((self.grid[0] * self.grid[1], 3), np.float32)
+        out[self._index] = np.einsum("nij,nj->ni", self._rot, chips)
+        return out.reshape(self.shape)
+
+    def chips_from_reading(self, reading_ut: np.ndarray) -> np.ndarray:
+        """The inverse of :meth:`reading_from_chips`: (rows, cols, 3) pad-axes field -> (n_chips, 3) chip axes."""
+        r = np.asarray(reading_ut, dtype=np.float32).reshape(-1, 3)
+        if self._identity:
+            return r.copy()
+        return np.einsum("nji,nj->ni", self._rot, r[self._index])
+
+    def saturation_from_chips(self, saturated: np.ndarray) -> np.ndarray:
+        """(n_chips, 3) bool in chip axes -> (rows, cols, 3) bool: a pad channel is saturated if any chip channel
+        it is made of is."""
+        sat = np.asarray(saturated, dtype=bool)
+        if self._identity:
+            return sat.reshape(self.shape)
+        if not sat.any():  # the usual case, without the channel mixing below
+            return np.zeros(self.shape, bool)
+        out = np.zeros((self.grid[0] * self.grid[1], 3), bool)
+        out[self._index] = np.einsum("nij,nj->ni", np.abs(self._rot) > 0, sat.astype(np.float32)) > 0
+        return out.reshape(self.shape)
+
+    def cells_from_chips(self, values: np.ndarray, fill: float = np.nan) -> np.ndarray:
+        """(n_chips,) per-chip scalars (e.g. temperatures) -> (rows, cols) float32, ``fill`` at unused cells."""
+        v = np.asarray(values, dtype=np.float32)
+        if self._identity:
+            return v.reshape(self.grid)
+        out = np.full(self.grid[0] * self.grid[1], fill, np.float32)
+        out[self._index] = v
+        return out.reshape(self.grid)
+
+
+def grid_layout(name: str, *, rows: int, cols: int, pitch_mm: float) -> BoardLayout:
+    """Chips row-major over a rows x cols grid centred on the pad, axes along the pad's (the SuperMag board)."""
+    chips = tuple(ChipPlacement(cell=(r, c),
+                                position_mm=((c - (cols - 1) / 2) * pitch_mm, ((rows - 1) / 2 - r) * pitch_mm))
+                  for r in range(rows) for c in range(cols))
+    return BoardLayout(name=name, grid=(rows, cols), chips=chips, pitch_mm=pitch_mm)
+
+
+def cross_layout(name: str, *, pitch_mm: float,
+                 rotations_deg: tuple[float, ...] = (90.0, 90.0, 180.0, -90.0, 0.0)) -> BoardLayout:
+    """The five-chip cross (centre, left, right, up, down) in a 3x3 reading (the ReSkin/AnySkin boards)."""
+    cells = ((1, 1), (1, 0), (1, 2), (0, 1), (2, 1))
+    chips = tuple(ChipPlacement(cell=cell, position_mm=((cell[1] - 1) * pitch_mm, (1 - cell[0]) * pitch_mm),
+                                rotation_deg=rot) for cell, rot in zip(cells, rotations_deg, strict=True))
+    return BoardLayout(name=name, grid=(3, 3), chips=chips, pitch_mm=pitch_mm)
+
+
+SUPERMAG_4X4 = grid_layout("supermag-4x4", rows=4, cols=4, pitch_mm=5.0)
+ANYSKIN_5 = cross_layout("anyskin-5", pitch_mm=ANYSKIN_PITCH_MM)
+LAYOUTS: dict[str, BoardLayout] = {layout.name: layout for layout in (SUPERMAG_4X4, ANYSKIN_5)}
+DEFAULT_LAYOUT = SUPERMAG_4X4.name
+
+
+def get_layout(name: str) -> BoardLayout:
+    """The shipped layout of this name; ValueError naming the known ones."""
+    try:
+        return LAYOUTS[name]
+    except KeyError:
+        raise ValueError(f"unknown board layout {name!r}; known layouts: {', '.join(LAYOUTS)}") from None

@@ -1,0 +1,31 @@
+"""Wire formats of the serial backend: one decoder per format, chosen by name (DESIGN.md section 6).
+
+:data:`WIRE_FORMATS` maps a name to its ``"module:Class"``; :func:`make_decoder` imports only the chosen one.
+
+- ``supermag`` (default): our binary frames with sequence, device clock, status and CRC (``firmware/``);
+- ``anyskin``: the published ReSkin/AnySkin binary burst sketch (float32 t, x, y, z per chip, then CRLF).
+"""
+
+from __future__ import annotations
+
+import importlib
+
+from tactile_manip.sensors.wire.base import ChipFrame, WireDecoder, WireStats
+from tactile_manip.sim.params import ChipParams
+
+WIRE_FORMATS: dict[str, str] = {
+    "supermag": "tactile_manip.sensors.wire.supermag:SuperMagDecoder",
+    "anyskin": "tactile_manip.sensors.wire.anyskin:AnySkinDecoder",
+}
+DEFAULT_LAYOUTS: dict[str, str] = {"supermag": "supermag-4x4", "anyskin": "anyskin-5"}
+
+
+def make_decoder(name: str, *, n_chips: int, chip: ChipParams) -> WireDecoder:
+    """A fresh decoder of the format ``name`` for ``n_chips`` chips; ValueError naming the known formats."""
+    if name not in WIRE_FORMATS:
+        raise ValueError(f"unknown wire format {name!r}; known formats: {', '.join(WIRE_FORMATS)}")
+    module, _, cls = WIRE_FORMATS[name].partition(":")
+    return getattr(importlib.import_module(module), cls)(n_chips=n_chips, chip=chip)
+
+
+__all__ = ["DEFAULT_LAYOUTS", "WIRE_FORMATS", "ChipFrame", "WireDecoder", "WireStats", "make_decoder"]
