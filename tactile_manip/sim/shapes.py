@@ -275,7 +275,10 @@ def procedural_sharp(seed: int, *, size_mm: float = 14.0) -> Indenter:
     rng = np.random.default_rng(int(seed))
     x, y, origin = _grid((-size / 2, size / 2), (-size / 2, size / 2), DEFAULT_PIXEL_MM)
     height = np.full_like(x, np.nan)
-    for _ in range(int(rng.integers(1, 4))):
+    parts = int(rng.integers(1, 4))
+    for i in range(parts + 10):  # a part can miss the grid (a thin star): draw more until there is material
+        if i >= parts and np.isfinite(height).any():
+            break
         part_height, flank = rng.uniform(0.5, 2.5), math.radians(rng.uniform(15.0, 60.0))
         u, v = _placed(rng, x, y, size)
         inside = _PRISMS[int(rng.integers(len(_PRISMS)))](rng, u, v, size)
