@@ -57,6 +57,17 @@ class Reconstructor(abc.ABC):
         depth, spread = self._run(self._check(field_ut)[None])
         return Reconstruction(depth[0], None if spread is None else spread[0], time.perf_counter() - t0)
 
+    def reconstruct_many(self, fields_ut: np.ndarray) -> list[Reconstruction]:
+        """(N, R, C, 3) readings -> N :class:`Reconstruction` from one batched run (spread included), each
+        with the batch's latency."""
+        t0 = time.perf_counter()
+        fields = self._check(fields_ut, batch=True)
+        if len(fields) == 0:
+            return []
+        depth, spread = self._run(fields)
+        latency = time.perf_counter() - t0
+        return [Reconstruction(depth[i], None if spread is None else spread[i], latency) for i in range(len(depth))]
+
     def reconstruct_batch(self, fields_ut: np.ndarray) -> np.ndarray:
         """(N, R, C, 3) readings -> (N, H, W) float32 depth images."""
         fields = self._check(fields_ut, batch=True)
