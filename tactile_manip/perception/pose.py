@@ -33,6 +33,7 @@ OUTLIER_FRACTION = 0.1         # contact regions smaller than this fraction of t
 DEPTH_CAP_MM = 1e6             # depths are capped far above any real indentation so sums cannot overflow
 GAUSS_TRUNCATE = 4.0           # the Gaussian kernel's reach in standard deviations (scipy.ndimage's default)
 CROSS_MOMENT_NOISE = 1e-7      # |sxy| below this fraction of sxx + syy is float32 rounding (angle shift < 1e-5 deg)
+FEW_REGIONS = 8                # up to this many contact regions are sized one by one, more by bincount
 FILTER_BLOCK_PX = 24           # output rows per filter block: small enough that OpenBLAS stays on one thread
 
 
@@ -203,16 +204,21 @@ def _kept_contact(d: np.ndarray, threshold_mm: float, min_fraction: float):
         return None
     cols = np.flatnonzero(mask.any(axis=0))
     r0, r1, c0, c1 = int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1
-    labels, n = ndimage.label(mask[r0:r1, c0:c1])  # the same regions as over the whole image
-    sizes = np.bincount(labels.ravel(), minlength=n + 1)[1:]
+    box = mask[r0:r1, c0:c1]
+    labels, n = ndimage.label(box)  # the same regions as over the whole image
+    if n <= 1:
+        return ((r0, r1), (c0, c1)), int(np.count_nonzero(box)), None
+    # a few regions (speckle beside one contact): a comparison per region beats bincount's int64 copy
+    sizes = (np.array([np.count_nonzero(labels == k) for k in range(1, n + 1)]) if n <= FEW_REGIONS
+             else np.bincount(labels.ravel(), minlength=n + 1)[1:])
     keep = sizes >= min_fraction * sizes.max()
-    if n <= 1 or keep.all():
+    if keep.all():
         return ((r0, r1), (c0, c1)), int(sizes.sum()), None
     if np.count_nonzero(keep) == 1:  # the common case: one contact and some speckle
         kept = labels == int(np.argmax(keep)) + 1
     else:
         kept = np.concatenate([[False], keep]).take(labels)
-    removed = (labels > 0) & ~kept
+    removed = box & ~kept
     rows, cols = np.flatnonzero(kept.any(axis=1)), np.flatnonzero(kept.any(axis=0))
     kept_rows, kept_cols = (r0 + int(rows[0]), r0 + int(rows[-1]) + 1), (c0 + int(cols[0]), c0 + int(cols[-1]) + 1)
     return (kept_rows, kept_cols), int(sizes[keep].sum()), (removed, r0, c0)
