@@ -109,3 +109,20 @@ def test_other_load_is_the_busy_time_not_spent_by_this_process() -> None:
     load = other_load(start, end)
     assert load["other_processes_cores"] == pytest.approx(1.0) and load["steal_share"] == 0.0
     assert other_load(None, end) is None and other_load(end, end) is None
+
+
+def test_pose_table_compares_each_runtime_with_the_paper_preset_on_the_same_runtime() -> None:
+    from tactile_manip.bench.report import pose_table
+
+    def row(method, runtime, p50, pair=None, share=None):
+        return {"method": method, "runtime": runtime, "pose_p50_ms": p50, "pose_p99_ms": p50 * 1.5,
+                "pose_pair_p50_ms": pair, "pose_pair_p99_ms": None if pair is None else pair * 1.5,
+                "postprocess_share": share}
+
+    rows = [row("compact", "onnxruntime 1 thread", 2.0, 3.5, 0.21), row("compact", "onnxruntime 2 threads", 1.5),
+            row("paper", "onnxruntime 1 thread", 100.0, 190.0, 0.01), {"method": "x", "runtime": "numpy"}]
+    lines = pose_table(rows).splitlines()
+    assert len(lines) == 5  # header, rule, three rows with a pose latency
+    assert lines[2] == "| compact | onnxruntime 1 thread | 2.00 / 3.00 | 3.50 / 5.25 | 21% | 50x |"
+    assert lines[3].endswith("| - | - | - |")  # no paper row on two threads: no ratio
+    assert lines[4].endswith("| 1% | - |")
