@@ -126,3 +126,21 @@ def test_pose_table_compares_each_runtime_with_the_paper_preset_on_the_same_runt
     assert lines[2] == "| compact | onnxruntime 1 thread | 2.00 / 3.00 | 3.50 / 5.25 | 21% | 50x |"
     assert lines[3].endswith("| - | - | - |")  # no paper row on two threads: no ratio
     assert lines[4].endswith("| 1% | - |")
+
+
+def test_default_models_include_the_decoder_candidates_on_one_thread_only(tiny_model, tmp_path) -> None:
+    from pathlib import Path
+
+    from tactile_manip.bench.candidates import ModelEntry, default_models, model_candidates
+
+    root = Path(__file__).resolve().parents[2]
+    entries = {e.name: e for e in default_models(root)}
+    configs = sorted(p.stem for p in (root / "configs" / "train").glob("decoder_*.toml"))
+    assert configs and all(entries[c].runtimes == ("ort-1",) for c in configs)
+    assert entries[configs[0]].untrained_preset.endswith(f"{configs[0]}.toml")  # timed untrained until trained
+    assert entries["compact"].runtimes is None
+    notes: list[str] = []
+    entry = ModelEntry("candidate", tiny_model, runtimes=("ort-1",))
+    found = model_candidates(entry, tmp_path, runtimes=("ort-1", "ort-all", "ort-int8"), notes=notes)
+    assert [c.runtime for c in found] == ["onnxruntime 1 thread"]
+    assert model_candidates(entry, tmp_path, runtimes=("ort-all",), notes=notes) == []
