@@ -63,7 +63,8 @@ def node_profile(path: str | Path, readings: np.ndarray, folder: Path) -> dict[s
         by_op[ops[n]] += ms
     slowest = sorted(median.items(), key=lambda kv: -kv[1])[:12]
     return {"nodes": len(median), "sum_ms": float(sum(median.values())),
-            "by_op_ms": dict(by_op.most_common()), "slowest": [{"node": n, "op": ops[n], "ms": ms} for n, ms in slowest]}
+            "by_op_ms": dict(by_op.most_common()),
+            "slowest": [{"node": n, "op": ops[n], "ms": ms} for n, ms in slowest]}
 
 
 def interleaved_latency(models: dict[str, Path], readings: np.ndarray, rounds: int) -> dict[str, Any]:
@@ -92,13 +93,15 @@ def markdown(report: dict[str, Any]) -> str:
     base = report["latency"]["shipped"]["cpu_p50_ms"]
     lines = [f"Decoder candidates, one reading, one thread; {m['cpu_model']}, {m['usable_cores']} cores, load "
              f"average {m.get('load_average')}. Candidates are untrained exports (latency only).", "",
-             "| model | params | wall p50 ms | wall p99 ms | thread CPU p50 ms | CPU vs shipped | profiled node sum ms |",
+             "| model | params | wall p50 ms | wall p99 ms | thread CPU p50 ms | CPU vs shipped | "
+             "profiled node sum ms |",
              "|---|---|---|---|---|---|---|"]
     for name, r in report["latency"].items():
         params = "-" if r["parameters"] is None else f"{r['parameters'] / 1e6:.2f} M"
         lines.append(f"| {name} | {params} | {r['p50_ms']:.2f} | {r['p99_ms']:.2f} | {r['cpu_p50_ms']:.2f} | "
                      f"{r['cpu_p50_ms'] / base - 1:+.0%} | {prof[name]['sum_ms']:.2f} |")
-    ops = sorted({op for p in prof.values() for op in p["by_op_ms"]}, key=lambda o: -prof["shipped"]["by_op_ms"].get(o, 0))
+    shipped_ops = prof["shipped"]["by_op_ms"]
+    ops = sorted({op for p in prof.values() for op in p["by_op_ms"]}, key=lambda o: -shipped_ops.get(o, 0.0))
     lines += ["", "Node time by operator type (median per node, summed), ms:", "",
               "| op | " + " | ".join(prof) + " |", "|---" * (len(prof) + 1) + "|"]
     for op in ops[:14]:

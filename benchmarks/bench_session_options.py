@@ -8,8 +8,9 @@ through ``session.run`` with fresh arrays; then one setting changed at a time (g
 extended, memory patterns off, spinning off, parallel execution, the batch and sample dimensions fixed to 1 in
 an in-memory copy of the graph, io_binding with buffers bound once); and ``OnnxReconstructor.reconstruct``
 as users call it. Every variant runs each reading in turn (in a shuffled order per reading), so a busy
-machine slows all of them alike. Per variant: wall-clock p50 / p99 and the calling thread's CPU time p50 (less sensitive to other
-processes than the wall clock). Writes benchmarks/results/session_options.json; it measures, it asserts nothing.
+machine slows all of them alike. Per variant: wall-clock p50 / p99 and the calling thread's CPU time p50
+(less sensitive to other processes than the wall clock). Writes benchmarks/results/session_options.json; it
+measures, it asserts nothing.
 """
 
 from __future__ import annotations
