@@ -146,8 +146,9 @@ class OnnxReconstructor(Reconstructor):
         else:
             eps = self._rng.standard_normal((n, self.samples, self.latent)).astype(np.float32)
         depth, spread = self.session.run(None, {"field_ut": fields_ut, "eps": eps})
+        spread = spread if self.samples > 1 else None  # one sample: no spread to check or return
         self._check_output(depth, spread)
-        return depth, (spread if self.samples > 1 else None)
+        return depth, spread
 
 
 def read_metadata(path: str | Path) -> dict[str, Any]:
