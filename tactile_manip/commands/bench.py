@@ -39,7 +39,7 @@ def run(args: argparse.Namespace) -> int:
     import dataclasses
 
     from tactile_manip.bench.candidates import RUNTIMES, default_models, parse_model_spec
-    from tactile_manip.bench.report import markdown_table, write_report
+    from tactile_manip.bench.report import markdown_table, pose_table, write_report
     from tactile_manip.bench.suite import BenchSettings, run_bench
 
     settings = BenchSettings.quick_settings() if args.quick else BenchSettings()
@@ -54,6 +54,7 @@ def run(args: argparse.Namespace) -> int:
                        log=lambda line: print(line, file=sys.stderr, flush=True))
     paths = write_report(args.out, report)
     print(markdown_table(report["rows"]), end="")
+    print("\nReading -> angle, one and two pads:\n" + pose_table(report["rows"]), end="")
     for note in report["notes"]:
         print(f"note: {note}")
     print(f"took {report['seconds']:.0f} s; wrote {', '.join(str(p) for p in paths)}")

@@ -40,12 +40,35 @@ class TrainingError(TactileManipError, RuntimeError):
 
 
 @dataclass(frozen=True)
+class DecoderOverrides:
+    """``[decoder]`` of a training config: decoder settings that replace the preset's (the defaults keep it)."""
+
+    native_scale: int = 0                # the decoder works at image size / native_scale (0: keep)
+    channels: list[int] = field(default_factory=list)  # feature channels per stage, coarse -> fine ([]: keep)
+    dec_blocks: int = -1                 # conv blocks after each decoder stage (-1: keep)
+    head: str = ""                       # "resize" / "shuffle" (CVAEConfig.head; "": keep)
+    act: str = ""                        # "gelu" / "relu" in the decoder's conv blocks ("": keep)
+
+    def __post_init__(self) -> None:
+        if self.native_scale < 0 or self.dec_blocks < -1 or any(c < 1 for c in self.channels):
+            raise ValueError(f"decoder: native_scale >= 0, dec_blocks >= -1 and channels >= 1 needed, got {self}")
+
+    def overrides(self) -> dict[str, Any]:
+        """The CVAEConfig fields this sets (validated by CVAEConfig itself)."""
+        out: dict[str, Any] = {"native_scale": self.native_scale or None, "channels": tuple(self.channels) or None,
+                               "dec_blocks": None if self.dec_blocks < 0 else self.dec_blocks,
+                               "head": self.head or None, "act": self.act or None}
+        return {k: v for k, v in out.items() if v is not None}
+
+
+@dataclass(frozen=True)
 class TrainConfig:
     """Mirrors ``configs/train/*.toml``."""
 
     preset: str = "compact"              # architecture preset (tactile_manip.learning.model.PRESETS)
     latent: int = 0                      # override the preset's latent size (0: keep)
     norm: str = ""                       # override the preset's normalisation ("batch" / "group"; "": keep)
+    decoder: DecoderOverrides = field(default_factory=DecoderOverrides)  # decoder settings over the preset's
     axes: str = "xyz"                    # "xyz", or "z" for the z-axis-only variant
     objects: list[str] = field(default_factory=list)  # train only on these objects ([]: all)
     clamp_ut: float = 500.0              # input clamp, uT (SuperMag: +-500 scaled to [-1, 1])
@@ -96,11 +119,18 @@ def model_config(cfg: TrainConfig, data: PairedDataset) -> CVAEConfig:
     """Architecture from the preset, with the taxel grid and image size read from the dataset."""
     rows, cols = data.grid
     h, w = data.image_shape
+    return architecture(cfg, taxel_rows=rows, taxel_cols=cols, image_h=h, image_w=w,
+                        axes=data.channels.count if cfg.axes == "xyz" else 1)
+
+
+def architecture(cfg: TrainConfig, **shape: int) -> CVAEConfig:
+    """The preset with the config's overrides (latent, norm, ``[decoder]``) and ``shape`` (taxel grid, channels
+    seen, image size; the CVAEConfig defaults where not given)."""
     extra = {"latent": cfg.latent} if cfg.latent else {}
     if cfg.norm:
         extra["norm"] = cfg.norm
-    return preset(cfg.preset, taxel_rows=rows, taxel_cols=cols, axes=data.channels.count if cfg.axes == "xyz" else 1,
-                  image_h=h, image_w=w, **extra)
+    shape.setdefault("axes", 1 if cfg.axes == "z" else 3)
+    return preset(cfg.preset, **shape, **extra, **cfg.decoder.overrides())
 
 
 @dataclass
