@@ -153,7 +153,7 @@ def _trial_scene(scene_path: str | Path | None, trials: int, notes: list[str]):
         import roboticstoolbox  # noqa: F401 - the kinematic twin of the trials
     except ImportError:
         notes.append("trials not run: the kinematic twin needs roboticstoolbox-python "
-                     '(pip install "tactile_manip[trials]")')
+                     '(pip install -e ".[trials]")')
         return None
     return accuracy.load_trial_scene(scene_path, trials)
 

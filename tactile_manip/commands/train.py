@@ -1,4 +1,4 @@
-"""``tactile-manip train``: train a SuperMag CVAE on a paired dataset (torch; `pip install "tactile_manip[train]"`).
+"""``tactile-manip train``: train a SuperMag CVAE on a paired dataset (torch; `pip install -e ".[train]"`).
 
 Start it with ``torchrun --nproc_per_node N -m tactile_manip train ...`` to train data-parallel.
 """

@@ -16,18 +16,15 @@ from typing import Any
 import numpy as np
 
 from tactile_manip.errors import SensorDisconnectedError, SensorTimeoutError
+from tactile_manip.extras import require
 from tactile_manip.sensors.base import TactileSensor
 from tactile_manip.sensors.config import SerialSensorConfig
 from tactile_manip.sensors.protocol import TEMPERATURE_LSB_C, CountScale, Frame, FrameDecoder, Unwrapper
 
 
 def import_serial() -> Any:
-    """Return the pyserial module, or raise an ImportError naming the extra that installs it."""
-    try:
-        import serial
-    except ImportError as e:
-        raise ImportError('the serial sensor backend needs pyserial: pip install "tactile_manip[serial]"') from e
-    return serial
+    """Return the pyserial module, or raise a MissingExtraError (an ImportError) naming the extra."""
+    return require("serial", "the serial sensor backend")
 
 
 class SerialSensor(TactileSensor):
