@@ -58,3 +58,12 @@ def check_choice(name: str, value: str, allowed: Sequence[str]) -> str:
     if value not in allowed:
         raise ValueError(f"{name} must be one of {list(allowed)}, got {value!r}")
     return value
+
+
+def npz_read_problem(error: Exception) -> str:
+    """Why ``np.load(..., allow_pickle=False)`` refused a file, in words for a user (no ``allow_pickle`` hint:
+    files are data, and pickled objects are never loaded)."""
+    text = str(error)
+    if "pickle" in text.lower() or "object arrays" in text.lower():
+        return "it is not an archive of plain arrays (reading it would need unpickling, which tactile_manip never does)"
+    return text

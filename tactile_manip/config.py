@@ -28,7 +28,8 @@ def load_config(path: str | Path, cls: type[T]) -> T:
     """Parse the TOML file at ``path`` into an instance of the dataclass ``cls``.
 
     Raises:
-        ConfigError: the file is missing, is not valid TOML, or does not fit ``cls``.
+        ConfigError: the file is missing, a directory, unreadable, not UTF-8, not valid TOML, or does not fit
+            ``cls``.
     """
     path = Path(path)
     try:
@@ -36,6 +37,12 @@ def load_config(path: str | Path, cls: type[T]) -> T:
             raw = tomllib.load(f)
     except FileNotFoundError as e:
         raise ConfigError(f"config file not found: {path}") from e
+    except IsADirectoryError as e:
+        raise ConfigError(f"config {path} is a directory; give a .toml file") from e
+    except OSError as e:
+        raise ConfigError(f"cannot read config {path}: {e.strerror or e}") from e
+    except UnicodeDecodeError as e:
+        raise ConfigError(f"{path}: not a text (UTF-8) TOML file: byte {e.start} is not UTF-8") from e
     except tomllib.TOMLDecodeError as e:
         raise ConfigError(f"{path}: not valid TOML: {e}") from e
     return from_dict(cls, raw, where=str(path))

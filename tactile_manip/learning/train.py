@@ -29,6 +29,7 @@ import torch
 
 from tactile_manip.config import load_config, to_dict
 from tactile_manip.errors import TactileManipError
+from tactile_manip.learning.checkpoint import config_differences, read_checkpoint
 from tactile_manip.learning.data import InputSpec, TensorPairs, augment_batch, select
 from tactile_manip.learning.model import (CVAEConfig, SuperMagCVAE, count_parameters, gaussian_nll, negative_elbo,
                                           preset)
@@ -300,10 +301,11 @@ def _save_checkpoint(path: Path, model, opt, mcfg: CVAEConfig, cfg: TrainConfig,
 def _load_checkpoint(path: Path, model, opt, mcfg: CVAEConfig) -> dict:
     if not path.is_file():
         raise TrainingError(f"--resume: no checkpoint at {path}")
-    payload = torch.load(path, map_location="cpu", weights_only=True)
-    if payload["model_config"] != to_dict(mcfg):
-        raise TrainingError(f"{path} was trained with another architecture or dataset shape; "
-                            "start a new output folder")
+    payload = read_checkpoint(path)
+    differences = config_differences(payload["model_config"], to_dict(mcfg))
+    if differences:
+        raise TrainingError(f"--resume: {path} was trained with another architecture or dataset shape "
+                            f"({'; '.join(differences)}); use the same config or start a new output folder")
     model.load_state_dict(payload["model"])
     opt.load_state_dict(payload["optimizer"])
     return payload["state"]

@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from tactile_manip.checks import npz_read_problem
 from tactile_manip.errors import DatasetError
 
 FORMAT_VERSION = 1
@@ -92,11 +93,15 @@ class PairedDataset:
         return h.hexdigest()[:16]
 
 
-def save_dataset(path: str | Path, data: PairedDataset) -> Path:
-    """Write ``data`` to ``path`` (``.npz`` appended if missing) atomically: a temp file, then rename."""
+def dataset_path(path: str | Path) -> Path:
+    """The file :func:`save_dataset` writes for ``path``: ``path`` itself, with ``.npz`` appended if missing."""
     path = Path(path)
-    if path.suffix != ".npz":
-        path = path.with_name(path.name + ".npz")
+    return path if path.suffix == ".npz" else path.with_name(path.name + ".npz")
+
+
+def save_dataset(path: str | Path, data: PairedDataset) -> Path:
+    """Write ``data`` to :func:`dataset_path` of ``path`` atomically (a temp file, then rename); return it."""
+    path = dataset_path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     arrays = {name: getattr(data, name) for name in _REQUIRED if name != "metadata"}
     arrays["metadata"] = np.array(json.dumps(data.metadata))
@@ -123,12 +128,14 @@ def load_dataset(path: str | Path) -> PairedDataset:
         with z:
             missing = [k for k in _REQUIRED if k not in z.files]
             if missing:
-                raise DatasetError(f"{path}: not a tactile_manip dataset, missing arrays {missing}")
+                raise DatasetError(f"{path} is not a tactile_manip dataset (no arrays {', '.join(missing[:4])}"
+                                   f"{', ...' if len(missing) > 4 else ''}); make one with `tactile-manip simulate`"
+                                   " or `tactile-manip collect`")
             arrays = {k: z[k] for k in _REQUIRED}
     except DatasetError:
         raise
     except (zipfile.BadZipFile, ValueError, OSError, EOFError) as e:
-        raise DatasetError(f"{path}: cannot read as a dataset (.npz): {e}") from e
+        raise DatasetError(f"{path} is not a tactile_manip dataset: {npz_read_problem(e)}") from e
     try:
         meta = json.loads(str(arrays.pop("metadata")))
     except json.JSONDecodeError as e:
