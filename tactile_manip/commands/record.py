@@ -8,7 +8,6 @@ killed recorder leaves every frame up to about that long before the kill. Read i
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -31,11 +30,12 @@ def run(args: argparse.Namespace) -> int:
     import sys
     import threading
 
+    from tactile_manip.extras import require
     from tactile_manip.sensors import Recorder, SerialSensor, SerialSensorConfig, SimulatedSensor, parse_press
 
-    out = Path(args.out)
-    if out.exists() and not args.force:
-        raise ValueError(f"{out} exists; pass --force to overwrite it")
+    from tactile_manip.outputs import check_output_file
+
+    out = check_output_file(args.out, force=args.force)
     if not 0 < args.sync_every_s <= 1.0:
         raise ValueError(f"--sync-every-s must be in (0, 1], got {args.sync_every_s}")
     if args.seconds is not None and not args.seconds > 0:
@@ -43,6 +43,7 @@ def run(args: argparse.Namespace) -> int:
     if args.press and not args.sim:
         raise ValueError("--press scripts the simulated sensor: use it with --sim")
     if args.port:
+        require("serial", "recording a serial port")  # before the file or the port is touched
         sensor = SerialSensor(SerialSensorConfig(port=args.port, baudrate=args.baud))
     else:
         sensor = SimulatedSensor()

@@ -12,7 +12,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--config", required=True, help="training TOML (e.g. configs/train/compact.toml)")
     p.add_argument("--data", required=True, help="paired dataset .npz (tactile-manip simulate / collect)")
     p.add_argument("--out", required=True, help="run folder for checkpoints, history and plots")
-    p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.pt")
+    again = p.add_mutually_exclusive_group()
+    again.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.pt")
+    again.add_argument("--force", action="store_true",
+                       help="start over in an OUT that holds a run, replacing its best.pt and checkpoint.pt")
     p.add_argument("--epochs", type=int, default=None, help="override the config's epochs")
     p.add_argument("--seed", type=int, default=None, help="override the config's seed")
     p.add_argument("--threads", type=int, default=None, help="torch CPU threads per process")
@@ -29,6 +32,7 @@ def run(args: argparse.Namespace) -> int:
 
     from tactile_manip.learning.train import load_train_config, resolve_device, train, with_overrides
 
+    _check_run_folder(args)
     cfg = with_overrides(load_train_config(args.config), epochs=args.epochs, seed=args.seed, threads=args.threads,
                          device=args.device, max_minutes=args.max_minutes)
     resolve_device(cfg.device)  # a missing GPU is one line before any progress bar or output folder
@@ -42,3 +46,11 @@ def run(args: argparse.Namespace) -> int:
         print(f"best validation PSNR {summary['best_val_psnr']:.2f} dB at epoch {summary['best_epoch']} "
               f"({summary['epochs_run']} epochs, {summary['train_seconds'] / 60:.1f} min); wrote {args.out}/")
     return 0
+
+
+def _check_run_folder(args: argparse.Namespace) -> None:
+    """Refuse, before any work, an OUT that cannot be written or whose run would be replaced unasked."""
+    from tactile_manip.commands import check_report_folder
+
+    check_report_folder(args.out, ("checkpoint.pt", "best.pt"), force=args.resume or args.force,
+                        hint="pass --resume to continue it, --force to start over (replacing it), or give a new --out")

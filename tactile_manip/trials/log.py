@@ -34,6 +34,7 @@ from pathlib import Path
 from typing import Any
 
 from tactile_manip.errors import TactileManipError
+from tactile_manip.outputs import unique_folder
 from tactile_manip.trials.record import RECORD_VERSION, TrialRecord
 
 TRIALS_FILE = "trials.jsonl"
@@ -71,7 +72,8 @@ def canonical_config(config: Mapping[str, Any] | Any) -> dict[str, Any]:
 
 
 def run_folder(scene_name: str, out: str | Path | None, *, resume: bool = False) -> Path:
-    """The folder of a trials run: ``out``, or a new ``runs/trials/<scene_name>-<UTC time>``.
+    """The folder of a trials run: ``out``, or a new ``runs/trials/<scene_name>-<UTC time>`` (``-2``, ``-3``, ...
+    appended when runs start within the same second).
 
     Raises:
         ValueError: ``resume`` without ``out`` (there is no run to continue).
@@ -80,7 +82,7 @@ def run_folder(scene_name: str, out: str | Path | None, *, resume: bool = False)
         return Path(out)
     if resume:
         raise ValueError("--resume needs --out: the run folder to continue")
-    return Path("runs") / "trials" / f"{scene_name}-{time.strftime('%Y%m%dT%H%M%SZ', time.gmtime())}"
+    return unique_folder(Path("runs") / "trials" / f"{scene_name}-{time.strftime('%Y%m%dT%H%M%SZ', time.gmtime())}")
 
 
 def trials_path(path: str | Path) -> Path:
