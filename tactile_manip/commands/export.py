@@ -38,7 +38,6 @@ def run(args: argparse.Namespace) -> int:
     check_output_file(args.out, force=args.force)
     if args.card:
         check_output_file(args.card, force=args.force)
-
     readings, pixel_mm, extra = None, args.pixel_mm or 0.1, {}
     if args.data:
         data = load_dataset(args.data)
@@ -87,4 +86,4 @@ def _commands(args: argparse.Namespace) -> list[str]:
     data = Path(args.data or "data/supermag.npz")
     return [f"tactile-manip simulate --config configs/dataset/{data.stem}.toml --out {data}",
             f"tactile-manip train --config configs/train/{run.name}.toml --data {data} --out {run}",
-            f"tactile-manip export --checkpoint {args.checkpoint} --out {args.out} --data {data}"]
+            f"tactile-manip export --checkpoint {args.checkpoint} --out {args.out} --data {data} --force"]

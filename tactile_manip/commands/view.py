@@ -46,6 +46,7 @@ def run(args: argparse.Namespace) -> int:
         parse_press,
     )
 
+    from tactile_manip.errors import CalibrationError
     from tactile_manip.extras import require
     from tactile_manip.outputs import check_output_file
     from tactile_manip.plots import figure_path
@@ -75,7 +76,11 @@ def run(args: argparse.Namespace) -> int:
         if offset_ut is not None:
             sensor.set_baseline(offset_ut)
         elif not args.no_baseline:
-            sensor.calibrate_baseline(args.baseline_frames)
+            try:
+                sensor.calibrate_baseline(args.baseline_frames)
+            except CalibrationError as e:
+                raise CalibrationError(f"{e} (a source that starts under load: view it with --no-baseline, or "
+                                       "--baseline-from FILE, a recording of the free pad)") from e
         if args.sim:
             presses = [parse_press(s) for s in args.press or [DEFAULT_SIM_PRESS]]
             sensor.play(presses, period_s=max(p.end_s for p in presses) + 0.5)
