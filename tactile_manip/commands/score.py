@@ -36,14 +36,14 @@ def run(args: argparse.Namespace) -> int:
     run_dir = Path(args.run_dir)
     if not run_dir.is_dir():
         raise TrialLogError(f"no run directory at {run_dir}")
-    file = trials_path(run_dir)
-    records = read_trials(file)
-    if not records:
-        raise TrialLogError(f"{file} holds no trial records yet: nothing to score")
     tolerance_rad = math.radians(tol_deg)
     tag = tolerance_tag(tolerance_rad)
     out = check_report_folder(args.out or run_dir, [f"summary{tag}.md", f"summary{tag}.json", f"errors{tag}.png",
                                                      f"success_vs_tolerance{tag}.png"], force=args.force)
+    file = trials_path(run_dir)
+    records = read_trials(file)
+    if not records:
+        raise TrialLogError(f"{file} holds no trial records yet: nothing to score")
     try:
         write_report(out, records, tolerance_rad, title=args.title, tag=tag, run_info=read_run_info(run_dir))
     except ValueError as e:  # duplicated trials or unpaired seeds: the log is not a consistent run

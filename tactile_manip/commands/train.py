@@ -28,11 +28,13 @@ def run(args: argparse.Namespace) -> int:
     from tactile_manip.learning.import_check import require_torch
 
     require_torch()
+    from tactile_manip.sim.dataset_io import check_dataset_file
     from tqdm import tqdm
 
     from tactile_manip.learning.train import load_train_config, resolve_device, train, with_overrides
 
     _check_run_folder(args)
+    check_dataset_file(args.data)  # before the progress bar: a missing file is one line
     cfg = with_overrides(load_train_config(args.config), epochs=args.epochs, seed=args.seed, threads=args.threads,
                          device=args.device, max_minutes=args.max_minutes)
     resolve_device(cfg.device)  # a missing GPU is one line before any progress bar or output folder

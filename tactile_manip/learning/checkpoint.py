@@ -28,6 +28,8 @@ def read_checkpoint(path: str | Path) -> dict[str, Any]:
         CheckpointError: missing, a directory, truncated or not a torch file, or a dict without our keys.
     """
     path = Path(path)
+    if path.is_dir():
+        raise CheckpointError(f"{path} is a directory; give a checkpoint file (RUN/best.pt)")
     if not path.is_file():
         raise CheckpointError(f"checkpoint not found: {path} (train one with `tactile-manip train`)")
     try:

@@ -34,7 +34,7 @@ from typing import Literal
 
 import numpy as np
 
-from tactile_manip.outputs import OutputPathError
+from tactile_manip.outputs import OutputPathError, check_writable_parent
 from tactile_manip.sensors.contacts import ContactTimeline, Press
 from tactile_manip.sensors.protocol import encode_frame
 from tactile_manip.sim.pair import SensorPair
@@ -277,7 +277,10 @@ class FirmwareEmulator:
 
     def _check_link(self) -> None:
         link = self.config.link
-        if not link or not os.path.lexists(link):
+        if not link:
+            return
+        check_writable_parent(link)
+        if not os.path.lexists(link):
             return
         # a link to a pty is one an emulator made (and a killed one left behind); anything else is the user's
         if not (os.path.islink(link) and _is_pty_path(os.readlink(link))):

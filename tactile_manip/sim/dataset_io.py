@@ -112,15 +112,23 @@ def save_dataset(path: str | Path, data: PairedDataset) -> Path:
     return path
 
 
+def check_dataset_file(path: str | Path) -> Path:
+    """``path`` after checking it is an existing file (DatasetError otherwise), before any long work."""
+    path = Path(path)
+    if path.is_dir():
+        raise DatasetError(f"{path} is a directory; give a dataset .npz file")
+    if not path.is_file():
+        raise DatasetError(f"dataset not found: {path} (make one with `tactile-manip simulate --out {path}`)")
+    return path
+
+
 def load_dataset(path: str | Path) -> PairedDataset:
     """Read a dataset written by :func:`save_dataset` (or ``tactile-manip simulate`` / ``collect``).
 
     Raises:
         DatasetError: missing file, not an npz, missing arrays, inconsistent lengths, or a newer format.
     """
-    path = Path(path)
-    if not path.is_file():
-        raise DatasetError(f"dataset not found: {path} (make one with `tactile-manip simulate --out {path}`)")
+    path = check_dataset_file(path)
     try:
         z = np.load(path, allow_pickle=False)
         if not isinstance(z, np.lib.npyio.NpzFile):
