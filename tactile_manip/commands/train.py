@@ -28,22 +28,30 @@ def run(args: argparse.Namespace) -> int:
     from tactile_manip.learning.import_check import require_torch
 
     require_torch()
-    from tactile_manip.sim.dataset_io import check_dataset_file
     from tqdm import tqdm
 
     from tactile_manip.learning.train import load_train_config, resolve_device, train, with_overrides
+    from tactile_manip.sim.dataset_io import check_dataset_file
 
     _check_run_folder(args)
     check_dataset_file(args.data)  # before the progress bar: a missing file is one line
     cfg = with_overrides(load_train_config(args.config), epochs=args.epochs, seed=args.seed, threads=args.threads,
                          device=args.device, max_minutes=args.max_minutes)
     resolve_device(cfg.device)  # a missing GPU is one line before any progress bar or output folder
-    with tqdm(total=cfg.epochs, unit="epoch", desc=f"training {cfg.preset}") as bar:
-        def progress(row: dict) -> None:
-            bar.update(1)
-            bar.set_postfix(loss=f"{row['loss']:.0f}", val_psnr=f"{row['val_psnr']:.2f}")
+    bars = []  # the bar starts once data, model and checkpoint are loaded, so their errors stay one line
 
-        summary = train(cfg, args.data, args.out, resume=args.resume, progress=progress)
+    def start(done: int) -> None:
+        bars.append(tqdm(total=cfg.epochs, initial=done, unit="epoch", desc=f"training {cfg.preset}"))
+
+    def progress(row: dict) -> None:
+        bars[0].update(1)
+        bars[0].set_postfix(loss=f"{row['loss']:.0f}", val_psnr=f"{row['val_psnr']:.2f}")
+
+    try:
+        summary = train(cfg, args.data, args.out, resume=args.resume, progress=progress, on_start=start)
+    finally:
+        for bar in bars:
+            bar.close()
     if summary:
         print(f"best validation PSNR {summary['best_val_psnr']:.2f} dB at epoch {summary['best_epoch']} "
               f"({summary['epochs_run']} epochs, {summary['train_seconds'] / 60:.1f} min); wrote {args.out}/")

@@ -143,17 +143,23 @@ def resolve_device(name: str, dist: _Dist | None = None) -> torch.device:
 
 
 def train(cfg: TrainConfig, data_path: str | Path, out_dir: str | Path, *, resume: bool = False,
-          progress: Callable[[dict[str, float]], None] | None = None) -> dict[str, Any]:
-    """Train a model and return the run summary (also written to ``out_dir/history.json``)."""
+          progress: Callable[[dict[str, float]], None] | None = None,
+          on_start: Callable[[int], None] | None = None) -> dict[str, Any]:
+    """Train a model and return the run summary (also written to ``out_dir/history.json``).
+
+    ``progress(row)`` is called after each epoch; ``on_start(epochs_done)`` once everything is loaded and checked
+    (data, model, a resumed checkpoint), just before the first epoch.
+    """
     dist = _init_distributed()
     try:
-        return _train(cfg, Path(data_path), Path(out_dir), resume, progress, dist)
+        return _train(cfg, Path(data_path), Path(out_dir), resume, progress, dist, on_start)
     finally:
         if dist.world > 1:
             torch.distributed.destroy_process_group()
 
 
-def _train(cfg: TrainConfig, data_path: Path, out: Path, resume: bool, progress, dist: _Dist) -> dict[str, Any]:
+def _train(cfg: TrainConfig, data_path: Path, out: Path, resume: bool, progress, dist: _Dist,
+           on_start=None) -> dict[str, Any]:
     if cfg.threads:
         torch.set_num_threads(cfg.threads)
     torch.manual_seed(cfg.seed)
@@ -182,6 +188,8 @@ def _train(cfg: TrainConfig, data_path: Path, out: Path, resume: bool, progress,
     sampler_gen = torch.Generator().manual_seed(cfg.seed)
     schedule = _schedule(cfg)
     start = time.perf_counter() - state["seconds"]
+    if on_start:
+        on_start(state["epoch"])
     for epoch in range(state["epoch"] + 1, cfg.epochs + 1):
         sampler_gen.manual_seed(cfg.seed * 100_003 + epoch)  # same batches for any world size and on resume
         for group in opt.param_groups:
