@@ -146,12 +146,13 @@ class Scan:
 def scan_records(data: bytes, pos: int, record: struct.Struct, tags: Collection[bytes]) -> Scan:
     """Every intact record of a framed file's ``data`` from offset ``pos`` (the first record) on.
 
-    A record is intact when its tag is one of ``tags``, it fits in ``data`` and its CRC-32 matches. After a
-    damaged one the scan resumes at the next offset where an intact record starts.
+    A record is intact when it fits in ``data`` and its CRC-32 matches (records of tags this code does not know
+    are returned too: a newer writer's, for the caller to ignore). After a damaged one the scan resumes at the
+    next offset where an intact record of one of ``tags`` starts.
     """
     scan = Scan()
     while pos < len(data):
-        end = _intact_end(data, pos, record, tags)
+        end = _intact_end(data, pos, record)
         if end is None:
             nxt = _next_intact(data, pos + 1, record, tags)
             if nxt is None:
@@ -166,9 +167,9 @@ def scan_records(data: bytes, pos: int, record: struct.Struct, tags: Collection[
     return scan
 
 
-def _intact_end(data: bytes, pos: int, record: struct.Struct, tags: Collection[bytes]) -> int | None:
-    """The offset after the record at ``pos`` when it is intact, else None."""
-    if pos + record.size + CRC32.size > len(data) or data[pos:pos + 2] not in tags:
+def _intact_end(data: bytes, pos: int, record: struct.Struct, tags: Collection[bytes] | None = None) -> int | None:
+    """The offset after the record at ``pos`` when it is intact (and, given ``tags``, of one of them), else None."""
+    if pos + record.size + CRC32.size > len(data) or (tags is not None and data[pos:pos + 2] not in tags):
         return None
     _, length, _ = record.unpack_from(data, pos)
     stop = pos + record.size + length

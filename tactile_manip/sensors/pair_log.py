@@ -106,7 +106,7 @@ def read_pair_log(path: str | Path) -> PairLog:
         try:
             if tag == TAG_PAIR:
                 pairs.append(_decode_pair(payload))
-            else:
+            elif tag == TAG_EVENT:  # other tags: a newer writer's records, skipped
                 events.append(json.loads(payload))
         except (ValueError, zlib.error, struct.error):  # intact on disk but not a pair / JSON: skip it
             scan.skip(RECORD.size + len(payload) + CRC32.size)

@@ -140,7 +140,7 @@ def read_recording(path: str | Path) -> Recording:
         try:
             if tag == TAG_FRAME:
                 frames.append((t_host, decode_frame(payload)))
-            else:
+            elif tag in (TAG_HEALTH, TAG_EVENT):  # other tags: a newer writer's records, skipped
                 (health if tag == TAG_HEALTH else events).append({"t_host_s": t_host, **json.loads(payload)})
         except (ProtocolError, ValueError, TypeError):  # intact on disk but not a frame / JSON object: skip it
             scan.skip(RECORD.size + len(payload) + CRC32.size)

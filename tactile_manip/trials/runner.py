@@ -23,6 +23,7 @@ import numpy as np
 
 from tactile_manip.behaviours.reorient import ReorientResult, grasp_estimate_reorient
 from tactile_manip.errors import ConfigError
+from tactile_manip.extras import require
 from tactile_manip.perception.estimator import TactilePoseEstimator
 from tactile_manip.perception.pose import wrap_axial
 from tactile_manip.perception.reconstruct import load_reconstructor
@@ -105,6 +106,7 @@ class SimulatedCell:
         from tactile_manip.sensors.simulated import SimulatedSensor
         from tactile_manip.sim.shapes import make_indenter
 
+        require("roboticstoolbox", "the simulated trial cell (kinematic FR3 twin)")  # before the run folder
         if not isinstance(scene.sensor, SimulatedSensorConfig):
             raise ConfigError("sensor: the simulated cell (robot.backend = 'twin') needs the simulated sensor; "
                               "remove the [sensor] port")
