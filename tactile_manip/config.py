@@ -80,6 +80,25 @@ def to_dict(obj: Any) -> Any:
     return obj
 
 
+def config_differences(saved: dict[str, Any], current: dict[str, Any], *, prefix: str = "",
+                       limit: int = 8) -> list[str]:
+    """``"key: saved -> current"`` for each leaf that differs between two nested config dicts (dotted keys,
+    sorted; tables are compared key by key, arrays as a whole). At most ``limit`` entries, then ``"..."``."""
+    out = []
+    for key in sorted(set(saved) | set(current)):
+        a, b = saved.get(key, "<absent>"), current.get(key, "<absent>")
+        if isinstance(a, dict) and isinstance(b, dict):
+            out += config_differences(a, b, prefix=_dot(prefix, key), limit=limit)
+        elif a != b:
+            out.append(f"{_dot(prefix, key)}: {_short(a)} -> {_short(b)}")
+    return out if len(out) <= limit else [*out[:limit], "..."]
+
+
+def _short(value: Any, width: int = 60) -> str:
+    text = repr(value)
+    return text if len(text) <= width else text[:width - 3] + "..."
+
+
 def _dot(prefix: str, key: str) -> str:
     return f"{prefix}.{key}" if prefix and key else (prefix or key)
 

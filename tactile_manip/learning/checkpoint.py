@@ -43,12 +43,3 @@ def read_checkpoint(path: str | Path) -> dict[str, Any]:
         raise CheckpointError(f"{path} is not a tactile_manip training checkpoint (no {', '.join(missing)}; "
                               "expected RUN/best.pt or RUN/checkpoint.pt of `tactile-manip train`)")
     return payload
-
-
-def config_differences(saved: dict[str, Any], current: dict[str, Any]) -> list[str]:
-    """``key: saved -> current`` for each field that differs between two flat config dicts, sorted by key."""
-    keys = sorted(set(saved) | set(current))
-    return [f"{k}: {saved.get(k, '<absent>')!r} -> {current.get(k, '<absent>')!r}" for k in keys
-            if saved.get(k, "<absent>") != current.get(k, "<absent>")]
-
-

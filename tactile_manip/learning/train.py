@@ -27,9 +27,9 @@ from typing import Any, Literal
 
 import torch
 
-from tactile_manip.config import load_config, to_dict
+from tactile_manip.config import config_differences, load_config, to_dict
 from tactile_manip.errors import TactileManipError
-from tactile_manip.learning.checkpoint import config_differences, read_checkpoint
+from tactile_manip.learning.checkpoint import read_checkpoint
 from tactile_manip.learning.data import InputSpec, TensorPairs, augment_batch, select
 from tactile_manip.learning.model import (CVAEConfig, SuperMagCVAE, count_parameters, gaussian_nll, negative_elbo,
                                           preset)

@@ -33,6 +33,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+from tactile_manip.config import config_differences
 from tactile_manip.errors import TactileManipError
 from tactile_manip.outputs import unique_folder
 from tactile_manip.trials.record import RECORD_VERSION, TrialRecord
@@ -281,8 +282,10 @@ class TrialLog:
             raise TrialLogError(f"{self.run_dir} already holds run {existing.get('run_id')!r}; resume it "
                                 f"(resume=True, `--resume`) or choose a new run directory")
         if existing.get("config_hash") != self.config_hash:
+            differences = config_differences(existing.get("config") or {}, self.config)
             raise TrialLogError(f"cannot resume {self.run_dir}: it was run with another config (hash "
-                                f"{str(existing.get('config_hash'))[:12]}, now {self.config_hash[:12]}); "
+                                f"{str(existing.get('config_hash'))[:12]}, now {self.config_hash[:12]}; "
+                                f"{'; '.join(differences) or 'same values, other form'}); "
                                 f"use a new run directory for the new config")
         return existing
 
