@@ -28,7 +28,7 @@ from benchmarks._common import machine_info, publish  # noqa: E402
 from tactile_manip.perception import load_reconstructor, wrap_axial  # noqa: E402
 from tactile_manip.perception.pose import angle_from_image  # noqa: E402
 from tactile_manip.perception.pose_reference import reference_angle_from_image  # noqa: E402
-from tactile_manip.sim.dataset_io import load_dataset  # noqa: E402
+from tactile_manip.data import load_dataset  # noqa: E402
 
 ANGLE_BAR_DEG = 0.05
 

@@ -15,6 +15,7 @@ import sys
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", required=True, help="folder for report.md, report.json and pareto.png")
+    p.add_argument("--force", action="store_true", help="replace the report of an earlier run in --out")
     p.add_argument("--quick", action="store_true",
                    help="3 readings per test object, 6 trials, 1 s per timing (about 4 minutes on 2 cores)")
     p.add_argument("--model", action="append", default=[], metavar="NAME=PATH",
@@ -41,7 +42,9 @@ def run(args: argparse.Namespace) -> int:
     from tactile_manip.bench.candidates import RUNTIMES, default_models, parse_model_spec
     from tactile_manip.bench.report import markdown_table, pose_table, write_report
     from tactile_manip.bench.suite import BenchSettings, run_bench
+    from tactile_manip.commands import check_report_folder
 
+    check_report_folder(args.out, ("report.md", "report.json", "pareto.png"), force=args.force)
     settings = BenchSettings.quick_settings() if args.quick else BenchSettings()
     if args.trials is not None:
         settings = dataclasses.replace(settings, trials=args.trials)

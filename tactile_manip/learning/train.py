@@ -27,8 +27,9 @@ from typing import Any, Literal
 
 import torch
 
-from tactile_manip.config import load_config, to_dict
+from tactile_manip.config import config_differences, load_config, to_dict
 from tactile_manip.errors import TactileManipError
+from tactile_manip.learning.checkpoint import read_checkpoint
 from tactile_manip.learning.data import InputSpec, OutputSpec, TensorPairs, augment_batch, select
 from tactile_manip.learning.model import (CVAEConfig, SuperMagCVAE, count_parameters, gaussian_nll, negative_elbo,
                                           preset)
@@ -172,17 +173,23 @@ def resolve_device(name: str, dist: _Dist | None = None) -> torch.device:
 
 
 def train(cfg: TrainConfig, data_path: str | Path, out_dir: str | Path, *, resume: bool = False,
-          progress: Callable[[dict[str, float]], None] | None = None) -> dict[str, Any]:
-    """Train a model and return the run summary (also written to ``out_dir/history.json``)."""
+          progress: Callable[[dict[str, float]], None] | None = None,
+          on_start: Callable[[int], None] | None = None) -> dict[str, Any]:
+    """Train a model and return the run summary (also written to ``out_dir/history.json``).
+
+    ``progress(row)`` is called after each epoch; ``on_start(epochs_done)`` once everything is loaded and checked
+    (data, model, a resumed checkpoint), just before the first epoch.
+    """
     dist = _init_distributed()
     try:
-        return _train(cfg, Path(data_path), Path(out_dir), resume, progress, dist)
+        return _train(cfg, Path(data_path), Path(out_dir), resume, progress, dist, on_start)
     finally:
         if dist.world > 1:
             torch.distributed.destroy_process_group()
 
 
-def _train(cfg: TrainConfig, data_path: Path, out: Path, resume: bool, progress, dist: _Dist) -> dict[str, Any]:
+def _train(cfg: TrainConfig, data_path: Path, out: Path, resume: bool, progress, dist: _Dist,
+           on_start=None) -> dict[str, Any]:
     if cfg.threads:
         torch.set_num_threads(cfg.threads)
     torch.manual_seed(cfg.seed)
@@ -212,6 +219,8 @@ def _train(cfg: TrainConfig, data_path: Path, out: Path, resume: bool, progress,
     sampler_gen = torch.Generator().manual_seed(cfg.seed)
     schedule = _schedule(cfg)
     start = time.perf_counter() - state["seconds"]
+    if on_start:
+        on_start(state["epoch"])
     for epoch in range(state["epoch"] + 1, cfg.epochs + 1):
         sampler_gen.manual_seed(cfg.seed * 100_003 + epoch)  # same batches for any world size and on resume
         for group in opt.param_groups:
@@ -332,10 +341,11 @@ def _save_checkpoint(path: Path, model, opt, mcfg: CVAEConfig, cfg: TrainConfig,
 def _load_checkpoint(path: Path, model, opt, mcfg: CVAEConfig) -> dict:
     if not path.is_file():
         raise TrainingError(f"--resume: no checkpoint at {path}")
-    payload = torch.load(path, map_location="cpu", weights_only=True)
-    if payload["model_config"] != to_dict(mcfg):
-        raise TrainingError(f"{path} was trained with another architecture or dataset shape; "
-                            "start a new output folder")
+    payload = read_checkpoint(path)
+    differences = config_differences(payload["model_config"], to_dict(mcfg))
+    if differences:
+        raise TrainingError(f"--resume: {path} was trained with another architecture or dataset shape "
+                            f"({'; '.join(differences)}); use the same config or start a new output folder")
     model.load_state_dict(payload["model"])
     opt.load_state_dict(payload["optimizer"])
     return payload["state"]

@@ -30,6 +30,7 @@ from tactile_manip.errors import TactileManipError
 from tactile_manip.sim.chip import full_scale_ut
 from tactile_manip.sim.params import ChipParams
 from tactile_manip.perception.onnx_session import session_options
+from tactile_manip.extras import require
 
 METADATA_KEY = "tactile_manip"
 SUPPORTED_FORMAT = 1
@@ -151,10 +152,7 @@ class OnnxReconstructor(Reconstructor):
 
     def __init__(self, path: str | Path, *, threads: int = 1, providers: tuple[str, ...] = ("CPUExecutionProvider",),
                  samples: int = 1, seed: int = 0) -> None:
-        try:
-            import onnxruntime as ort
-        except ImportError as e:
-            raise ImportError('OnnxReconstructor needs onnxruntime: pip install "tactile_manip[onnx]"') from e
+        ort = require("onnxruntime", "OnnxReconstructor")
         self.path = Path(path)
         if samples < 1:
             raise ValueError(f"samples must be >= 1, got {samples}")
