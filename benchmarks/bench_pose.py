@@ -1,13 +1,19 @@
-"""End-to-end tactile pose: reading -> angle latency against angle error, per method.
+"""End-to-end tactile pose: reading -> angle latency (one and two pads) against angle error, per method.
 
     python -m benchmarks.bench_pose                        # shipped SuperMag (one pass and symmetry-averaged),
-                                                           # bilinear 16x16 and 200x200
+                                                           # bilinear 16x16 and 200x200, the paper preset
     python -m benchmarks.bench_pose --readings 300 --method mine=path/to/model.onnx
+    python -m benchmarks.bench_pose --untrained fast=configs/train/candidate.toml   # latency of a config
+    python -m benchmarks.bench_pose --candidates           # also every configs/train/decoder_*.toml, untrained
 
 Readings are simulated presses of the six unseen rods (random in-hand angle, +-2 mm offset, 10-11 N, chip
-noise), the same for every method. Per method: latency p50 / p99 of ``TactilePoseEstimator.estimate`` on one
-thread (reconstruction + outlier removal + filter + PCA), and the angle error median / p95 / share within
-5 deg. Prints a markdown table and writes benchmarks/results/pose.json. It measures; it asserts nothing.
+noise), the same for every method. Per method, on one thread: latency p50 / p99 of
+``TactilePoseEstimator.estimate`` (reconstruction + outlier removal + filter + PCA) and the share of it spent
+after the reconstruction; of ``estimate_many`` on two pads' readings (one batched model run, time per pair);
+and the angle error median / p95 / share within 5 deg. The paper preset (and every ``--untrained`` config) is
+an untrained export, timed only (latency does not depend on the weights; at most ``--slow-calls`` calls), and
+every method's p50 is compared with it. Prints a markdown table and writes benchmarks/results/pose.json. It
+measures; it asserts nothing.
 """
 
 from __future__ import annotations
@@ -15,17 +21,22 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import tempfile
 import time
+from pathlib import Path
 from typing import Any
 
-import numpy as np
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # before numpy: one thread, as the table says
+os.environ.setdefault("OMP_NUM_THREADS", "1")
 
-from benchmarks._common import machine_info, publish
-from tactile_manip.perception import TactilePoseEstimator, load_reconstructor, wrap_axial
-from tactile_manip.perception.symmetry import SymmetrizedReconstructor
-from tactile_manip.sim.objects import IndenterPose
-from tactile_manip.sim.pair import SensorPair
-from tactile_manip.sim.shapes import make_indenter
+import numpy as np  # noqa: E402
+
+from benchmarks._common import machine_info, publish  # noqa: E402
+from tactile_manip.perception import TactilePoseEstimator, load_reconstructor, wrap_axial  # noqa: E402
+from tactile_manip.perception.symmetry import SymmetrizedReconstructor  # noqa: E402
+from tactile_manip.sim.objects import IndenterPose  # noqa: E402
+from tactile_manip.sim.pair import SensorPair  # noqa: E402
+from tactile_manip.sim.shapes import make_indenter  # noqa: E402
 
 RODS = [("cylinder", 3.0), ("hex_bar", 4.0), ("square_bar", 2.5), ("cylinder", 6.0), ("hex_bar", 8.0),
         ("square_bar", 5.0)]
@@ -46,32 +57,72 @@ def rod_readings(n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
     return np.stack(fields), np.array(angles)
 
 
-def measure(estimator: TactilePoseEstimator, fields: np.ndarray, angles: np.ndarray, repeats: int) -> dict[str, Any]:
-    for f in fields[:10]:  # warm-up
+def measure(estimator: TactilePoseEstimator, fields: np.ndarray, angles: np.ndarray, repeats: int, *,
+            max_calls: int | None = None, untrained: bool = False) -> dict[str, Any]:
+    """One pad (``estimate``), then two pads (``estimate_many`` of each reading and the next), interleaved
+    reading by reading so a busy machine slows both alike; ``repeats`` passes, at most ``max_calls`` each."""
+    pairs = np.stack([fields, np.roll(fields, -1, axis=0)], axis=1)  # (N, 2, R, C, 3)
+    for f, pair in zip(fields[:5], pairs[:5]):  # warm-up (both batch sizes)
         estimator.estimate(f)
-    latencies, errors = [], []
-    for _ in range(repeats):
-        for f, a in zip(fields, angles):
-            t0 = time.perf_counter()
-            est = estimator.estimate(f)
-            latencies.append(time.perf_counter() - t0)
-            if len(errors) < len(fields):
-                errors.append(abs(math.degrees(wrap_axial(est.angle_rad - a))) if est.defined else 90.0)
-    lat_ms, err = np.array(latencies) * 1e3, np.array(errors)
-    return {"latency_p50_ms": float(np.percentile(lat_ms, 50)), "latency_p99_ms": float(np.percentile(lat_ms, 99)),
-            "angle_error_median_deg": float(np.median(err)), "angle_error_p95_deg": float(np.percentile(err, 95)),
-            "within_5deg": float((err <= 5.0).mean()), "readings": int(len(fields)), "calls": len(latencies)}
+        estimator.estimate_many(pair)
+    one_ms, pair_ms, model_s, post_s, total_s, errors = [], [], [], [], [], []
+    order = [i for _ in range(repeats) for i in range(len(fields))][:max_calls]
+    for i in order:
+        t0 = time.perf_counter()
+        est = estimator.estimate(fields[i])
+        t1 = time.perf_counter()
+        estimator.estimate_many(pairs[i])
+        t2 = time.perf_counter()
+        one_ms.append((t1 - t0) * 1e3)
+        pair_ms.append((t2 - t1) * 1e3)
+        model_s.append(est.timings_s["reconstruct"])
+        post_s.append(est.timings_s["pose"])
+        total_s.append(est.timings_s["total"])
+        if len(errors) < len(fields):
+            errors.append(abs(math.degrees(wrap_axial(est.angle_rad - angles[i]))) if est.defined else 90.0)
+    out = {"latency_p50_ms": _pct(one_ms, 50), "latency_p99_ms": _pct(one_ms, 99), "pair_p50_ms": _pct(pair_ms, 50),
+           "pair_p99_ms": _pct(pair_ms, 99), "model_p50_ms": _pct(np.array(model_s) * 1e3, 50),
+           "postprocess_p50_ms": _pct(np.array(post_s) * 1e3, 50),
+           "postprocess_share": float(sum(post_s) / sum(total_s)),
+           "readings": int(len(fields)), "calls": len(one_ms), "untrained": untrained}
+    if not untrained:
+        err = np.array(errors)
+        out |= {"angle_error_median_deg": float(np.median(err)), "angle_error_p95_deg": float(np.percentile(err, 95)),
+                "within_5deg": float((err <= 5.0).mean())}
+    return out
+
+
+def _pct(values: list[float], q: float) -> float:
+    return float(np.percentile(values, q))
 
 
 def markdown(report: dict[str, Any]) -> str:
     m = report["machine"]
+    paper = report["methods"].get("paper", {}).get("latency_p50_ms")
     lines = [f"End-to-end pose (reading -> angle), one thread, {report['readings']} unseen-rod readings; "
-             f"{m['cpu_model']}, {m['usable_cores']} cores; sensor period {PERIOD_MS:g} ms", "",
-             "| method | p50 ms | p99 ms | angle error median deg | p95 deg | within 5 deg |", "|---|---|---|---|---|---|"]
+             f"{m['cpu_model']}, {m['usable_cores']} cores, load average {m.get('load_average')}; sensor period "
+             f"{PERIOD_MS:g} ms", "",
+             "| method | 1 pad p50 ms | 1 pad p99 ms | 2 pads p50 ms | 2 pads p99 ms | model p50 ms | "
+             "post-processing p50 ms (share) | x faster than paper (p50) | angle error median deg | p95 deg | "
+             "within 5 deg |", "|---" * 11 + "|"]
     for name, r in report["methods"].items():
-        lines.append(f"| {name} | {r['latency_p50_ms']:.2f} | {r['latency_p99_ms']:.2f} | "
-                     f"{r['angle_error_median_deg']:.2f} | {r['angle_error_p95_deg']:.2f} | {r['within_5deg']:.1%} |")
+        ratio = "-" if paper is None or name == "paper" else f"{paper / r['latency_p50_ms']:.0f}x"
+        accuracy = (["n/a (untrained)"] * 3 if r["untrained"] else [f"{r['angle_error_median_deg']:.2f}",
+                                                                     f"{r['angle_error_p95_deg']:.2f}",
+                                                                     f"{r['within_5deg']:.1%}"])
+        lines.append(f"| {name} | {r['latency_p50_ms']:.2f} | {r['latency_p99_ms']:.2f} | {r['pair_p50_ms']:.2f} | "
+                     f"{r['pair_p99_ms']:.2f} | {r['model_p50_ms']:.2f} | {r['postprocess_p50_ms']:.2f} "
+                     f"({r['postprocess_share']:.0%}) | {ratio} | " + " | ".join(accuracy) + " |")
+    lines += ["", "Untrained rows: their images are not contacts, so their post-processing is not representative; "
+              "their reading -> angle is about their model time plus a trained model's post-processing."]
     return "\n".join(lines)
+
+
+def untrained_model(name: str, config: str, folder: Path) -> Path:
+    """Export an untrained model of the preset or training config ``config`` (torch needed) for timing."""
+    from tactile_manip.learning.eager import export_untrained
+
+    return export_untrained(config, folder / name)
 
 
 def main() -> None:
@@ -80,9 +131,14 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=3, help="passes over the readings for the latency")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--method", action="append", default=[], metavar="NAME=MODEL.onnx")
+    parser.add_argument("--untrained", action="append", default=[], metavar="NAME=PRESET|CONFIG.toml",
+                        help="also time an untrained export of this preset or training config (latency only)")
+    parser.add_argument("--candidates", action="store_true",
+                        help="also time every configs/train/decoder_*.toml (untrained) not given with --method")
+    parser.add_argument("--no-paper", action="store_true", help="skip the paper preset (needs torch to export)")
+    parser.add_argument("--slow-calls", type=int, default=40, help="calls at most for the untrained models")
     parser.add_argument("--out", default="benchmarks/results/pose.json")
     args = parser.parse_args()
-    os.environ.setdefault("OMP_NUM_THREADS", "1")
     shipped = load_reconstructor("models/supermag_compact.onnx", threads=1)
     methods = {"supermag_compact": shipped, "supermag_compact_sym": SymmetrizedReconstructor(shipped),
                "bilinear_16px": load_reconstructor("bilinear", output_px=16),
@@ -90,10 +146,21 @@ def main() -> None:
     for spec in args.method:
         name, _, path = spec.partition("=")
         methods[name] = load_reconstructor(path, threads=1)
+    untrained = dict(spec.partition("=")[::2] for spec in args.untrained)
+    if args.candidates:
+        configs = sorted(Path("configs/train").glob("decoder_*.toml"))
+        untrained |= {p.stem: str(p) for p in configs if p.stem not in methods}
+    if not args.no_paper:
+        untrained = {"paper": "paper", **untrained}
     fields, angles = rod_readings(args.readings, args.seed)
-    report = {"machine": machine_info(), "readings": args.readings,
-              "methods": {name: measure(TactilePoseEstimator(rec), fields, angles, args.repeats)
-                          for name, rec in methods.items()}}
+    results = {name: measure(TactilePoseEstimator(rec), fields, angles, args.repeats) for name, rec in methods.items()}
+    with tempfile.TemporaryDirectory(prefix="bench-pose-") as tmp:
+        for name, config in untrained.items():
+            rec = load_reconstructor(untrained_model(name, config, Path(tmp)), threads=1)
+            results[name] = measure(TactilePoseEstimator(rec), fields, angles, args.repeats,
+                                    max_calls=args.slow_calls if name == "paper" else None, untrained=True)
+            del rec
+    report = {"machine": machine_info(), "readings": args.readings, "untrained": untrained, "methods": results}
     publish(report, args.out, markdown)
 
 

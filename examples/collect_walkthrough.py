@@ -76,9 +76,12 @@ def train_and_evaluate(data: Path) -> None:
     """Step 3: the CVAE commands on the collected file, unconverted."""
     (OUT / "tiny.toml").write_text(TINY_TRAIN)
     run = OUT / "run"
-    steps = [["train", "--config", str(OUT / "tiny.toml"), "--data", str(data), "--out", str(run)],
-             ["export", "--checkpoint", str(run / "best.pt"), "--out", str(OUT / "model.onnx"), "--data", str(data)],
-             ["evaluate", "--data", str(data), "--model", f"Tiny={OUT / 'model.onnx'}", "--out", str(OUT / "eval")]]
+    # --force: the walkthrough owns OUT and starts over in it on every run
+    steps = [["train", "--config", str(OUT / "tiny.toml"), "--data", str(data), "--out", str(run), "--force"],
+             ["export", "--checkpoint", str(run / "best.pt"), "--out", str(OUT / "model.onnx"), "--data", str(data),
+              "--force"],
+             ["evaluate", "--data", str(data), "--model", f"Tiny={OUT / 'model.onnx'}", "--out", str(OUT / "eval"),
+              "--force"]]
     for argv in steps:
         print(f"3. tactile-manip {' '.join(argv)}")
         if cli(argv) != 0:

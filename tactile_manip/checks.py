@@ -69,3 +69,12 @@ def check_nonblank(name: str, value: str, *, hint: str = "") -> str:
     if not isinstance(value, str) or not value.strip():
         raise ValueError(f"{name} must not be empty, got {value!r}" + (f": {hint}" if hint else ""))
     return value
+
+
+def npz_read_problem(error: Exception) -> str:
+    """Why ``np.load(..., allow_pickle=False)`` refused a file, in words for a user (no ``allow_pickle`` hint:
+    files are data, and pickled objects are never loaded)."""
+    text = str(error)
+    if "pickle" in text.lower() or "object arrays" in text.lower():
+        return "it is not an archive of plain arrays (reading it would need unpickling, which tactile_manip never does)"
+    return text

@@ -2,18 +2,23 @@
 
 Each subcommand lives in ``tactile_manip.commands.<module>`` with ``add_arguments(parser)`` and
 ``run(args) -> int``; command modules import their heavy dependencies inside ``run``, so ``--help`` is
-fast. Errors this package raises on purpose (bad configs, missing files, bad values) print one line and
-exit with status 2; anything else is a bug and keeps its traceback.
+fast. :func:`main` is the one place that turns errors into exit statuses: errors this package raises on
+purpose, bad values (ValueError), file-system errors (the OSError family: missing, unreadable or unwritable
+paths) and a missing optional package (the line names its extra and install command) print one line
+``tactile-manip CMD: error: ...`` and exit with status 2; Ctrl-C exits with 130, a closed stdout (``| head``)
+quietly with 141; anything else is a bug and keeps its traceback.
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 from collections.abc import Sequence
 
 from tactile_manip.errors import TactileManipError
+from tactile_manip.extras import missing_extra_message
 from tactile_manip.version import __version__
 
 # name -> (module, one-line help)
@@ -51,13 +56,47 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
-        return int(importlib.import_module(args._module).run(args) or 0)
-    except (TactileManipError, ValueError, FileNotFoundError) as e:
-        print(f"tactile-manip {args.command}: error: {e}", file=sys.stderr)
-        return 2
+        status = int(importlib.import_module(args._module).run(args) or 0)
+        sys.stdout.flush()  # a closed stdout shows here, not in the interpreter's exit
+        return status
+    except BrokenPipeError:  # the reader went away (`tactile-manip params | head -1`): nothing left to say
+        _silence_stdout()
+        return 141
+    except (TactileManipError, ValueError, OSError) as e:
+        return _fail(args.command, error_line(e))
+    except ImportError as e:
+        line = missing_extra_message(e)
+        if line is None:  # one of our own modules failed to import: a bug, keep the traceback
+            raise
+        return _fail(args.command, line)
     except KeyboardInterrupt:
         print(f"tactile-manip {args.command}: interrupted", file=sys.stderr)
         return 130
+
+
+def error_line(error: BaseException) -> str:
+    """The one-line text of an expected error; OSErrors name their path (``Permission denied: out/x.npz``)."""
+    if isinstance(error, OSError) and not isinstance(error, TactileManipError) and error.filename is not None:
+        text = f"{error.strerror or type(error).__name__}: {error.filename}"
+        if error.filename2 is not None:
+            text += f" -> {error.filename2}"
+    else:
+        text = str(error) or type(error).__name__
+    return " ".join(text.split())
+
+
+def _fail(command: str, line: str) -> int:
+    print(f"tactile-manip {command}: error: {line}", file=sys.stderr)
+    return 2
+
+
+def _silence_stdout() -> None:
+    # Python flushes stdout again at exit and would print a second BrokenPipeError; point it at /dev/null
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError, AttributeError):  # not a real file (captured in tests)
+        pass
 
 
 if __name__ == "__main__":  # pragma: no cover

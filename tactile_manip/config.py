@@ -28,7 +28,8 @@ def load_config(path: str | Path, cls: type[T]) -> T:
     """Parse the TOML file at ``path`` into an instance of the dataclass ``cls``.
 
     Raises:
-        ConfigError: the file is missing, is not valid TOML, or does not fit ``cls``.
+        ConfigError: the file is missing, a directory, unreadable, not UTF-8, not valid TOML, or does not fit
+            ``cls``.
     """
     path = Path(path)
     try:
@@ -36,6 +37,12 @@ def load_config(path: str | Path, cls: type[T]) -> T:
             raw = tomllib.load(f)
     except FileNotFoundError as e:
         raise ConfigError(f"config file not found: {path}") from e
+    except IsADirectoryError as e:
+        raise ConfigError(f"config {path} is a directory; give a .toml file") from e
+    except OSError as e:
+        raise ConfigError(f"cannot read config {path}: {e.strerror or e}") from e
+    except UnicodeDecodeError as e:
+        raise ConfigError(f"{path}: not a text (UTF-8) TOML file: byte {e.start} is not UTF-8") from e
     except tomllib.TOMLDecodeError as e:
         raise ConfigError(f"{path}: not valid TOML: {e}") from e
     return from_dict(cls, raw, where=str(path))
@@ -71,6 +78,25 @@ def to_dict(obj: Any) -> Any:
     if isinstance(obj, dict):
         return {k: to_dict(v) for k, v in obj.items()}
     return obj
+
+
+def config_differences(saved: dict[str, Any], current: dict[str, Any], *, prefix: str = "",
+                       limit: int = 8) -> list[str]:
+    """``"key: saved -> current"`` for each leaf that differs between two nested config dicts (dotted keys,
+    sorted; tables are compared key by key, arrays as a whole). At most ``limit`` entries, then ``"..."``."""
+    out = []
+    for key in sorted(set(saved) | set(current)):
+        a, b = saved.get(key, "<absent>"), current.get(key, "<absent>")
+        if isinstance(a, dict) and isinstance(b, dict):
+            out += config_differences(a, b, prefix=_dot(prefix, key), limit=limit)
+        elif a != b:
+            out.append(f"{_dot(prefix, key)}: {_short(a)} -> {_short(b)}")
+    return out if len(out) <= limit else [*out[:limit], "..."]
+
+
+def _short(value: Any, width: int = 60) -> str:
+    text = repr(value)
+    return text if len(text) <= width else text[:width - 3] + "..."
 
 
 def _dot(prefix: str, key: str) -> str:

@@ -130,7 +130,14 @@ def sample_figure(field_ut: np.ndarray, depth_mm: np.ndarray | None, *, title: s
     if title:
         fig.suptitle(title)
     if path is not None:
-        Path(path).parent.mkdir(parents=True, exist_ok=True)
+        path = figure_path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
         fig.savefig(path, dpi=90)
         plt.close(fig)
     return fig
+
+
+def figure_path(path: str | Path) -> Path:
+    """The file matplotlib's ``savefig(path)`` writes: ``path``, with ``.png`` appended when it has no suffix."""
+    path = Path(path)
+    return path if path.suffix else path.with_name(path.name + ".png")

@@ -170,7 +170,7 @@ def test_show_notes_an_object_off_the_pad(tmp_path, capsys):
     assert main(["show", "--object", "letter_r", "--x-mm", "30", "--out", str(out)]) == 0
     printed = capsys.readouterr().out
     assert "note: letter_r at (30, 0) mm does not touch the 20 mm pad" in printed
-    assert main(["show", "--object", "letter_r", "--out", str(out)]) == 0
+    assert main(["show", "--object", "letter_r", "--out", str(out), "--force"]) == 0
     assert "note:" not in capsys.readouterr().out  # a normal press has no note
 
 

@@ -285,3 +285,15 @@ def test_supermag_file_parses_with_plain_tomllib():
     """The file is data: tomllib alone reads it, and the loader adds nothing a reader would not see."""
     raw = tomllib.loads(SUPERMAG.read_text())
     assert from_dict(DatasetConfig, raw) == load_dataset_config(SUPERMAG)
+
+
+def test_config_differences_name_dotted_keys_and_stop_at_a_limit():
+    from tactile_manip.config import config_differences
+
+    saved = {"a": 1, "sim": {"layer": {"e_kpa": 200.0, "h_mm": 2.5}}, "objects": ["x"]}
+    now = {"a": 1, "sim": {"layer": {"e_kpa": 150.0, "h_mm": 2.5}}, "objects": ["x", "y"], "new": True}
+    assert config_differences(saved, now) == ["new: '<absent>' -> True", "objects: ['x'] -> ['x', 'y']",
+                                              "sim.layer.e_kpa: 200.0 -> 150.0"]
+    assert config_differences(saved, saved) == []
+    many = config_differences({f"k{i}": i for i in range(20)}, {}, limit=3)
+    assert len(many) == 4 and many[-1] == "..."

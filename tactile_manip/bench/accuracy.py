@@ -51,7 +51,7 @@ def load_readings(data_path: str | Path | None, config_path: str | Path, *,
                   per_object: int | None) -> tuple[PairedDataset, dict[str, Any]]:
     """The benchmark's readings as a dataset whose ``test`` split is what every method is scored on, and a
     description of where they came from."""
-    if data_path is not None and Path(data_path).is_file():
+    if data_path is not None and Path(data_path).exists():  # a folder or a foreign file is refused, not replaced
         data = load_dataset(data_path)
         source = {"source": f"{data_path} test split", "data_fingerprint": data.fingerprint()}
         if per_object is not None:

@@ -34,8 +34,9 @@ class ModelEntry:
         path: the ``.onnx`` file.
         checkpoint: its training checkpoint, for the torch-eager reference (None: no torch row).
         symmetrized: also measure it averaged over the sensor's symmetries, as method ``<name>_sym``.
-        untrained_preset: when ``path`` is missing, export an untrained model of this preset instead
-            (latency only; its accuracy is reported as "n/a (untrained)").
+        untrained_preset: when ``path`` is missing, export an untrained model of this preset (or training
+            config ``.toml``) instead (latency only; its accuracy is reported as "n/a (untrained)").
+        runtimes: the only runtimes to measure it on (None: every runtime asked for).
     """
 
     name: str
@@ -43,16 +44,25 @@ class ModelEntry:
     checkpoint: Path | None = None
     symmetrized: bool = False
     untrained_preset: str | None = None
+    runtimes: tuple[str, ...] | None = None
+
+
+DECODER_CANDIDATES = "configs/train/decoder_*.toml"  # faster decoders (issue 15), timed untrained until trained
 
 
 def default_models(root: str | Path = ".") -> list[ModelEntry]:
-    """The shipped model and the size variants on one 8-epoch recipe, and the paper preset (paths under ``root``)."""
+    """The shipped model and the size variants on one 8-epoch recipe, the paper preset, and the decoder
+    candidates of ``configs/train/decoder_*.toml`` (their run's export when trained, else an untrained export
+    timed on one thread) (paths under ``root``)."""
     r = Path(root)
+    candidates = [ModelEntry(c.stem, r / "runs" / c.stem / "model.onnx", r / "runs" / c.stem / "best.pt",
+                             untrained_preset=str(c), runtimes=("ort-1",)) for c in sorted(r.glob(DECODER_CANDIDATES))]
     return [ModelEntry("compact", r / "models/supermag_compact.onnx", r / "runs/compact/best.pt", symmetrized=True),
             ModelEntry("small_8ep", r / "runs/variant_small/model.onnx", r / "runs/variant_small/best.pt"),
             ModelEntry("compact_8ep", r / "runs/table1_full/model.onnx", r / "runs/table1_full/best.pt"),
             ModelEntry("large_8ep", r / "runs/variant_large/model.onnx", r / "runs/variant_large/best.pt"),
-            ModelEntry("paper", r / "runs/paper/model.onnx", r / "runs/paper/best.pt", untrained_preset="paper")]
+            ModelEntry("paper", r / "runs/paper/model.onnx", r / "runs/paper/best.pt", untrained_preset="paper"),
+            *candidates]
 
 
 def parse_model_spec(spec: str) -> ModelEntry:
@@ -101,6 +111,10 @@ def model_candidates(entry: ModelEntry, workdir: Path, *, runtimes: tuple[str, .
                      notes: list[str]) -> list[Candidate]:
     """Candidates of one model on each runtime in ``runtimes``; what cannot run is skipped into ``notes``."""
     path, untrained = entry.path, False
+    if entry.runtimes is not None:
+        runtimes = tuple(r for r in runtimes if r in entry.runtimes)
+    if not runtimes:
+        return []
     if not path.is_file():
         if entry.untrained_preset is None:
             notes.append(f"{entry.name}: skipped, {path} not found (train it and `tactile-manip export` it)")

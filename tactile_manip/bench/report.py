@@ -155,6 +155,29 @@ def markdown_table(rows: Sequence[dict[str, Any]]) -> str:
     return "\n".join(lines) + "\n"
 
 
+PAPER_METHOD = "paper"  # the row every pose latency is compared with
+
+
+def pose_table(rows: Sequence[dict[str, Any]]) -> str:
+    """Reading -> angle per method and runtime: one pad, two pads (per pair, one batched model run), the
+    post-processing share of the one-pad time, and how many times faster than the paper preset on the same
+    runtime (p50 against p50)."""
+    paper = {r["runtime"]: r["pose_p50_ms"] for r in rows if r["method"] == PAPER_METHOD and r.get("pose_p50_ms")}
+    lines = ["| method | runtime | 1 pad p50 / p99 ms | 2 pads p50 / p99 ms per pair | post-processing share | "
+             "x faster than the paper preset (p50) |", "|---" * 6 + "|"]
+    for r in rows:
+        if r.get("pose_p50_ms") is None:
+            continue
+        share = r.get("postprocess_share")
+        ratio = paper.get(r["runtime"])
+        cells = [r["method"], r["runtime"], _pair(r["pose_p50_ms"], r["pose_p99_ms"], ".2f"),
+                 _pair(r.get("pose_pair_p50_ms"), r.get("pose_pair_p99_ms"), ".2f"),
+                 "-" if share is None else f"{share:.0%}",
+                 "-" if ratio is None or r["method"] == PAPER_METHOD else f"{ratio / r['pose_p50_ms']:.0f}x"]
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
 def markdown_report(report: dict[str, Any]) -> str:
     """The whole report.md: what was measured on what, the table, the fronts and the notes."""
     m, lib, rd, s = report["machine"], report["libraries"], report["readings"], report["settings"]
@@ -181,7 +204,10 @@ def markdown_report(report: dict[str, Any]) -> str:
            f"on the first one once their outputs agree within {report['share_tolerance_mm']:g} mm on "
            f"{s['parity_readings']} readings (`accuracy_from` and `parity_max_abs_mm` in report.json); accuracy "
            "passes use all cores where that gives the same outputs, trials use 1 thread as the trials command. "
-           f"Baselines are 200x200 with the shipped linear fit. Sensor period: {PERIOD_MS:g} ms.", ""]
+           f"Baselines are 200x200 with the shipped linear fit. Sensor period: {PERIOD_MS:g} ms.", "",
+           "Reading -> angle (`TactilePoseEstimator.estimate` on the rod readings; two pads: `estimate_many` of two "
+           "readings, one batched model run, time per pair):", "",
+           pose_table(report["rows"])]
     for key, title, _ in PANELS:
         out.append(f"Pareto front ({title} vs 1-thread latency): {', '.join(report['pareto'][key]) or '-'}")
     if report["notes"]:

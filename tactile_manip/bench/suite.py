@@ -87,9 +87,9 @@ def run_bench(*, settings: BenchSettings, models: Sequence[ModelEntry], baseline
         _check_names(methods, known, "methods")
     report: dict[str, Any] = {"machine": machine_info(), "libraries": library_versions(),
                               "settings": asdict(settings), "share_tolerance_mm": SHARE_TOLERANCE_MM, "notes": []}
+    scene = _trial_scene(scene_path, settings.trials, report["notes"])  # a bad scene fails before any work
     data, report["readings"] = accuracy.load_readings(data_path, dataset_config, per_object=settings.per_object)
     log(f"bench: {report['readings']['readings']} readings ({report['readings']['source']})")
-    scene = _trial_scene(scene_path, settings.trials, report["notes"])
     if scene is not None:
         name = str(scene_path or "reorient_sim: the six rods of configs/scenes/reorient_sim.toml, built in")
         report["trials"] = {"scene": name, "trials": scene.trials, "seed": scene.seed,
@@ -153,7 +153,7 @@ def _trial_scene(scene_path: str | Path | None, trials: int, notes: list[str]):
         import roboticstoolbox  # noqa: F401 - the kinematic twin of the trials
     except ImportError:
         notes.append("trials not run: the kinematic twin needs roboticstoolbox-python "
-                     '(pip install "tactile_manip[trials]")')
+                     '(pip install -e ".[trials]")')
         return None
     return accuracy.load_trial_scene(scene_path, trials)
 

@@ -1,4 +1,4 @@
-"""Timings of one reconstructor: one reading, batches, and the whole pose (reading -> angle).
+"""Timings of one reconstructor: one reading, batches, and the whole pose (reading -> angle, one and two pads).
 
 Each measurement warms up first, then runs until it has ``max_calls`` samples or ``max_seconds`` have
 passed (whichever comes first, but at least ``min_calls``), so a 100 ms model does not hold the report up
@@ -90,8 +90,24 @@ def batch_throughput(rec: Reconstructor, readings: np.ndarray, budget: TimingBud
 
 
 def pose_latency_ms(rec: Reconstructor, readings: np.ndarray, budget: TimingBudget) -> dict[str, Any]:
-    """Latency of :meth:`TactilePoseEstimator.estimate` (reconstruct, post-process, PCA) per reading, ms."""
+    """Reading -> angle latency per method, ms: :meth:`TactilePoseEstimator.estimate` of one reading
+    (reconstruct, post-process, PCA), and :meth:`TactilePoseEstimator.estimate_many` of two pads' readings
+    (one batched model run, then the pose of each: the time per pair). ``postprocess_share`` is the part of
+    the one-reading time spent after the reconstruction (outlier removal, filter, PCA, confidence).
+    """
     estimator = TactilePoseEstimator(rec)
-    ms = _timed_calls(estimator.estimate, readings, budget)
+    post_s, total_s = [], []
+
+    def one(x: np.ndarray) -> None:
+        timings = estimator.estimate(x).timings_s
+        post_s.append(timings["pose"])
+        total_s.append(timings["total"])
+
+    ms = _timed_calls(one, readings, budget)
+    timed = slice(budget.warmup, None)
+    pairs = np.stack([readings, np.roll(readings, 1, axis=0)], axis=1)  # (N, 2, R, C, 3): two pads' readings
+    pair_ms = _timed_calls(estimator.estimate_many, pairs, budget)
     return {"pose_p50_ms": float(np.percentile(ms, 50)), "pose_p99_ms": float(np.percentile(ms, 99)),
-            "pose_calls": int(ms.size)}
+            "pose_calls": int(ms.size), "pose_pair_p50_ms": float(np.percentile(pair_ms, 50)),
+            "pose_pair_p99_ms": float(np.percentile(pair_ms, 99)), "pose_pair_calls": int(pair_ms.size),
+            "postprocess_share": float(sum(post_s[timed]) / sum(total_s[timed]))}

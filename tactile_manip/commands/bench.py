@@ -15,6 +15,7 @@ import sys
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", required=True, help="folder for report.md, report.json and pareto.png")
+    p.add_argument("--force", action="store_true", help="replace the report of an earlier run in --out")
     p.add_argument("--quick", action="store_true",
                    help="3 readings per test object, 6 trials, 1 s per timing (about 4 minutes on 2 cores)")
     p.add_argument("--model", action="append", default=[], metavar="NAME=PATH",
@@ -39,9 +40,11 @@ def run(args: argparse.Namespace) -> int:
     import dataclasses
 
     from tactile_manip.bench.candidates import RUNTIMES, default_models, parse_model_spec
-    from tactile_manip.bench.report import markdown_table, write_report
+    from tactile_manip.bench.report import markdown_table, pose_table, write_report
     from tactile_manip.bench.suite import BenchSettings, run_bench
+    from tactile_manip.commands import check_report_folder
 
+    check_report_folder(args.out, ("report.md", "report.json", "pareto.png"), force=args.force)
     settings = BenchSettings.quick_settings() if args.quick else BenchSettings()
     if args.trials is not None:
         settings = dataclasses.replace(settings, trials=args.trials)
@@ -54,6 +57,7 @@ def run(args: argparse.Namespace) -> int:
                        log=lambda line: print(line, file=sys.stderr, flush=True))
     paths = write_report(args.out, report)
     print(markdown_table(report["rows"]), end="")
+    print("\nReading -> angle, one and two pads:\n" + pose_table(report["rows"]), end="")
     for note in report["notes"]:
         print(f"note: {note}")
     print(f"took {report['seconds']:.0f} s; wrote {', '.join(str(p) for p in paths)}")

@@ -96,18 +96,24 @@ def check_nonblank(name: str, value: str, *, hint: str) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from tactile_manip.errors import SensorError
+    from tactile_manip.extras import require
 
-    try:
-        return {"calibrate": _calibrate, "run": _record, "finalize": _finalize}[args.action](args)
-    except ImportError as e:  # an optional extra (camera, serial) is missing: one line, naming the extra
-        raise SensorError(str(e)) from e
+    if not getattr(args, "sim", False):  # a typo first (an empty --port / --camera is not --sim), then the extras
+        if getattr(args, "camera", None) is not None:
+            check_nonblank("--camera", args.camera, hint=CAMERA_HINT)
+        if getattr(args, "port", None) is not None:
+            check_nonblank("--port", args.port, hint=PORT_HINT)
+    if getattr(args, "camera", None) and not getattr(args, "sim", False):  # a real rig: its extras before any work
+        require("cv2", "a real VBTS camera")
+        if args.action == "run":
+            require("serial", "a real MBTS board")
+    return {"calibrate": _calibrate, "run": _record, "finalize": _finalize}[args.action](args)
 
 
 def _fresh(path: Path, force: bool) -> Path:
-    if path.exists() and not force:
-        raise ValueError(f"{path} exists; pass --force to overwrite it")
-    return path
+    from tactile_manip.outputs import check_output_file
+
+    return check_output_file(path, force=force)
 
 
 def _calibrate(args: argparse.Namespace) -> int:
@@ -170,9 +176,11 @@ def _record(args: argparse.Namespace) -> int:
     from tactile_manip.sensors.collect import CollectConfig
     from tactile_manip.sensors.vbts_calibration import VbtsCalibration
 
+    from tactile_manip.data import dataset_path
+
     if not args.sim:  # checked before any file is touched; an empty --port is not --sim
         check_nonblank("--port", args.port, hint=PORT_HINT)
-    out = _fresh(Path(args.out), args.force)
+    out = _fresh(dataset_path(args.out), args.force)
     log_path = _fresh(out.with_suffix(".tmpairs"), args.force)
     if args.presses < 1:
         raise ValueError(f"--presses must be >= 1, got {args.presses}")
@@ -274,13 +282,15 @@ def _record_real(args, config, calibration, log_path: Path, progress):
 
 def _finalize(args: argparse.Namespace) -> int:
     from tactile_manip.sensors.pair_log import dataset_from_pair_logs, read_pair_log
-    from tactile_manip.data import SPLITS, save_dataset
+    from tactile_manip.data import SPLITS, dataset_path, save_dataset
 
-    out = _fresh(Path(args.out), args.force)
+    out = _fresh(dataset_path(args.out), args.force)
     logs = [read_pair_log(p) for p in args.logs]
     for log in logs:
         if log.truncated_bytes:
             print(f"{log.path}: {len(log)} pairs, ignored a torn tail of {log.truncated_bytes} bytes (a crash)")
+        if log.skipped_bytes:
+            print(f"{log.path}: skipped {log.skipped_bytes} damaged bytes in {log.damaged_records} place(s)")
     data = dataset_from_pair_logs(logs, test_objects=args.test_objects, validation_fraction=args.val_fraction)
     path = save_dataset(out, data)
     counts = ", ".join(f"{s} {len(data.indices(s))}" for s in SPLITS)

@@ -9,7 +9,6 @@ from __future__ import annotations
 import argparse
 import math
 import time
-from pathlib import Path
 
 DEMO_OBJECTS = (("allen_key", {}), ("letter_r", {}), ("cylinder", {"size_mm": 4.0}),
                 ("hex_bar", {"size_mm": 6.0}), ("square_bar", {"size_mm": 3.0}), ("procedural", {"seed": 7}))
@@ -17,6 +16,7 @@ DEMO_OBJECTS = (("allen_key", {}), ("letter_r", {}), ("cylinder", {"size_mm": 4.
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", default="out/demo", help="folder for the PNGs (default out/demo)")
+    p.add_argument("--force", action="store_true", help="replace the PNGs of an earlier demo in --out")
     p.add_argument("--force-n", type=float, default=10.0, help="press force, N (default 10)")
     p.add_argument("--seed", type=int, default=0, help="seed for poses and noise")
 
@@ -29,9 +29,11 @@ def run(args: argparse.Namespace) -> int:
     from tactile_manip.sim.shapes import make_indenter
     from tactile_manip.sim.pair import SensorPair
 
+    from tactile_manip.commands import check_report_folder
+
+    out = check_report_folder(args.out, [f"{name}.png" for name, _ in DEMO_OBJECTS], force=args.force)
     rng = np.random.default_rng(args.seed)
     pair = SensorPair()
-    out = Path(args.out)
     print(f"{'object':<14}{'gel mm':>8}{'skin mm':>9}{'depth max':>11}{'|dB| max uT':>13}{'ms':>7}")
     for name, kwargs in DEMO_OBJECTS:
         pose = IndenterPose(x_mm=rng.uniform(-2, 2), y_mm=rng.uniform(-2, 2), yaw_rad=rng.uniform(-math.pi, math.pi))

@@ -11,6 +11,11 @@ import argparse
 
 import numpy as np
 
+from tactile_manip.commands import check_report_folder
+from tactile_manip.extras import require
+
+REPORT_FILES = ("table.md", "results.json", "gallery.png")
+
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--data", required=True, help="paired dataset .npz (its test split is evaluated)")
@@ -19,6 +24,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--symmetrized", action="append", default=[], metavar="LABEL=PATH",
                    help="an exported model averaged over the sensor's 8 symmetries (SymmetrizedReconstructor)")
     p.add_argument("--out", required=True, help="folder for table.md, results.json and gallery.png")
+    p.add_argument("--force", action="store_true", help="replace the report files of an earlier evaluation in --out")
     p.add_argument("--split", default="test", choices=("train", "val", "test"))
     p.add_argument("--inception-onnx", default=None,
                    help="Inception-v3 pool features as ONNX ((N,3,299,299) -> (N,2048)) to report a real FID")
@@ -35,8 +41,17 @@ def run(args: argparse.Namespace) -> int:
     from tactile_manip.perception.evaluation import evaluate_methods, gallery, markdown_table, write_report
     from tactile_manip.perception.reconstruct import BASELINES, OnnxReconstructor
     from tactile_manip.data import load_dataset
+    from tactile_manip.errors import DatasetError
 
+    check_report_folder(args.out, REPORT_FILES, force=args.force)
+    if args.model or args.symmetrized or args.inception_onnx:
+        require("onnxruntime", "evaluating exported models")
     data = load_dataset(args.data)
+    if not len(data.indices(args.split)):
+        raise DatasetError(f"{args.data} has no {args.split} split to evaluate (its splits: "
+                           f"{', '.join(sorted(set(data.split.tolist()))) or 'none'}); choose one with --split, or "
+                           "give test objects when making it (`collect --test-objects`, a dataset config's "
+                           "split = \"test\")")
     methods = {}
     if not args.no_baselines:
         train = _baseline_fit_indices(data, args.baseline_objects)

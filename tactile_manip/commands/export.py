@@ -13,6 +13,7 @@ import json
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--checkpoint", required=True, help="training checkpoint (RUN/best.pt)")
     p.add_argument("--out", required=True, help="output .onnx")
+    p.add_argument("--force", action="store_true", help="replace an existing --out (and --card)")
     p.add_argument("--data", default=None, help="the training dataset: real readings for the parity check, "
                                                  "pixel size and provenance")
     p.add_argument("--metrics", default=None, help="results.json of `tactile-manip evaluate` to store inside")
@@ -27,9 +28,16 @@ def run(args: argparse.Namespace) -> int:
     from tactile_manip.learning.import_check import require_torch
 
     require_torch()
+    from tactile_manip.extras import require
     from tactile_manip.learning.export import export_onnx
     from tactile_manip.data import load_dataset
+    from tactile_manip.outputs import check_output_file
 
+    require("onnx", "export")
+    require("onnxruntime", "export's parity check")
+    check_output_file(args.out, force=args.force)
+    if args.card:
+        check_output_file(args.card, force=args.force)
     readings, pixel_mm, extra = None, args.pixel_mm or 0.1, {}
     if args.data:
         data = load_dataset(args.data)
@@ -80,4 +88,4 @@ def _commands(args: argparse.Namespace) -> list[str]:
     data = Path(args.data or "data/supermag.npz")
     return [f"tactile-manip simulate --config configs/dataset/{data.stem}.toml --out {data}",
             f"tactile-manip train --config configs/train/{run.name}.toml --data {data} --out {run}",
-            f"tactile-manip export --checkpoint {args.checkpoint} --out {args.out} --data {data}"]
+            f"tactile-manip export --checkpoint {args.checkpoint} --out {args.out} --data {data} --force"]

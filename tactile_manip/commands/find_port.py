@@ -12,8 +12,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     import sys
 
+    from tactile_manip.extras import require
     from tactile_manip.sensors.ports import list_ports
 
+    require("serial.tools.list_ports", "find-port")
     ports = list_ports(include_all=args.all)
     if not ports:
         print("find-port: no USB serial port found. Is the board plugged in with a data cable? On Linux, is your "

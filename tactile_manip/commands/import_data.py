@@ -46,12 +46,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from tactile_manip.data import dataset_path, from_arrays, save_dataset
+    from tactile_manip.outputs import check_output_file
 
-    out = dataset_path(args.out)
-    if out.exists() and not args.force:
-        raise FileExistsError(f"{out} exists; pass --force to overwrite it")
-    if out.is_dir():
-        raise IsADirectoryError(f"--out {out} is a directory; give a file name")
+    out = check_output_file(dataset_path(args.out), force=args.force)  # the file written, before reading anything
     arrays = {name: _read(args, name) for name in ("readings", "images", "split", "groups", "objects")}
     for name in ("readings", "images"):
         if arrays[name] is None:

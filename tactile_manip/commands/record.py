@@ -8,7 +8,6 @@ killed recorder leaves every frame up to about that long before the kill. Read i
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
 from tactile_manip.commands.serial_options import add_serial_options, serial_config
 
@@ -33,11 +32,12 @@ def run(args: argparse.Namespace) -> int:
     import sys
     import threading
 
+    from tactile_manip.extras import require
     from tactile_manip.sensors import Recorder, SerialSensor, SimulatedSensor, parse_press
 
-    out = Path(args.out)
-    if out.exists() and not args.force:
-        raise ValueError(f"{out} exists; pass --force to overwrite it")
+    from tactile_manip.outputs import check_output_file
+
+    out = check_output_file(args.out, force=args.force)
     if not 0 < args.sync_every_s <= 1.0:
         raise ValueError(f"--sync-every-s must be in (0, 1], got {args.sync_every_s}")
     if args.seconds is not None and not args.seconds > 0:
@@ -47,7 +47,9 @@ def run(args: argparse.Namespace) -> int:
     if args.sim:
         sensor = SimulatedSensor()
     else:  # an empty --port is refused by serial_config, never read as "no port" (that once recorded --sim)
-        sensor = SerialSensor(serial_config(args))
+        config = serial_config(args)
+        require("serial", "recording a serial port")  # before the file or the port is touched
+        sensor = SerialSensor(config)
     presses = [parse_press(s) for s in args.press]
     stop = threading.Event()
     previous = signal.signal(signal.SIGTERM, lambda *_: stop.set())

@@ -19,11 +19,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="success tolerance on |final - target|, deg (default 5)")
     p.add_argument("--out", default=None, metavar="DIR", help="folder for the report files (default: RUN_DIR)")
     p.add_argument("--title", default="Reorientation trials", help="heading of the summary and figures")
+    p.add_argument("--force", action="store_true", help="replace the report of an earlier scoring at this tolerance")
 
 
 def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
+    from tactile_manip.commands import check_report_folder
     from tactile_manip.errors import ConfigError
     from tactile_manip.trials.log import TrialLogError, read_run_info, read_trials, trials_path
     from tactile_manip.trials.report import tolerance_tag, write_report
@@ -34,13 +36,14 @@ def run(args: argparse.Namespace) -> int:
     run_dir = Path(args.run_dir)
     if not run_dir.is_dir():
         raise TrialLogError(f"no run directory at {run_dir}")
+    tolerance_rad = math.radians(tol_deg)
+    tag = tolerance_tag(tolerance_rad)
+    out = check_report_folder(args.out or run_dir, [f"summary{tag}.md", f"summary{tag}.json", f"errors{tag}.png",
+                                                     f"success_vs_tolerance{tag}.png"], force=args.force)
     file = trials_path(run_dir)
     records = read_trials(file)
     if not records:
         raise TrialLogError(f"{file} holds no trial records yet: nothing to score")
-    tolerance_rad = math.radians(tol_deg)
-    out = Path(args.out) if args.out else run_dir
-    tag = tolerance_tag(tolerance_rad)
     try:
         write_report(out, records, tolerance_rad, title=args.title, tag=tag, run_info=read_run_info(run_dir))
     except ValueError as e:  # duplicated trials or unpaired seeds: the log is not a consistent run

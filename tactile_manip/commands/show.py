@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import math
-from pathlib import Path
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -17,20 +16,23 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--yaw-deg", type=float, default=0.0, help="object yaw, degrees (with --object)")
     p.add_argument("--force-n", type=float, default=10.0, help="press force, N (with --object)")
     p.add_argument("--seed", type=int, default=0, help="noise seed (with --object)")
-    p.add_argument("--out", default="sample.png", help="output PNG (default sample.png)")
+    p.add_argument("--out", default="sample.png", help="output PNG (default sample.png; .png added without a suffix)")
+    p.add_argument("--force", action="store_true", help="overwrite an existing output file")
 
 
 def run(args: argparse.Namespace) -> int:
-    from tactile_manip.plots import sample_figure
+    from tactile_manip.outputs import check_output_file
+    from tactile_manip.plots import figure_path, sample_figure
 
+    out = check_output_file(figure_path(args.out), force=args.force)
     if args.data is not None:  # not truthiness: an empty --data is an error, not a simulated press
         field, depth, title, note = _from_dataset(args)
     else:
         field, depth, title, note = _from_simulation(args)
-    sample_figure(field, depth, title=title, path=args.out)
+    sample_figure(field, depth, title=title, path=out)
     if note:
         print(f"note: {note}")
-    print(f"wrote {Path(args.out)}")
+    print(f"wrote {out}")
     return 0
 
 

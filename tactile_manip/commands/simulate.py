@@ -4,14 +4,13 @@ from __future__ import annotations
 
 import argparse
 import os
-from pathlib import Path
 
 DEFAULT_CONFIG = "configs/dataset/supermag.toml"
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--config", default=DEFAULT_CONFIG, help=f"dataset TOML (default: {DEFAULT_CONFIG})")
-    p.add_argument("--out", required=True, help="output .npz file")
+    p.add_argument("--out", required=True, help="output .npz file (.npz is appended when missing)")
     p.add_argument("--workers", type=int, default=0, help="worker processes (0 = all cores)")
     p.add_argument("--scale", type=float, default=1.0,
                    help="multiply every object count (e.g. 0.05 for a quick small dataset)")
@@ -24,12 +23,11 @@ def run(args: argparse.Namespace) -> int:
 
     from tqdm import tqdm
 
+    from tactile_manip.outputs import check_output_file
     from tactile_manip.sim.dataset import generate, load_dataset_config
-    from tactile_manip.data import SPLITS, save_dataset
+    from tactile_manip.data import SPLITS, dataset_path, save_dataset
 
-    out = Path(args.out)
-    if out.exists() and not args.force:
-        raise ValueError(f"{out} exists; pass --force to overwrite it")
+    out = check_output_file(dataset_path(args.out), force=args.force)  # the file written, checked before the work
     if args.workers < 0:
         raise ValueError(f"--workers must be >= 0, got {args.workers}")
     if not 0 < args.scale <= 100:

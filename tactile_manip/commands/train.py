@@ -1,4 +1,4 @@
-"""``tactile-manip train``: train a SuperMag CVAE on a paired dataset (torch; `pip install "tactile_manip[train]"`).
+"""``tactile-manip train``: train a SuperMag CVAE on a paired dataset (torch; `pip install -e ".[train]"`).
 
 Start it with ``torchrun --nproc_per_node N -m tactile_manip train ...`` to train data-parallel.
 """
@@ -12,7 +12,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--config", required=True, help="training TOML (e.g. configs/train/compact.toml)")
     p.add_argument("--data", required=True, help="paired dataset .npz (tactile-manip simulate / collect)")
     p.add_argument("--out", required=True, help="run folder for checkpoints, history and plots")
-    p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.pt")
+    again = p.add_mutually_exclusive_group()
+    again.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.pt")
+    again.add_argument("--force", action="store_true",
+                       help="start over in an OUT that holds a run, replacing its best.pt and checkpoint.pt")
     p.add_argument("--epochs", type=int, default=None, help="override the config's epochs")
     p.add_argument("--seed", type=int, default=None, help="override the config's seed")
     p.add_argument("--threads", type=int, default=None, help="torch CPU threads per process")
@@ -28,17 +31,36 @@ def run(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
     from tactile_manip.learning.train import load_train_config, resolve_device, train, with_overrides
+    from tactile_manip.data import check_dataset_file
 
+    _check_run_folder(args)
+    check_dataset_file(args.data)  # before the progress bar: a missing file is one line
     cfg = with_overrides(load_train_config(args.config), epochs=args.epochs, seed=args.seed, threads=args.threads,
                          device=args.device, max_minutes=args.max_minutes)
     resolve_device(cfg.device)  # a missing GPU is one line before any progress bar or output folder
-    with tqdm(total=cfg.epochs, unit="epoch", desc=f"training {cfg.preset}") as bar:
-        def progress(row: dict) -> None:
-            bar.update(1)
-            bar.set_postfix(loss=f"{row['loss']:.0f}", val_psnr=f"{row['val_psnr']:.2f}")
+    bars = []  # the bar starts once data, model and checkpoint are loaded, so their errors stay one line
 
-        summary = train(cfg, args.data, args.out, resume=args.resume, progress=progress)
+    def start(done: int) -> None:
+        bars.append(tqdm(total=cfg.epochs, initial=done, unit="epoch", desc=f"training {cfg.preset}"))
+
+    def progress(row: dict) -> None:
+        bars[0].update(1)
+        bars[0].set_postfix(loss=f"{row['loss']:.0f}", val_psnr=f"{row['val_psnr']:.2f}")
+
+    try:
+        summary = train(cfg, args.data, args.out, resume=args.resume, progress=progress, on_start=start)
+    finally:
+        for bar in bars:
+            bar.close()
     if summary:
         print(f"best validation PSNR {summary['best_val_psnr']:.2f} dB at epoch {summary['best_epoch']} "
               f"({summary['epochs_run']} epochs, {summary['train_seconds'] / 60:.1f} min); wrote {args.out}/")
     return 0
+
+
+def _check_run_folder(args: argparse.Namespace) -> None:
+    """Refuse, before any work, an OUT that cannot be written or whose run would be replaced unasked."""
+    from tactile_manip.commands import check_report_folder
+
+    check_report_folder(args.out, ("checkpoint.pt", "best.pt"), force=args.resume or args.force,
+                        hint="pass --resume to continue it, --force to start over (replacing it), or give a new --out")

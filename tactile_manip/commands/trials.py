@@ -23,6 +23,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     import dataclasses
 
+    from tactile_manip.outputs import check_output_dir
     from tactile_manip.trials.log import run_folder
     from tactile_manip.trials.runner import run_trials
     from tactile_manip.trials.scene import load_scene
@@ -37,7 +38,7 @@ def run(args: argparse.Namespace) -> int:
         if unknown:
             raise ValueError(f"--methods: {unknown} not in the scene's methods {sorted(known)}")
         scene = dataclasses.replace(scene, methods=[known[m] for m in wanted])
-    out = run_folder(scene.name, args.out, resume=args.resume)
+    out = check_output_dir(run_folder(scene.name, args.out, resume=args.resume))
     summary = run_trials(scene, out, scene_path=args.config, resume=args.resume, progress=not args.quiet)
     md = out / "summary.md"
     if md.exists():

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
 import time
 
 from tactile_manip.commands.serial_options import add_serial_options, serial_config
@@ -24,12 +25,17 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     src.add_argument("--replay", metavar="FILE", help="a recording from `tactile-manip record`")
     p.add_argument("--press", action="append", default=[], metavar="SPEC",
                    help=f"with --sim: scripted press (repeatable; default {DEFAULT_SIM_PRESS!r})")
-    p.add_argument("--no-baseline", action="store_true", help="show raw fields (no baseline at start)")
+    zero = p.add_mutually_exclusive_group()
+    zero.add_argument("--no-baseline", action="store_true", help="show raw fields (no baseline at start)")
+    zero.add_argument("--baseline-from", metavar="FILE",
+                      help="subtract the mean of the first --baseline-frames frames of this recording (of the free "
+                           "pad) instead of a baseline taken at start: for a source that starts under load")
     p.add_argument("--baseline-frames", type=int, default=125, help="frames averaged for the baseline (125)")
     p.add_argument("--fps", type=float, default=20.0, help="display refresh rate (default 20)")
     p.add_argument("--snapshot", metavar="PNG", help="run headless and save the last frame to this PNG")
     p.add_argument("--seconds", type=float, default=2.0, help="with --snapshot: how long to read first, s")
     add_serial_options(p, src)
+    p.add_argument("--force", action="store_true", help="with --snapshot: overwrite an existing PNG")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -42,13 +48,22 @@ def run(args: argparse.Namespace) -> int:
         parse_press,
     )
 
+    from tactile_manip.errors import CalibrationError
+    from tactile_manip.extras import require
+    from tactile_manip.outputs import check_output_file
+    from tactile_manip.plots import figure_path
+
+    if args.port:
+        require("serial", "viewing a serial port")
     if args.snapshot is None:
         plt = _interactive_pyplot()  # fail before connecting when there is no display
     else:
+        args.snapshot = check_output_file(figure_path(args.snapshot), force=args.force)
         import matplotlib
 
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
+    offset_ut = _baseline_from(args.baseline_from, args.baseline_frames) if args.baseline_from else None
     # dispatch on which flag was given, not on truthiness: an empty --port or --replay is an error, not --sim
     if args.sim:
         sensor = SimulatedSensor()
@@ -57,8 +72,18 @@ def run(args: argparse.Namespace) -> int:
     else:  # --port or --serial-number: an empty one is refused by serial_config
         sensor = SerialSensor(serial_config(args))
     with sensor:
-        if not args.no_baseline:
-            sensor.calibrate_baseline(args.baseline_frames)
+        rec = getattr(sensor, "recording", None)
+        if rec is not None and rec.skipped_bytes:
+            print(f"view: {rec.path}: skipped {rec.skipped_bytes} damaged bytes in {rec.damaged_records} place(s); "
+                  f"replaying the {len(rec)} intact frames", file=sys.stderr)
+        if offset_ut is not None:
+            sensor.set_baseline(offset_ut)
+        elif not args.no_baseline:
+            try:
+                sensor.calibrate_baseline(args.baseline_frames)
+            except CalibrationError as e:
+                raise CalibrationError(f"{e} (a source that starts under load: view it with --no-baseline, or "
+                                       "--baseline-from FILE, a recording of the free pad)") from e
         if args.sim:
             presses = [parse_press(s) for s in args.press or [DEFAULT_SIM_PRESS]]
             sensor.play(presses, period_s=max(p.end_s for p in presses) + 0.5)
@@ -66,6 +91,16 @@ def run(args: argparse.Namespace) -> int:
         if args.snapshot:
             return view.snapshot(args.snapshot, seconds=args.seconds)
         return view.live(fps=args.fps)
+
+
+def _baseline_from(path: str, frames: int):
+    """(4, 4, 3) uT: the mean raw field of the first ``frames`` frames of the recording at ``path``."""
+    from tactile_manip.sensors import read_recording
+
+    rec = read_recording(path)
+    if len(rec) < 2:
+        raise ValueError(f"--baseline-from {path}: holds {len(rec)} frame(s); a baseline needs at least 2")
+    return rec.field_raw_ut()[:max(2, frames)].mean(axis=0)
 
 
 def _interactive_pyplot():
@@ -121,9 +156,8 @@ class FieldView:
 
     def snapshot(self, path: str, *, seconds: float) -> int:
         """Read for ``seconds`` (updating as live), then save the figure; returns the exit status."""
-        from pathlib import Path
-
         from tactile_manip.errors import SensorTimeoutError
+        from tactile_manip.plots import figure_path
 
         end = time.monotonic() + seconds
         while time.monotonic() < end:
@@ -135,7 +169,8 @@ class FieldView:
             if self.frames % 10 == 0:
                 self.update()
         self.update()
-        Path(path).parent.mkdir(parents=True, exist_ok=True)
+        path = figure_path(path)  # the file savefig writes (.png added to a bare name), and the one printed
+        path.parent.mkdir(parents=True, exist_ok=True)
         self.fig.savefig(path, dpi=90)
         seq = "none" if self.last is None else self.last.seq
         print(f"wrote {path} (last frame seq {seq}; {self.frames} readings taken in {seconds:g} s)")

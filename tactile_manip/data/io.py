@@ -22,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from tactile_manip.checks import npz_read_problem
 from tactile_manip.data.dataset import PairedDataset
 from tactile_manip.data.spec import ChannelSpec, ImageSpec
 from tactile_manip.errors import DatasetError
@@ -70,6 +71,17 @@ def save_dataset(path: str | Path, data: PairedDataset) -> Path:
     return path
 
 
+def check_dataset_file(path: str | Path) -> Path:
+    """``path`` after checking it is an existing file (DatasetError otherwise), before any long work."""
+    path = Path(path)
+    if path.is_dir():
+        raise DatasetError(f"{path} is a directory, not a dataset file (.npz)")
+    if not path.is_file():
+        raise DatasetError(f"dataset not found: {path} (make one with `tactile-manip simulate --out {path}` "
+                           f"or `tactile-manip import ... --out {path}`)")
+    return path
+
+
 def load_dataset(path: str | Path) -> PairedDataset:
     """Read a dataset written by :func:`save_dataset` (format 2) or by earlier versions (format 1).
 
@@ -77,12 +89,7 @@ def load_dataset(path: str | Path) -> PairedDataset:
         DatasetError: missing file, not an npz, not a dataset of ours, missing arrays, inconsistent lengths,
             or a newer format.
     """
-    path = Path(path)
-    if path.is_dir():
-        raise DatasetError(f"{path} is a directory, not a dataset file (.npz)")
-    if not path.is_file():
-        raise DatasetError(f"dataset not found: {path} (make one with `tactile-manip simulate --out {path}` "
-                           f"or `tactile-manip import ... --out {path}`)")
+    path = check_dataset_file(path)
     try:
         z = np.load(path, allow_pickle=False)
         if not isinstance(z, np.lib.npyio.NpzFile):
@@ -90,7 +97,7 @@ def load_dataset(path: str | Path) -> PairedDataset:
                                f"`tactile-manip import` makes a dataset from arrays")
         with z:
             if "metadata" not in z.files:
-                raise DatasetError(f"{path}: not a tactile_manip dataset (no 'metadata' entry; it holds "
+                raise DatasetError(f"{path} is not a tactile_manip dataset (no 'metadata' entry; it holds "
                                    f"{sorted(z.files)[:8]}); `tactile-manip import` makes one from arrays")
             meta = _metadata(path, z["metadata"])
             version = meta.get("format_version")
@@ -103,7 +110,7 @@ def load_dataset(path: str | Path) -> PairedDataset:
     except DatasetError:
         raise
     except (zipfile.BadZipFile, ValueError, OSError, EOFError, KeyError) as e:
-        raise DatasetError(f"{path}: cannot read as a dataset (.npz): {e}") from e
+        raise DatasetError(f"{path} is not a tactile_manip dataset: {npz_read_problem(e)}") from e
 
 
 def _metadata(path: Path, entry: np.ndarray) -> dict[str, Any]:

@@ -57,21 +57,29 @@ class TorchReconstructor(Reconstructor):
 
 
 def export_untrained(preset_name: str, folder: str | Path, *, seed: int = 0, pixel_mm: float = 0.1) -> Path:
-    """Export a randomly initialised model of ``preset_name`` to ``folder/<preset>.onnx`` (for timing only:
+    """Export a randomly initialised model of ``preset_name`` (a preset, or a training config ``.toml`` whose
+    preset and ``[decoder]`` settings give the architecture) to ``folder/<name>.onnx`` (for timing only:
     latency does not depend on the weights). Returns the ONNX path; the checkpoint is written beside it."""
     from tactile_manip.config import to_dict
     from tactile_manip.learning.model import SuperMagCVAE
     from tactile_manip.learning.model import preset as make_preset
+    from tactile_manip.learning.train import architecture, load_train_config
 
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     torch.manual_seed(seed)
-    model = SuperMagCVAE(make_preset(preset_name))
-    ckpt = folder / f"{preset_name}.pt"
+    if preset_name.endswith(".toml"):
+        train_cfg = load_train_config(preset_name)
+        name, mcfg = Path(preset_name).stem, architecture(train_cfg)
+        preset_name, axes = train_cfg.preset, train_cfg.axes
+    else:
+        name, mcfg, axes = preset_name, make_preset(preset_name), "xyz"
+    model = SuperMagCVAE(mcfg)
+    ckpt = folder / f"{name}.pt"
     torch.save({"model": model.state_dict(), "model_config": to_dict(model.cfg),
-                "input": {"clamp_ut": 500.0, "axes": "xyz"},
+                "input": {"clamp_ut": 500.0, "axes": axes},
                 "train_config": {"preset": preset_name, "epochs": 0}, "data_fingerprint": "untrained"}, ckpt)
-    out = folder / f"{preset_name}.onnx"
+    out = folder / f"{name}.onnx"
     with warnings.catch_warnings():  # the legacy exporter's tracer notes say nothing about a timing model
         warnings.simplefilter("ignore", DeprecationWarning)
         warnings.simplefilter("ignore", torch.jit.TracerWarning)

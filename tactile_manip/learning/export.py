@@ -26,6 +26,7 @@ import torch
 from torch import nn
 
 from tactile_manip.errors import TactileManipError
+from tactile_manip.learning.checkpoint import CheckpointError, read_checkpoint
 from tactile_manip.learning.data import InputSpec, OutputSpec
 from tactile_manip.learning.model import CVAEConfig, SuperMagCVAE, count_parameters
 from tactile_manip.version import __version__
@@ -57,14 +58,16 @@ class InferenceGraph(nn.Module):
 
 def load_checkpoint(path: str | Path) -> tuple[SuperMagCVAE, InputSpec, dict[str, Any]]:
     """Model (eval mode), input spec and the raw checkpoint payload (its "output" key: the OutputSpec)."""
-    path = Path(path)
-    if not path.is_file():
-        raise ExportError(f"checkpoint not found: {path} (train one with `tactile-manip train`)")
-    payload = torch.load(path, map_location="cpu", weights_only=True)
-    mcfg = CVAEConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in payload["model_config"].items()})
-    model = SuperMagCVAE(mcfg)
-    model.load_state_dict(payload["model"])
-    return model.eval(), InputSpec(**payload["input"]), payload
+    payload = read_checkpoint(path)
+    try:
+        mcfg = CVAEConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in payload["model_config"].items()})
+        model = SuperMagCVAE(mcfg)
+        model.load_state_dict(payload["model"])
+        spec = InputSpec(**payload["input"])
+    except (TypeError, ValueError, RuntimeError, AttributeError) as e:  # another code version or architecture
+        raise CheckpointError(f"{path}: the checkpoint does not fit this code's model "
+                              f"({type(e).__name__}: {' '.join(str(e).split())[:160]})") from e
+    return model.eval(), spec, payload
 
 
 def export_onnx(checkpoint: str | Path, out: str | Path, *, pixel_mm: float, metrics: dict | None = None,
@@ -81,6 +84,7 @@ def export_onnx(checkpoint: str | Path, out: str | Path, *, pixel_mm: float, met
     field = torch.zeros(2, cfg.taxel_rows, cfg.taxel_cols, spec.channels)
     eps = torch.zeros(2, 3, cfg.latent)
     out = Path(out)
+    final, out = out, out.with_name(out.name + ".partial")  # an existing model is replaced only by a checked one
     out.parent.mkdir(parents=True, exist_ok=True)
     torch.onnx.export(graph, (field, eps), str(out), dynamo=False, opset_version=17,
                       input_names=["field_ut", "eps"], output_names=["depth_mm", "spread_mm"],
@@ -93,6 +97,7 @@ def export_onnx(checkpoint: str | Path, out: str | Path, *, pixel_mm: float, met
     proto.producer_name = "tactile_manip"
     onnx.save(proto, str(out))
     meta["parity_max_abs_mm"] = check_parity(graph, out, check_readings)
+    out.replace(final)
     return meta
 
 

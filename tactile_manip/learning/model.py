@@ -47,6 +47,9 @@ class CVAEConfig:
     encoder_pool: int = 2               # the encoder sees the image average-pooled by this factor
     spatial: int = 0                    # channels of the decoder's taxel-map path (0: off), see Decoder
     norm: str = "batch"                 # "batch" (the paper) or "group" (exactly data-parallel on CPU)
+    head: str = "resize"                # "resize": 3x3 head at the native size, bilinear to (H, W); "shuffle":
+                                        # native_scale^2 channels per output, rearranged to (H, W) (DepthToSpace)
+    act: str = "gelu"                   # activation of the decoder's conv blocks: "gelu" or "relu" (fusable)
     logvar_min: float = -10.0           # per-pixel log-variance floor, log(mm^2)
     logvar_max: float = 2.0
 
@@ -61,6 +64,10 @@ class CVAEConfig:
             raise ValueError("CVAEConfig.channels and enc_channels need at least two stages")
         if self.norm not in ("batch", "group"):
             raise ValueError(f"CVAEConfig.norm must be 'batch' or 'group', got {self.norm!r}")
+        if self.head not in ("resize", "shuffle"):
+            raise ValueError(f"CVAEConfig.head must be 'resize' or 'shuffle', got {self.head!r}")
+        if self.act not in ("gelu", "relu"):
+            raise ValueError(f"CVAEConfig.act must be 'gelu' or 'relu', got {self.act!r}")
         if not self.logvar_min < self.logvar_max:
             raise ValueError("CVAEConfig.logvar_min must be < logvar_max")
 
@@ -130,10 +137,12 @@ class Modulation(nn.Module):
         return h * (1.0 + self.proj(e))[:, :, None, None]
 
 
-def conv_block(c_in: int, c_out: int, norm: str = "batch") -> nn.Sequential:
-    """3x3 convolution, BatchNorm (or GroupNorm), GELU."""
+def conv_block(c_in: int, c_out: int, norm: str = "batch", act: str = "gelu") -> nn.Sequential:
+    """3x3 convolution, BatchNorm (or GroupNorm), GELU (or ReLU: with BatchNorm folded into the convolution
+    at export, onnxruntime fuses the three into one node)."""
     layer = nn.BatchNorm2d(c_out) if norm == "batch" else nn.GroupNorm(min(4, c_out), c_out)
-    return nn.Sequential(nn.Conv2d(c_in, c_out, 3, padding=1, bias=False), layer, nn.GELU())
+    return nn.Sequential(nn.Conv2d(c_in, c_out, 3, padding=1, bias=False), layer,
+                         nn.ReLU() if act == "relu" else nn.GELU())
 
 
 class Encoder(nn.Module):
@@ -198,17 +207,19 @@ class Decoder(nn.Module):
         if cfg.spatial:
             self.taxel_map = nn.Sequential(nn.Conv2d(cfg.axes, cfg.spatial, 3, padding=1), nn.GELU(),
                                            nn.Conv2d(cfg.spatial, cfg.spatial, 3, padding=1), nn.GELU())
-        self.base = nn.Sequential(conv_block(cfg.stem_channels + cfg.spatial, ch[0], cfg.norm),
-                                  *[conv_block(ch[0], ch[0], cfg.norm) for _ in range(cfg.dec_blocks)])
+        self.base = nn.Sequential(conv_block(cfg.stem_channels + cfg.spatial, ch[0], cfg.norm, cfg.act),
+                                  *[conv_block(ch[0], ch[0], cfg.norm, cfg.act) for _ in range(cfg.dec_blocks)])
         ups = []
         for c_in, c_out in zip(ch[:-1], ch[1:]):
             layers = [nn.ConvTranspose2d(c_in, c_out, 4, stride=2, padding=1), nn.GroupNorm(min(4, c_out), c_out),
                       nn.ReLU()]
-            layers += [conv_block(c_out, c_out, cfg.norm) for _ in range(cfg.dec_blocks)]
+            layers += [conv_block(c_out, c_out, cfg.norm, cfg.act) for _ in range(cfg.dec_blocks)]
             ups.append(nn.Sequential(*layers))
         self.ups = nn.ModuleList(ups)
         self.mod = nn.ModuleList([Modulation(cfg.embed, ch[0]), Modulation(cfg.embed, ch[1])])
-        self.head = nn.Conv2d(ch[-1], 2, 3, padding=1)
+        # per output pixel: mean and log-variance; the shuffle head makes native_scale^2 of each per native pixel
+        self.per_pixel = cfg.native_scale**2 if cfg.head == "shuffle" else 1
+        self.head = nn.Conv2d(ch[-1], 2 * self.per_pixel, 3, padding=1)
 
     def forward(self, z: torch.Tensor, e: torch.Tensor, x: torch.Tensor | None = None, *,
                 with_logvar: bool = True) -> tuple[torch.Tensor, torch.Tensor | None]:
@@ -233,11 +244,11 @@ class Decoder(nn.Module):
             h = up(h)                                   # (B, c_{i+1}, 2^{i+1} bh, 2^{i+1} bw)
             if i == 0:
                 h = self.mod[1](h, e)
-        if with_logvar:
-            out = self.head(h)                          # (B, 2, native_h, native_w)
-        else:
-            out = F.conv2d(h, self.head.weight[:1], self.head.bias[:1], padding=1)  # (B, 1, ...)
-        if out.shape[-2:] != (self.cfg.image_h, self.cfg.image_w):
+        k = 2 * self.per_pixel if with_logvar else self.per_pixel  # the mean's channels come first
+        out = F.conv2d(h, self.head.weight[:k], self.head.bias[:k], padding=1)  # (B, k, native_h, native_w)
+        if cfg.head == "shuffle":
+            out = _centre_crop(F.pixel_shuffle(out, cfg.native_scale), cfg.image_h, cfg.image_w)  # (B, k / s^2, H, W)
+        elif out.shape[-2:] != (self.cfg.image_h, self.cfg.image_w):
             out = F.interpolate(out, size=(self.cfg.image_h, self.cfg.image_w), mode="bilinear",
                                 align_corners=False)
         mean = F.relu(out[:, 0])  # indentation is >= 0, and the background must be exactly 0 (SSIM)
@@ -245,6 +256,12 @@ class Decoder(nn.Module):
             return mean, None
         logvar = out[:, 1].clamp(self.cfg.logvar_min, self.cfg.logvar_max)
         return mean, logvar                             # (B, H, W) each
+
+
+def _centre_crop(x: torch.Tensor, h: int, w: int) -> torch.Tensor:
+    """The central (h, w) of (B, C, H', W'), H' >= h and W' >= w (the shuffle head's grid may overhang)."""
+    top, left = (x.shape[-2] - h) // 2, (x.shape[-1] - w) // 2
+    return x[..., top:top + h, left:left + w]
 
 
 class SuperMagCVAE(nn.Module):

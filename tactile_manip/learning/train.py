@@ -27,8 +27,9 @@ from typing import Any, Literal
 
 import torch
 
-from tactile_manip.config import load_config, to_dict
+from tactile_manip.config import config_differences, load_config, to_dict
 from tactile_manip.errors import TactileManipError
+from tactile_manip.learning.checkpoint import read_checkpoint
 from tactile_manip.learning.data import InputSpec, OutputSpec, TensorPairs, augment_batch, select
 from tactile_manip.learning.model import (CVAEConfig, SuperMagCVAE, count_parameters, gaussian_nll, negative_elbo,
                                           preset)
@@ -40,12 +41,35 @@ class TrainingError(TactileManipError, RuntimeError):
 
 
 @dataclass(frozen=True)
+class DecoderOverrides:
+    """``[decoder]`` of a training config: decoder settings that replace the preset's (the defaults keep it)."""
+
+    native_scale: int = 0                # the decoder works at image size / native_scale (0: keep)
+    channels: list[int] = field(default_factory=list)  # feature channels per stage, coarse -> fine ([]: keep)
+    dec_blocks: int = -1                 # conv blocks after each decoder stage (-1: keep)
+    head: str = ""                       # "resize" / "shuffle" (CVAEConfig.head; "": keep)
+    act: str = ""                        # "gelu" / "relu" in the decoder's conv blocks ("": keep)
+
+    def __post_init__(self) -> None:
+        if self.native_scale < 0 or self.dec_blocks < -1 or any(c < 1 for c in self.channels):
+            raise ValueError(f"decoder: native_scale >= 0, dec_blocks >= -1 and channels >= 1 needed, got {self}")
+
+    def overrides(self) -> dict[str, Any]:
+        """The CVAEConfig fields this sets (validated by CVAEConfig itself)."""
+        out: dict[str, Any] = {"native_scale": self.native_scale or None, "channels": tuple(self.channels) or None,
+                               "dec_blocks": None if self.dec_blocks < 0 else self.dec_blocks,
+                               "head": self.head or None, "act": self.act or None}
+        return {k: v for k, v in out.items() if v is not None}
+
+
+@dataclass(frozen=True)
 class TrainConfig:
     """Mirrors ``configs/train/*.toml``."""
 
     preset: str = "compact"              # architecture preset (tactile_manip.learning.model.PRESETS)
     latent: int = 0                      # override the preset's latent size (0: keep)
     norm: str = ""                       # override the preset's normalisation ("batch" / "group"; "": keep)
+    decoder: DecoderOverrides = field(default_factory=DecoderOverrides)  # decoder settings over the preset's
     axes: str = "xyz"                    # "xyz", or "z" for the z-axis-only variant
     objects: list[str] = field(default_factory=list)  # train only on these objects ([]: all)
     clamp_ut: float = 500.0              # input clamp, uT (SuperMag: +-500 scaled to [-1, 1])
@@ -96,11 +120,18 @@ def model_config(cfg: TrainConfig, data: PairedDataset) -> CVAEConfig:
     """Architecture from the preset, with the taxel grid and image size read from the dataset."""
     rows, cols = data.grid
     h, w = data.image_shape
+    return architecture(cfg, taxel_rows=rows, taxel_cols=cols, image_h=h, image_w=w,
+                        axes=data.channels.count if cfg.axes == "xyz" else 1)
+
+
+def architecture(cfg: TrainConfig, **shape: int) -> CVAEConfig:
+    """The preset with the config's overrides (latent, norm, ``[decoder]``) and ``shape`` (taxel grid, channels
+    seen, image size; the CVAEConfig defaults where not given)."""
     extra = {"latent": cfg.latent} if cfg.latent else {}
     if cfg.norm:
         extra["norm"] = cfg.norm
-    return preset(cfg.preset, taxel_rows=rows, taxel_cols=cols, axes=data.channels.count if cfg.axes == "xyz" else 1,
-                  image_h=h, image_w=w, **extra)
+    shape.setdefault("axes", 1 if cfg.axes == "z" else 3)
+    return preset(cfg.preset, **shape, **extra, **cfg.decoder.overrides())
 
 
 @dataclass
@@ -142,17 +173,23 @@ def resolve_device(name: str, dist: _Dist | None = None) -> torch.device:
 
 
 def train(cfg: TrainConfig, data_path: str | Path, out_dir: str | Path, *, resume: bool = False,
-          progress: Callable[[dict[str, float]], None] | None = None) -> dict[str, Any]:
-    """Train a model and return the run summary (also written to ``out_dir/history.json``)."""
+          progress: Callable[[dict[str, float]], None] | None = None,
+          on_start: Callable[[int], None] | None = None) -> dict[str, Any]:
+    """Train a model and return the run summary (also written to ``out_dir/history.json``).
+
+    ``progress(row)`` is called after each epoch; ``on_start(epochs_done)`` once everything is loaded and checked
+    (data, model, a resumed checkpoint), just before the first epoch.
+    """
     dist = _init_distributed()
     try:
-        return _train(cfg, Path(data_path), Path(out_dir), resume, progress, dist)
+        return _train(cfg, Path(data_path), Path(out_dir), resume, progress, dist, on_start)
     finally:
         if dist.world > 1:
             torch.distributed.destroy_process_group()
 
 
-def _train(cfg: TrainConfig, data_path: Path, out: Path, resume: bool, progress, dist: _Dist) -> dict[str, Any]:
+def _train(cfg: TrainConfig, data_path: Path, out: Path, resume: bool, progress, dist: _Dist,
+           on_start=None) -> dict[str, Any]:
     if cfg.threads:
         torch.set_num_threads(cfg.threads)
     torch.manual_seed(cfg.seed)
@@ -182,6 +219,8 @@ def _train(cfg: TrainConfig, data_path: Path, out: Path, resume: bool, progress,
     sampler_gen = torch.Generator().manual_seed(cfg.seed)
     schedule = _schedule(cfg)
     start = time.perf_counter() - state["seconds"]
+    if on_start:
+        on_start(state["epoch"])
     for epoch in range(state["epoch"] + 1, cfg.epochs + 1):
         sampler_gen.manual_seed(cfg.seed * 100_003 + epoch)  # same batches for any world size and on resume
         for group in opt.param_groups:
@@ -302,10 +341,11 @@ def _save_checkpoint(path: Path, model, opt, mcfg: CVAEConfig, cfg: TrainConfig,
 def _load_checkpoint(path: Path, model, opt, mcfg: CVAEConfig) -> dict:
     if not path.is_file():
         raise TrainingError(f"--resume: no checkpoint at {path}")
-    payload = torch.load(path, map_location="cpu", weights_only=True)
-    if payload["model_config"] != to_dict(mcfg):
-        raise TrainingError(f"{path} was trained with another architecture or dataset shape; "
-                            "start a new output folder")
+    payload = read_checkpoint(path)
+    differences = config_differences(payload["model_config"], to_dict(mcfg))
+    if differences:
+        raise TrainingError(f"--resume: {path} was trained with another architecture or dataset shape "
+                            f"({'; '.join(differences)}); use the same config or start a new output folder")
     model.load_state_dict(payload["model"])
     opt.load_state_dict(payload["optimizer"])
     return payload["state"]

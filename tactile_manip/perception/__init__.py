@@ -9,9 +9,9 @@ The pose API users plug into their tasks::
 (numpy and scipy at import; onnxruntime only when an ONNX model is loaded.)
 """
 
-from tactile_manip.perception.estimator import TactilePoseEstimator
+from tactile_manip.perception.estimator import StreamStats, TactilePoseEstimator
 from tactile_manip.perception.pose import PoseParams, angle_from_image, wrap_axial
 from tactile_manip.perception.reconstruct import Reconstructor, load_reconstructor
 
-__all__ = ["PoseParams", "Reconstructor", "TactilePoseEstimator", "angle_from_image", "load_reconstructor",
-           "wrap_axial"]
+__all__ = ["PoseParams", "Reconstructor", "StreamStats", "TactilePoseEstimator", "angle_from_image",
+           "load_reconstructor", "wrap_axial"]

@@ -5,14 +5,17 @@
 (:func:`~tactile_manip.perception.pose.angle_from_image`). It takes a (4, 4, 3) reading (an array in
 microtesla or a :class:`~tactile_manip.types.TactileReading`) and returns an
 :class:`~tactile_manip.types.AngleEstimate` with angle, confidence, defined flag, contact centroid and area,
-and per-stage timings. It can average several consecutive frames and stream estimates from any
-:class:`~tactile_manip.sensors.base.TactileSensor` at the sensor's rate::
+and per-stage timings. It can average several consecutive frames, estimate several pads' readings in one
+batched model run (:meth:`TactilePoseEstimator.estimate_many`), and stream estimates from any
+:class:`~tactile_manip.sensors.base.TactileSensor` at the sensor's rate, always from the newest frame::
 
-    from tactile_manip.perception import TactilePoseEstimator, load_reconstructor
+    from tactile_manip.perception import StreamStats, TactilePoseEstimator, load_reconstructor
     estimator = TactilePoseEstimator(load_reconstructor("models/supermag_compact.onnx"))
-    for est in estimator.stream(sensor):          # one estimate per new frame
+    stats = StreamStats()
+    for est in estimator.stream(sensor, stats=stats):   # one estimate per new frame; stale ones skipped
         if est.defined and est.confidence > 0.5:
-            print(math.degrees(est.angle_rad))
+            print(math.degrees(est.angle_rad), stats.skipped_frames)
+    left, right = estimator.estimate_many([left_reading, right_reading])   # two pads, one model run
 
 Confidence: the PCA's ``1 - lambda_minor / lambda_major``; when the reconstructor draws several prior samples
 (``OnnxReconstructor(samples=K)``), it is multiplied by the samples' agreement on the contact,
@@ -27,7 +30,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Iterator, Sequence
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -38,6 +41,29 @@ from tactile_manip.types import AngleEstimate, TactileReading
 
 if TYPE_CHECKING:  # the sensors layer is only needed for type hints here
     from tactile_manip.sensors.base import TactileSensor
+
+
+@dataclass
+class StreamStats:
+    """Counters of one :meth:`TactilePoseEstimator.stream`, updated in place as it runs.
+
+    Attributes:
+        estimates: estimates yielded so far.
+        skipped_frames: frames between two estimated ones that were never estimated: they arrived while an
+            estimate was computed or consumed (the stream then takes the newest frame, not the stale ones
+            queued before it), or were lost on the wire (``sensor.health()`` tells those apart).
+        last_seq: sequence number of the last estimated frame (None before the first).
+    """
+
+    estimates: int = 0
+    skipped_frames: int = 0
+    last_seq: int | None = None
+
+    def count(self, seq: int) -> None:
+        """Record that frame ``seq`` is estimated next (a sequence restart skips nothing)."""
+        if self.last_seq is not None:
+            self.skipped_frames += max(0, seq - self.last_seq - 1)
+        self.last_seq = seq
 
 
 class TactilePoseEstimator:
@@ -78,17 +104,37 @@ class TactilePoseEstimator:
 
     def estimate_with_image(self, reading: TactileReading | np.ndarray) -> tuple[AngleEstimate, Reconstruction]:
         """Like :meth:`estimate`, also returning the reconstruction (depth and spread) it used."""
-        if isinstance(reading, TactileReading):
-            return self._estimate(reading.field_ut, reading.saturated, reading)
-        return self._estimate(reading, None, None)
-
-    def _estimate(self, field: np.ndarray, saturated: np.ndarray | None, reading: TactileReading | None
-                  ) -> tuple[AngleEstimate, Reconstruction]:
-        """One estimate from ``field`` (R, C, 3) uT; ``saturated`` (R, C, 3) flags from the sensor or None;
-        ``reading`` (the newest frame, or None) dates the estimate."""
         t0 = time.perf_counter()
+        field = _field(reading)
         rec = self.reconstructor.reconstruct(field)  # refuses NaN / inf, clamps values beyond the chip's range
+        return self._pose(field, _saturated(reading), _dated(reading), rec, t0, time.perf_counter()), rec
+
+    def estimate_many(self, readings: Sequence[TactileReading | np.ndarray]) -> list[AngleEstimate]:
+        """Angles of several readings (e.g. both pads of a gripper), reconstructed in one batched model run.
+
+        Each estimate equals what :meth:`estimate` returns for its reading (the same reconstruction, bit for
+        bit, and the same post-processing); in ``timings_s``, "reconstruct" is the whole batch's time and
+        "total" runs from the call to that estimate's completion.
+
+        Raises:
+            ValueError: readings of different shapes, or any with NaN / infinite values (nothing is estimated).
+        """
+        t0 = time.perf_counter()
+        fields = [_field(r) for r in readings]
+        if not fields:
+            return []
+        shapes = {np.shape(f) for f in fields}
+        if len(shapes) != 1:
+            raise ValueError(f"estimate_many: readings of different shapes: {sorted(shapes)}")
+        recs = self.reconstructor.reconstruct_many(np.stack(fields))
         t1 = time.perf_counter()
+        return [self._pose(f, _saturated(r), _dated(r), rec, t0, t1) for r, f, rec in zip(readings, fields, recs)]
+
+    def _pose(self, field: np.ndarray, saturated: np.ndarray | None, reading: TactileReading | None,
+              rec: Reconstruction, t0: float, t1: float) -> AngleEstimate:
+        """Post-processing and PCA of ``rec``, reconstructed from ``field`` (R, C, 3) uT between ``t0`` and
+        ``t1``; ``saturated`` (R, C, 3) flags from the sensor or None; ``reading`` (the newest frame, or None)
+        dates the estimate."""
         if np.max(np.abs(field)) < self.min_field_ut:  # NaN fails this test and stays with the reconstructor
             est = AngleEstimate(0.0, 0.0, False, reason="no contact field")
         else:
@@ -105,22 +151,23 @@ class TactilePoseEstimator:
         timings = {"reconstruct": t1 - t0, "pose": t2 - t1, "total": t2 - t0}
         if reading is not None:
             timings["age"] = time.monotonic() - reading.t_host_s
-        return replace(est, saturated_chips=chips, timings_s=timings), rec
+        return replace(est, saturated_chips=chips, timings_s=timings)
 
     def estimate_frames(self, readings: Sequence[TactileReading | np.ndarray]) -> AngleEstimate:
         """Angle from the mean of several consecutive readings of one static contact (less chip noise)."""
         if len(readings) == 0:
             raise ValueError("estimate_frames needs at least one reading")
-        fields = [r.field_ut if isinstance(r, TactileReading) else np.asarray(r) for r in readings]
+        fields = [np.asarray(_field(r)) for r in readings]
         shapes = {f.shape for f in fields}
         if len(shapes) != 1:
             raise ValueError(f"readings of different shapes cannot be averaged: {sorted(shapes)}")
         stacked = np.stack(fields).astype(np.float64)
         # a channel saturated (or out of range) in any frame is saturated in the mean
         flags = [r.saturated for r in readings if isinstance(r, TactileReading)] + list(out_of_range(stacked))
-        last = readings[-1]
-        return self._estimate(np.mean(stacked, axis=0), np.logical_or.reduce(flags),
-                              last if isinstance(last, TactileReading) else None)[0]
+        t0 = time.perf_counter()
+        mean = np.mean(stacked, axis=0)
+        rec = self.reconstructor.reconstruct(mean)
+        return self._pose(mean, np.logical_or.reduce(flags), _dated(readings[-1]), rec, t0, time.perf_counter())
 
     def read(self, sensor: TactileSensor, *, frames: int = 1, timeout_s: float = 0.1) -> AngleEstimate:
         """Estimate from the next ``frames`` new frames of ``sensor`` (frames that arrived before the call are
@@ -135,19 +182,40 @@ class TactilePoseEstimator:
         readings = _fresh_frames(sensor, frames, timeout_s)
         return self.estimate_frames(readings)
 
-    def stream(self, sensor: TactileSensor, *, timeout_s: float = 0.1,
-               max_estimates: int | None = None) -> Iterator[AngleEstimate]:
-        """Yield one estimate per new frame of ``sensor``, at the sensor's rate (frames that arrive while an
-        estimate is computed are skipped, so the stream never falls behind).
+    def stream(self, sensor: TactileSensor, *, timeout_s: float = 0.1, max_estimates: int | None = None,
+               stats: StreamStats | None = None) -> Iterator[AngleEstimate]:
+        """Yield one estimate per new frame of ``sensor``, at the sensor's rate, always from the newest frame.
+
+        Frames that arrive while an estimate is computed (or while the caller holds the previous one) are
+        skipped, not queued, so the stream never falls behind: when processing is slower than the sensor,
+        every estimate is of the frame that is newest when the previous one is done. ``stats`` (a
+        :class:`StreamStats`), when given, counts the estimates and the skipped frames as the stream runs.
 
         Stops after ``max_estimates`` (None: never); raises SensorTimeoutError when the sensor stalls, and
         ValueError (naming both) when the sensor's board layout is not the reconstructor's.
         """
         self.reconstructor.check_layout(sensor.layout.name)
+        stats = StreamStats() if stats is None else stats
         count = 0
         while max_estimates is None or count < max_estimates:
-            yield self.estimate(sensor.wait_new(timeout_s))
+            reading = sensor.wait_new(timeout_s)  # the newest frame not returned before
+            stats.count(reading.seq)
+            est = self.estimate(reading)
+            stats.estimates += 1
             count += 1
+            yield est
+
+
+def _field(reading: TactileReading | np.ndarray) -> np.ndarray:
+    return reading.field_ut if isinstance(reading, TactileReading) else reading
+
+
+def _saturated(reading: TactileReading | np.ndarray) -> np.ndarray | None:
+    return reading.saturated if isinstance(reading, TactileReading) else None
+
+
+def _dated(reading: TactileReading | np.ndarray) -> TactileReading | None:
+    return reading if isinstance(reading, TactileReading) else None
 
 
 def _fresh_frames(sensor: TactileSensor, frames: int, timeout_s: float) -> list[TactileReading]:

@@ -19,9 +19,10 @@ from typing import Any
 
 import numpy as np
 
+from tactile_manip.extras import require
 from tactile_manip.perception import metrics
 from tactile_manip.perception.pose import angle_from_image, wrap_axial
-from tactile_manip.perception.reconstruct import Reconstructor
+from tactile_manip.perception.reconstruct import ModelFileError, Reconstructor
 from tactile_manip.data import PairedDataset
 
 ELONGATED = ("cylinder", "hex_bar", "square_bar")
@@ -133,12 +134,15 @@ def sample_groups(data: PairedDataset, idx: np.ndarray) -> dict[str, dict[str, n
 
 def _inception_features(path: str | Path):
     """Features from a user-supplied Inception network in ONNX: (N, 3, 299, 299) ImageNet-normalised in,
-    (N, 2048) pool features out. Depth images are scaled by the 2 mm range to [0, 1] and repeated to RGB."""
-    import onnxruntime as ort
+    (N, 2048) pool features out. Depth images are scaled by the 2 mm range to [0, 1] and repeated to RGB.
+
+    Raises:
+        ModelFileError: the file is missing, not ONNX, or not a network of that signature (checked on one
+            blank image before any method runs).
+    """
     from scipy import ndimage
 
-    session = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
-    name = session.get_inputs()[0].name
+    session, name = _inception_session(Path(path))
     mean = np.array([0.485, 0.456, 0.406], np.float32)[:, None, None]
     std = np.array([0.229, 0.224, 0.225], np.float32)[:, None, None]
 
@@ -152,6 +156,29 @@ def _inception_features(path: str | Path):
         return np.asarray(out)
 
     return features
+
+
+def _inception_session(path: Path):
+    ort = require("onnxruntime", "--inception-onnx")
+    if not path.is_file():
+        raise ModelFileError(f"Inception model not found: {path}")
+    try:
+        session = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
+    except Exception as e:  # noqa: BLE001 - onnxruntime raises its own classes (InvalidProtobuf, Fail, ...)
+        raise ModelFileError(f"{path} is not a readable ONNX model ({type(e).__name__})") from e
+    inputs = session.get_inputs()
+    if len(inputs) != 1 or len(inputs[0].shape) != 4 or list(inputs[0].shape[1:]) != [3, 299, 299]:
+        got = ", ".join(f"{i.name} {i.shape}" for i in inputs)
+        raise ModelFileError(f"{path} is not an Inception-v3 feature network: expected one input "
+                             f"(N, 3, 299, 299), got {got}")
+    try:
+        probe = session.run(None, {inputs[0].name: np.zeros((1, 3, 299, 299), np.float32)})[0]
+    except Exception as e:  # noqa: BLE001 - as above
+        raise ModelFileError(f"{path} failed on a blank 299x299 image ({type(e).__name__})") from e
+    if np.asarray(probe).size != 2048:
+        raise ModelFileError(f"{path} is not an Inception-v3 feature network: expected 2048 pool features per "
+                             f"image, got an output of shape {tuple(np.shape(probe))}")
+    return session, inputs[0].name
 
 
 def markdown_table(results: list[MethodResult]) -> str:

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import abc
 import json
+import math
 import time
 from dataclasses import dataclass
 from importlib import resources
@@ -28,6 +29,8 @@ from scipy import ndimage
 from tactile_manip.errors import TactileManipError
 from tactile_manip.sim.chip import full_scale_ut
 from tactile_manip.sim.params import ChipParams
+from tactile_manip.perception.onnx_session import session_options
+from tactile_manip.extras import require
 
 METADATA_KEY = "tactile_manip"
 SUPPORTED_FORMAT = 1
@@ -91,6 +94,17 @@ class Reconstructor(abc.ABC):
             raise ValueError(f"{self.name} takes readings of the {self.board_layout!r} board layout, but the sensor "
                              f"has the {layout!r} layout: train or export a model for that board")
 
+    def reconstruct_many(self, fields_ut: np.ndarray) -> list[Reconstruction]:
+        """(N, R, C, 3) readings -> N :class:`Reconstruction` from one batched run (spread included), each
+        with the batch's latency."""
+        t0 = time.perf_counter()
+        fields = self._check(fields_ut, batch=True)
+        if len(fields) == 0:
+            return []
+        depth, spread = self._run(fields)
+        latency = time.perf_counter() - t0
+        return [Reconstruction(depth[i], None if spread is None else spread[i], latency) for i in range(len(depth))]
+
     def reconstruct_batch(self, fields_ut: np.ndarray) -> np.ndarray:
         """(N, R, C, 3) readings -> (N, H, W) float32 depth images."""
         fields = self._check(fields_ut, batch=True)
@@ -138,21 +152,16 @@ class OnnxReconstructor(Reconstructor):
 
     def __init__(self, path: str | Path, *, threads: int = 1, providers: tuple[str, ...] = ("CPUExecutionProvider",),
                  samples: int = 1, seed: int = 0) -> None:
-        try:
-            import onnxruntime as ort
-        except ImportError as e:
-            raise ImportError('OnnxReconstructor needs onnxruntime: pip install "tactile_manip[onnx]"') from e
+        ort = require("onnxruntime", "OnnxReconstructor")
         self.path = Path(path)
         if samples < 1:
             raise ValueError(f"samples must be >= 1, got {samples}")
         self.metadata = read_metadata(self.path)
         self.samples = samples
         self._rng = np.random.default_rng(seed)
-        opts = ort.SessionOptions()
-        opts.intra_op_num_threads = max(0, int(threads))
-        opts.inter_op_num_threads = 1
         try:
-            self.session = ort.InferenceSession(str(self.path), sess_options=opts, providers=list(providers))
+            self.session = ort.InferenceSession(str(self.path), sess_options=session_options(ort, threads=threads),
+                                                providers=list(providers))
         except Exception as e:  # onnxruntime raises its own exception types
             raise ModelFileError(f"{self.path}: onnxruntime cannot load it: {e}") from e
         shape = self.metadata["input"]["shape"]
@@ -195,6 +204,14 @@ class OnnxReconstructor(Reconstructor):
                 f"{_describe({n: (d, 'tensor(float)') for n, d in want_out.items()})}; export the model again "
                 "with `tactile-manip export` (metadata copied onto another graph is refused)")
 
+    def _check_output(self, depth: np.ndarray, spread: np.ndarray | None) -> None:
+        # min and max propagate NaN and show inf: two reductions instead of an isfinite pass
+        values = [float(depth.min()), float(depth.max())]
+        if spread is not None:
+            values += [float(spread.min()), float(spread.max())]
+        if not all(math.isfinite(v) for v in values):
+            raise ModelFileError(f"{self.path}: the model produced non-finite output; the file may be corrupt")
+
     def _run(self, fields_ut: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
         n = len(fields_ut)
         if self.samples == 1:
@@ -202,9 +219,9 @@ class OnnxReconstructor(Reconstructor):
         else:
             eps = self._rng.standard_normal((n, self.samples, self.latent)).astype(np.float32)
         depth, spread = self.session.run(None, {"field_ut": fields_ut, "eps": eps})
-        if not (np.isfinite(depth).all() and np.isfinite(spread).all()):
-            raise ModelFileError(f"{self.path}: the model produced non-finite output; the file may be corrupt")
-        return depth, (spread if self.samples > 1 else None)
+        spread = spread if self.samples > 1 else None  # one sample: no spread to check or return
+        self._check_output(depth, spread)
+        return depth, spread
 
 
 def _signature_mismatch(graph_in: dict, graph_out: dict, want_in: dict, want_out: dict) -> str:

@@ -31,6 +31,7 @@ import numpy as np
 
 from tactile_manip.checks import check_array, check_finite_scalar
 from tactile_manip.errors import ArmFault, GripperError, RobotError, RobotNotConnectedError, SafetyLimitError
+from tactile_manip.extras import MissingExtraError, missing_message
 from tactile_manip.robot.base import N_JOINTS, ArmState, GraspResult, Gripper, GripperState
 from tactile_manip.robot.fr3 import FR3_HOME_Q_RAD, FR3Arm, check_fr3_configuration, fr3_joint_violation
 from tactile_manip.robot.safety import check_rigid_transform
@@ -39,7 +40,7 @@ FRANKA_HAND_MAX_WIDTH_M = 0.08  # nominal opening of the Franka Hand before homi
 FRANKA_HAND_MAX_FORCE_N = 140.0  # Franka Hand peak grasp force (70 N continuous), N
 
 
-class FrankyMissingError(RobotError, ImportError):
+class FrankyMissingError(RobotError, MissingExtraError):
     """franky-control is not installed (a RobotError, and an ImportError like the other optional backends)."""
 
 
@@ -48,8 +49,7 @@ def import_franky() -> ModuleType:
     try:
         import franky
     except ImportError as e:
-        raise FrankyMissingError('the franky backend (real FR3) needs franky-control: '
-                                 'pip install "tactile_manip[franky]"') from e
+        raise FrankyMissingError(missing_message("franky", "the franky backend (real FR3)")) from e
     return franky
 
 

@@ -22,6 +22,7 @@ import numpy as np
 
 from tactile_manip.checks import check_array, check_finite_scalar
 from tactile_manip.errors import ArmFault, IKError, RobotNotConnectedError, SafetyLimitError  # noqa: F401
+from tactile_manip.extras import require
 from tactile_manip.robot.base import N_JOINTS, ArmState
 from tactile_manip.robot.fr3 import (FR3_DQ_MAX_RAD_S, FR3_HOME_Q_RAD, FR3_Q_MAX_RAD, FR3_Q_MIN_RAD,  # noqa: F401
                                      FR3Arm, check_fr3_configuration)
@@ -77,11 +78,7 @@ class TwinArmConfig:
 @functools.lru_cache(maxsize=1)
 def _fr3_kinematics() -> Any:
     """roboticstoolbox ETS of the Panda (flange + Franka Hand TCP) with the FR3 joint limits; built once."""
-    try:
-        import roboticstoolbox as rtb
-    except ImportError as e:
-        raise ImportError("the kinematic FR3 twin needs roboticstoolbox-python: "
-                          "pip install 'tactile_manip[robot]'") from e
+    rtb = require("roboticstoolbox", "the kinematic FR3 twin")
     panda = rtb.models.Panda()
     for link in panda.links:
         if link.isjoint:

@@ -6,7 +6,7 @@ captured and a sequence number that counts every frame slot, so a gap in ``seq``
 
 Backends are a config dataclass plus a ``"module:Class"`` entry in :data:`CAMERA_BACKENDS`, built by
 :func:`make_camera` and imported only when chosen: ``OpenCVCamera`` (:mod:`tactile_manip.sensors.camera_opencv`,
-``pip install "tactile_manip[camera]"``, ``cv2`` imported on ``connect()``) and ``SimulatedCamera``
+``pip install -e ".[camera]"``, ``cv2`` imported on ``connect()``) and ``SimulatedCamera``
 (:mod:`tactile_manip.sensors.camera_sim`).
 """
 

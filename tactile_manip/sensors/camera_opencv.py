@@ -1,6 +1,6 @@
 """The OpenCV camera backend: a USB camera (the DTact camera, 640x480 at 30 Hz) read with ``cv2.VideoCapture``.
 
-OpenCV is an optional extra (``pip install "tactile_manip[camera]"``, the headless build); ``cv2`` is imported on
+OpenCV is an optional extra (``pip install -e ".[camera]"``, the headless build); ``cv2`` is imported on
 ``connect()`` only, so importing this module, or building the camera, works without it.
 """
 
@@ -14,17 +14,13 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from tactile_manip.extras import require
 from tactile_manip.sensors.camera import Camera, CameraError
 
 
 def import_cv2() -> Any:
-    """Return the ``cv2`` module, or raise an ImportError naming the extra that installs it."""
-    try:
-        import cv2
-    except ImportError as e:
-        raise ImportError('the OpenCV camera backend needs opencv-python-headless: '
-                          'pip install "tactile_manip[camera]"') from e
-    return cv2
+    """Return the ``cv2`` module, or raise a MissingExtraError (an ImportError) naming the extra."""
+    return require("cv2", "the OpenCV camera backend")
 
 
 @dataclass(frozen=True)

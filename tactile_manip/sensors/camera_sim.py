@@ -117,6 +117,7 @@ class SimulatedCamera(Camera):
         self._static: tuple[_Contact, float] | None = None
         self._script: tuple[list[Press], list[_Contact], float] | None = None
         self._stalled = False
+        self._stall_lock = threading.Lock()
         self._solved: dict[tuple, _Contact] = {}
 
     # ------------------------------------------------------------------ contacts
@@ -168,8 +169,10 @@ class SimulatedCamera(Camera):
         return np.clip(np.rint(img), 0, 255).astype(np.uint8).reshape(self.config.image_shape)
 
     def stall(self) -> None:
-        """Stop delivering frames (a camera that hangs) until :meth:`resume`."""
-        self._stalled = True
+        """Stop delivering frames (a camera that hangs) until :meth:`resume`; no frame is published after this
+        returns (one being rendered is dropped)."""
+        with self._stall_lock:
+            self._stalled = True
 
     def resume(self) -> None:
         self._stalled = False
@@ -201,7 +204,10 @@ class SimulatedCamera(Camera):
                 if wait < -REBASE_LATE_S:
                     t0 = time.monotonic() - (k + 1) * period
                 if not dropped and not self._stalled:
-                    self._publish(self.render(exposure, rng), seq=k, t_host_s=t_host, t_exposure_s=exposure)
+                    frame = self.render(exposure, rng)
+                    with self._stall_lock:  # a stall() during the render stops this frame too
+                        if not self._stalled:
+                            self._publish(frame, seq=k, t_host_s=t_host, t_exposure_s=exposure)
             except Exception as e:  # noqa: BLE001 - the thread must survive anything and report it
                 self._last_error = f"{type(e).__name__} in the frame thread: {e}"
             k += 1

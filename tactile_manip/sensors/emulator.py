@@ -39,6 +39,7 @@ from typing import Literal
 
 import numpy as np
 
+from tactile_manip.outputs import OutputPathError, check_writable_parent
 from tactile_manip.sensors.contacts import ContactTimeline, Press
 from tactile_manip.sensors.layout import ANYSKIN_5, BoardLayout
 from tactile_manip.sensors.protocol import encode_frame
@@ -168,7 +169,13 @@ class FirmwareEmulator:
         return self.config.link or self.device
 
     def open(self) -> str:
-        """Solve the press script, create the pty (and link); return :attr:`path`."""
+        """Solve the press script, create the pty (and link); return :attr:`path`.
+
+        Raises:
+            OutputPathError: the link path holds something other than a pty link (a file, a folder, a link to
+                anything else): the emulator never replaces or deletes what it did not create.
+        """
+        self._check_link()
         if self.presses and self._timeline is None:
             self._timeline = ContactTimeline(self.pair, self.presses, period_s=self.config.period_s,
                                              seed=self.config.seed)
@@ -295,13 +302,31 @@ class FirmwareEmulator:
             os.symlink(self.device, tmp)
             os.replace(tmp, self.config.link)  # atomic: a driver never sees a half-made link
 
+    def _check_link(self) -> None:
+        link = self.config.link
+        if not link:
+            return
+        check_writable_parent(link)
+        if not os.path.lexists(link):
+            return
+        # a link to a pty is one an emulator made (and a killed one left behind); anything else is the user's
+        if not (os.path.islink(link) and _is_pty_path(os.readlink(link))):
+            raise OutputPathError(f"--link {link} exists and is not an emulator's pty link: refusing to replace "
+                                  "a file the emulator did not create; give another path")
+
     def _close_pty(self) -> None:
-        if self.config.link and os.path.islink(self.config.link):
-            os.unlink(self.config.link)
+        link = self.config.link
+        if link and os.path.islink(link) and os.readlink(link) == self.device:  # only the link this run made
+            os.unlink(link)
         for fd in (self._master, self._slave):
             if fd >= 0:
                 os.close(fd)
         self._master = self._slave = -1
+
+
+def _is_pty_path(path: str) -> bool:
+    """Whether ``path`` names a pseudo-terminal device (Linux ``/dev/pts/N``, macOS ``/dev/ttysNNN``)."""
+    return path.startswith("/dev/pts/") or (path.startswith("/dev/ttys") and path[9:].isdigit())
 
 
 if __name__ == "__main__":  # pragma: no cover - the CLI is tested through `tactile-manip emulate`

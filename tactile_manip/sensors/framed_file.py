@@ -4,6 +4,10 @@ Layout: a magic line, one JSON header line, then records ``tag (2 bytes) | paylo
 payload | crc32 u32`` (little-endian; the CRC-32 covers tag, length, time and payload). The length field's
 width is the format's (``RECORD`` struct). The writer flushes and ``fsync``s at least every ``sync_every_s``
 while records keep coming and on close.
+
+Readers go through :func:`scan_records`: a damaged record in the middle (a flipped byte, a bad sector) is
+skipped by searching for the next intact one, as the serial decoder resyncs on the wire, and counted; only
+bytes after the last intact record are a torn tail.
 """
 
 from __future__ import annotations
@@ -13,6 +17,8 @@ import os
 import struct
 import time
 import zlib
+from collections.abc import Collection
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -113,3 +119,72 @@ def read_header(data: bytes, path: Path, magic: bytes, kind: str, format_version
         raise RecordingError(f"{path} has {kind} format {header['format_version']}; this tactile_manip reads up "
                              f"to {format_version}: upgrade tactile_manip")
     return header, end + 1
+
+
+@dataclass
+class Scan:
+    """What :func:`scan_records` found: the intact records and what it had to skip.
+
+    Attributes:
+        records: ``(tag, t_host_s, payload)`` of every intact record, in file order.
+        skipped_bytes: bytes between intact records that belong to no intact record (damage in the middle).
+        damaged_records: places where damage was skipped (each one or more lost records).
+        truncated_bytes: bytes after the last intact record (a crash's torn tail; 0 for a clean file).
+    """
+
+    records: list[tuple[bytes, float, bytes]] = field(default_factory=list)
+    skipped_bytes: int = 0
+    damaged_records: int = 0
+    truncated_bytes: int = 0
+
+    def skip(self, nbytes: int) -> None:
+        """Count one more damaged place of ``nbytes`` (also used by readers for a record that fails to decode)."""
+        self.skipped_bytes += nbytes
+        self.damaged_records += 1
+
+
+def scan_records(data: bytes, pos: int, record: struct.Struct, tags: Collection[bytes]) -> Scan:
+    """Every intact record of a framed file's ``data`` from offset ``pos`` (the first record) on.
+
+    A record is intact when it fits in ``data`` and its CRC-32 matches (records of tags this code does not know
+    are returned too: a newer writer's, for the caller to ignore). After a damaged one the scan resumes at the
+    next offset where an intact record of one of ``tags`` starts.
+    """
+    scan = Scan()
+    while pos < len(data):
+        end = _intact_end(data, pos, record)
+        if end is None:
+            nxt = _next_intact(data, pos + 1, record, tags)
+            if nxt is None:
+                break
+            scan.skip(nxt - pos)
+            pos = nxt
+            continue
+        tag, _, t_host = record.unpack_from(data, pos)
+        scan.records.append((tag, t_host, data[pos + record.size:end - CRC32.size]))
+        pos = end
+    scan.truncated_bytes = len(data) - pos
+    return scan
+
+
+def _intact_end(data: bytes, pos: int, record: struct.Struct, tags: Collection[bytes] | None = None) -> int | None:
+    """The offset after the record at ``pos`` when it is intact (and, given ``tags``, of one of them), else None."""
+    if pos + record.size + CRC32.size > len(data) or (tags is not None and data[pos:pos + 2] not in tags):
+        return None
+    _, length, _ = record.unpack_from(data, pos)
+    stop = pos + record.size + length
+    if stop + CRC32.size > len(data) or zlib.crc32(data[pos:stop]) != CRC32.unpack_from(data, stop)[0]:
+        return None
+    return stop + CRC32.size
+
+
+def _next_intact(data: bytes, start: int, record: struct.Struct, tags: Collection[bytes]) -> int | None:
+    """The first offset >= ``start`` where an intact record begins (candidates: where a tag occurs)."""
+    while True:
+        hits = [i for i in (data.find(tag, start) for tag in tags) if i >= 0]
+        if not hits:
+            return None
+        candidate = min(hits)
+        if _intact_end(data, candidate, record, tags) is not None:
+            return candidate
+        start = candidate + 1

@@ -30,7 +30,8 @@ from typing import Any
 import numpy as np
 
 from tactile_manip.errors import RecordingError
-from tactile_manip.sensors.framed_file import CRC32, TAG_EVENT, FramedWriter, json_default, read_header
+from tactile_manip.sensors.framed_file import (CRC32, TAG_EVENT, FramedWriter, json_default, read_header,
+                                               scan_records)
 from tactile_manip.data import DEPTH_SCALE_MM, SPLITS, PairedDataset, depth_image_spec
 from tactile_manip.version import code_version
 
@@ -72,13 +73,16 @@ class PairLogWriter(FramedWriter):
 
 @dataclass(frozen=True, eq=False)
 class PairLog:
-    """A pair log read back: header, pairs in file order, events, and the size of a torn tail (0 when clean)."""
+    """A pair log read back: header, pairs in file order, events, the size of a torn tail (0 when clean) and what
+    was skipped as damaged in the middle (bytes and places; see ``framed_file.Scan``)."""
 
     path: Path
     header: dict[str, Any]
     pairs: list[PairRecord]
     events: list[dict[str, Any]] = field(default_factory=list)
     truncated_bytes: int = 0
+    skipped_bytes: int = 0
+    damaged_records: int = 0
 
     def __len__(self) -> int:
         return len(self.pairs)
@@ -96,22 +100,18 @@ def read_pair_log(path: str | Path) -> PairLog:
     except FileNotFoundError as e:
         raise RecordingError(f"pair log not found: {path}") from e
     header, pos = read_header(data, path, MAGIC, "pair log", FORMAT_VERSION)
+    scan = scan_records(data, pos, RECORD, (TAG_PAIR, TAG_EVENT))
     pairs, events = [], []
-    while pos + RECORD.size + CRC32.size <= len(data):
-        tag, length, _ = RECORD.unpack_from(data, pos)
-        stop = pos + RECORD.size + length
-        if stop + CRC32.size > len(data) or zlib.crc32(data[pos:stop]) != CRC32.unpack_from(data, stop)[0]:
-            break
-        payload = data[pos + RECORD.size:stop]
+    for tag, _, payload in scan.records:
         try:
             if tag == TAG_PAIR:
                 pairs.append(_decode_pair(payload))
-            elif tag == TAG_EVENT:
+            elif tag == TAG_EVENT:  # other tags: a newer writer's records, skipped
                 events.append(json.loads(payload))
-        except (ValueError, zlib.error, struct.error):
-            break
-        pos = stop + CRC32.size
-    return PairLog(path, header, pairs, events, truncated_bytes=len(data) - pos)
+        except (ValueError, zlib.error, struct.error):  # intact on disk but not a pair / JSON: skip it
+            scan.skip(RECORD.size + len(payload) + CRC32.size)
+    return PairLog(path, header, pairs, events, truncated_bytes=scan.truncated_bytes,
+                   skipped_bytes=scan.skipped_bytes, damaged_records=scan.damaged_records)
 
 
 def _decode_pair(payload: bytes) -> PairRecord:

@@ -12,8 +12,8 @@ sync to CRC-16 with seq, device time, status, raw counts, temperatures; ``anyski
 the header's ``layout`` chips, whose sequence is the record order), ``HL`` a JSON health snapshot, ``EV`` a
 JSON event. ``t_host_s`` is the recording host's ``time.monotonic()`` when the frame became available. The
 writer flushes and ``fsync``s every ``sync_every_s`` (0.5 s by default), so a killed recorder leaves every
-frame up to that long before the kill;
-the reader stops at the first incomplete or damaged record (the torn tail of a crash) and reports its size.
+frame up to that long before the kill; the reader skips a damaged record in the middle (resyncing on the next
+intact one) and stops at an incomplete tail (a crash), and reports both.
 """
 
 from __future__ import annotations
@@ -24,7 +24,6 @@ import math
 import struct
 import threading
 import time
-import zlib
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -41,7 +40,8 @@ from tactile_manip.sensors.protocol import (
     decode_frame,
     encode_frame,
 )
-from tactile_manip.sensors.framed_file import CRC32, TAG_EVENT, FramedWriter, json_default, read_header
+from tactile_manip.sensors.framed_file import (CRC32, TAG_EVENT, FramedWriter, Scan, json_default, read_header,
+                                               scan_records)
 from tactile_manip.sensors.layout import DEFAULT_LAYOUT, get_layout
 from tactile_manip.sensors.wire import make_decoder
 from tactile_manip.sim.params import ChipParams
@@ -96,6 +96,8 @@ class Recording:
         truncated_bytes: bytes after the last complete record (a crash's torn tail), 0 for a clean file.
         raw_ut: (N, R, C, 3) float32 raw fields of formats that send microtesla (``counts`` is None then).
         saturated_mask: (N, R, C, 3) bool saturation of those formats, else None (derived from counts).
+        skipped_bytes: bytes of damaged records in the middle that were skipped (0 for an undamaged file).
+        damaged_records: places where damage was skipped (each one or more lost records).
     """
 
     path: Path
@@ -111,6 +113,8 @@ class Recording:
     truncated_bytes: int = 0
     raw_ut: np.ndarray | None = None
     saturated_mask: np.ndarray | None = None
+    skipped_bytes: int = 0
+    damaged_records: int = 0
 
     def __len__(self) -> int:
         return len(self.seq)
@@ -137,7 +141,8 @@ class Recording:
 
 
 def read_recording(path: str | Path) -> Recording:
-    """Read a recording, tolerating a torn last record (see ``Recording.truncated_bytes``).
+    """Read a recording, skipping damaged records and a torn last one (``Recording.skipped_bytes``,
+    ``damaged_records``, ``truncated_bytes`` say how much).
 
     Raises:
         RecordingError: missing file, not a recording, or a newer format version.
@@ -149,24 +154,17 @@ def read_recording(path: str | Path) -> Recording:
         raise RecordingError(f"recording not found: {path}") from e
     header, pos = _read_header(data, path)
     decode = _record_decoder(header, path)
+    scan = scan_records(data, pos, RECORD, (TAG_FRAME, TAG_HEALTH, TAG_EVENT))
     frames, health, events = [], [], []
-    while pos + RECORD.size + CRC32.size <= len(data):
-        tag, length, t_host = RECORD.unpack_from(data, pos)
-        end = pos + RECORD.size + length
-        if end + CRC32.size > len(data):
-            break
-        if zlib.crc32(data[pos:end]) != CRC32.unpack_from(data, end)[0]:
-            break
-        payload = data[pos + RECORD.size:end]
-        if tag == TAG_FRAME:
-            try:
+    for tag, t_host, payload in scan.records:
+        try:
+            if tag == TAG_FRAME:
                 frames.append((t_host, decode(payload)))
-            except ProtocolError:
-                break
-        elif tag in (TAG_HEALTH, TAG_EVENT):
-            (health if tag == TAG_HEALTH else events).append({"t_host_s": t_host, **json.loads(payload)})
-        pos = end + CRC32.size
-    return _assemble(path, header, frames, health, events, truncated=len(data) - pos)
+            elif tag in (TAG_HEALTH, TAG_EVENT):  # other tags: a newer writer's records, skipped
+                (health if tag == TAG_HEALTH else events).append({"t_host_s": t_host, **json.loads(payload)})
+        except (ProtocolError, ValueError, TypeError):  # intact on disk but not a frame / JSON object: skip it
+            scan.skip(RECORD.size + len(payload) + CRC32.size)
+    return _assemble(path, header, frames, health, events, scan)
 
 
 def _read_header(data: bytes, path: Path) -> tuple[dict[str, Any], int]:
@@ -187,10 +185,9 @@ def _record_decoder(header: dict[str, Any], path: Path) -> Callable[[bytes], Any
         raise RecordingError(f"{path}: cannot read its frames: {e}") from None
 
 
-def _assemble(path: Path, header: dict[str, Any], frames: list, health: list, events: list, *,
-              truncated: int) -> Recording:
+def _assemble(path: Path, header: dict[str, Any], frames: list, health: list, events: list, scan: Scan) -> Recording:
     if header.get("wire_format", "supermag") != "supermag":
-        return _assemble_fields(path, header, frames, health, events, truncated=truncated)
+        return _assemble_fields(path, header, frames, health, events, scan)
     n = len(frames)
     seq, clock = Unwrapper(16), Unwrapper(32)
     counts = np.empty((n, 4, 4, 3), np.int16)
@@ -204,11 +201,12 @@ def _assemble(path: Path, header: dict[str, Any], frames: list, health: list, ev
             temps[i] = f.temperature_raw * TEMPERATURE_LSB_C
     return Recording(path=path, header=header, t_host_s=np.array([t for t, _ in frames], np.float64), seq=seqs,
                      t_device_s=t_dev, status=np.array([f.status for _, f in frames], np.uint16), counts=counts,
-                     temperature_c=temps, health=health, events=events, truncated_bytes=truncated)
+                     temperature_c=temps, health=health, events=events, truncated_bytes=scan.truncated_bytes,
+                     skipped_bytes=scan.skipped_bytes, damaged_records=scan.damaged_records)
 
 
-def _assemble_fields(path: Path, header: dict[str, Any], frames: list, health: list, events: list, *,
-                     truncated: int) -> Recording:
+def _assemble_fields(path: Path, header: dict[str, Any], frames: list, health: list, events: list,
+                     scan: Scan) -> Recording:
     """A recording of a format that sends microtesla and no counter: sequence = record order, no device time."""
     layout = get_layout(header["layout"])
     n = len(frames)
@@ -224,7 +222,9 @@ def _assemble_fields(path: Path, header: dict[str, Any], frames: list, health: l
     return Recording(path=path, header=header, t_host_s=np.array([t for t, _ in frames], np.float64),
                      seq=np.arange(n, dtype=np.int64), t_device_s=np.full(n, np.nan),
                      status=np.array([f.status for _, f in frames], np.uint16), counts=None, temperature_c=temps,
-                     health=health, events=events, truncated_bytes=truncated, raw_ut=raw, saturated_mask=sat)
+                     health=health, events=events, truncated_bytes=scan.truncated_bytes,
+                     skipped_bytes=scan.skipped_bytes, damaged_records=scan.damaged_records, raw_ut=raw,
+                     saturated_mask=sat)
 
 
 def recording_header(sensor: TactileSensor, **extra: Any) -> dict[str, Any]:

@@ -77,8 +77,10 @@ class ReplaySensor(TactileSensor):
         self._stop_producer()
 
     def _link_health(self) -> dict[str, Any]:
+        rec = self.recording  # damage skipped in the file shows as the wire's CRC errors and resync bytes
         return {"link_up": self._connected and not self.finished, "reader_cpu_s": self._cpu_s,
-                "last_error": self._last_error}
+                "last_error": self._last_error, "crc_errors": rec.damaged_records if rec else 0,
+                "resync_bytes": rec.skipped_bytes if rec else 0}
 
     def _stale_hint(self) -> str:
         if self.finished:

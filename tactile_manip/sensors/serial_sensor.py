@@ -20,6 +20,7 @@ from typing import Any
 
 
 from tactile_manip.errors import SensorDisconnectedError, SensorTimeoutError
+from tactile_manip.extras import require
 from tactile_manip.sensors.base import TactileSensor
 from tactile_manip.sensors.config import SerialSensorConfig
 from tactile_manip.sensors.layout import get_layout
@@ -28,12 +29,8 @@ from tactile_manip.sensors.wire import ChipFrame, make_decoder
 
 
 def import_serial() -> Any:
-    """Return the pyserial module, or raise an ImportError naming the extra that installs it."""
-    try:
-        import serial
-    except ImportError as e:
-        raise ImportError('the serial sensor backend needs pyserial: pip install "tactile_manip[serial]"') from e
-    return serial
+    """Return the pyserial module, or raise a MissingExtraError (an ImportError) naming the extra."""
+    return require("serial", "the serial sensor backend")
 
 
 class SerialSensor(TactileSensor):

@@ -32,7 +32,7 @@ from typing import Any
 import numpy as np
 from scipy import ndimage
 
-from tactile_manip.checks import check_finite_scalar
+from tactile_manip.checks import check_finite_scalar, npz_read_problem
 from tactile_manip.errors import CalibrationError
 from tactile_manip.sensors.vbts import DepthParams, DepthPipeline, PadAlignment, Reference, to_grey
 from tactile_manip.version import code_version
@@ -248,7 +248,7 @@ class VbtsCalibration:
                 arrays = {k: z[k] for k in ("table_levels", "table_mm", "reference_grey", "metadata")}
             meta = json.loads(str(arrays["metadata"]))
         except (KeyError, ValueError, OSError) as e:
-            raise CalibrationError(f"{path} is not a VBTS calibration file: {e}") from e
+            raise CalibrationError(f"{path} is not a VBTS calibration file: {npz_read_problem(e)}") from e
         if meta.get("format") != "tactile_manip.vbts_calibration" or meta.get("format_version", 0) > FORMAT_VERSION:
             raise CalibrationError(f"{path}: not a VBTS calibration of format <= {FORMAT_VERSION}")
         al = meta["alignment"]

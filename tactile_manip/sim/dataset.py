@@ -24,7 +24,7 @@ import numpy as np
 from tactile_manip.config import load_config, to_dict
 from tactile_manip.data import PairedDataset, depth_image_spec, quantise_depth
 from tactile_manip.sim.objects import Indenter, IndenterPose
-from tactile_manip.sim.shapes import SHAPES, make_indenter
+from tactile_manip.sim.shapes import SHAPES, check_shape_arguments, make_indenter
 from tactile_manip.sim.pair import SensorPair
 from tactile_manip.sim.params import SimParams, randomise, randomised_values
 from tactile_manip.version import code_version
@@ -48,6 +48,8 @@ class ObjectSpec:
             raise ValueError(f"objects.variants must be >= 1, got {self.variants}")
         if self.name not in SHAPES:
             raise ValueError(f"objects.name: unknown object {self.name!r}; known: {', '.join(sorted(SHAPES))}")
+        check_shape_arguments(self.name, {"seed": 0, **self.kwargs} if self.variants > 1 else self.kwargs,
+                              where="objects.kwargs")
 
     @property
     def display_name(self) -> str:

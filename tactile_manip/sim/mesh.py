@@ -14,6 +14,7 @@ import numpy as np
 
 from tactile_manip.checks import check_finite_scalar
 from tactile_manip.errors import MeshError
+from tactile_manip.extras import require
 
 MAX_GRID_PX = 4000          # largest heightmap side, pixels
 _CHUNK_PX = 2_000_000       # candidate pixels tested per vectorised batch (bounds memory to ~100 MB)
@@ -46,10 +47,7 @@ def heightmap_from_mesh(path: str | Path, *, pixel_mm: float = 0.05) -> tuple[np
 
 def _load_triangles(path: Path) -> np.ndarray:
     """Read ``path`` with trimesh and return its triangles as float64 (T, 3, 3) in mm."""
-    try:
-        import trimesh
-    except ImportError as e:
-        raise ImportError('reading meshes needs trimesh: pip install "tactile_manip[mesh]"') from e
+    trimesh = require("trimesh", "reading meshes")
     if not path.is_file():
         raise MeshError(f"mesh file {path} does not exist or is not a file")
     try:

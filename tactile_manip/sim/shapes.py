@@ -9,6 +9,7 @@ only differences of protrusion are physical. ``make_indenter(name, **kwargs)`` l
 from __future__ import annotations
 
 import functools
+import inspect
 import math
 from collections.abc import Callable
 
@@ -303,8 +304,26 @@ SHAPES: dict[str, Callable[..., Indenter]] = {
 
 def make_indenter(name: str, **kwargs: object) -> Indenter:
     """Build the built-in shape called ``name`` (a key of ``SHAPES``) with its keyword arguments."""
+    check_shape_arguments(name, kwargs)
+    return SHAPES[name](**kwargs)
+
+
+def check_shape_arguments(name: str, kwargs: dict[str, object], *, where: str = "") -> None:
+    """Raise ValueError when ``name`` is not a shape of SHAPES or ``kwargs`` do not fit its arguments.
+
+    The message names the unknown or missing keys and the arguments the shape accepts (``where`` prefixes
+    the keys, e.g. ``"objects.kwargs"``), so a config is refused when it is loaded, not mid-run.
+    """
     try:
         factory = SHAPES[name]
     except (KeyError, TypeError):
         raise ValueError(f"unknown object {name!r}; known: {', '.join(SHAPES)}") from None
-    return factory(**kwargs)
+    params = inspect.signature(factory).parameters
+    accepted = [p for p, v in params.items() if v.kind in (v.KEYWORD_ONLY, v.POSITIONAL_OR_KEYWORD)]
+    unknown = sorted(set(kwargs) - set(accepted))
+    missing = [p for p in accepted if params[p].default is inspect.Parameter.empty and p not in kwargs]
+    if unknown or missing:
+        prefix = f"{where}." if where else ""
+        problem = (f"unknown argument(s) {', '.join(prefix + k for k in unknown)}" if unknown
+                   else f"missing argument(s) {', '.join(prefix + k for k in missing)}")
+        raise ValueError(f"{name}: {problem}; {name} accepts {', '.join(accepted) or 'no arguments'}")

@@ -33,7 +33,9 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+from tactile_manip.config import config_differences
 from tactile_manip.errors import TactileManipError
+from tactile_manip.outputs import unique_folder
 from tactile_manip.trials.record import RECORD_VERSION, TrialRecord
 
 TRIALS_FILE = "trials.jsonl"
@@ -71,7 +73,8 @@ def canonical_config(config: Mapping[str, Any] | Any) -> dict[str, Any]:
 
 
 def run_folder(scene_name: str, out: str | Path | None, *, resume: bool = False) -> Path:
-    """The folder of a trials run: ``out``, or a new ``runs/trials/<scene_name>-<UTC time>``.
+    """The folder of a trials run: ``out``, or a new ``runs/trials/<scene_name>-<UTC time>`` (``-2``, ``-3``, ...
+    appended when runs start within the same second).
 
     Raises:
         ValueError: ``resume`` without ``out`` (there is no run to continue).
@@ -80,7 +83,7 @@ def run_folder(scene_name: str, out: str | Path | None, *, resume: bool = False)
         return Path(out)
     if resume:
         raise ValueError("--resume needs --out: the run folder to continue")
-    return Path("runs") / "trials" / f"{scene_name}-{time.strftime('%Y%m%dT%H%M%SZ', time.gmtime())}"
+    return unique_folder(Path("runs") / "trials" / f"{scene_name}-{time.strftime('%Y%m%dT%H%M%SZ', time.gmtime())}")
 
 
 def trials_path(path: str | Path) -> Path:
@@ -279,8 +282,10 @@ class TrialLog:
             raise TrialLogError(f"{self.run_dir} already holds run {existing.get('run_id')!r}; resume it "
                                 f"(resume=True, `--resume`) or choose a new run directory")
         if existing.get("config_hash") != self.config_hash:
+            differences = config_differences(existing.get("config") or {}, self.config)
             raise TrialLogError(f"cannot resume {self.run_dir}: it was run with another config (hash "
-                                f"{str(existing.get('config_hash'))[:12]}, now {self.config_hash[:12]}); "
+                                f"{str(existing.get('config_hash'))[:12]}, now {self.config_hash[:12]}; "
+                                f"{'; '.join(differences) or 'same values, other form'}); "
                                 f"use a new run directory for the new config")
         return existing
 

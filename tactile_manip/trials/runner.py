@@ -23,6 +23,7 @@ import numpy as np
 
 from tactile_manip.behaviours.reorient import ReorientResult, grasp_estimate_reorient
 from tactile_manip.errors import ConfigError
+from tactile_manip.extras import require
 from tactile_manip.perception.estimator import TactilePoseEstimator
 from tactile_manip.perception.pose import wrap_axial
 from tactile_manip.perception.reconstruct import load_reconstructor
@@ -118,6 +119,7 @@ class SimulatedCell:
         from tactile_manip.sensors.simulated import SimulatedSensor
         from tactile_manip.sim.shapes import make_indenter
 
+        require("roboticstoolbox", "the simulated trial cell (kinematic FR3 twin)")  # before the run folder
         if not isinstance(scene.sensor, SimulatedSensorConfig):
             raise ConfigError("sensor: the simulated cell (robot.backend = 'twin') needs the simulated sensor; "
                               "remove the [sensor] port")
@@ -254,6 +256,15 @@ def _sensor_extra(p: Presentation) -> dict:
     return {"sensor": {k: round(v, 6) for k, v in randomised_values(params).items()}}
 
 
+def make_cell(scene: TrialScene):
+    """The trial cell of ``scene.robot.backend``: :class:`SimulatedCell` for the twin, else an operator cell."""
+    if scene.robot.backend == "twin":
+        return SimulatedCell(scene)
+    from tactile_manip.trials.operator import OperatorCell
+
+    return OperatorCell(scene)
+
+
 def run_scene(scene: TrialScene, write: Callable[[TrialRecord], None], *, estimators: dict[str, TactilePoseEstimator],
               skip: set[tuple[int, str]] = frozenset(), progress: bool = True, cell=None) -> int:
     """Run every (trial, method) of ``scene`` not in ``skip``; ``write`` each record.
@@ -266,13 +277,7 @@ def run_scene(scene: TrialScene, write: Callable[[TrialRecord], None], *, estima
     """
     from tqdm.auto import tqdm
 
-    if cell is None:
-        if scene.robot.backend == "twin":
-            cell = SimulatedCell(scene)
-        else:
-            from tactile_manip.trials.operator import OperatorCell
-
-            cell = OperatorCell(scene)
+    cell = cell if cell is not None else make_cell(scene)
     todo = [(i, m) for i in range(scene.trials) for m in estimators if (i, m) not in skip]
     faults = scene.faults
     target = math.radians(scene.target_deg)
@@ -306,10 +311,12 @@ def run_trials(scene: TrialScene, out_dir: str | Path, *, scene_path: str | Path
     from tactile_manip.trials.report import write_report
 
     out = Path(out_dir)
+    # every part the scene names is built before the run folder is made, so a bad scene leaves no folder behind
     estimators = build_estimators(scene, Path(scene_path) if scene_path is not None else None)
+    cell = make_cell(scene)
     skip = completed_keys(out / "trials.jsonl") if resume and (out / "trials.jsonl").exists() else set()
     with TrialLog(out, config=to_dict(scene), resume=resume) as log:
-        run_scene(scene, log.append, estimators=estimators, skip=skip, progress=progress)
+        run_scene(scene, log.append, estimators=estimators, skip=skip, progress=progress, cell=cell)
     tolerance = math.radians(scene.tolerance_deg if tolerance_deg is None else tolerance_deg)
     return write_report(out, read_trials(out / "trials.jsonl"), tolerance, title=f"Reorientation trials: {scene.name}",
                         run_info=read_run_info(out))

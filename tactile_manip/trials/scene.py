@@ -17,6 +17,7 @@ from tactile_manip.checks import check_finite_scalar
 from tactile_manip.config import load_config
 from tactile_manip.robot.safety import SafetyLimits
 from tactile_manip.sensors.config import SerialSensorConfig, SimulatedSensorConfig
+from tactile_manip.sim.shapes import check_shape_arguments
 
 
 @dataclass(frozen=True)
@@ -64,6 +65,9 @@ class TrialObject:
     label: str = ""
     kwargs: dict[str, Any] = field(default_factory=dict)
     width_mm: float = 0.0
+
+    def __post_init__(self) -> None:
+        check_shape_arguments(self.name, self.kwargs, where="kwargs")  # refused at load, not mid-run
 
     @property
     def display_name(self) -> str:

@@ -24,8 +24,8 @@ def bench_data(tmp_path_factory: pytest.TempPathFactory) -> Path:
 def tiny_model(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A seeded, untrained ``small`` model with 200x200 output exported to RUN/model.onnx, its checkpoint at
     RUN/best.pt (as a training run leaves them). Its output depends on the reading (not all zero)."""
-    torch = pytest.importorskip("torch", reason="exporting a model needs torch (pip install 'tactile_manip[train]')")
-    pytest.importorskip("onnx", reason="exporting a model needs onnx (pip install 'tactile_manip[train]')")
+    torch = pytest.importorskip("torch", reason="exporting a model needs torch (pip install -e '.[train]')")
+    pytest.importorskip("onnx", reason="exporting a model needs onnx (pip install -e '.[train]')")
     pytest.importorskip("onnxruntime", reason="running a model needs onnxruntime")
     from tactile_manip.config import to_dict
     from tactile_manip.learning.export import export_onnx

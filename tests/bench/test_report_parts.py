@@ -109,3 +109,38 @@ def test_other_load_is_the_busy_time_not_spent_by_this_process() -> None:
     load = other_load(start, end)
     assert load["other_processes_cores"] == pytest.approx(1.0) and load["steal_share"] == 0.0
     assert other_load(None, end) is None and other_load(end, end) is None
+
+
+def test_pose_table_compares_each_runtime_with_the_paper_preset_on_the_same_runtime() -> None:
+    from tactile_manip.bench.report import pose_table
+
+    def row(method, runtime, p50, pair=None, share=None):
+        return {"method": method, "runtime": runtime, "pose_p50_ms": p50, "pose_p99_ms": p50 * 1.5,
+                "pose_pair_p50_ms": pair, "pose_pair_p99_ms": None if pair is None else pair * 1.5,
+                "postprocess_share": share}
+
+    rows = [row("compact", "onnxruntime 1 thread", 2.0, 3.5, 0.21), row("compact", "onnxruntime 2 threads", 1.5),
+            row("paper", "onnxruntime 1 thread", 100.0, 190.0, 0.01), {"method": "x", "runtime": "numpy"}]
+    lines = pose_table(rows).splitlines()
+    assert len(lines) == 5  # header, rule, three rows with a pose latency
+    assert lines[2] == "| compact | onnxruntime 1 thread | 2.00 / 3.00 | 3.50 / 5.25 | 21% | 50x |"
+    assert lines[3].endswith("| - | - | - |")  # no paper row on two threads: no ratio
+    assert lines[4].endswith("| 1% | - |")
+
+
+def test_default_models_include_the_decoder_candidates_on_one_thread_only(tiny_model, tmp_path) -> None:
+    from pathlib import Path
+
+    from tactile_manip.bench.candidates import ModelEntry, default_models, model_candidates
+
+    root = Path(__file__).resolve().parents[2]
+    entries = {e.name: e for e in default_models(root)}
+    configs = sorted(p.stem for p in (root / "configs" / "train").glob("decoder_*.toml"))
+    assert configs and all(entries[c].runtimes == ("ort-1",) for c in configs)
+    assert entries[configs[0]].untrained_preset.endswith(f"{configs[0]}.toml")  # timed untrained until trained
+    assert entries["compact"].runtimes is None
+    notes: list[str] = []
+    entry = ModelEntry("candidate", tiny_model, runtimes=("ort-1",))
+    found = model_candidates(entry, tmp_path, runtimes=("ort-1", "ort-all", "ort-int8"), notes=notes)
+    assert [c.runtime for c in found] == ["onnxruntime 1 thread"]
+    assert model_candidates(entry, tmp_path, runtimes=("ort-all",), notes=notes) == []

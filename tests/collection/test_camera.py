@@ -110,7 +110,7 @@ def test_make_camera_builds_from_the_config_table():
 @pytest.mark.skipif(importlib.util.find_spec("cv2") is not None, reason="opencv is installed here")
 def test_opencv_backend_without_opencv_names_the_extra():
     cam = OpenCVCamera(OpenCVCameraConfig(device=0))
-    with pytest.raises(ImportError, match=r'tactile_manip\[camera\]'):
+    with pytest.raises(ImportError, match=r'pip install -e "\.\[camera\]"'):
         cam.connect()
     assert not cam.is_connected
 

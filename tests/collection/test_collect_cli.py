@@ -32,7 +32,7 @@ def test_missing_calibration_is_one_line(tmp_path, capsys):
 def test_a_real_camera_without_opencv_names_the_extra(tmp_path, capsys):
     assert main(["collect", "calibrate", "--camera", "0", "--corners", "489,72 151,66 146,411 494,413",
                  "--ball-radius-mm", "4", "--out", str(tmp_path / "c.npz")]) == 2
-    _one_line_error(capsys, 'pip install "tactile_manip[camera]"')
+    _one_line_error(capsys, 'pip install -e ".[camera]"')
 
 
 def test_bad_corners_are_refused_by_the_parser(tmp_path, capsys):

@@ -72,3 +72,80 @@ def test_inference_decoder_gives_the_training_mean_without_the_variance_channel(
         mean, none = model.decoder(z, e, x, with_logvar=False)
     assert none is None and logvar.shape == mean.shape
     torch.testing.assert_close(mean, full_mean)
+
+
+# ---------------------------------------------------------------- decoder options (issue 15: a faster decoder)
+
+
+@pytest.mark.parametrize("overrides", [{"native_scale": 4, "head": "shuffle"}, {"native_scale": 2, "head": "shuffle"},
+                                       {"native_scale": 4, "act": "relu", "dec_blocks": 0}])
+def test_decoder_options_give_full_size_images_and_the_same_mean_without_the_variance(overrides):
+    torch.manual_seed(0)
+    cfg = preset("small", image_h=200, image_w=200, **overrides)
+    model = SuperMagCVAE(cfg).eval()
+    x = torch.randn(3, cfg.condition_size)
+    z, e = torch.randn(3, cfg.latent), model.embed_dec(x)
+    with torch.no_grad():
+        mean, logvar = model.decoder(z, e, x)
+        mean_only, none = model.decoder(z, e, x, with_logvar=False)
+    assert mean.shape == logvar.shape == (3, 200, 200) and none is None
+    torch.testing.assert_close(mean_only, mean)
+
+
+def test_the_shuffle_head_places_each_native_pixel_over_its_own_block_of_output_pixels():
+    """A head that copies channel 0 of the last feature map to the mean's 16 sub-pixels: the output is that map
+    upsampled by repetition (4x4 blocks), centred on the 200x200 image (the 52x52 grid overhangs by 4 px)."""
+    cfg = preset("small", image_h=200, image_w=200, native_scale=4, head="shuffle")
+    decoder = SuperMagCVAE(cfg).decoder
+    with torch.no_grad():
+        decoder.head.weight.zero_()
+        decoder.head.bias.zero_()
+        decoder.head.weight[:16, 0, 1, 1] = 1.0
+    feat = torch.rand(1, cfg.channels[-1], 52, 52)
+    out = torch.nn.functional.conv2d(feat, decoder.head.weight[:16], decoder.head.bias[:16], padding=1)
+    img = torch.nn.functional.pixel_shuffle(out, 4)[0, 0, 4:204, 4:204]
+    torch.testing.assert_close(img, feat[0, 0].repeat_interleave(4, 0).repeat_interleave(4, 1)[4:204, 4:204])
+
+
+def test_decoder_options_are_validated():
+    with pytest.raises(ValueError, match="head"):
+        preset("compact", head="nearest")
+    with pytest.raises(ValueError, match="act"):
+        preset("compact", act="tanh")
+
+
+def test_a_training_config_decoder_table_overrides_the_preset(tmp_path):
+    from tactile_manip.learning.train import architecture, load_train_config
+
+    path = tmp_path / "fast.toml"
+    path.write_text('preset = "compact"\n\n[decoder]\nnative_scale = 4\nchannels = [24, 12, 6]\nhead = "shuffle"\n'
+                    'act = "relu"\ndec_blocks = 0\n')
+    cfg = architecture(load_train_config(path))
+    assert (cfg.native_scale, cfg.channels, cfg.head, cfg.act, cfg.dec_blocks) == (4, (24, 12, 6), "shuffle", "relu", 0)
+    assert cfg.spatial == preset("compact").spatial  # what the table does not name stays the preset's
+    plain = tmp_path / "plain.toml"
+    plain.write_text('preset = "compact"\n')
+    assert architecture(load_train_config(plain)) == preset("compact")
+    path.write_text('preset = "compact"\n\n[decoder]\nhead = "nearest"\n')
+    with pytest.raises(ValueError, match="head"):  # CVAEConfig refuses it when the architecture is built
+        architecture(load_train_config(path))
+    path.write_text('preset = "compact"\n\n[decoder]\nnative_scale = -1\n')
+    with pytest.raises(ValueError, match="native_scale"):  # ConfigError is a ValueError
+        load_train_config(path)
+
+
+def test_an_untrained_export_of_a_training_config_runs_on_onnxruntime(tmp_path):
+    pytest.importorskip("onnx")
+    pytest.importorskip("onnxruntime")
+    import numpy as np
+
+    from tactile_manip.learning.eager import export_untrained
+    from tactile_manip.perception.reconstruct import load_reconstructor
+
+    config = tmp_path / "tiny_fast.toml"
+    config.write_text('preset = "small"\n\n[decoder]\nnative_scale = 4\nhead = "shuffle"\nact = "relu"\n')
+    path = export_untrained(str(config), tmp_path / "out")
+    assert path.name == "tiny_fast.onnx"
+    rec = load_reconstructor(path, threads=1)
+    depth = rec.reconstruct(np.random.default_rng(0).normal(0.0, 100.0, (4, 4, 3))).depth_mm
+    assert depth.shape == (200, 200) and np.isfinite(depth).all()

@@ -43,9 +43,9 @@ def _tiny_dataset(rows: int, cols: int, h: int, w: int, n: int = 6):
 
 def _export(tmp: Path, *, rows: int, cols: int, h: int, w: int, pixel_mm: float) -> ExportedModel:
     # torch and onnx are the "train" extra: skip (only) model tests without them
-    torch = pytest.importorskip("torch", reason="exporting a model needs torch (pip install 'tactile_manip[train]')")
-    pytest.importorskip("onnx", reason="exporting a model needs onnx (pip install 'tactile_manip[train]')")
-    pytest.importorskip("onnxruntime", reason="running a model needs onnxruntime (pip install 'tactile_manip[onnx]')")
+    torch = pytest.importorskip("torch", reason="exporting a model needs torch (pip install -e '.[train]')")
+    pytest.importorskip("onnx", reason="exporting a model needs onnx (pip install -e '.[train]')")
+    pytest.importorskip("onnxruntime", reason="running a model needs onnxruntime (pip install -e '.[onnx]')")
     from tactile_manip.learning.data import InputSpec
     from tactile_manip.learning.export import export_onnx
     from tactile_manip.learning.model import SuperMagCVAE, preset

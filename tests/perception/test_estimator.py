@@ -213,3 +213,116 @@ def test_nan_and_infinite_values_still_raise(supermag, pair, bad) -> None:
     field[3, 0, 1] = bad
     with pytest.raises(ValueError, match="NaN or infinite values"):
         supermag.estimate(field)
+
+
+# ---------------------------------------------------------------- several pads, and streams that fall behind
+
+
+def _pad_readings(pair: SensorPair) -> list:
+    """Two pads' readings as arrays and TactileReadings (one with a railed chip), and an empty pad."""
+    from tactile_manip.types import TactileReading
+
+    left, right = _rod_field(pair, 30.0).astype(np.float32), _rod_field(pair, -75.0, size_mm=6.0, seed=1)
+    flags = np.zeros((4, 4, 3), bool)
+    flags[0, 1, 2] = True
+    return [left, TactileReading(right.astype(np.float32), right.astype(np.float32), flags, t_host_s=0.0),
+            np.zeros((4, 4, 3)), right]
+
+
+@pytest.mark.parametrize("method", ["supermag", "supermag_3_samples", "bilinear"])
+def test_estimate_many_equals_estimating_one_by_one(pair, method) -> None:
+    def make() -> TactilePoseEstimator:
+        if method == "bilinear":
+            return TactilePoseEstimator(load_reconstructor("bilinear"))
+        return TactilePoseEstimator(load_reconstructor(MODEL, samples=3 if "3" in method else 1, seed=7))
+
+    readings = _pad_readings(pair)
+    together = make().estimate_many(readings)
+    single = make()  # a fresh one: with prior samples, the same noise draws in the same order
+    one_by_one = [single.estimate(r) for r in readings]
+    assert together == one_by_one  # AngleEstimate equality: angle, confidence, flag, centroid, area, reason
+    assert [e.defined for e in together] == [True, True, False, True]
+    assert all(set(e.timings_s) >= {"reconstruct", "pose", "total"} for e in together)
+    assert together[0].timings_s["reconstruct"] == together[3].timings_s["reconstruct"]  # one batch
+
+
+def test_estimate_many_of_nothing_and_of_bad_readings(supermag) -> None:
+    assert supermag.estimate_many([]) == []
+    with pytest.raises(ValueError, match="different shapes"):
+        supermag.estimate_many([np.zeros((4, 4, 3)), np.zeros((4, 4, 1))])
+    bad = np.zeros((4, 4, 3))
+    bad[1, 1, 1] = np.nan
+    with pytest.raises(ValueError, match="NaN"):
+        supermag.estimate_many([np.zeros((4, 4, 3)), bad])
+
+
+class _FramesDuringEstimates:
+    """A sensor stand-in (what ``stream`` uses: ``layout`` and ``wait_new``) whose next frames arrive while an
+    estimate runs: the reconstructor below publishes ``per_estimate`` frames each time it is called."""
+
+    def __init__(self, fields: np.ndarray) -> None:
+        from tactile_manip.sensors.layout import get_layout
+
+        self.layout = get_layout("supermag-4x4")
+        self.fields, self.published, self.seen = fields, 1, -1
+
+    def publish(self, n: int) -> None:
+        self.published = min(self.published + n, len(self.fields))
+
+    def wait_new(self, timeout_s: float):
+        from tactile_manip.types import TactileReading
+
+        newest = self.published - 1
+        if newest <= self.seen:
+            raise SensorTimeoutError(f"no new frame within {timeout_s} s")
+        self.seen = newest
+        f = self.fields[newest]
+        return TactileReading(f, f, np.zeros(f.shape, bool), t_host_s=0.0, seq=newest)
+
+
+def test_a_stream_that_falls_behind_takes_the_newest_frame_and_counts_the_skipped_ones(pair) -> None:
+    from tactile_manip.perception import StreamStats
+    from tactile_manip.perception.reconstruct import Reconstructor
+
+    fields = np.stack([_rod_field(pair, a, seed=i) for i, a in enumerate(np.linspace(-80.0, 80.0, 10))])
+    sensor = _FramesDuringEstimates(fields.astype(np.float32))
+    bilinear, used = load_reconstructor("bilinear"), []
+
+    class SlowerThanTheSensor(Reconstructor):
+        pixel_mm, output_shape = bilinear.pixel_mm, bilinear.output_shape
+
+        def _run(self, fields_ut):
+            used.append(fields_ut[0].copy())
+            sensor.publish(3)  # three frames arrive while this one is processed
+            return bilinear._run(fields_ut)
+
+    stats = StreamStats()
+    estimates = list(TactilePoseEstimator(SlowerThanTheSensor()).stream(sensor, max_estimates=4, stats=stats))
+    assert len(estimates) == 4 and stats.estimates == 4
+    assert stats.last_seq == 9 and stats.skipped_frames == 6  # frames 0, 3, 6, 9 estimated; 1-2, 4-5, 7-8 not
+    np.testing.assert_array_equal(np.stack(used), fields[[0, 3, 6, 9]].astype(np.float32))
+    with pytest.raises(SensorTimeoutError):  # nothing newer than frame 9: a stale frame is never re-used
+        next(TactilePoseEstimator(SlowerThanTheSensor()).stream(sensor))
+
+
+def test_a_slow_estimator_on_the_simulated_sensor_skips_frames_instead_of_queueing_them(sensor) -> None:
+    import time
+
+    from tactile_manip.perception import StreamStats
+    from tactile_manip.perception.reconstruct import Reconstructor
+
+    bilinear, seqs = load_reconstructor("bilinear"), []
+
+    class FortyMilliseconds(Reconstructor):  # five sensor periods at 125 Hz
+        pixel_mm, output_shape = bilinear.pixel_mm, bilinear.output_shape
+
+        def _run(self, fields_ut):
+            time.sleep(0.04)
+            return bilinear._run(fields_ut)
+
+    stats = StreamStats()
+    for est in TactilePoseEstimator(FortyMilliseconds()).stream(sensor, timeout_s=0.5, max_estimates=4, stats=stats):
+        seqs.append(stats.last_seq)
+        assert math.isfinite(est.angle_rad)
+    gaps = np.diff(seqs)
+    assert (gaps >= 1).all() and stats.skipped_frames == int((gaps - 1).sum()) >= 1

@@ -25,7 +25,7 @@ from collections import deque
 import numpy as np
 import pytest
 
-pytest.importorskip("franky", reason='franky-control is not installed: pip install "tactile_manip[franky]"')
+pytest.importorskip("franky", reason='franky-control is not installed: pip install -e ".[franky]"')
 # the simulator runs in its own process: only check it is installed (importing it here would load MuJoCo,
 # whose bindings print reference-leak noise when this test process exits)
 if importlib.util.find_spec("franky_sim") is None:

@@ -173,7 +173,7 @@ def _robot(arm: FrankyArm):
 
 def test_affine_round_trip_and_conventions_match_franky():
     franky = pytest.importorskip("franky", reason='franky-control is not installed: '
-                                 'pip install "tactile_manip[franky]"')
+                                 'pip install -e ".[franky]"')
     rng = np.random.default_rng(0)
     for _ in range(20):
         a_T_b, b_T_c = _random_pose(rng), _random_pose(rng)
@@ -200,7 +200,7 @@ def test_affine_from_matrix_refuses_a_non_rigid_matrix(fake_franky):
 
 def test_missing_franky_is_a_clear_robot_error(monkeypatch):
     monkeypatch.setitem(sys.modules, "franky", None)  # `import franky` now raises ImportError
-    with pytest.raises(FrankyMissingError, match=r'pip install "tactile_manip\[franky\]"') as info:
+    with pytest.raises(FrankyMissingError, match=r'pip install -e "\.\[franky\]"') as info:
         import_franky()
     assert isinstance(info.value, RobotError) and isinstance(info.value, ImportError)
     arm = FrankyArm(FrankyConfig(host=HOST))  # constructing does no I/O and needs no franky

@@ -131,3 +131,37 @@ def test_sigkill_leaves_every_frame_up_to_a_second_before(emulator, tmp_path, wa
     assert len(rec) > 200 and np.all(np.diff(rec.seq) == 1)
     assert rec.t_host_s[-1] >= t_kill - 1.0, f"last frame {t_kill - rec.t_host_s[-1]:.2f} s before the kill"
     assert len(rec.health) >= 1 and rec.header["source"] == e.path
+
+
+def test_a_flipped_byte_in_the_middle_loses_only_that_record(tmp_path):
+    """Resync as the serial decoder does: the frames after a damaged record are read, and the damage counted."""
+    counts = _write(tmp_path / "a.tmrec")
+    data = bytearray((tmp_path / "a.tmrec").read_bytes())
+    clean = read_recording(tmp_path / "a.tmrec")
+    record = 2 + 2 + 8 + 110 + 4
+    # frame 2: the third FR record after the header line (frames 0-4 come before the health and event records)
+    start = data.index(b"FR", data.index(b"\n", len(MAGIC)) + 1)
+    for _ in range(2):
+        start = data.index(b"FR", start + record)
+    for where in (start, start + 20, start + record - 1):  # the tag, the payload, the CRC of frame 2
+        damaged = bytearray(data)
+        damaged[where] ^= 0x10
+        (tmp_path / "d.tmrec").write_bytes(bytes(damaged))
+        rec = read_recording(tmp_path / "d.tmrec")
+        assert len(rec) == 9 and rec.truncated_bytes == 0, where
+        assert rec.seq.tolist() == [s for s in clean.seq.tolist() if s != 65532]
+        assert rec.skipped_bytes == record and rec.damaged_records == 1
+        assert np.array_equal(rec.counts[2:], counts[3:])
+        assert len(rec.health) == 1 and len(rec.events) == 1  # the records after the damage are all there
+    undamaged = read_recording(tmp_path / "a.tmrec")
+    assert undamaged.skipped_bytes == 0 and undamaged.damaged_records == 0
+
+
+def test_replay_reports_skipped_damage_as_crc_errors_and_resync_bytes(tmp_path):
+    _write(tmp_path / "a.tmrec")
+    data = bytearray((tmp_path / "a.tmrec").read_bytes())
+    data[data.index(b"FR", data.index(b"\n", len(MAGIC)) + 1) + 30] ^= 0xFF
+    (tmp_path / "d.tmrec").write_bytes(bytes(data))
+    with ReplaySensor(ReplaySensorConfig(path=str(tmp_path / "d.tmrec"), pace="on_demand")) as sensor:
+        h = sensor.health()
+        assert h.crc_errors == 1 and h.resync_bytes == 2 + 2 + 8 + 110 + 4

@@ -125,3 +125,80 @@ def test_an_empty_port_or_path_is_an_error_not_the_simulated_sensor(argv, tmp_pa
     message = _one_line_error(capsys, argv[0])
     assert "must not be empty" in message
     assert list(tmp_path.iterdir()) == []  # nothing recorded, nothing created
+
+
+# ---------------------------------------------------------------- nothing overwritten, paths as written
+
+
+def test_emulate_link_never_replaces_a_file_it_did_not_create(tmp_path, capsys):
+    mine = tmp_path / "notes.txt"
+    mine.write_text("my notes")
+    assert main(["emulate", "--frames", "1", "--linger-s", "0", "--link", str(mine)]) == 2
+    assert "not an emulator's pty link" in _one_line_error(capsys, "emulate")
+    assert mine.read_text() == "my notes" and not mine.is_symlink()
+    other = tmp_path / "other_link"
+    other.symlink_to(mine)  # a link, but to the user's file, not to a pty
+    assert main(["emulate", "--frames", "1", "--linger-s", "0", "--link", str(other)]) == 2
+    assert other.is_symlink() and other.resolve() == mine
+
+
+def test_emulate_replaces_a_stale_pty_link_and_removes_only_its_own(tmp_path, capsys):
+    import os
+
+    from tactile_manip.sensors.emulator import EmulatorConfig, FirmwareEmulator
+
+    link = tmp_path / "board"
+    link.symlink_to("/dev/pts/987654")  # left behind by a killed emulator
+    with FirmwareEmulator(EmulatorConfig(link=str(link), frames=1)) as e:
+        assert os.readlink(link) == e.device
+        os.unlink(link)
+        link.symlink_to("/dev/pts/987653")  # another emulator took the path meanwhile
+    assert link.is_symlink() and os.readlink(link) == "/dev/pts/987653"  # not ours: left alone
+    with FirmwareEmulator(EmulatorConfig(link=str(link), frames=1)):
+        pass
+    assert not os.path.lexists(link)  # ours: removed at close
+
+
+def _recording(path, counts):
+    from tactile_manip.sensors import RecordingWriter
+    from tactile_manip.sensors.protocol import encode_frame
+
+    chip = {"lsb_xy_ut": 0.2, "lsb_z_ut": 0.323, "saturation_counts": 32767, "rate_hz": 125.0}
+    with RecordingWriter(path, {"source": "test", "chip": chip}) as w:
+        for i, c in enumerate(counts):
+            w.write_frame(10.0 + i * 0.008, encode_frame(c, seq=i, t_mcu_us=8000 * i))
+    return path
+
+
+def test_view_a_recording_that_starts_under_load(tmp_path, capsys):
+    import numpy as np
+
+    rng = np.random.default_rng(0)
+    free = rng.normal(0, 5, (150, 4, 4, 3)).astype(np.int16)
+    load = free + np.linspace(0, 2000, 150).astype(np.int16)[:, None, None, None]  # pressed from the first frame
+    _recording(tmp_path / "free.tmrec", free)
+    _recording(tmp_path / "pressed.tmrec", load)
+    assert main(["view", "--replay", str(tmp_path / "pressed.tmrec"), "--snapshot", str(tmp_path / "a"),
+                 "--seconds", "0.2"]) == 2
+    err = _one_line_error(capsys, "view")
+    assert "baseline refused" in err and "--baseline-from" in err and "--no-baseline" in err
+    assert main(["view", "--replay", str(tmp_path / "pressed.tmrec"), "--snapshot", str(tmp_path / "a"),
+                 "--seconds", "0.2", "--baseline-from", str(tmp_path / "free.tmrec")]) == 0
+    assert f"wrote {tmp_path / 'a.png'} " in capsys.readouterr().out  # the file savefig wrote, .png added
+    assert (tmp_path / "a.png").read_bytes()[:8] == PNG_MAGIC
+    assert main(["view", "--replay", str(tmp_path / "pressed.tmrec"), "--snapshot", str(tmp_path / "a.png"),
+                 "--seconds", "0.2", "--no-baseline"]) == 2
+    assert "exists; pass --force" in _one_line_error(capsys, "view")
+
+
+def test_view_replay_says_what_damage_it_skipped(tmp_path, capsys):
+    import numpy as np
+
+    path = _recording(tmp_path / "r.tmrec", np.zeros((40, 4, 4, 3), np.int16))
+    data = bytearray(path.read_bytes())
+    data[len(data) - 5 * 126 + 40] ^= 0x01  # one flipped bit in the fifth frame from the end
+    path.write_bytes(bytes(data))
+    assert main(["view", "--replay", str(path), "--snapshot", str(tmp_path / "v.png"), "--seconds", "0.2",
+                 "--no-baseline"]) == 0
+    err = capsys.readouterr().err
+    assert "skipped 126 damaged bytes in 1 place(s); replaying the 39 intact frames" in err

@@ -201,13 +201,21 @@ def test_load_missing_file(tmp_path):
 def test_load_random_bytes(tmp_path):
     path = tmp_path / "noise.npz"
     path.write_bytes(np.random.default_rng(0).integers(0, 256, 4096, dtype=np.uint8).tobytes())
-    assert "cannot read as a dataset" in _load_error(path)
+    assert "is not a tactile_manip dataset" in _load_error(path)
+
+
+def test_load_pickled_objects_says_not_a_dataset_without_suggesting_allow_pickle(tmp_path):
+    path = tmp_path / "objects.npz"
+    with path.open("wb") as f:
+        np.save(f, np.array([{"a": 1}], dtype=object))  # an object array: loading it would unpickle
+    msg = _load_error(path)
+    assert "is not a tactile_manip dataset" in msg and "never" in msg and "allow_pickle" not in msg
 
 
 def test_load_truncated_file(saved, tmp_path):
     path = tmp_path / "cut.npz"
     path.write_bytes(saved.read_bytes()[: saved.stat().st_size // 2])
-    assert "cannot read as a dataset" in _load_error(path)
+    assert "is not a tactile_manip dataset" in _load_error(path)
 
 
 def test_load_npz_missing_arrays(saved, tmp_path):
@@ -235,7 +243,7 @@ def test_load_refuses_pickled_arrays(saved, tmp_path):
     """Files are data: an object array (which would need pickle) is refused, not unpickled."""
     objects = np.array([{"a": 1}] * 23, dtype=object)
     msg = _load_error(_rewrite(saved, tmp_path / "p.npz", object_names=objects))
-    assert "cannot read" in msg
+    assert "is not a tactile_manip dataset" in msg and "allow_pickle" not in msg
 
 
 def test_load_plain_npy_file(tmp_path):

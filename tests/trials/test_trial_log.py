@@ -195,9 +195,10 @@ def test_existing_run_is_not_appended_to_without_resume(tmp_path):
     write_run(tmp_path / "run", 2)
     with pytest.raises(TrialLogError, match="already holds run"):
         TrialLog(tmp_path / "run", config=CONFIG, code_version="test").open()
-    with pytest.raises(TrialLogError, match="another config"):
+    with pytest.raises(TrialLogError, match="another config") as info:
         TrialLog(tmp_path / "run", config={**CONFIG, "tolerance_deg": 10.0}, resume=True,
                  code_version="test").open()
+    assert f"tolerance_deg: {CONFIG['tolerance_deg']!r} -> 10.0" in str(info.value)  # names what differs
     assert len(read_trials(tmp_path / "run")) == 2
 
 

@@ -1,0 +1,82 @@
+"""Checks on the files and folders a command will write, made before any long work starts.
+
+A command that would fail on its output only after minutes of simulation, or that would silently replace a
+file it did not create, calls one of these first. Each raises :class:`OutputPathError` (one line at the CLI)
+that names the path and what to do.
+"""
+
+from __future__ import annotations
+
+import tempfile
+from pathlib import Path
+
+from tactile_manip.errors import TactileManipError
+
+
+class OutputPathError(TactileManipError, OSError):
+    """An output path cannot be written, or holds something that must not be replaced without ``--force``."""
+
+
+def check_output_file(path: str | Path, *, force: bool = False) -> Path:
+    """Return ``path`` after checking that a file can be written there.
+
+    Raises:
+        OutputPathError: ``path`` is a directory; it exists and ``force`` is False; its nearest existing parent
+            is not a directory; or that parent cannot be written into (permissions, a read-only file system).
+    """
+    path = Path(path)
+    if path.is_dir():
+        raise OutputPathError(f"{path} is a directory; give a file name")
+    if (path.exists() or path.is_symlink()) and not force:
+        raise OutputPathError(f"{path} exists; pass --force to overwrite it")
+    check_writable_parent(path)
+    return path
+
+
+def check_output_dir(path: str | Path) -> Path:
+    """Return ``path`` after checking that it is, or can be created as, a writable directory.
+
+    Raises:
+        OutputPathError: ``path`` exists and is not a directory, or it (or its nearest existing parent) cannot
+            be written into.
+    """
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise OutputPathError(f"{path} exists and is not a directory; give a folder")
+    if path.is_dir():
+        _probe(path, path)
+    else:
+        check_writable_parent(path)
+    return path
+
+
+def check_writable_parent(path: str | Path) -> Path:
+    """The nearest existing ancestor of ``path``, after checking that files can be created in it."""
+    path = Path(path)
+    ancestor = path.absolute().parent
+    while not ancestor.exists() and ancestor != ancestor.parent:
+        ancestor = ancestor.parent
+    if not ancestor.is_dir():
+        raise OutputPathError(f"cannot write {path}: {ancestor} is not a directory")
+    _probe(ancestor, path)
+    return ancestor
+
+
+def _probe(folder: Path, target: Path) -> None:
+    # creating a file is the only check that also holds for root and for read-only mounts (os.access is not)
+    try:
+        with tempfile.NamedTemporaryFile(dir=folder, prefix=".tactile_manip-probe-"):
+            pass
+    except OSError as e:
+        raise OutputPathError(f"cannot write {target}: cannot create files in {folder} ({e.strerror})") from e
+
+
+def unique_folder(path: str | Path) -> Path:
+    """``path`` when nothing exists there, else the first free ``path-2``, ``path-3``, ... (timestamped run
+    folders made within the same second stay apart)."""
+    path = Path(path)
+    candidate, n = path, 1
+    while candidate.exists() or candidate.is_symlink():
+        n += 1
+        candidate = path.with_name(f"{path.name}-{n}")
+    return candidate

@@ -1,0 +1,124 @@
+"""train / export / evaluate never replace a run or a model unasked, and refuse foreign inputs in one line."""
+
+import dataclasses
+import zipfile
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch", reason="training tests need torch: pip install torch==2.13.0")
+
+from tactile_manip.cli import main
+from tactile_manip.data import load_dataset, save_dataset
+
+TINY = 'preset = "small"\nepochs = 1\nbatch_size = 8\nlr = 3e-3\nthreads = 1\n'
+
+
+@pytest.fixture(scope="module")
+def run(tiny_data, tmp_path_factory):
+    """One tiny training run (1 epoch) and its exported model, shared by the tests below."""
+    tmp = tmp_path_factory.mktemp("refusals")
+    (tmp / "tiny.toml").write_text(TINY)
+    assert main(["train", "--config", str(tmp / "tiny.toml"), "--data", str(tiny_data), "--out", str(tmp / "run")]) == 0
+    assert main(["export", "--checkpoint", str(tmp / "run" / "best.pt"), "--out", str(tmp / "m.onnx")]) == 0
+    return tmp
+
+
+def _one_line(capsys, command: str) -> str:
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and err.startswith(f"tactile-manip {command}: error: "), err
+    assert "Traceback" not in err
+    return err
+
+
+def test_train_refuses_an_existing_run_without_resume_or_force(run, tiny_data, capsys):
+    before = (run / "run" / "best.pt").read_bytes()
+    capsys.readouterr()
+    assert main(["train", "--config", str(run / "tiny.toml"), "--data", str(tiny_data), "--out", str(run / "run")]) == 2
+    err = _one_line(capsys, "train")
+    assert "checkpoint.pt" in err and "--resume" in err and "--force" in err
+    assert (run / "run" / "best.pt").read_bytes() == before
+
+
+def test_resume_with_another_architecture_names_the_differing_fields(run, tiny_data, capsys):
+    other = run / "other.toml"
+    other.write_text(TINY.replace('"small"', '"compact"'))
+    capsys.readouterr()
+    assert main(["train", "--config", str(other), "--data", str(tiny_data), "--out", str(run / "run"),
+                 "--resume"]) == 2
+    err = _one_line(capsys, "train")
+    assert "another architecture" in err and "latent" in err and "->" in err
+
+
+def test_export_refuses_to_replace_a_model_without_force(run, capsys):
+    model = run / "m.onnx"
+    before = model.read_bytes()
+    capsys.readouterr()
+    assert main(["export", "--checkpoint", str(run / "run" / "best.pt"), "--out", str(model)]) == 2
+    assert "exists; pass --force" in _one_line(capsys, "export")
+    assert model.read_bytes() == before
+    copy = run / "copy.onnx"
+    copy.write_bytes(b"an older model")
+    assert main(["export", "--checkpoint", str(run / "run" / "best.pt"), "--out", str(copy), "--force"]) == 0
+    assert copy.read_bytes() != b"an older model" and not (run / "copy.onnx.partial").exists()
+
+
+def _torch_dict(path):
+    torch.save({"weights": torch.zeros(3)}, path)  # a torch file, but not our checkpoint
+    return path
+
+
+def _zip(path):
+    with zipfile.ZipFile(path, "w") as z:
+        z.writestr("hello.txt", "not a checkpoint")
+    return path
+
+
+def _truncated(path, run):
+    data = (run / "run" / "best.pt").read_bytes()
+    path.write_bytes(data[: len(data) // 2])
+    return path
+
+
+@pytest.mark.parametrize("kind,expected", [("truncated", "not a readable torch checkpoint"),
+                                           ("foreign", "not a tactile_manip training checkpoint"),
+                                           ("zip", "not a readable torch checkpoint"),
+                                           ("text", "not a readable torch checkpoint")])
+def test_export_of_a_file_that_is_not_our_checkpoint_is_one_line(kind, expected, run, tmp_path, capsys):
+    path = tmp_path / f"{kind}.pt"
+    {"truncated": lambda: _truncated(path, run), "foreign": lambda: _torch_dict(path), "zip": lambda: _zip(path),
+     "text": lambda: path.write_text("hello")}[kind]()
+    assert main(["export", "--checkpoint", str(path), "--out", str(tmp_path / "x.onnx")]) == 2
+    assert expected in _one_line(capsys, "export")
+    assert not (tmp_path / "x.onnx").exists() and not (tmp_path / "x.onnx.partial").exists()
+
+
+def test_evaluate_a_dataset_without_a_test_split_is_one_line(tiny_data, tmp_path, capsys):
+    data = load_dataset(tiny_data)
+    no_test = dataclasses.replace(data, split=np.where(data.split == "test", "val", data.split))
+    path = save_dataset(tmp_path / "no_test.npz", no_test)
+    assert main(["evaluate", "--data", str(path), "--out", str(tmp_path / "eval")]) == 2
+    err = _one_line(capsys, "evaluate")
+    assert "has no test split" in err and "train, val" in err
+    assert not (tmp_path / "eval").exists()
+
+
+def test_inception_onnx_that_is_another_model_is_one_line(run, tiny_data, tmp_path, capsys):
+    capsys.readouterr()
+    assert main(["evaluate", "--data", str(tiny_data), "--out", str(tmp_path / "eval"),
+                 "--inception-onnx", str(run / "m.onnx")]) == 2  # a SuperMag model, not an Inception network
+    assert "not an Inception-v3 feature network" in _one_line(capsys, "evaluate")
+    (tmp_path / "junk.onnx").write_bytes(b"\x00" * 64)
+    assert main(["evaluate", "--data", str(tiny_data), "--out", str(tmp_path / "eval2"),
+                 "--inception-onnx", str(tmp_path / "junk.onnx")]) == 2
+    assert "not a readable ONNX model" in _one_line(capsys, "evaluate")
+
+
+def test_evaluate_refuses_to_replace_an_earlier_report_without_force(tiny_data, tmp_path, capsys):
+    out = tmp_path / "eval"
+    out.mkdir()
+    (out / "results.json").write_text("{}")
+    assert main(["evaluate", "--data", str(tiny_data), "--out", str(out)]) == 2
+    assert "results.json" in _one_line(capsys, "evaluate") and (out / "results.json").read_text() == "{}"
+    assert main(["evaluate", "--data", str(tiny_data), "--out", str(out), "--force"]) == 0
+    assert (out / "results.json").read_text() != "{}"

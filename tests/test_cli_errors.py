@@ -1,0 +1,168 @@
+"""Every subcommand, on the three path faults a new user meets first, answers in one line and exits with 2.
+
+For each command in ``cli.COMMANDS`` (in-process, so the whole file runs in seconds) and each fault:
+
+- ``missing``: an input path that does not exist;
+- ``readonly``: an output in a location where nothing can be created. As a normal user that is a folder with
+  mode 0o500. The tests often run as root, which writes through 0o500, so there the location is a folder
+  under ``/proc`` (a kernel file system that refuses new files even to root). Either way the test proves the
+  command checks that it can create its output and says so in one line; it does not prove anything about
+  disks that fill up mid-write;
+- ``dir``: a directory where a file is expected (or a file where a folder is expected, for folder outputs).
+
+Each must give exit status 2, exactly one line on stderr starting ``tactile-manip CMD: error:``, and no
+traceback anywhere. Commands or faults without such a path are listed in ``NO_PATH`` with the reason.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from tactile_manip.cli import COMMANDS, main
+
+ROOT = Path(__file__).resolve().parents[1]
+SCENE = str(ROOT / "configs/scenes/reorient_sim.toml")
+DATASET_CONFIG = str(ROOT / "configs/dataset/supermag.toml")
+TRAIN_CONFIG = str(ROOT / "configs/train/compact.toml")
+
+
+def _readonly_dir(tmp_path: Path) -> Path:
+    """A folder in which no file can be created (see the module docstring for root)."""
+    folder = tmp_path / "readonly"
+    folder.mkdir()
+    folder.chmod(0o500)
+    try:
+        (folder / "probe").write_bytes(b"")
+    except PermissionError:
+        return folder
+    (folder / "probe").unlink()  # root: permissions do not stop it; /proc refuses new files to everyone
+    return Path("/proc") / f"tactile_manip_readonly_{os.getpid()}"
+
+
+@pytest.fixture
+def paths(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "folder").mkdir()
+    (tmp_path / "file").write_text("not what anyone expects\n")
+    ro = _readonly_dir(tmp_path)
+    yield {"missing": str(tmp_path / "missing.bin"), "dir": str(tmp_path / "folder"), "file": str(tmp_path / "file"),
+           "ro": str(ro), "tmp": tmp_path}
+    if ro.parent == tmp_path:
+        ro.chmod(0o700)
+
+
+# command -> fault -> argv (after the command name); P is the paths fixture
+CASES = {
+    "simulate": {"missing": lambda p: ["--config", p["missing"], "--out", f"{p['tmp']}/d.npz"],
+                 "readonly": lambda p: ["--config", DATASET_CONFIG, "--out", f"{p['ro']}/d.npz"],
+                 "dir": lambda p: ["--config", p["dir"], "--out", f"{p['tmp']}/d.npz"]},
+    "import": {"missing": lambda p: ["--readings", p["missing"], "--images", p["missing"], "--out", f"{p['tmp']}/d.npz"],
+               "readonly": lambda p: ["--readings", p["file"], "--images", p["file"], "--out", f"{p['ro']}/d.npz"],
+               "dir": lambda p: ["--readings", p["dir"], "--images", p["dir"], "--out", f"{p['tmp']}/d.npz"]},
+    "show": {"missing": lambda p: ["--data", p["missing"], "--out", f"{p['tmp']}/s.png"],
+             "readonly": lambda p: ["--object", "letter_r", "--out", f"{p['ro']}/s.png"],
+             "dir": lambda p: ["--data", p["dir"], "--out", f"{p['tmp']}/s.png"]},
+    "train": {"missing": lambda p: ["--config", p["missing"], "--data", p["file"], "--out", f"{p['tmp']}/run"],
+              "readonly": lambda p: ["--config", TRAIN_CONFIG, "--data", p["file"], "--out", f"{p['ro']}/run"],
+              "dir": lambda p: ["--config", TRAIN_CONFIG, "--data", p["dir"], "--out", f"{p['tmp']}/run"]},
+    "export": {"missing": lambda p: ["--checkpoint", p["missing"], "--out", f"{p['tmp']}/m.onnx"],
+               "readonly": lambda p: ["--checkpoint", p["file"], "--out", f"{p['ro']}/m.onnx"],
+               "dir": lambda p: ["--checkpoint", p["dir"], "--out", f"{p['tmp']}/m.onnx"]},
+    "evaluate": {"missing": lambda p: ["--data", p["missing"], "--out", f"{p['tmp']}/eval"],
+                 "readonly": lambda p: ["--data", p["file"], "--out", f"{p['ro']}/eval"],
+                 "dir": lambda p: ["--data", p["dir"], "--out", f"{p['tmp']}/eval"]},
+    "emulate": {"readonly": lambda p: ["--link", f"{p['ro']}/board", "--frames", "1"],
+                "dir": lambda p: ["--link", p["dir"], "--frames", "1"]},
+    "record": {"missing": lambda p: ["--port", p["missing"], "--out", f"{p['tmp']}/r.tmrec"],
+               "readonly": lambda p: ["--sim", "--out", f"{p['ro']}/r.tmrec"],
+               "dir": lambda p: ["--sim", "--out", p["dir"]]},
+    "view": {"missing": lambda p: ["--replay", p["missing"], "--snapshot", f"{p['tmp']}/v.png"],
+             "readonly": lambda p: ["--replay", p["file"], "--snapshot", f"{p['ro']}/v.png"],
+             "dir": lambda p: ["--replay", p["dir"], "--snapshot", f"{p['tmp']}/v.png"]},
+    "trials": {"missing": lambda p: ["--config", p["missing"], "--quiet"],
+               "readonly": lambda p: ["--config", SCENE, "--out", f"{p['ro']}/run", "--quiet"],
+               "dir": lambda p: ["--config", p["dir"], "--quiet"]},
+    "score": {"missing": lambda p: [p["missing"]],
+              "readonly": lambda p: [p["dir"], "--out", f"{p['ro']}/scores"],
+              "dir": lambda p: [p["dir"], "--out", p["file"]]},  # a file where the report folder goes
+    "collect": {"missing": lambda p: ["run", "--sim", "--calibration", p["missing"], "--out", f"{p['tmp']}/c.npz"],
+                "readonly": lambda p: ["calibrate", "--sim", "--ball-radius-mm", "4", "--out", f"{p['ro']}/cal.npz"],
+                "dir": lambda p: ["finalize", p["dir"], "--out", f"{p['tmp']}/c.npz"]},
+    "bench": {"missing": lambda p: ["--out", f"{p['tmp']}/bench", "--scene", p["missing"]],
+              "readonly": lambda p: ["--out", f"{p['ro']}/bench"],
+              "dir": lambda p: ["--out", p["file"]]},  # a file where the report folder goes
+    "demo": {"readonly": lambda p: ["--out", f"{p['ro']}/demo"],
+             "dir": lambda p: ["--out", p["file"]]},  # a file where the PNG folder goes
+}
+
+NO_PATH = {
+    ("params", "missing"): "reads no file", ("params", "readonly"): "writes only to stdout",
+    ("params", "dir"): "takes no path",
+    ("find-port", "missing"): "reads no file", ("find-port", "readonly"): "writes only to stdout",
+    ("find-port", "dir"): "takes no path",
+    ("emulate", "missing"): "reads no input file (presses are specs, not paths)",
+    ("demo", "missing"): "reads no input file",
+}
+
+FAULTS = ("missing", "readonly", "dir")
+
+
+def test_every_command_and_fault_is_covered_or_excused():
+    for command in COMMANDS:
+        for fault in FAULTS:
+            assert (fault in CASES.get(command, {})) != ((command, fault) in NO_PATH), (command, fault)
+
+
+@pytest.mark.parametrize("command,fault", [(c, f) for c in COMMANDS for f in FAULTS if f in CASES.get(c, {})])
+def test_a_path_fault_is_one_line_and_status_2(command, fault, paths, capsys):
+    before = sorted(p.name for p in paths["tmp"].iterdir())
+    rc = main([command, *CASES[command][fault](paths)])
+    out, err = capsys.readouterr()
+    assert rc == 2, (out, err)
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"tactile-manip {command}: error: "), err
+    assert "Traceback" not in out + err
+    assert sorted(p.name for p in paths["tmp"].iterdir()) == before  # nothing was created on the way out
+
+
+def test_a_closed_stdout_exits_quietly():
+    proc = subprocess.Popen([sys.executable, "-m", "tactile_manip.cli", "params", "--markdown"], cwd=ROOT,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, env={**os.environ, "PYTHONPATH": str(ROOT)})
+    proc.stdout.close()  # the reader is gone before the first line, like `| head -0`
+    err = proc.stderr.read().decode()
+    assert proc.wait(timeout=60) == 141
+    assert err == ""
+
+
+@pytest.mark.parametrize("module,argv,install", [
+    ("serial", ["record", "--port", "/dev/ttyUSB9", "--out", "r.tmrec"], 'pip install -e ".[serial]"'),
+    ("serial", ["find-port"], 'pip install -e ".[serial]"'),
+    ("torch", ["train", "--config", TRAIN_CONFIG, "--data", "d.npz", "--out", "run"],
+     'pip install torch==2.13.0 && pip install -e ".[train]"'),
+    ("torch", ["export", "--checkpoint", "best.pt", "--out", "m.onnx"],
+     'pip install torch==2.13.0 && pip install -e ".[train]"'),
+    ("onnxruntime", ["evaluate", "--data", "d.npz", "--model", "M=m.onnx", "--out", "eval"],
+     'pip install -e ".[onnx]"'),
+])
+def test_a_missing_extra_names_its_install_line_before_any_work(module, argv, install, tmp_path, monkeypatch,
+                                                                 capsys):
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setitem(sys.modules, module, None)  # `import module` now raises ImportError
+    if module == "serial":
+        monkeypatch.setitem(sys.modules, "serial.tools.list_ports", None)
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and err.startswith(f"tactile-manip {argv[0]}: error: ") and install in err
+    assert "Traceback" not in err and list(tmp_path.iterdir()) == []  # nothing written before the check
+
+
+def test_an_import_error_of_our_own_code_keeps_its_traceback(monkeypatch):
+    """Only optional extras become one line: a broken module of the package is a bug."""
+    monkeypatch.setitem(sys.modules, "tactile_manip.sim.params", None)
+    with pytest.raises(ImportError):
+        main(["params"])

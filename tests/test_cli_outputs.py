@@ -1,0 +1,118 @@
+"""Outputs are never overwritten unasked, the path printed is the path written, and configs fail in one line.
+
+Each case here is one of issue 14's: a second ``simulate --out x`` (which writes ``x.npz``), ``show`` to a
+bare name, report folders of ``demo`` / ``score`` / ``bench``, a config that is a directory or not UTF-8,
+unknown shape arguments in a dataset or scene config, and a bad scene that must not leave a run folder.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import pytest
+
+from tactile_manip.cli import main
+from tactile_manip.errors import ConfigError
+from tactile_manip.outputs import unique_folder
+from tactile_manip.sim.dataset import load_dataset_config
+from tactile_manip.trials.log import run_folder
+from tactile_manip.trials.scene import load_scene
+
+ROOT = Path(__file__).resolve().parents[1]
+DATASET_CONFIG = ROOT / "configs/dataset/supermag.toml"
+SCENE = ROOT / "configs/scenes/reorient_sim.toml"
+
+
+def _one_line(capsys, command: str) -> str:
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and err.startswith(f"tactile-manip {command}: error: "), err
+    assert "Traceback" not in err
+    return err
+
+
+def test_simulate_checks_the_file_it_writes_and_refuses_it_the_second_time(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(ROOT)
+    args = ["simulate", "--config", str(DATASET_CONFIG), "--scale", "0.001", "--workers", "1",
+            "--out", str(tmp_path / "x")]
+    assert main(args) == 0
+    written = tmp_path / "x.npz"
+    assert f"wrote {written} " in capsys.readouterr().out
+    before = written.read_bytes()
+    t0 = time.perf_counter()
+    assert main(args) == 2  # `x` does not exist, but `x.npz`, the file it would write, does
+    assert f"{written} exists; pass --force" in _one_line(capsys, "simulate")
+    assert written.read_bytes() == before
+    assert time.perf_counter() - t0 < 5.0  # refused before simulating (the run above took longer)
+
+
+def test_show_prints_the_path_it_wrote_and_refuses_to_replace_it(tmp_path, capsys):
+    assert main(["show", "--object", "cylinder", "--out", str(tmp_path / "press")]) == 0
+    assert capsys.readouterr().out.strip() == f"wrote {tmp_path / 'press.png'}"
+    assert (tmp_path / "press.png").read_bytes()[:4] == b"\x89PNG"
+    assert main(["show", "--object", "cylinder", "--out", str(tmp_path / "press.png")]) == 2
+    assert "exists; pass --force" in _one_line(capsys, "show")
+    assert main(["show", "--object", "cylinder", "--out", str(tmp_path / "press.png"), "--force"]) == 0
+
+
+@pytest.mark.parametrize("argv,existing", [
+    (["demo", "--out", "{d}"], "letter_r.png"),
+    (["score", "{d}"], "summary_5deg.md"),
+    (["bench", "--out", "{d}", "--quick"], "report.json"),
+])
+def test_report_folders_are_not_overwritten_without_force(argv, existing, tmp_path, capsys):
+    (tmp_path / existing).write_text("an earlier run")
+    assert main([a.format(d=tmp_path) for a in argv]) == 2
+    err = _one_line(capsys, argv[0])
+    assert existing in err and "--force" in err
+    assert (tmp_path / existing).read_text() == "an earlier run"
+
+
+def test_a_config_that_is_a_directory_or_not_utf8_is_one_line_naming_it(tmp_path):
+    with pytest.raises(ConfigError, match=f"config {tmp_path} is a directory"):
+        load_dataset_config(tmp_path)
+    latin1 = tmp_path / "latin1.toml"
+    latin1.write_bytes("name = \"Müller\"\n".encode("latin-1"))
+    with pytest.raises(ConfigError, match=r"latin1.toml: not a text \(UTF-8\) TOML file"):
+        load_scene(latin1)
+
+
+def test_unknown_shape_arguments_are_named_with_the_accepted_ones(tmp_path):
+    text = DATASET_CONFIG.read_text().replace('name = "allen_key"\ncount = 2025',
+                                              'name = "allen_key"\ncount = 2025\nkwargs = { bogus = 1 }', 1)
+    (tmp_path / "d.toml").write_text(text)
+    with pytest.raises(ConfigError, match=r"allen_key: unknown argument\(s\) objects.kwargs.bogus; allen_key "
+                                          r"accepts across_flats_mm, "):
+        load_dataset_config(tmp_path / "d.toml")
+    scene = SCENE.read_text().replace("kwargs = { size_mm = 3.0 }", "kwargs = { radius_mm = 3.0, bogus = 1 }", 1)
+    (tmp_path / "s.toml").write_text(scene)
+    with pytest.raises(ConfigError, match=r"cylinder: unknown argument\(s\) kwargs.bogus, kwargs.radius_mm; "
+                                          r"cylinder accepts size_mm, length_mm"):
+        load_scene(tmp_path / "s.toml")
+
+
+@pytest.mark.parametrize("old,new,named", [
+    ('reconstructor = "models/supermag_compact.onnx"', 'reconstructor = "models/missing.onnx"', "missing.onnx"),
+    ("seed = 0                      # chip noise", 'port = "/dev/ttyUSB0"\n# chip noise', "simulated sensor"),
+])
+def test_a_bad_scene_leaves_no_run_folder_behind(old, new, named, tmp_path, monkeypatch, capsys):
+    """Every part the scene names is built before the run folder: a late error would leave a folder that
+    blocks the next run with the same --out."""
+    monkeypatch.chdir(ROOT)  # the scene's model paths are relative to the repository root
+    scene = SCENE.read_text().replace(old, new)
+    assert scene != SCENE.read_text()
+    (tmp_path / "s.toml").write_text(scene)
+    assert main(["trials", "--config", str(tmp_path / "s.toml"), "--out", str(tmp_path / "run"), "--quiet"]) == 2
+    assert named in _one_line(capsys, "trials")
+    assert not (tmp_path / "run").exists()
+
+
+def test_run_folders_started_in_the_same_second_stay_apart(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(time, "strftime", lambda *_: "20260101T000000Z")
+    first = run_folder("scene", None)
+    first.mkdir(parents=True)
+    second = run_folder("scene", None)
+    assert second != first and second.name == "scene-20260101T000000Z-2"
+    second.mkdir()
+    assert unique_folder(first).name == "scene-20260101T000000Z-3"
