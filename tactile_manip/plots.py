@@ -106,27 +106,39 @@ def plot_depth(ax, depth_mm: np.ndarray, *, pixel_mm: float = 0.1, title: str = 
     _colorbar(ax, im, "depth [mm]")
 
 
+MAX_ANNOTATED_CELLS = 64   # heat maps of larger grids (a 41x72 capacitive pad) get no per-cell numbers
+MAX_CHANNEL_PANELS = 4     # scalar readings with more channels show their first four
+
+
 def sample_figure(field_ut: np.ndarray, depth_mm: np.ndarray | None, *, title: str = "",
-                  pixel_mm: float = 0.1, path: str | Path | None = None):
-    """One figure: depth image, the field as arrows, and one heat map per axis. Saved when ``path``."""
+                  pixel_mm: float | None = 0.1, path: str | Path | None = None, channels: Any = None,
+                  image_unit: str = "mm", image_range: tuple[float, float] | None = None):
+    """One figure of a sample, saved when ``path``: the image, then for a magnetic reading (R, C, 3) the field
+    as arrows and one heat map per axis, for any other reading one heat map per channel.
+
+    ``channels`` is the dataset's :class:`~tactile_manip.data.ChannelSpec` (None: a magnetic field in uT);
+    ``image_unit`` / ``image_range`` label and scale the image (None: its own maximum, from 0).
+    """
     plt = _pyplot()
     f = np.asarray(field_ut, dtype=np.float64)
-    fig, axes = plt.subplots(1, 5, figsize=(22, 4.2), constrained_layout=True)
+    if f.ndim == 2:
+        f = f[..., None]
+    magnetic = channels is None or (channels.kind == "magnetic_vector" and f.shape[-1] == 3)
+    names = list(AXES) if channels is None else list(channels.names)
+    unit = "uT" if channels is None else channels.unit
+    shown = list(range(3)) if magnetic else list(range(min(f.shape[-1], MAX_CHANNEL_PANELS)))
+    panels = 1 + int(magnetic) + len(shown)
+    fig, axes = plt.subplots(1, panels, figsize=(4.4 * panels, 4.2), constrained_layout=True, squeeze=False)
+    axes = axes[0]
     if depth_mm is not None:
-        plot_depth(axes[0], depth_mm, pixel_mm=pixel_mm, title="VBTS depth")
+        _plot_image(axes[0], depth_mm, pixel_mm=pixel_mm, unit=image_unit, value_range=image_range)
     else:
         axes[0].set_axis_off()
-    plot_field(axes[1], f)
-    for ax, i in zip(axes[2:], range(3)):
-        lim = max(float(np.abs(f[..., i]).max()), 1e-9)
-        im = ax.imshow(f[..., i], cmap="RdBu_r", vmin=-lim, vmax=lim)
-        annotate_cells(ax, im, f[..., i])
-        ax.set_title(f"B_{AXES[i]} per chip (row 0 = +y)")
-        ax.set_xlabel("column")
-        ax.set_ylabel("row")
-        ax.set_xticks(range(4))
-        ax.set_yticks(range(4))
-        _colorbar(ax, im, f"B_{AXES[i]} [uT]")
+    if magnetic:
+        plot_field(axes[1], f)
+    for ax, i in zip(axes[1 + int(magnetic):], shown):
+        _channel_map(ax, f[..., i], label=(f"B_{names[i]}" if magnetic else names[i]), unit=unit,
+                     what="chip" if magnetic else "taxel", symmetric=magnetic)
     if title:
         fig.suptitle(title)
     if path is not None:
@@ -135,6 +147,46 @@ def sample_figure(field_ut: np.ndarray, depth_mm: np.ndarray | None, *, title: s
         fig.savefig(path, dpi=90)
         plt.close(fig)
     return fig
+
+
+def _plot_image(ax, image: np.ndarray, *, pixel_mm: float | None, unit: str,
+                value_range: tuple[float, float] | None) -> None:
+    """The sample's image: depth with the pad extent in mm, any other unit in pixels when the size is unknown."""
+    if unit == "mm" and pixel_mm:
+        plot_depth(ax, image, pixel_mm=pixel_mm, title="VBTS depth", vmax_mm=value_range[1] if value_range else None)
+        return
+    img = np.asarray(image, dtype=np.float64)
+    lo, hi = value_range if value_range else (0.0, max(float(img.max()), 1e-9))
+    if pixel_mm:
+        hx, hy = img.shape[1] * pixel_mm / 2, img.shape[0] * pixel_mm / 2
+        im = ax.imshow(img, cmap="viridis", vmin=lo, vmax=hi, extent=(-hx, hx, -hy, hy))
+        ax.set_xlabel("x [mm]")
+        ax.set_ylabel("y [mm]")
+    else:
+        im = ax.imshow(img, cmap="viridis", vmin=lo, vmax=hi)
+        ax.set_xlabel("column [px]")
+        ax.set_ylabel("row [px]")
+    ax.set_title("image")
+    _colorbar(ax, im, unit)
+
+
+def _channel_map(ax, values: np.ndarray, *, label: str, unit: str, what: str, symmetric: bool) -> None:
+    """One channel of a reading (R, C) as a heat map, with its numbers on small grids: symmetric about 0 for a
+    baseline-subtracted field, over the values' own range for other channels (a 100 pF pad, raw counts)."""
+    if symmetric:
+        lim = max(float(np.abs(values).max()), 1e-9)
+        im = ax.imshow(values, cmap="RdBu_r", vmin=-lim, vmax=lim)
+    else:
+        lo, hi = float(values.min()), float(values.max())
+        im = ax.imshow(values, cmap="magma", vmin=lo, vmax=max(hi, lo + 1e-9))
+    if values.size <= MAX_ANNOTATED_CELLS:
+        annotate_cells(ax, im, values)
+        ax.set_xticks(range(values.shape[1]))
+        ax.set_yticks(range(values.shape[0]))
+    ax.set_title(f"{label} per {what} (row 0 = +y)")
+    ax.set_xlabel("column")
+    ax.set_ylabel("row")
+    _colorbar(ax, im, f"{label} [{unit}]")
 
 
 def figure_path(path: str | Path) -> Path:

@@ -82,3 +82,25 @@ def test_plot_field_returns_what_a_live_view_updates() -> None:
                                          (250.0, 200.0), (0.03, 0.02), (9999.0, 5000.0)])
 def test_nice_step(value, step) -> None:
     assert nice_step(value) == pytest.approx(step)
+
+
+def test_a_scalar_reading_of_any_grid_gets_one_heat_map_per_channel():
+    from tactile_manip.data import ChannelSpec
+    from tactile_manip.plots import sample_figure
+
+    rng = np.random.default_rng(0)
+    cap = ChannelSpec(names=("c0",), kind="scalar", unit="pF")
+    fig = sample_figure(rng.normal(0, 1, (41, 72, 1)), rng.uniform(0, 1, (82, 144)), channels=cap,
+                        image_unit="fraction", pixel_mm=None, image_range=(0.0, 1.0))
+    panels = {ax.get_title(): ax for ax in fig.axes}
+    assert set(panels) >= {"image", "c0 per taxel (row 0 = +y)"}
+    assert panels["image"].images[0].get_clim() == (0.0, 1.0)
+    assert not panels["c0 per taxel (row 0 = +y)"].texts  # 2952 cells: no numbers
+    xela = ChannelSpec(names=("x", "y", "z"), kind="scalar", unit="counts")
+    fig = sample_figure(rng.normal(0, 1, (4, 4, 3)), rng.uniform(0, 255, (40, 40)), channels=xela,
+                        image_unit="grey", pixel_mm=None, image_range=(0.0, 255.0))
+    titles = [ax.get_title() for ax in fig.axes]
+    from matplotlib.quiver import Quiver
+
+    arrows = [c for ax in fig.axes for c in ax.collections if isinstance(c, Quiver)]
+    assert "x per taxel (row 0 = +y)" in titles and not arrows  # scalar channels: no field arrows

@@ -26,10 +26,10 @@ def run(args: argparse.Namespace) -> int:
 
     out = check_output_file(figure_path(args.out), force=args.force)
     if args.data is not None:  # not truthiness: an empty --data is an error, not a simulated press
-        field, depth, title, note = _from_dataset(args)
+        field, depth, title, note, how = _from_dataset(args)
     else:
-        field, depth, title, note = _from_simulation(args)
-    sample_figure(field, depth, title=title, path=out)
+        (field, depth, title, note), how = _from_simulation(args), {}
+    sample_figure(field, depth, title=title, path=out, **how)
     if note:
         print(f"note: {note}")
     print(f"wrote {out}")
@@ -50,7 +50,9 @@ def _from_dataset(args: argparse.Namespace):
         title += f" at ({x:.1f}, {y:.1f}) mm, yaw {math.degrees(yaw):.0f} deg, {data.extra('force_n')[i]:.1f} N"
     empty = data.has("contact") and not data.extra("contact")[i]
     note = f"sample {i} is an empty press: the object does not touch the pad" if empty else ""
-    return data.field_ut[i], data.depth_mm([i])[0], title, note
+    how = {"channels": data.channels, "image_unit": data.image.unit, "pixel_mm": data.image.pixel_mm,
+           "image_range": (data.image.value_min, data.image.value_max)}
+    return data.readings[i], data.image_values([i])[0], title, note, how
 
 
 def _from_simulation(args: argparse.Namespace):

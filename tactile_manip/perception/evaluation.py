@@ -26,6 +26,7 @@ from tactile_manip.perception.reconstruct import ModelFileError, Reconstructor
 from tactile_manip.data import PairedDataset
 
 ELONGATED = ("cylinder", "hex_bar", "square_bar")
+FORCE_BANDS_N = (2.0, 5.0, 8.0, 11.0, 15.0)   # edges of the force bands reported when a test split spans them
 
 
 @dataclass
@@ -40,12 +41,13 @@ class MethodResult:
     angle_error_deg: dict[str, float]
     per_object: dict[str, dict[str, float]] = field(default_factory=dict)
     seconds_per_image: float = 0.0
+    per_group: dict[str, dict[str, dict[str, float]]] = field(default_factory=dict)  # force bands, sensor draws
 
     def row(self) -> dict[str, Any]:
         return {"method": self.name, "psnr_db_mean": self.psnr_db[0], "psnr_db_std": self.psnr_db[1],
                 "ssim_mean": self.ssim[0], "ssim_std": self.ssim[1], "fd_dct": self.fd_dct, "fid": self.fid,
                 "angle_error_deg": self.angle_error_deg, "per_object": self.per_object,
-                "seconds_per_image": self.seconds_per_image}
+                "per_group": self.per_group, "seconds_per_image": self.seconds_per_image}
 
 
 def evaluate_methods(data: PairedDataset, methods: dict[str, Reconstructor], *, split: str = "test",
@@ -56,6 +58,7 @@ def evaluate_methods(data: PairedDataset, methods: dict[str, Reconstructor], *, 
     names = data.objects(idx)
     fid_features = _inception_features(inception_onnx) if inception_onnx else None
     truth_feats = fid_features(truth) if fid_features else None
+    groups = sample_groups(data, idx)
     results, predictions = [], {}
     for label, method in methods.items():
         t0 = time.perf_counter()
@@ -67,31 +70,66 @@ def evaluate_methods(data: PairedDataset, methods: dict[str, Reconstructor], *, 
         per_object = {str(n): {"psnr_db": float(np.mean(p[names == n])), "ssim": float(np.mean(s[names == n])),
                                "count": int(np.sum(names == n))} for n in np.unique(names)}
         fid = metrics.frechet_distance(fid_features(pred), truth_feats) if fid_features else None
+        errors = rod_angle_errors(data, idx, pred)
+        per_group = {g: {band: _summary(p[m], s[m], errors[m]) for band, m in bands.items()}
+                     for g, bands in groups.items()}
         results.append(MethodResult(label, (float(p.mean()), float(p.std())), (float(s.mean()), float(s.std())),
-                                    metrics.fd_dct(pred, truth), fid, _angle_errors(data, idx, pred), per_object,
-                                    seconds))
+                                    metrics.fd_dct(pred, truth), fid, _angle_summary(errors), per_object,
+                                    seconds, per_group))
     return results, predictions
 
 
-def _angle_errors(data: PairedDataset, idx: np.ndarray, pred: np.ndarray) -> dict[str, float]:
-    """PCA angle error (deg) on the elongated objects of the split: median, p95, fraction undefined."""
-    names = data.objects(idx)
+def rod_angle_errors(data: PairedDataset, idx: np.ndarray, pred: np.ndarray) -> np.ndarray:
+    """PCA angle error (deg, >= 0) of each sample's reconstruction against its true yaw, for the elongated
+    objects of ``idx`` (NaN for other samples); an undefined angle counts as the worst error, 90 deg."""
+    errors = np.full(len(idx), np.nan)
     if not data.has("pose") or data.image.pixel_mm is None:
+        return errors
+    names = data.objects(idx)
+    yaw = data.extra("pose")[idx, 2]
+    for i in range(len(idx)):
+        if any(str(names[i]).startswith(e) for e in ELONGATED):
+            est = angle_from_image(pred[i], pixel_mm=data.image.pixel_mm)
+            errors[i] = abs(math.degrees(wrap_axial(est.angle_rad - float(yaw[i])))) if est.defined else 90.0
+    return errors
+
+
+def _angle_summary(errors: np.ndarray) -> dict[str, float]:
+    """Median, p95, shares within 2 and 5 deg, count and undefined fraction of the rod angle errors."""
+    e = errors[np.isfinite(errors)]
+    if not e.size:
         return {}
-    rods = np.array([any(str(n).startswith(e) for e in ELONGATED) for n in names])
-    errors, undefined = [], 0
-    for i in np.flatnonzero(rods):
-        est = angle_from_image(pred[i], pixel_mm=data.image.pixel_mm)
-        if not est.defined:
-            undefined += 1
-            errors.append(90.0)  # an undefined angle counts as the worst error
-            continue
-        errors.append(abs(math.degrees(wrap_axial(est.angle_rad - float(data.extra("pose")[idx[i], 2])))))
-    if not errors:
-        return {}
-    e = np.asarray(errors)
     return {"median": float(np.median(e)), "p95": float(np.percentile(e, 95)), "count": int(e.size),
-            "undefined_fraction": undefined / e.size}
+            "within_2_deg": float(np.mean(e <= 2.0)), "within_5_deg": float(np.mean(e <= 5.0)),
+            "undefined_fraction": float(np.mean(e >= 90.0))}
+
+
+def _summary(psnr: np.ndarray, ssim: np.ndarray, errors: np.ndarray) -> dict[str, float]:
+    return {"psnr_db": float(psnr.mean()), "ssim": float(ssim.mean()), "count": int(psnr.size),
+            **{f"angle_{k}": v for k, v in _angle_summary(errors).items()}}
+
+
+def sample_groups(data: PairedDataset, idx: np.ndarray) -> dict[str, dict[str, np.ndarray]]:
+    """Masks over ``idx`` for the breakdowns a split supports: force bands (``FORCE_BANDS_N``) when its forces
+    span more than 2 N; magnet strength and chip noise terciles when each press has its own drawn sensor."""
+    groups: dict[str, dict[str, np.ndarray]] = {}
+    if data.has("force_n"):
+        f = data.extra("force_n")[idx]
+        if f.size and f.max() - f.min() > 2.0:
+            edges = FORCE_BANDS_N
+            bands = {f"{lo:g}-{hi:g} N": (f >= lo) & ((f < hi) if hi < edges[-1] else (f <= hi))
+                     for lo, hi in zip(edges[:-1], edges[1:])}
+            groups["force"] = {k: m for k, m in bands.items() if m.any()}
+    names = data.provenance.get("sensor_param_names", [])
+    if data.has("sensor_params") and len(idx) >= 3:
+        params = data.extra("sensor_params")[idx]
+        for key, label in (("magnet.remanence_t", "magnet"), ("chip.noise_z_ut", "chip noise")):
+            if key in names:
+                v = params[:, names.index(key)]
+                lo, hi = np.quantile(v, [1 / 3, 2 / 3])
+                groups[label] = {f"low ({v.min():.3g}-{lo:.3g})": v <= lo, f"mid ({lo:.3g}-{hi:.3g})": (v > lo) & (v <= hi),
+                                 f"high ({hi:.3g}-{v.max():.3g})": v > hi}
+    return groups
 
 
 def _inception_features(path: str | Path):
@@ -153,7 +191,27 @@ def markdown_table(results: list[MethodResult]) -> str:
         angle = f"{a['median']:.1f} / {a['p95']:.1f}" if a else "-"
         lines.append(f"| {r.name} | " + (f"{r.fid:.2f} | " if fid else "") + f"{r.fd_dct:.2f} | "
                      f"{r.psnr_db[0]:.2f} +- {r.psnr_db[1]:.2f} | {r.ssim[0]:.3f} +- {r.ssim[1]:.3f} | {angle} |")
-    return "\n".join(lines) + "\n"
+    return "\n".join(lines) + "\n" + group_tables(results)
+
+
+def group_tables(results: list[MethodResult]) -> str:
+    """Per force band and per sensor draw (where the split has them): PSNR and the share of rod angles within
+    5 and 2 deg for each method, one table per breakdown."""
+    out = []
+    for group in (results[0].per_group if results else {}):
+        bands = list(results[0].per_group[group])
+        head = f"| {group} | " + " | ".join(f"{r.name}: PSNR dB / rods within 5 / 2 deg" for r in results) + " |"
+        lines = ["", head, "|---" * (head.count("|") - 1) + "|"]
+        for band in bands:
+            cells = []
+            for r in results:
+                g = r.per_group[group][band]
+                rods = (f"{100 * g['angle_within_5_deg']:.1f} % / {100 * g['angle_within_2_deg']:.1f} % "
+                        f"(n {g['angle_count']})" if "angle_count" in g else "-")
+                cells.append(f"{g['psnr_db']:.2f} / {rods}")
+            lines.append(f"| {band} (n {results[0].per_group[group][band]['count']}) | " + " | ".join(cells) + " |")
+        out += lines
+    return "\n".join(out) + ("\n" if out else "")
 
 
 def untrained(reconstructor: Reconstructor) -> bool:

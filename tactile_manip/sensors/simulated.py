@@ -55,6 +55,7 @@ class SimulatedSensor(TactileSensor):
         self._thread: threading.Thread | None = None
         self._cpu_s = 0.0
         self._last_error = ""
+        self._pair_generation = self._published_generation = 0  # replace_pair count; that of the last frame out
 
     # ------------------------------------------------------------------ contacts and faults
 
@@ -88,6 +89,24 @@ class SimulatedSensor(TactileSensor):
         self._script = None
         self._static = change
         return change
+
+    def replace_pair(self, pair: SensorPair) -> None:
+        """Read another simulated sensor pair from the next frame on (say, a drawn skin per trial).
+
+        Its no-contact field differs from the old one's: take a new baseline (pad unloaded) before reading
+        contacts. Its chips are rated by their own noise (the baseline's refusal threshold follows them). The
+        contact in place is cleared; cached contact solves belong to the old pair and are dropped.
+        """
+        self.clear_contact()
+        self._cache.clear()
+        self._chip = dataclasses.replace(pair.params.chip, rate_hz=self.config.rate_hz)
+        self.pair = pair
+        self._pair_generation += 1
+        # a frame measured on the old pair may still be in flight: return once one of the new pair is out, so
+        # that a baseline taken next averages the new sensor only
+        if self._thread is not None and self._thread.is_alive() and not self._stalled:
+            with self._cond:
+                self._cond.wait_for(lambda: self._published_generation == self._pair_generation, timeout=1.0)
 
     def clear_contact(self) -> None:
         """Nothing on the pad from the next frame on (stops a script too)."""
@@ -161,7 +180,6 @@ class SimulatedSensor(TactileSensor):
         cpu0 = time.thread_time()
         rng = np.random.default_rng(self.config.seed)
         period = 1.0 / self.config.rate_hz
-        chips, baseline_field = self.pair.chips, self.pair.baseline_field_ut
         t0, k, seq = time.monotonic(), 0, 0
         while True:
             deadline = t0 + k * period
@@ -172,8 +190,13 @@ class SimulatedSensor(TactileSensor):
                 if wait < -REBASE_LATE_S:
                     t0 = time.monotonic() - k * period
                 if not self._stalled:
-                    m = chips.measure(baseline_field + self._change_at(deadline), rng)
+                    # read per frame (generation first): replace_pair swaps the pair while the thread runs
+                    generation, pair = self._pair_generation, self.pair
+                    m = pair.chips.measure(pair.baseline_field_ut + self._change_at(deadline), rng)
                     self._publish(m.raw_ut, m.saturated, seq=seq, t_host_s=time.monotonic(), t_device_s=k * period)
+                    with self._cond:
+                        self._published_generation = generation
+                        self._cond.notify_all()
                     seq += 1
             except Exception as e:  # noqa: BLE001 - the thread must survive anything and report it
                 self._last_error = f"{type(e).__name__} in the frame thread: {e}"

@@ -26,7 +26,7 @@ from tactile_manip.data import PairedDataset, depth_image_spec, quantise_depth
 from tactile_manip.sim.objects import Indenter, IndenterPose
 from tactile_manip.sim.shapes import SHAPES, check_shape_arguments, make_indenter
 from tactile_manip.sim.pair import SensorPair
-from tactile_manip.sim.params import SimParams, randomise
+from tactile_manip.sim.params import SimParams, randomise, randomised_values
 from tactile_manip.version import code_version
 
 
@@ -85,6 +85,8 @@ class DatasetConfig:
     sensor_seed: int = 0              # per-sensor constants (Earth field, chip misalignment)
     validation_fraction: float = 0.1  # of each trainval object, the last fraction goes to 'val'
     randomise_spread: float = 0.0     # 0: one fixed sensor pair; 1: full domain randomisation per sample
+    bottomed_out: Literal["keep", "redraw"] = "keep"  # a press through the layer: keep it (flagged), or draw
+                                      # the sample's pose, force and sensor again (up to MAX_REDRAWS times)
     poses: PoseRanges = field(default_factory=PoseRanges)
     objects: list[ObjectSpec] = field(default_factory=list)
     sim: SimParams = field(default_factory=SimParams)
@@ -96,6 +98,8 @@ class DatasetConfig:
             raise ValueError(f"randomise_spread must be in [0, 1], got {self.randomise_spread}")
         if not self.objects:
             raise ValueError("objects: a dataset needs at least one [[objects]] entry")
+        if self.bottomed_out not in ("keep", "redraw"):
+            raise ValueError(f"bottomed_out must be 'keep' or 'redraw', got {self.bottomed_out!r}")
         half_pad_mm = self.sim.layer.size_mm / 2.0
         if self.poses.offset_mm > half_pad_mm:
             raise ValueError(f"poses.offset_mm = {self.poses.offset_mm:g} puts object centres off the "
@@ -141,6 +145,7 @@ def _splits(cfg: DatasetConfig) -> np.ndarray:
 
 
 _WORKER: dict[str, Any] = {}
+MAX_REDRAWS = 20   # bottomed_out = "redraw": draws per sample before a press through the layer is kept (flagged)
 
 
 def _init_worker(cfg: DatasetConfig) -> None:
@@ -165,17 +170,21 @@ def _simulate(task: _Task) -> dict[str, Any]:
     cfg: DatasetConfig = _WORKER["cfg"]
     rng = np.random.default_rng([cfg.seed, task.index])
     pr = cfg.poses
-    pose = IndenterPose(
-        x_mm=rng.uniform(-pr.offset_mm, pr.offset_mm), y_mm=rng.uniform(-pr.offset_mm, pr.offset_mm),
-        yaw_rad=math.radians(rng.uniform(*pr.yaw_deg)),
-        tilt_x_rad=math.radians(rng.uniform(-pr.tilt_deg, pr.tilt_deg)),
-        tilt_y_rad=math.radians(rng.uniform(-pr.tilt_deg, pr.tilt_deg)))
-    force = rng.uniform(*pr.force_n)
-    pair = _WORKER["pair"]
-    if cfg.randomise_spread > 0:
-        pair = SensorPair(randomise(cfg.sim, rng, spread=cfg.randomise_spread), seed=cfg.sensor_seed)
-    s = pair.press(_indenter(cfg.objects[task.spec], task.variant), pose, force, rng)
-    return {"field_ut": s.field_ut, "field_raw_ut": s.field_raw_ut, "saturated": s.saturated,
+    for _ in range(MAX_REDRAWS + 1):  # one pass unless bottomed_out = "redraw" meets a press through the layer
+        pose = IndenterPose(
+            x_mm=rng.uniform(-pr.offset_mm, pr.offset_mm), y_mm=rng.uniform(-pr.offset_mm, pr.offset_mm),
+            yaw_rad=math.radians(rng.uniform(*pr.yaw_deg)),
+            tilt_x_rad=math.radians(rng.uniform(-pr.tilt_deg, pr.tilt_deg)),
+            tilt_y_rad=math.radians(rng.uniform(-pr.tilt_deg, pr.tilt_deg)))
+        force = rng.uniform(*pr.force_n)
+        pair, drawn = _WORKER["pair"], {}
+        if cfg.randomise_spread > 0:
+            params = randomise(cfg.sim, rng, spread=cfg.randomise_spread)
+            pair, drawn = SensorPair(params, seed=cfg.sensor_seed), {"sensor_params": randomised_values(params)}
+        s = pair.press(_indenter(cfg.objects[task.spec], task.variant), pose, force, rng)
+        if not (s.bottomed_out and cfg.bottomed_out == "redraw"):
+            break
+    return {**drawn, "bottomed_out": s.bottomed_out, "field_ut": s.field_ut, "field_raw_ut": s.field_raw_ut, "saturated": s.saturated,
             "depth_q": quantise_depth(s.depth_mm), "pose": [pose.x_mm, pose.y_mm, pose.yaw_rad,
                                                               pose.tilt_x_rad, pose.tilt_y_rad],
             "force_n": s.force_n, "approach_mm": s.approach_mm, "skin_approach_mm": s.skin_approach_mm,
@@ -237,7 +246,11 @@ def _assemble(cfg: DatasetConfig, tasks: list[_Task], results: list[dict[str, An
     extras = {"field_raw_ut": stack("field_raw_ut", np.float32), "saturated": stack("saturated", bool),
               "pose": stack("pose", np.float32), "force_n": stack("force_n", np.float32),
               "approach_mm": stack("approach_mm", np.float32),
-              "skin_approach_mm": stack("skin_approach_mm", np.float32), "contact": stack("contact", bool)}
+              "skin_approach_mm": stack("skin_approach_mm", np.float32), "contact": stack("contact", bool),
+              "bottomed_out": stack("bottomed_out", bool)}
+    if cfg.randomise_spread > 0:  # each press on its own drawn sensor: record the draw (names in provenance)
+        provenance["sensor_param_names"] = list(results[0]["sensor_params"])
+        extras["sensor_params"] = np.array([list(r["sensor_params"].values()) for r in results], np.float32)
     return PairedDataset(
         readings=stack("field_ut", np.float32), images=stack("depth_q", np.uint8), split=_splits(cfg),
         image=depth_image_spec(cfg.sim.vbts.pixel_mm),

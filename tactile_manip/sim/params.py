@@ -193,6 +193,12 @@ def randomise(params: Any, rng: np.random.Generator, *, spread: float = 1.0) -> 
     return dataclasses.replace(params, **changes)
 
 
+def randomised_values(params: Any) -> dict[str, float]:
+    """The randomisable fields of a parameter tree by dotted name (``"magnet.remanence_t"``), in field order:
+    what :func:`randomise` draws, for recording a drawn sensor next to the data it made."""
+    return {row["name"]: float(row["value"]) for row in describe(params) if row["rand"] is not None}
+
+
 def describe(params: Any, prefix: str = "") -> list[dict[str, Any]]:
     """Flatten a parameter tree into rows ``{name, value, unit, source, rand}`` (for docs and reports)."""
     rows = []

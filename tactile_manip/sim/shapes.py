@@ -164,6 +164,31 @@ def rod(kind: str, *, size_mm: float = 4.0, length_mm: float = 30.0) -> Indenter
     return _indenter(height, origin, _ROD_NAMES[kind])
 
 
+def ridge(*, angle_deg: float = 60.0, tip_radius_mm: float = 0.1, height_mm: float = 3.0,
+          length_mm: float = 30.0) -> Indenter:
+    """A knife-edge: a straight wedge bar along local x with apex angle ``angle_deg`` and a tip rounded to
+    ``tip_radius_mm``, standing on its base; reference point at the centre of the edge.
+
+    The flanks meet the pad along a line contact far narrower than the taxel pitch: the hardest contact for
+    a 4x4 grid to resolve (heights measured from the base; ``height_mm`` is that of the sharp apex, the rounded
+    tip lies ``r (1 / sin(angle / 2) - 1)`` below it; footprint ``2 height tan(angle / 2)`` wide).
+    """
+    angle = math.radians(check_finite_scalar("angle_deg", angle_deg, low=20.0, high=150.0))
+    radius = check_finite_scalar("tip_radius_mm", tip_radius_mm, low=0.0, high=2.0)
+    height = check_finite_scalar("height_mm", height_mm, low=0.5, high=10.0)
+    length = check_finite_scalar("length_mm", length_mm, low=2.0, high=150.0)
+    half = angle / 2
+    px = DEFAULT_PIXEL_MM
+    half_x, half_y = length / 2 + px, height * math.tan(half) + px
+    x, y, origin = _grid((-half_x, half_x), (-half_y, half_y), px)
+    flank = height - np.abs(y) / math.tan(half)
+    centre = height - radius / math.sin(half)          # the tip circle touches both flanks
+    tip = centre + np.sqrt(np.clip(radius**2 - y**2, 0.0, None))
+    profile = np.where(np.abs(y) <= radius * math.cos(half), tip, flank)
+    h = np.where((np.abs(x) <= length / 2 + 1e-9) & (profile >= 0), profile, np.nan)
+    return _indenter(h, origin, "ridge")
+
+
 # ---------------------------------------------------------------- procedural (unseen) shapes
 
 def _placed(rng: np.random.Generator, x: np.ndarray, y: np.ndarray, size: float) -> tuple[np.ndarray, np.ndarray]:
@@ -238,6 +263,31 @@ def procedural(seed: int, *, size_mm: float = 14.0) -> Indenter:
     return _indenter(height, origin, f"procedural_{int(seed)}")
 
 
+def procedural_sharp(seed: int, *, size_mm: float = 14.0) -> Indenter:
+    """A seeded family of sharp-edged shapes: the parts of :func:`procedural` (bars, rings, crosses, stars,
+    strokes) roofed with flanks at 15-60 degrees from vertical instead of flat tops with rounded edges, so a
+    bar or stroke becomes a knife ridge and a star or cross a pointed pyramid; 1-3 parts, 0.5-2.5 mm high.
+
+    A separate family (not a flag of :func:`procedural`), so that every procedural seed keeps its shape.
+    """
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
+    size = check_finite_scalar("size_mm", size_mm, low=4.0, high=30.0)
+    rng = np.random.default_rng(int(seed))
+    x, y, origin = _grid((-size / 2, size / 2), (-size / 2, size / 2), DEFAULT_PIXEL_MM)
+    height = np.full_like(x, np.nan)
+    parts = int(rng.integers(1, 4))
+    for i in range(parts + 10):  # a part can miss the grid (a thin star): draw more until there is material
+        if i >= parts and np.isfinite(height).any():
+            break
+        part_height, flank = rng.uniform(0.5, 2.5), math.radians(rng.uniform(15.0, 60.0))
+        u, v = _placed(rng, x, y, size)
+        inside = _PRISMS[int(rng.integers(len(_PRISMS)))](rng, u, v, size)
+        roof = np.minimum(part_height, inside / math.tan(flank))   # slope of the flank: 1 / tan(flank)
+        height = np.fmax(height, np.where(inside > 0, roof, np.nan))
+    return _indenter(height, origin, f"procedural_sharp_{int(seed)}")
+
+
 # ---------------------------------------------------------------- registry
 
 SHAPES: dict[str, Callable[..., Indenter]] = {
@@ -247,6 +297,8 @@ SHAPES: dict[str, Callable[..., Indenter]] = {
     "hex_bar": functools.partial(rod, "hex"),
     "square_bar": functools.partial(rod, "square"),
     "procedural": procedural,
+    "ridge": ridge,
+    "procedural_sharp": procedural_sharp,
 }
 
 

@@ -33,6 +33,10 @@ from tactile_manip.sensors.config import SimulatedSensorConfig
 from tactile_manip.trials.record import TrialRecord
 from tactile_manip.trials.scene import MethodSpec, TrialObject, TrialScene
 
+# A drawn sensor's baseline: 25 frames (0.2 s) average the chip noise (<= 15 uT per frame) to <= 3 uT, well
+# under the 20 uT no-contact threshold, at a fraction of the 1 s a session's first baseline takes.
+SENSOR_DRAW_BASELINE_FRAMES = 25
+
 
 @dataclass(frozen=True)
 class Presentation:
@@ -44,6 +48,15 @@ class Presentation:
     angle_rad: float
     offset_mm: tuple[float, float]
     force_n: float
+    sensor_spread: float = 0.0      # > 0: this trial's sensor is drawn (see sensor_params)
+
+    def sensor_params(self):
+        """The simulator parameters of this trial's sensor (drawn from its seed), or None for the nominal one."""
+        if self.sensor_spread == 0:
+            return None
+        from tactile_manip.sim.params import SimParams, randomise
+
+        return randomise(SimParams(), np.random.default_rng([self.seed, 1]), spread=self.sensor_spread)
 
 
 def draw_presentation(scene: TrialScene, trial: int) -> Presentation:
@@ -55,7 +68,7 @@ def draw_presentation(scene: TrialScene, trial: int) -> Presentation:
     angle = float(wrap_axial(math.radians(rng.uniform(*p.angle_deg))))
     offset = rng.uniform(-p.offset_mm, p.offset_mm, size=2)
     force = float(rng.uniform(*p.force_n))
-    return Presentation(trial, seed, obj, angle, (float(offset[0]), float(offset[1])), force)
+    return Presentation(trial, seed, obj, angle, (float(offset[0]), float(offset[1])), force, p.sensor_spread)
 
 
 def pad_T_object(angle_rad: float, offset_mm: tuple[float, float], width_m: float) -> np.ndarray:
@@ -119,6 +132,7 @@ class SimulatedCell:
         self.sensor = SimulatedSensor(scene.sensor)
         self._indenters = {o.display_name: make_indenter(o.name, **o.kwargs) for o in scene.presentation.objects}
         self._presentation: Presentation | None = None
+        self._sensor_key: int | None = None      # seed of the drawn sensor in use (None: the nominal one)
         self._stall_after_grasp = False
         self.world.on_grasp.append(self._on_grasp)
         self.world.on_release.append(lambda obj: self.sensor.clear_contact())
@@ -156,6 +170,7 @@ class SimulatedCell:
         from tactile_manip.robot.twin import WorldObject
 
         self._ready_for_trial()
+        self._use_sensor_of(p)
         obj = WorldObject(p.obj.display_name, p.obj.grasp_width_m, payload=self._indenters[p.obj.display_name])
         self._presentation, self._stall_after_grasp = p, sensor_stall
         self.world.present(obj, hand_T_finger_pad(obj.width_m) @ pad_T_object(p.angle_rad, p.offset_mm, obj.width_m))
@@ -170,6 +185,19 @@ class SimulatedCell:
             self.gripper.open()
             self.world.remove(obj)
             self._presentation = None
+
+    def _use_sensor_of(self, p: Presentation) -> None:
+        """Swap in the trial's drawn sensor (or back to the nominal one) and take its baseline, pad unloaded."""
+        from tactile_manip.sim.pair import SensorPair
+
+        params = p.sensor_params()
+        key = None if params is None else p.seed
+        if key == self._sensor_key:
+            return
+        self.sensor.replace_pair(SensorPair(seed=self.scene.sensor.seed) if params is None
+                                 else SensorPair(params, seed=self.scene.sensor.seed))
+        self.sensor.calibrate_baseline(frames=SENSOR_DRAW_BASELINE_FRAMES)
+        self._sensor_key = key
 
     def run_one(self, p: Presentation, estimator: TactilePoseEstimator, *, arm_fault: bool = False,
                 sensor_stall: bool = False) -> ReorientResult:
@@ -214,9 +242,18 @@ def make_record(p: Presentation, method: str, target_rad: float, result: Reorien
         action=result.action, regrasps=result.regrasps, final_angle_rad=result.final_angle_rad,
         error_rad=result.error_rad, outcome=outcome, detail=detail,
         timings_s={k: round(v, 6) for k, v in result.timings_s.items()},
-        extra={"force_n": round(p.force_n, 4), "grasp_width_m": result.grasp_width_m,
+        extra={"force_n": round(p.force_n, 4), "grasp_width_m": result.grasp_width_m, **_sensor_extra(p),
                "correction_rad": result.correction_rad,
                "estimate_timings_s": dict(est.timings_s) if est is not None else {}})
+
+
+def _sensor_extra(p: Presentation) -> dict:
+    params = p.sensor_params()
+    if params is None:
+        return {}
+    from tactile_manip.sim.params import randomised_values
+
+    return {"sensor": {k: round(v, 6) for k, v in randomised_values(params).items()}}
 
 
 def make_cell(scene: TrialScene):

@@ -89,12 +89,17 @@ class PresentationConfig:
         angle_deg: [low, high] of the uniform in-hand angle of the object's axis in the pad frame, deg.
         offset_mm: the contact centre is uniform within +-offset_mm of the pad centre in pad x and y, mm.
         force_n: [low, high] of the uniform grasp force, N (the gripper's threshold plus overshoot).
+        sensor_spread: 0 presents every trial to the nominal simulated sensor; > 0 draws each trial's sensor
+            (magnetisation, gap, moduli, chip noise, ...) from the simulator's randomisation ranges shrunk about
+            the defaults by this factor (1: the full ranges; ``tactile-manip params`` lists them). The draw is
+            a function of the trial's seed: every method meets the same sensor in the same trial.
         objects: presented in turn (trial i gets object i mod len(objects)).
     """
 
     angle_deg: tuple[float, float] = (-90.0, 90.0)
     offset_mm: float = 2.0
     force_n: tuple[float, float] = (10.0, 11.0)
+    sensor_spread: float = 0.0
     objects: list[TrialObject] = field(default_factory=list)
 
     def __post_init__(self) -> None:
@@ -105,6 +110,7 @@ class PresentationConfig:
         f_lo, f_hi = self.force_n
         if not (math.isfinite(f_lo) and math.isfinite(f_hi) and 0 < f_lo <= f_hi <= 140.0):
             raise ValueError(f"presentation.force_n must be [low, high] within (0, 140] N, got {self.force_n}")
+        check_finite_scalar("presentation.sensor_spread", self.sensor_spread, low=0.0, high=1.0)
 
 
 @dataclass(frozen=True)

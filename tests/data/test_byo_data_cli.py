@@ -55,6 +55,8 @@ def _train_export_evaluate(data, folder, capsys) -> dict:
     assert main(["export", "--checkpoint", str(run / "best.pt"), "--out", str(model), "--data", str(data),
                  "--card", str(folder / "card.md")]) == 0
     assert main(["evaluate", "--data", str(data), "--model", f"Mine={model}", "--out", str(out)]) == 0
+    assert main(["show", "--data", str(data), "--index", "0", "--out", str(folder / "sample.png")]) == 0
+    assert (folder / "sample.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     capsys.readouterr()
     return {"meta": read_metadata(model), "card": (folder / "card.md").read_text(),
             "results": json.loads((out / "results.json").read_text())}

@@ -60,3 +60,36 @@ def test_evaluate_fits_the_baselines_on_the_named_objects_only(tiny_data, tmp_pa
                  "--baseline-objects", "no_such_object"]) == 2
     err = capsys.readouterr().err
     assert "no training presses of no_such_object" in err
+
+
+def test_evaluation_breaks_down_by_force_band_and_sensor_draw(tmp_path):
+    import numpy as np
+
+    from tactile_manip.data import PairedDataset, depth_image_spec
+    from tactile_manip.perception.evaluation import evaluate_methods, markdown_table
+    from tactile_manip.perception.reconstruct import BASELINES
+
+    rng = np.random.default_rng(0)
+    n = 40
+    yy, xx = np.mgrid[0:40, 0:40]
+    yaw = rng.uniform(-1.5, 1.5, n)
+    images = np.stack([np.clip(1.0 - np.abs((xx - 20) * np.sin(a) + (yy - 20) * np.cos(a)) / 3, 0, None)
+                       for a in yaw])  # bars through the centre at yaw a (row 0 at +y)
+    force = np.linspace(2.0, 15.0, n).astype(np.float32)
+    draws = rng.uniform(0.03, 0.055, (n, 2)).astype(np.float32)
+    data = PairedDataset(
+        readings=rng.normal(0, 50, (n, 4, 4, 3)).astype(np.float32), images=(images / 0.01).astype(np.uint8),
+        split=np.array(["train"] * 10 + ["test"] * 30), image=depth_image_spec(0.5),
+        object_index=np.zeros(n, np.int16), object_names=np.array(["cylinder_3mm"]),
+        extras={"force_n": force, "pose": np.c_[np.zeros((n, 2)), yaw, np.zeros((n, 2))].astype(np.float32),
+                "sensor_params": draws},
+        provenance={"sensor_param_names": ["magnet.remanence_t", "chip.noise_z_ut"]})
+    fit = BASELINES["bilinear"].fit(data.readings[:10], data.depth_mm(np.arange(10)))
+    results, _ = evaluate_methods(data, {"Bilinear": fit})
+    groups = results[0].per_group
+    assert list(groups["force"]) == ["5-8 N", "8-11 N", "11-15 N"]  # the test split holds 5.3-15 N
+    assert sum(g["count"] for g in groups["force"].values()) == 30
+    assert sum(g["count"] for g in groups["magnet"].values()) == 30 and len(groups["chip noise"]) == 3
+    assert 0.0 <= groups["force"]["8-11 N"]["angle_within_5_deg"] <= 1.0
+    table = markdown_table(results)
+    assert "| force |" in table and "| magnet |" in table and "(n 30)" not in table.splitlines()[2]

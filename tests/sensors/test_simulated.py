@@ -113,3 +113,22 @@ def test_press_specs_and_overlaps_are_checked(pair):
             parse_press(bad)
     with pytest.raises(ValueError, match="overlap"):
         ContactTimeline(pair, [Press("letter_r", start_s=0.0), Press("allen_key", start_s=0.5)])
+
+
+def test_a_replaced_pair_is_read_and_baselined_at_its_own_chip_noise():
+    import dataclasses
+
+    from tactile_manip.sensors.simulated import SimulatedSensor
+    from tactile_manip.sim.pair import SensorPair
+    from tactile_manip.sim.params import SimParams
+
+    params = SimParams()
+    noisy = dataclasses.replace(params, chip=dataclasses.replace(params.chip, noise_xy_ut=14.0, noise_z_ut=14.0),
+                                magnet=dataclasses.replace(params.magnet, remanence_t=0.035))
+    with SimulatedSensor() as sensor:
+        sensor.calibrate_baseline(frames=25)
+        sensor.replace_pair(SensorPair(noisy))
+        assert sensor.chip.noise_xy_ut == 14.0
+        base = sensor.calibrate_baseline(frames=25)  # refused at the nominal chip's 9 uT threshold
+        assert float(base.noise_ut.max()) > 9.0
+        assert abs(float(sensor.wait_new(timeout_s=1.0).field_ut.mean())) < 15.0

@@ -251,3 +251,33 @@ def test_load_plain_npy_file(tmp_path):
     with path.open("wb") as f:
         np.save(f, np.zeros(3))
     assert "not a dataset archive" in _load_error(path)
+
+
+def test_randomised_sensors_are_recorded_per_sample():
+    spec = ObjectSpec("cylinder", count=4, kwargs={"size_mm": 3.0})
+    cfg = DatasetConfig(objects=[spec], randomise_spread=1.0, poses=PoseRanges(force_n=(2.0, 15.0)))
+    d = generate(cfg, workers=1)
+    names = d.provenance["sensor_param_names"]
+    draws = d.extra("sensor_params")
+    assert draws.shape == (4, len(names)) and "magnet.remanence_t" in names and "chip.noise_z_ut" in names
+    jr = draws[:, names.index("magnet.remanence_t")]
+    assert ((0.03 <= jr) & (jr <= 0.055)).all() and len(np.unique(jr)) == 4  # each press its own sensor
+    forces = d.extra("force_n")
+    assert ((2.0 <= forces) & (forces <= 15.0)).all()
+    assert not generate(dataclasses.replace(cfg, randomise_spread=0.0), workers=1).has("sensor_params")
+
+
+def test_presses_through_the_layer_are_flagged_or_redrawn():
+    sharp = ObjectSpec("ridge", count=6, kwargs={"angle_deg": 60.0, "tip_radius_mm": 0.0})
+    poses = PoseRanges(offset_mm=0.0, force_n=(12.0, 15.0))
+    kept = generate(DatasetConfig(objects=[sharp], poses=poses), workers=1)
+    assert kept.extra("bottomed_out").all()  # a knife edge at 12-15 N goes through the 2.5 mm layer
+    assert (np.maximum(kept.extra("approach_mm"), kept.extra("skin_approach_mm")) >= 2.5).all()
+    blunt = ObjectSpec("ridge", count=8, kwargs={"angle_deg": 70.0, "tip_radius_mm": 0.1})
+    mixed = DatasetConfig(objects=[blunt], poses=PoseRanges(offset_mm=0.0, force_n=(2.0, 15.0)), seed=1)
+    assert generate(mixed, workers=1).extra("bottomed_out").any()  # some of these presses go through
+    redrawn = generate(dataclasses.replace(mixed, bottomed_out="redraw"), workers=1)
+    assert not redrawn.extra("bottomed_out").any()
+    assert (np.maximum(redrawn.extra("approach_mm"), redrawn.extra("skin_approach_mm")) < 2.5).all()
+    with pytest.raises(ValueError, match="bottomed_out must be"):
+        DatasetConfig(objects=[blunt], bottomed_out="drop")

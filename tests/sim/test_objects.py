@@ -9,7 +9,7 @@ import pytest
 
 from tactile_manip.errors import MeshError
 from tactile_manip.sim.objects import Indenter, IndenterPose
-from tactile_manip.sim.shapes import SHAPES, make_indenter, procedural, rod
+from tactile_manip.sim.shapes import SHAPES, make_indenter, procedural, procedural_sharp, ridge, rod
 
 PX = 0.05
 
@@ -153,8 +153,44 @@ def test_procedural_seeded() -> None:
         procedural(-1)
 
 
+@pytest.mark.parametrize("angle, radius", [(60.0, 0.0), (90.0, 0.3), (120.0, 1.0)])
+def test_ridge_is_a_wedge_of_its_apex_angle(angle: float, radius: float) -> None:
+    ind = ridge(angle_deg=angle, tip_radius_mm=radius, height_mm=2.0, length_mm=20.0)
+    h = ind.height_mm
+    np.testing.assert_allclose(h, h[::-1], atol=1e-12)  # mirror about the edge
+    half = math.radians(angle) / 2
+    assert np.nanmax(h) == pytest.approx(2.0 - radius * (1 / math.sin(half) - 1), abs=1e-3)
+    half_width = 2.0 * math.tan(math.radians(angle) / 2)  # flanks reach the base at height tan(angle / 2)
+    _assert_extent(np.isfinite(h), 0, 2 * half_width)
+    col = h[:, h.shape[1] // 2]
+    finite = np.isfinite(col)
+    slope = np.abs(np.diff(col[finite])) / PX
+    if radius == 0.0:  # flanks straight to the apex: |dh/dy| = 1 / tan(angle / 2) everywhere
+        np.testing.assert_allclose(np.median(slope), 1 / math.tan(math.radians(angle) / 2), rtol=0.05)
+    else:  # the rounded tip is flat at the top, the flanks keep their slope below it
+        assert slope.min() < 0.2 and slope.max() == pytest.approx(1 / math.tan(math.radians(angle) / 2), rel=0.05)
+    with pytest.raises(ValueError, match="angle_deg"):
+        ridge(angle_deg=5.0)
+
+
+def test_procedural_sharp_is_seeded_sharp_and_separate_from_procedural() -> None:
+    a, b = procedural_sharp(3), procedural_sharp(3)
+    np.testing.assert_array_equal(a.height_mm, b.height_mm)
+    assert not np.array_equal(np.nan_to_num(a.height_mm, nan=-1), np.nan_to_num(procedural(3).height_mm, nan=-1))
+    for seed in range(9000, 9400):  # every seed of the robust training family has material
+        assert np.isfinite(procedural_sharp(seed).height_mm).any(), seed
+    steep = 0
+    for seed in range(10):
+        h = procedural_sharp(seed).height_mm
+        assert 0.0 <= np.nanmin(h) and np.nanmax(h) <= 2.5
+        grad = np.hypot(*np.gradient(np.nan_to_num(h, nan=0.0), PX))
+        steep += np.nanmax(np.where(np.isfinite(h), grad, 0)) > 1.5  # flanks steeper than 56 deg somewhere
+    assert steep >= 8
+
+
 def test_registry() -> None:
-    assert set(SHAPES) == {"allen_key", "letter_r", "cylinder", "hex_bar", "square_bar", "procedural"}
+    assert set(SHAPES) == {"allen_key", "letter_r", "cylinder", "hex_bar", "square_bar", "procedural", "ridge",
+                           "procedural_sharp"}
     assert make_indenter("hex_bar", size_mm=5.0).name == "hex_bar"
     with pytest.raises(ValueError, match="unknown object 'banana'; known: allen_key"):
         make_indenter("banana")

@@ -1,0 +1,169 @@
+"""Confidence that predicts error: calibrate the pose estimate's raw confidence against held-out errors.
+
+The raw confidence of an :class:`~tactile_manip.types.AngleEstimate` (``1 - lambda_minor / lambda_major`` of the
+contact's moments, times the agreement of prior samples when the model draws several, times the fraction of
+unsaturated chips) orders estimates by how elongated and consistent the contact looks; it is not a
+probability. :class:`ConfidenceCalibration` maps it monotonically onto the probability that the angle error is
+within ``tolerance_deg``, fitted by isotonic regression (pool adjacent violators) on held-out presses, so a
+behaviour's ``min_confidence = 0.9`` means "act when 9 in 10 such estimates were within tolerance".
+
+:func:`reliability_table` bins estimates by confidence (deciles by default) and reports, per bin, the mean
+predicted probability, the observed share within tolerance and the median / p95 error: the reliability
+diagram in numbers. numpy only (the figure needs matplotlib).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class ConfidenceCalibration:
+    """A non-decreasing piecewise-linear map raw confidence -> P(|error| <= tolerance_deg)."""
+
+    knots: tuple[float, ...]      # raw confidence at the breakpoints, ascending, in [0, 1]
+    values: tuple[float, ...]     # calibrated probability at the knots, non-decreasing, in [0, 1]
+    tolerance_deg: float = 5.0    # the error the probability is about, deg
+    samples: int = 0              # held-out estimates it was fitted on
+
+    def __post_init__(self) -> None:
+        k, v = np.asarray(self.knots, float), np.asarray(self.values, float)
+        if k.ndim != 1 or k.size < 1 or k.shape != v.shape:
+            raise ValueError(f"knots and values must be 1-D of one length >= 1, got {k.shape} and {v.shape}")
+        if not (np.isfinite(k).all() and np.isfinite(v).all()):
+            raise ValueError("knots and values must be finite")
+        if np.any(np.diff(k) <= 0) or np.any(np.diff(v) < 0):
+            raise ValueError("knots must increase and values must not decrease")
+        if k.min() < 0 or k.max() > 1 or v.min() < 0 or v.max() > 1:
+            raise ValueError("knots and values must lie in [0, 1]")
+        if not (math.isfinite(self.tolerance_deg) and self.tolerance_deg > 0):
+            raise ValueError(f"tolerance_deg must be finite and > 0, got {self.tolerance_deg}")
+
+    def __call__(self, raw: float | np.ndarray) -> float | np.ndarray:
+        """Calibrated probability for raw confidence(s); NaN maps to the lowest value."""
+        r = np.nan_to_num(np.asarray(raw, float), nan=-1.0)
+        out = np.interp(r, self.knots, self.values)
+        return float(out) if out.ndim == 0 else out
+
+    @classmethod
+    def fit(cls, raw: np.ndarray, errors_deg: np.ndarray, *, tolerance_deg: float = 5.0,
+            min_per_knot: int = 20) -> ConfidenceCalibration:
+        """Isotonic fit of "error within tolerance" on raw confidence (held-out estimates only).
+
+        Undefined estimates enter with raw confidence 0 and their error (90 deg when unknown). Blocks of fewer
+        than ``min_per_knot`` estimates are merged into their neighbours, so a knot is never a single press.
+        """
+        raw = np.clip(np.nan_to_num(np.asarray(raw, float), nan=0.0), 0.0, 1.0)
+        err = np.nan_to_num(np.abs(np.asarray(errors_deg, float)), nan=90.0)
+        if raw.shape != err.shape or raw.ndim != 1 or raw.size < 2 * min_per_knot:
+            raise ValueError(f"need matching 1-D raw confidences and errors, at least {2 * min_per_knot}; got "
+                             f"{raw.shape} and {err.shape}")
+        order = np.argsort(raw, kind="stable")
+        x, y = raw[order], (err[order] <= tolerance_deg).astype(float)
+        blocks = _pool_adjacent_violators(x, y, min_per_knot)
+        knots = [b[0] for b in blocks]
+        values = [b[1] for b in blocks]
+        knots, values = _strictly_increasing(knots, values)
+        return cls(tuple(knots), tuple(values), float(tolerance_deg), int(raw.size))
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"knots": list(self.knots), "values": list(self.values), "tolerance_deg": self.tolerance_deg,
+                "samples": self.samples}
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> ConfidenceCalibration:
+        return cls(tuple(d["knots"]), tuple(d["values"]), float(d["tolerance_deg"]), int(d.get("samples", 0)))
+
+    def save(self, path: str | Path) -> Path:
+        Path(path).write_text(json.dumps(self.to_dict(), indent=1))
+        return Path(path)
+
+    @classmethod
+    def load(cls, path: str | Path) -> ConfidenceCalibration:
+        try:
+            return cls.from_dict(json.loads(Path(path).read_text()))
+        except (OSError, ValueError, KeyError, TypeError) as e:
+            raise ValueError(f"{path}: not a confidence calibration ({type(e).__name__}: {e})") from e
+
+
+def _pool_adjacent_violators(x: np.ndarray, y: np.ndarray, min_count: int) -> list[tuple[float, float]]:
+    """Blocks (mean x, mean y) of the isotonic regression of y on sorted x, each of >= min_count points."""
+    seeds = [[float(x[i:i + min_count].sum()), float(y[i:i + min_count].sum()), len(x[i:i + min_count])]
+             for i in range(0, len(x), min_count)]
+    if len(seeds) > 1 and seeds[-1][2] < min_count:   # a short tail joins its neighbour
+        tail = seeds.pop()
+        seeds[-1] = [a + b for a, b in zip(seeds[-1], tail)]
+    blocks: list[list[float]] = []                     # [sum_x, sum_y, count]
+    for block in seeds:
+        blocks.append(block)
+        while len(blocks) > 1 and blocks[-2][1] / blocks[-2][2] > blocks[-1][1] / blocks[-1][2]:
+            last = blocks.pop()
+            blocks[-1] = [a + b for a, b in zip(blocks[-1], last)]
+    return [(sx / n, sy / n) for sx, sy, n in blocks]
+
+
+def _strictly_increasing(knots: list[float], values: list[float]) -> tuple[list[float], list[float]]:
+    """Drop knots that repeat an x (ties of raw confidence), keeping the later (higher) value."""
+    out_k, out_v = [], []
+    for k, v in zip(knots, values):
+        if out_k and k <= out_k[-1]:
+            out_v[-1] = max(out_v[-1], v)
+            continue
+        out_k.append(min(max(k, 0.0), 1.0))
+        out_v.append(v)
+    return out_k, out_v
+
+
+def reliability_table(confidence: np.ndarray, errors_deg: np.ndarray, *, tolerance_deg: float = 5.0,
+                      bins: int = 10) -> list[dict[str, float]]:
+    """Per confidence bin (equal counts: deciles by default): confidence range, mean confidence, observed share
+    within tolerance, median and p95 error, count."""
+    conf = np.nan_to_num(np.asarray(confidence, float), nan=0.0)
+    err = np.nan_to_num(np.abs(np.asarray(errors_deg, float)), nan=90.0)
+    if conf.shape != err.shape or conf.ndim != 1 or conf.size < bins:
+        raise ValueError(f"need matching 1-D confidences and errors, at least {bins}; got {conf.shape}, {err.shape}")
+    order = np.argsort(conf, kind="stable")
+    rows = []
+    for part in np.array_split(order, bins):
+        c, e = conf[part], err[part]
+        rows.append({"confidence_low": float(c.min()), "confidence_high": float(c.max()),
+                     "mean_confidence": float(c.mean()), "within_tolerance": float(np.mean(e <= tolerance_deg)),
+                     "median_error_deg": float(np.median(e)), "p95_error_deg": float(np.percentile(e, 95)),
+                     "count": int(part.size)})
+    return rows
+
+
+def reliability_figure(rows: list[dict[str, float]], path: str | Path, *, title: str = "") -> Path:
+    """Reliability diagram (observed share within tolerance against mean confidence per bin) and the error per
+    bin, as a PNG."""
+    from tactile_manip.plots import _pyplot
+
+    plt = _pyplot()
+    fig, (a, b) = plt.subplots(1, 2, figsize=(9, 3.8), constrained_layout=True)
+    mean_c = [r["mean_confidence"] for r in rows]
+    a.plot([0, 1], [0, 1], color="0.6", linestyle="--", label="perfectly calibrated")
+    a.plot(mean_c, [r["within_tolerance"] for r in rows], "o-", color="C0", label="observed")
+    a.set_xlabel("confidence (bin mean)")
+    a.set_ylabel("share within tolerance")
+    a.set_xlim(0, 1)
+    a.set_ylim(0, 1.02)
+    a.legend(loc="upper left", fontsize=8)
+    x = np.arange(1, len(rows) + 1)
+    b.bar(x - 0.2, [r["median_error_deg"] for r in rows], width=0.4, label="median")
+    b.bar(x + 0.2, [r["p95_error_deg"] for r in rows], width=0.4, label="p95")
+    b.set_yscale("log")
+    b.set_xlabel("confidence bin (1 = lowest)")
+    b.set_ylabel("angle error [deg]")
+    b.set_xticks(x)
+    b.legend(fontsize=8)
+    if title:
+        fig.suptitle(title, fontsize=10)
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return Path(path)

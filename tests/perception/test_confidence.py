@@ -1,0 +1,57 @@
+"""Confidence calibration: isotonic fit recovers a known success curve, is monotone, and round-trips."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tactile_manip.perception.confidence import ConfidenceCalibration, reliability_figure, reliability_table
+
+
+def _synthetic(n: int, rng) -> tuple[np.ndarray, np.ndarray]:
+    """Raw confidence uniform in [0, 1]; P(error <= 5 deg | raw) = raw**2 (an over-confident raw score)."""
+    raw = rng.uniform(0, 1, n)
+    ok = rng.uniform(0, 1, n) < raw**2
+    errors = np.where(ok, rng.uniform(0, 5, n), rng.uniform(5.01, 90, n))
+    return raw, errors
+
+
+def test_fit_recovers_the_success_curve_and_is_monotone():
+    raw, errors = _synthetic(20000, np.random.default_rng(0))
+    cal = ConfidenceCalibration.fit(raw, errors, tolerance_deg=5.0)
+    grid = np.linspace(0.05, 0.95, 19)
+    np.testing.assert_allclose(cal(grid), grid**2, atol=0.05)
+    assert np.all(np.diff(cal.values) >= 0) and np.all(np.diff(cal.knots) > 0)
+    assert cal(-1.0) == cal.values[0] and cal(2.0) == cal.values[-1] and cal(np.nan) == cal.values[0]
+    held_out_raw, held_out_err = _synthetic(5000, np.random.default_rng(1))
+    rows = reliability_table(cal(held_out_raw), held_out_err)
+    assert len(rows) == 10 and sum(r["count"] for r in rows) == 5000
+    gap = max(abs(r["mean_confidence"] - r["within_tolerance"]) for r in rows)
+    assert gap < 0.06  # calibrated on held-out data: predicted matches observed per decile
+    raw_rows = reliability_table(held_out_raw, held_out_err)
+    assert max(abs(r["mean_confidence"] - r["within_tolerance"]) for r in raw_rows) > 0.15  # the raw score is not
+
+
+def test_blocks_hold_at_least_min_per_knot_and_errors_are_clear(tmp_path):
+    rng = np.random.default_rng(2)
+    raw, errors = _synthetic(95, rng)
+    cal = ConfidenceCalibration.fit(raw, errors, min_per_knot=20)
+    assert len(cal.knots) <= 95 // 20 and cal.samples == 95
+    back = ConfidenceCalibration.load(cal.save(tmp_path / "c.json"))
+    assert back == cal
+    with pytest.raises(ValueError, match="at least 40"):
+        ConfidenceCalibration.fit(raw[:10], errors[:10])
+    with pytest.raises(ValueError, match="must not decrease"):
+        ConfidenceCalibration((0.1, 0.5), (0.8, 0.2))
+    (tmp_path / "bad.json").write_text("{}")
+    with pytest.raises(ValueError, match="not a confidence calibration"):
+        ConfidenceCalibration.load(tmp_path / "bad.json")
+
+
+def test_undefined_estimates_count_as_misses_and_the_figure_draws(tmp_path):
+    raw = np.r_[np.full(50, np.nan), np.full(50, 0.9)]
+    errors = np.r_[np.full(50, np.nan), np.full(50, 1.0)]
+    cal = ConfidenceCalibration.fit(raw, errors, min_per_knot=10)
+    assert cal(0.0) == 0.0 and cal(0.9) == 1.0
+    path = reliability_figure(reliability_table(cal(np.nan_to_num(raw)), errors, bins=5), tmp_path / "r.png")
+    assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
