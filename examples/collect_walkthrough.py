@@ -23,11 +23,11 @@ import numpy as np
 from tqdm import tqdm
 
 from tactile_manip.cli import main as cli
-from tactile_manip.sensors.camera_sim import SimulatedCamera, SimulatedCameraConfig
-from tactile_manip.sensors.collect import CollectConfig, PairCollector
-from tactile_manip.sensors.collect_sim import SimulatedRig, calibrate_simulated, random_presses
+from tactile_manip.collection.camera_sim import SimulatedCamera, SimulatedCameraConfig
+from tactile_manip.collection.collect import CollectConfig, PairCollector
+from tactile_manip.collection.collect_sim import SimulatedRig, calibrate_simulated, random_presses
 from tactile_manip.sensors.emulator import FaultConfig
-from tactile_manip.sensors.pair_log import dataset_from_pair_logs
+from tactile_manip.collection.pair_log import dataset_from_pair_logs
 from tactile_manip.data import save_dataset
 from tactile_manip.sim.vbts import lookup_table
 

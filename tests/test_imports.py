@@ -28,8 +28,8 @@ def _heavy_modules_after(code: str) -> list[str]:
     "import tactile_manip.sim.pair",
     "import tactile_manip.sim.dataset",
     "import tactile_manip.sensors",
-    "import tactile_manip.sensors.camera, tactile_manip.sensors.camera_opencv, tactile_manip.sensors.camera_sim, "
-    "tactile_manip.sensors.vbts_calibration, tactile_manip.sensors.collect, tactile_manip.sensors.collect_sim",
+    "import tactile_manip.collection.camera, tactile_manip.collection.camera_opencv, tactile_manip.collection.camera_sim, "
+    "tactile_manip.collection.vbts_calibration, tactile_manip.collection.collect, tactile_manip.collection.collect_sim",
     "import tactile_manip.perception.reconstruct, tactile_manip.perception.pose, tactile_manip.perception.metrics",
     "import tactile_manip.perception",
     "import tactile_manip.robot, tactile_manip.robot.twin, tactile_manip.robot.safety, tactile_manip.robot.conformance",

@@ -119,14 +119,14 @@ def _fresh(path: Path, force: bool) -> Path:
 def _calibrate(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from tactile_manip.sensors.vbts_calibration import calibrate_ball
+    from tactile_manip.collection.vbts_calibration import calibrate_ball
 
     out = _fresh(Path(args.out), args.force)
     if args.frames < 2:
         raise ValueError(f"--frames must be >= 2, got {args.frames}")
     if args.sim:
-        from tactile_manip.sensors.camera_sim import SimulatedCamera, SimulatedCameraConfig
-        from tactile_manip.sensors.collect_sim import calibrate_simulated
+        from tactile_manip.collection.camera_sim import SimulatedCamera, SimulatedCameraConfig
+        from tactile_manip.collection.collect_sim import calibrate_simulated
         from tactile_manip.sim.vbts import lookup_table
 
         camera = SimulatedCamera(SimulatedCameraConfig(lookup_table=args.sim_table, mirror=args.mirror))
@@ -138,8 +138,8 @@ def _calibrate(args: argparse.Namespace) -> int:
         cal.report["table_error_vs_truth_mm"] = {"max": float(np.abs(cal.table_mm[1:n] - true[1:n]).max()),
                                                  "mean": float(np.abs(cal.table_mm[1:n] - true[1:n]).mean())}
     else:
-        from tactile_manip.sensors.camera_opencv import OpenCVCamera, OpenCVCameraConfig
-        from tactile_manip.sensors.vbts import PadAlignment
+        from tactile_manip.collection.camera_opencv import OpenCVCamera, OpenCVCameraConfig
+        from tactile_manip.collection.vbts import PadAlignment
 
         if args.corners is None:
             raise ValueError("--corners is required with a real camera (the pad's four corners in the image)")
@@ -173,8 +173,8 @@ def _record(args: argparse.Namespace) -> int:
     import numpy as np
     from tqdm import tqdm
 
-    from tactile_manip.sensors.collect import CollectConfig
-    from tactile_manip.sensors.vbts_calibration import VbtsCalibration
+    from tactile_manip.collection.collect import CollectConfig
+    from tactile_manip.collection.vbts_calibration import VbtsCalibration
 
     from tactile_manip.data import dataset_path
 
@@ -207,7 +207,7 @@ def _record(args: argparse.Namespace) -> int:
     finally:
         if bar is not None:
             bar.close()
-    from tactile_manip.sensors.pair_log import dataset_from_pair_logs
+    from tactile_manip.collection.pair_log import dataset_from_pair_logs
     from tactile_manip.data import SPLITS, save_dataset
 
     data = dataset_from_pair_logs([log_path], test_objects=args.test_objects, validation_fraction=args.val_fraction)
@@ -228,9 +228,9 @@ def _record(args: argparse.Namespace) -> int:
 def _record_sim(args, config, calibration, log_path: Path, progress):
     import numpy as np
 
-    from tactile_manip.sensors.camera_sim import SimulatedCameraConfig
-    from tactile_manip.sensors.collect import PairCollector
-    from tactile_manip.sensors.collect_sim import SimulatedRig, random_presses
+    from tactile_manip.collection.camera_sim import SimulatedCameraConfig
+    from tactile_manip.collection.collect import PairCollector
+    from tactile_manip.collection.collect_sim import SimulatedRig, random_presses
     from tactile_manip.sensors.emulator import FaultConfig
 
     rng = np.random.default_rng(args.seed)
@@ -251,9 +251,9 @@ def _record_real(args, config, calibration, log_path: Path, progress):
     import signal
     import threading
 
-    from tactile_manip.sensors.camera_opencv import OpenCVCamera, OpenCVCameraConfig
-    from tactile_manip.sensors.collect import PairCollector
-    from tactile_manip.sensors.force import FieldForce
+    from tactile_manip.collection.camera_opencv import OpenCVCamera, OpenCVCameraConfig
+    from tactile_manip.collection.collect import PairCollector
+    from tactile_manip.collection.force import FieldForce
     from tactile_manip.sensors.config import SerialSensorConfig
     from tactile_manip.sensors.serial_sensor import SerialSensor
 
@@ -281,7 +281,7 @@ def _record_real(args, config, calibration, log_path: Path, progress):
 
 
 def _finalize(args: argparse.Namespace) -> int:
-    from tactile_manip.sensors.pair_log import dataset_from_pair_logs, read_pair_log
+    from tactile_manip.collection.pair_log import dataset_from_pair_logs, read_pair_log
     from tactile_manip.data import SPLITS, dataset_path, save_dataset
 
     out = _fresh(dataset_path(args.out), args.force)

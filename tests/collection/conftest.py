@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tactile_manip.sensors.camera_sim import SimulatedCamera, SimulatedCameraConfig, ball_indenter
-from tactile_manip.sensors.pair_log import PairLogWriter, PairRecord
-from tactile_manip.sensors.vbts_calibration import calibrate_ball
+from tactile_manip.collection.camera_sim import SimulatedCamera, SimulatedCameraConfig, ball_indenter
+from tactile_manip.collection.pair_log import PairLogWriter, PairRecord
+from tactile_manip.collection.vbts_calibration import calibrate_ball
 from tactile_manip.sim.objects import IndenterPose
 
 BALL_RADIUS_MM = 4.0

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from tactile_manip.errors import CalibrationError
-from tactile_manip.sensors.camera_sim import SimulatedCamera, SimulatedCameraConfig, ball_indenter
-from tactile_manip.sensors.vbts_calibration import (
+from tactile_manip.collection.camera_sim import SimulatedCamera, SimulatedCameraConfig, ball_indenter
+from tactile_manip.collection.vbts_calibration import (
     VbtsCalibration,
     _isotonic,
     calibrate_ball,

@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 from tactile_manip.errors import SensorDisconnectedError
-from tactile_manip.sensors.camera import CameraError, CameraFrame, CameraTimeoutError, make_camera
-from tactile_manip.sensors.camera_opencv import OpenCVCamera, OpenCVCameraConfig
-from tactile_manip.sensors.camera_sim import SimulatedCamera, SimulatedCameraConfig, ball_indenter
+from tactile_manip.collection.camera import CameraError, CameraFrame, CameraTimeoutError, make_camera
+from tactile_manip.collection.camera_opencv import OpenCVCamera, OpenCVCameraConfig
+from tactile_manip.collection.camera_sim import SimulatedCamera, SimulatedCameraConfig, ball_indenter
 from tactile_manip.sim.objects import IndenterPose
 
 

@@ -10,12 +10,12 @@ import pytest
 
 from tactile_manip.errors import CalibrationError, RecordingError, SensorTimeoutError
 from tactile_manip.sensors import SimulatedSensor, SimulatedSensorConfig
-from tactile_manip.sensors.camera import CameraTimeoutError
-from tactile_manip.sensors.camera_sim import SimulatedCamera, SimulatedCameraConfig
-from tactile_manip.sensors.collect import CollectConfig, PairCollector
-from tactile_manip.sensors.force import FieldForce, FunctionForce, PressTrigger, ScriptForce
+from tactile_manip.collection.camera import CameraTimeoutError
+from tactile_manip.collection.camera_sim import SimulatedCamera, SimulatedCameraConfig
+from tactile_manip.collection.collect import CollectConfig, PairCollector
+from tactile_manip.collection.force import FieldForce, FunctionForce, PressTrigger, ScriptForce
 from tactile_manip.sensors.contacts import Press
-from tactile_manip.sensors.pair_log import dataset_from_pair_logs, read_pair_log
+from tactile_manip.collection.pair_log import dataset_from_pair_logs, read_pair_log
 from tactile_manip.data import load_dataset, save_dataset
 from tactile_manip.sim.objects import IndenterPose
 from tactile_manip.sim.shapes import make_indenter
@@ -200,7 +200,7 @@ def test_a_killed_writer_leaves_a_readable_log(tmp_path):
 
     path = tmp_path / "killed.tmpairs"
     code = ("import numpy as np, time\n"
-            "from tactile_manip.sensors.pair_log import PairLogWriter, PairRecord\n"
+            "from tactile_manip.collection.pair_log import PairLogWriter, PairRecord\n"
             f"w = PairLogWriter({str(path)!r}, {{'config': {{'tolerance_s': 0.005}}}}, sync_every_s=0.2)\n"
             "z = np.zeros((4, 4, 3), np.float32)\n"
             "k = 0\n"

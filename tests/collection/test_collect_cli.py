@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from tactile_manip.cli import main
-from tactile_manip.sensors.pair_log import read_pair_log
+from tactile_manip.collection.pair_log import read_pair_log
 from tactile_manip.data import load_dataset
 
 

@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from tactile_manip.sensors.sync import DeviceClock, StreamPairer, nearest_within
+from tactile_manip.collection.sync import DeviceClock, StreamPairer, nearest_within
 
 # Times on a 0.5 ms grid make exact ties and duplicates likely; floats anywhere in [0, 1] s make near-ties.
 grid_times = st.lists(st.integers(0, 400).map(lambda k: k * 0.0005), max_size=40)

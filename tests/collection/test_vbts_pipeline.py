@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from tactile_manip.errors import CalibrationError
-from tactile_manip.sensors.camera_sim import DEFAULT_CORNERS_PX
-from tactile_manip.sensors.vbts import (
+from tactile_manip.collection.camera_sim import DEFAULT_CORNERS_PX
+from tactile_manip.collection.vbts import (
     DepthParams,
     DepthPipeline,
     PadAlignment,
@@ -20,7 +20,7 @@ from tactile_manip.sensors.vbts import (
     resize_area,
     to_grey,
 )
-from tactile_manip.sensors.vbts_calibration import check_reference_clear
+from tactile_manip.collection.vbts_calibration import check_reference_clear
 from tactile_manip.sim.objects import IndenterPose
 from tactile_manip.sim.shapes import make_indenter
 

@@ -34,7 +34,7 @@ from scipy import ndimage
 
 from tactile_manip.checks import check_finite_scalar, npz_read_problem
 from tactile_manip.errors import CalibrationError
-from tactile_manip.sensors.vbts import DepthParams, DepthPipeline, PadAlignment, Reference, to_grey
+from tactile_manip.collection.vbts import DepthParams, DepthPipeline, PadAlignment, Reference, to_grey
 from tactile_manip.version import code_version
 
 FORMAT_VERSION = 1

@@ -6,18 +6,18 @@ closes to a force threshold (10 N). :class:`PairCollector`:
 1. prepares: the MBTS baseline and the VBTS reference, both only while the force source reads no press
    (below ``release_n``), the reference also checked against the calibration's for a hidden contact;
 2. streams: every MBTS frame from a subscription, stamped with its host time (mapped from the device clock
-   by :class:`~tactile_manip.sensors.sync.DeviceClock`, so USB bursts do not smear it); every camera frame
+   by :class:`~tactile_manip.collection.sync.DeviceClock`, so USB bursts do not smear it); every camera frame
    with its capture time (minus the camera's latency);
 3. triggers: when the force at a camera frame's time first reaches ``threshold_n``, the next
    ``pairs_per_press`` camera frames at or above the threshold are taken; the trigger re-arms when the
    force falls below ``release_n`` (the gripper opened);
 4. pairs each taken frame with the MBTS frame nearest in time, only within ``tolerance_s``
-   (:class:`~tactile_manip.sensors.sync.StreamPairer`); a frame without one is logged as unpaired and the
+   (:class:`~tactile_manip.collection.sync.StreamPairer`); a frame without one is logged as unpaired and the
    press may take the next frame instead;
 5. writes each pair (depth from the calibrated pipeline, quantised as the dataset stores it) to the
-   append-only, fsynced pair log (:mod:`~tactile_manip.sensors.pair_log`).
+   append-only, fsynced pair log (:mod:`~tactile_manip.collection.pair_log`).
 
-The force comes from a :class:`~tactile_manip.sensors.force.ForceSource`: the gripper (wrap its reading in
+The force comes from a :class:`~tactile_manip.collection.force.ForceSource`: the gripper (wrap its reading in
 ``FunctionForce``), the MBTS itself as a proxy (``FieldForce``) or, in simulation, the press script
 (``ScriptForce``).
 """
@@ -37,11 +37,11 @@ import numpy as np
 from tactile_manip.checks import check_finite_scalar
 from tactile_manip.errors import CalibrationError, SensorTimeoutError
 from tactile_manip.sensors.base import TactileSensor
-from tactile_manip.sensors.camera import Camera, CameraFrame
-from tactile_manip.sensors.force import ForceSource, PressTrigger
-from tactile_manip.sensors.pair_log import PairLogWriter, PairRecord
-from tactile_manip.sensors.sync import DeviceClock, Match, StreamPairer
-from tactile_manip.sensors.vbts_calibration import VbtsCalibration, check_reference_clear
+from tactile_manip.collection.camera import Camera, CameraFrame
+from tactile_manip.collection.force import ForceSource, PressTrigger
+from tactile_manip.collection.pair_log import PairLogWriter, PairRecord
+from tactile_manip.collection.sync import DeviceClock, Match, StreamPairer
+from tactile_manip.collection.vbts_calibration import VbtsCalibration, check_reference_clear
 from tactile_manip.data import quantise_depth
 
 

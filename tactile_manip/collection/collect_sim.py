@@ -18,14 +18,14 @@ from collections.abc import Sequence
 import numpy as np
 
 from tactile_manip.errors import SensorTimeoutError
-from tactile_manip.sensors.camera_sim import SimulatedCamera, SimulatedCameraConfig, ball_indenter
-from tactile_manip.sensors.force import ScriptForce
+from tactile_manip.collection.camera_sim import SimulatedCamera, SimulatedCameraConfig, ball_indenter
+from tactile_manip.collection.force import ScriptForce
 from tactile_manip.sensors.config import SerialSensorConfig
 from tactile_manip.sensors.contacts import Press
 from tactile_manip.sensors.emulator import EmulatorConfig, FaultConfig, FirmwareEmulator
 from tactile_manip.sensors.serial_sensor import SerialSensor
-from tactile_manip.sensors.vbts import DepthParams
-from tactile_manip.sensors.vbts_calibration import VbtsCalibration, calibrate_ball
+from tactile_manip.collection.vbts import DepthParams
+from tactile_manip.collection.vbts_calibration import VbtsCalibration, calibrate_ball
 from tactile_manip.sim.objects import IndenterPose
 from tactile_manip.sim.pair import SensorPair
 

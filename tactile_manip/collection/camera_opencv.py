@@ -15,7 +15,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from tactile_manip.extras import require
-from tactile_manip.sensors.camera import Camera, CameraError
+from tactile_manip.collection.camera import Camera, CameraError
 
 
 def import_cv2() -> Any:

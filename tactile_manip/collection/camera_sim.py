@@ -24,9 +24,9 @@ from typing import ClassVar, Literal
 import numpy as np
 
 from tactile_manip.checks import check_finite_scalar
-from tactile_manip.sensors.camera import Camera
+from tactile_manip.collection.camera import Camera
 from tactile_manip.sensors.contacts import Press
-from tactile_manip.sensors.vbts import MIRRORS, PadAlignment, apply_homography
+from tactile_manip.collection.vbts import MIRRORS, PadAlignment, apply_homography
 from tactile_manip.sim.objects import Indenter, IndenterPose
 from tactile_manip.sim.pair import SensorPair
 from tactile_manip.sim.vbts import grey_from_depth, lookup_table
@@ -99,7 +99,7 @@ class _Contact:
 
 
 class SimulatedCamera(Camera):
-    """The DTact camera of the simulated rig (see :class:`~tactile_manip.sensors.camera.Camera` for the contract).
+    """The DTact camera of the simulated rig (see :class:`~tactile_manip.collection.camera.Camera` for the contract).
 
     Args:
         config: rate, image geometry, true lookup table, noise and timing faults.

@@ -5,9 +5,9 @@ unread frame in order (a collector needs every frame, not just the newest), with
 captured and a sequence number that counts every frame slot, so a gap in ``seq`` is a dropped frame.
 
 Backends are a config dataclass plus a ``"module:Class"`` entry in :data:`CAMERA_BACKENDS`, built by
-:func:`make_camera` and imported only when chosen: ``OpenCVCamera`` (:mod:`tactile_manip.sensors.camera_opencv`,
+:func:`make_camera` and imported only when chosen: ``OpenCVCamera`` (:mod:`tactile_manip.collection.camera_opencv`,
 ``pip install -e ".[camera]"``, ``cv2`` imported on ``connect()``) and ``SimulatedCamera``
-(:mod:`tactile_manip.sensors.camera_sim`).
+(:mod:`tactile_manip.collection.camera_sim`).
 """
 
 from __future__ import annotations
@@ -27,8 +27,8 @@ import numpy as np
 from tactile_manip.errors import SensorDisconnectedError, SensorError, SensorTimeoutError
 
 CAMERA_BACKENDS: dict[str, str] = {
-    "opencv": "tactile_manip.sensors.camera_opencv:OpenCVCamera",
-    "simulated": "tactile_manip.sensors.camera_sim:SimulatedCamera",
+    "opencv": "tactile_manip.collection.camera_opencv:OpenCVCamera",
+    "simulated": "tactile_manip.collection.camera_sim:SimulatedCamera",
 }
 
 

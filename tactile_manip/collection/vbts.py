@@ -16,7 +16,7 @@ no-contact reference. :class:`DepthPipeline` does, per frame:
 
 The output follows DESIGN.md section 4 in the MBTS pad frame: float32 (200, 200) mm, >= 0, pixel (0, 0) at
 the (-x, +y) corner, 0.1 mm per pixel. The lookup table comes from a ball press
-(:mod:`tactile_manip.sensors.vbts_calibration`).
+(:mod:`tactile_manip.collection.vbts_calibration`).
 """
 
 from __future__ import annotations
