@@ -21,6 +21,7 @@ import numpy as np
 
 from tactile_manip.errors import ProtocolError
 from tactile_manip.sensors.wire.base import ChipFrame, WireDecoder
+from tactile_manip.sim.chip import full_scale_ut
 from tactile_manip.sim.params import ChipParams
 
 EOL = b"\r\n"
@@ -59,8 +60,7 @@ class AnySkinDecoder(WireDecoder):
         self._buf = bytearray()
         self._synced = False
         # a channel is at the rail when its value reaches the count rail times the LSB (the library's conversion)
-        lsb = np.array([self.chip.lsb_xy_ut, self.chip.lsb_xy_ut, self.chip.lsb_z_ut], np.float32)
-        self._rail_ut = lsb * np.float32(self.chip.saturation_counts) * np.float32(1 - 1e-6)
+        self._rail_ut = full_scale_ut(self.chip).astype(np.float32) * np.float32(1 - 1e-6)
 
     @property
     def pending(self) -> int:
