@@ -32,10 +32,16 @@ def self_test_pattern(k: int, *, temperature: bool) -> dict:
 
 @pytest.fixture(scope="module")
 def frame_dump(tmp_path_factory) -> Path:
-    if shutil.which("make") is None or shutil.which("gcc") is None:
-        pytest.skip("the host build of the firmware needs make and gcc on PATH")
+    if shutil.which("gcc") is None:
+        pytest.skip("the host build of the firmware needs gcc on PATH")
     build = tmp_path_factory.mktemp("firmware_build")
-    subprocess.run(["make", "-C", str(FIRMWARE), "host", f"BUILD={build}"], check=True, capture_output=True)
+    if shutil.which("make") is not None:  # the documented command
+        subprocess.run(["make", "-C", str(FIRMWARE), "host", f"BUILD={build}"], check=True, capture_output=True)
+    else:  # a machine with gcc but no make: the Makefile's one compile line
+        subprocess.run(["gcc", "-std=c99", "-O2", "-Wall", "-Wextra", "-Werror", "-pedantic",
+                        f"-I{FIRMWARE / 'supermag'}", "-o", str(build / "frame_dump"),
+                        str(FIRMWARE / "host" / "frame_dump.c"), str(FIRMWARE / "supermag" / "frame.c")],
+                       check=True, capture_output=True)
     return build / "frame_dump"
 
 
