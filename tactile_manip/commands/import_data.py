@@ -11,7 +11,6 @@ split, groups, objects by default, or the names given to --readings/--images/--s
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -88,5 +87,4 @@ def _read(args: argparse.Namespace, name: str):
 
 def _inputs(args: argparse.Namespace) -> dict[str, str]:
     keys = ("arrays", "readings", "images", "split", "groups", "objects")
-    return {k: str(Path(getattr(args, k))) if k == "arrays" else str(getattr(args, k))
-            for k in keys if getattr(args, k) is not None}
+    return {k: str(getattr(args, k)) for k in keys if getattr(args, k) is not None}
