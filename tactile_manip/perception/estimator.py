@@ -23,7 +23,9 @@ Confidence: the PCA's ``1 - lambda_minor / lambda_major``; when the reconstructo
 :class:`~tactile_manip.types.TactileReading` flags a chip at its ADC rail, or any reading, array or not, holds
 a value beyond the chip's full scale, which every reconstructor clamps: see
 :func:`~tactile_manip.perception.reconstruct.out_of_range`), by the fraction of chips with no saturated axis.
-The estimate's ``saturated_chips`` counts those chips.
+The estimate's ``saturated_chips`` counts those chips. With a ``calibration``
+(:class:`~tactile_manip.perception.confidence.ConfidenceCalibration`), that raw confidence is finally mapped
+onto the probability, measured on held-out presses, that the angle is within the calibration's tolerance.
 """
 
 from __future__ import annotations
@@ -35,6 +37,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from tactile_manip.perception.confidence import ConfidenceCalibration
 from tactile_manip.perception.pose import PoseParams, angle_from_image
 from tactile_manip.perception.reconstruct import Reconstruction, Reconstructor, out_of_range
 from tactile_manip.types import AngleEstimate, TactileReading
@@ -77,10 +80,13 @@ class TactilePoseEstimator:
             reconstruction shows (0: trust the image). Chip noise peaks near 10 uT on the simulated pad and a
             10 N press gives 95 uT and more; a model never trained on empty readings may otherwise draw a
             faint contact into one (the shipped model draws 0.37 mm into an all-zero reading).
+        calibration: maps the raw confidence of a defined estimate onto the probability that its angle is
+            within the calibration's tolerance, fitted on held-out presses
+            (:class:`~tactile_manip.perception.confidence.ConfidenceCalibration`); None keeps the raw one.
     """
 
     def __init__(self, reconstructor: Reconstructor, params: PoseParams | None = None, *,
-                 min_field_ut: float = 20.0) -> None:
+                 min_field_ut: float = 20.0, calibration: ConfidenceCalibration | None = None) -> None:
         if not isinstance(reconstructor, Reconstructor):
             raise TypeError(f"reconstructor must be a Reconstructor, got {type(reconstructor).__name__}")
         if not (np.isfinite(min_field_ut) and min_field_ut >= 0):
@@ -88,6 +94,9 @@ class TactilePoseEstimator:
         self.reconstructor = reconstructor
         self.params = params or PoseParams()
         self.min_field_ut = float(min_field_ut)
+        if calibration is not None and not isinstance(calibration, ConfidenceCalibration):
+            raise TypeError(f"calibration must be a ConfidenceCalibration, got {type(calibration).__name__}")
+        self.calibration = calibration
 
     @property
     def name(self) -> str:
@@ -147,6 +156,8 @@ class TactilePoseEstimator:
         chips = int(flags.any(axis=-1).sum())
         if est.defined and chips:
             est = replace(est, confidence=est.confidence * _unsaturated_fraction(flags))
+        if est.defined and self.calibration is not None:
+            est = replace(est, confidence=float(self.calibration(est.confidence)))
         t2 = time.perf_counter()
         timings = {"reconstruct": t1 - t0, "pose": t2 - t1, "total": t2 - t0}
         if reading is not None:

@@ -326,3 +326,21 @@ def test_a_slow_estimator_on_the_simulated_sensor_skips_frames_instead_of_queuei
         assert math.isfinite(est.angle_rad)
     gaps = np.diff(seqs)
     assert (gaps >= 1).all() and stats.skipped_frames == int((gaps - 1).sum()) >= 1
+
+
+def test_a_calibration_maps_the_raw_confidence_of_defined_estimates(pair) -> None:
+    from tactile_manip.perception.confidence import ConfidenceCalibration
+
+    rec = load_reconstructor("bilinear", output_px=16)
+    raw = TactilePoseEstimator(rec)
+    # a calibration that says: raw 0.5 -> 10 % within tolerance, raw 1.0 -> 90 %
+    cal = ConfidenceCalibration(knots=(0.5, 1.0), values=(0.1, 0.9), tolerance_deg=5.0, samples=200)
+    calibrated = TactilePoseEstimator(rec, calibration=cal)
+    field = _rod_field(pair, 25.0)
+    a, b = raw.estimate(field), calibrated.estimate(field)
+    assert a.defined and b.defined and a.angle_rad == b.angle_rad
+    assert b.confidence == pytest.approx(float(np.interp(a.confidence, (0.5, 1.0), (0.1, 0.9))))
+    empty = calibrated.estimate(np.zeros((4, 4, 3)))
+    assert not empty.defined and empty.confidence == 0.0  # an undefined angle stays at 0
+    with pytest.raises(TypeError, match="ConfidenceCalibration"):
+        TactilePoseEstimator(rec, calibration={"knots": [0, 1]})
