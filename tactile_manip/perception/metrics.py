@@ -1,8 +1,9 @@
-"""Image quality metrics for depth images, with one fixed data range used everywhere.
+"""Image quality metrics for depth images, with a stated data range used everywhere.
 
 PSNR and SSIM need a data range ``L``. Depth images are in millimetres and the DTact-style VBTS saturates at
-1.92 mm, so we fix ``L = DEPTH_RANGE_MM = 2.0`` mm for every image, every method and every report (never the
-per-image maximum, which would reward predicting noise on empty images). SSIM follows Wang et al. (2004):
+1.92 mm, so depth datasets state ``L = DEPTH_RANGE_MM = 2.0`` mm (the default here) for every image, every
+method and every report; a dataset in another unit states its own (``ImageSpec.data_range``), and evaluation
+passes it. Never the per-image maximum, which would reward predicting noise on empty images. SSIM follows Wang et al. (2004):
 11x11 Gaussian window with sigma 1.5 px, ``K1 = 0.01``, ``K2 = 0.03``, averaged over the image minus a
 5-pixel border.
 
