@@ -10,7 +10,9 @@ import argparse
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--config", required=True, help="training TOML (e.g. configs/train/compact.toml)")
-    p.add_argument("--data", required=True, help="paired dataset .npz (tactile-manip simulate / collect)")
+    p.add_argument("--data", required=True, nargs="+",
+                   help="paired dataset .npz (tactile-manip simulate / collect / import); several are trained on as "
+                        "one, each keeping its splits")
     p.add_argument("--out", required=True, help="run folder for checkpoints, history and plots")
     again = p.add_mutually_exclusive_group()
     again.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.pt")
@@ -34,7 +36,8 @@ def run(args: argparse.Namespace) -> int:
     from tactile_manip.data import check_dataset_file
 
     _check_run_folder(args)
-    check_dataset_file(args.data)  # before the progress bar: a missing file is one line
+    for path in args.data:
+        check_dataset_file(path)  # before the progress bar: a missing file is one line
     cfg = with_overrides(load_train_config(args.config), epochs=args.epochs, seed=args.seed, threads=args.threads,
                          device=args.device, max_minutes=args.max_minutes)
     resolve_device(cfg.device)  # a missing GPU is one line before any progress bar or output folder

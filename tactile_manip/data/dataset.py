@@ -162,3 +162,50 @@ class PairedDataset:
                 "image_shape": list(self.image_shape), "image": self.image.to_dict(),
                 "splits": {s: int(np.sum(self.split == s)) for s in SPLITS}, "fingerprint": self.fingerprint(),
                 "source": self.provenance.get("source", "unknown")}
+
+
+def concatenate(datasets: list[PairedDataset] | tuple[PairedDataset, ...]) -> PairedDataset:
+    """One dataset of several, in order: same channels and image spec; object names merged, groups kept apart.
+
+    Splits are kept as each dataset has them. Extras are kept when every dataset has them with the same
+    per-sample shape; the others are left out and named in ``provenance["dropped_extras"]``. A dataset without
+    groups gets one group per sample, so no group spans two datasets.
+    """
+    parts = list(datasets)
+    if not parts:
+        raise DatasetError("concatenate needs at least one dataset")
+    first = parts[0]
+    for i, d in enumerate(parts[1:], start=1):
+        if d.channels != first.channels:
+            raise DatasetError(f"dataset {i} has channels {d.channels.to_dict()}, dataset 0 has "
+                               f"{first.channels.to_dict()}")
+        if d.image != first.image:
+            raise DatasetError(f"dataset {i} has images {d.image.to_dict()}, dataset 0 has {first.image.to_dict()}")
+        if d.grid != first.grid or d.image_shape != first.image_shape:
+            raise DatasetError(f"dataset {i} has a {d.grid} grid and {d.image_shape} images, dataset 0 a "
+                               f"{first.grid} grid and {first.image_shape} images")
+    object_index, names = None, None
+    if any(d.object_names is not None for d in parts):  # a dataset that names none is the object "all"
+        names = list(dict.fromkeys(name for d in parts
+                                   for name in (["all"] if d.object_names is None else d.object_names.tolist())))
+        lookup = {name: i for i, name in enumerate(names)}
+        object_index = np.concatenate([np.array([lookup[o] for o in d.objects()], dtype=np.int16) for d in parts])
+    groups = None
+    if any(d.groups is not None for d in parts):
+        chunks, start = [], 0
+        for d in parts:
+            g = np.arange(len(d), dtype=np.int64) if d.groups is None else np.unique(d.groups, return_inverse=True)[1]
+            chunks.append(g.astype(np.int64) + start)
+            start = int(chunks[-1].max(initial=start - 1)) + 1
+        groups = np.concatenate(chunks)
+    common = [k for k in first.extras if all(k in d.extras and d.extras[k].shape[1:] == first.extras[k].shape[1:]
+                                            for d in parts)]
+    dropped = sorted({k for d in parts for k in d.extras} - set(common))
+    extras = {k: np.concatenate([d.extras[k] for d in parts]) for k in common}
+    provenance = {"source": "concatenate", "parts": [dict(d.provenance, fingerprint=d.fingerprint(), samples=len(d))
+                                                     for d in parts], "dropped_extras": dropped}
+    return PairedDataset(readings=np.concatenate([d.readings for d in parts]),
+                         images=np.concatenate([d.images for d in parts]),
+                         split=np.concatenate([d.split for d in parts]), channels=first.channels, image=first.image,
+                         object_index=object_index, object_names=None if names is None else np.array(names),
+                         groups=groups, extras=extras, provenance=provenance)

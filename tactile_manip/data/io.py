@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from tactile_manip.checks import npz_read_problem
-from tactile_manip.data.dataset import PairedDataset
+from tactile_manip.data.dataset import PairedDataset, concatenate
 from tactile_manip.data.spec import ChannelSpec, ImageSpec
 from tactile_manip.errors import DatasetError
 
@@ -111,6 +111,12 @@ def load_dataset(path: str | Path) -> PairedDataset:
         raise
     except (zipfile.BadZipFile, ValueError, OSError, EOFError, KeyError) as e:
         raise DatasetError(f"{path} is not a tactile_manip dataset: {npz_read_problem(e)}") from e
+
+
+def load_datasets(paths: list[str | Path] | tuple[str | Path, ...]) -> PairedDataset:
+    """One dataset file, or several concatenated (:func:`~tactile_manip.data.dataset.concatenate`)."""
+    parts = [load_dataset(p) for p in paths]
+    return parts[0] if len(parts) == 1 else concatenate(parts)
 
 
 def _metadata(path: Path, entry: np.ndarray) -> dict[str, Any]:

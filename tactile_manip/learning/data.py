@@ -98,9 +98,16 @@ class OutputSpec:
         return cls(offset=data.image.value_min, scale=data.image.data_range)
 
 
-def select(data: PairedDataset, split: str, objects: tuple[str, ...] = ()) -> np.ndarray:
-    """Indices of ``split``, restricted to ``objects`` (by name) when given."""
+def select(data: PairedDataset, split: str, objects: tuple[str, ...] = (), *,
+           drop_bottomed_out: bool = False) -> np.ndarray:
+    """Indices of ``split``, restricted to ``objects`` (by name) when given.
+
+    ``drop_bottomed_out`` leaves out presses the producer flagged as through the elastic layer (the extra
+    ``bottomed_out``; data without it loses nothing): their images come from outside the layer model.
+    """
     idx = data.indices(split, objects)
+    if drop_bottomed_out and data.has("bottomed_out"):
+        idx = idx[~data.extra("bottomed_out")[idx].astype(bool)]
     if idx.size == 0:
         raise ValueError(f"no samples in split {split!r}" + (f" for objects {list(objects)}" if objects else ""))
     return idx

@@ -33,7 +33,7 @@ from tactile_manip.learning.checkpoint import read_checkpoint
 from tactile_manip.learning.data import InputSpec, OutputSpec, TensorPairs, augment_batch, select
 from tactile_manip.learning.model import (CVAEConfig, SuperMagCVAE, count_parameters, gaussian_nll, negative_elbo,
                                           preset)
-from tactile_manip.data import PairedDataset, load_dataset
+from tactile_manip.data import PairedDataset, load_datasets
 
 
 class TrainingError(TactileManipError, RuntimeError):
@@ -72,6 +72,7 @@ class TrainConfig:
     decoder: DecoderOverrides = field(default_factory=DecoderOverrides)  # decoder settings over the preset's
     axes: str = "xyz"                    # "xyz", or "z" for the z-axis-only variant
     objects: list[str] = field(default_factory=list)  # train only on these objects ([]: all)
+    drop_bottomed_out: bool = True       # leave out training/validation presses flagged as through the layer
     clamp_ut: float = 500.0              # input clamp, uT (SuperMag: +-500 scaled to [-1, 1])
     clamp_std: float = 5.0               # input clamp of readings not in uT, standard deviations of the training split
     epochs: int = 60
@@ -172,23 +173,27 @@ def resolve_device(name: str, dist: _Dist | None = None) -> torch.device:
     return torch.device("cuda", index)
 
 
-def train(cfg: TrainConfig, data_path: str | Path, out_dir: str | Path, *, resume: bool = False,
+def train(cfg: TrainConfig, data_path: str | Path | list[str | Path], out_dir: str | Path, *, resume: bool = False,
           progress: Callable[[dict[str, float]], None] | None = None,
           on_start: Callable[[int], None] | None = None) -> dict[str, Any]:
     """Train a model and return the run summary (also written to ``out_dir/history.json``).
+
+    ``data_path`` is one dataset file or several, trained on as one (:func:`~tactile_manip.data.concatenate`:
+    each keeps its splits).
 
     ``progress(row)`` is called after each epoch; ``on_start(epochs_done)`` once everything is loaded and checked
     (data, model, a resumed checkpoint), just before the first epoch.
     """
     dist = _init_distributed()
     try:
-        return _train(cfg, Path(data_path), Path(out_dir), resume, progress, dist, on_start)
+        paths = [Path(p) for p in (data_path if isinstance(data_path, (list, tuple)) else [data_path])]
+        return _train(cfg, paths, Path(out_dir), resume, progress, dist, on_start)
     finally:
         if dist.world > 1:
             torch.distributed.destroy_process_group()
 
 
-def _train(cfg: TrainConfig, data_path: Path, out: Path, resume: bool, progress, dist: _Dist,
+def _train(cfg: TrainConfig, data_paths: list[Path], out: Path, resume: bool, progress, dist: _Dist,
            on_start=None) -> dict[str, Any]:
     if cfg.threads:
         torch.set_num_threads(cfg.threads)
@@ -197,12 +202,13 @@ def _train(cfg: TrainConfig, data_path: Path, out: Path, resume: bool, progress,
     if device.type == "cuda":
         torch.backends.cuda.matmul.allow_tf32 = True
         torch.backends.cudnn.allow_tf32 = True
-    data = load_dataset(data_path)
-    train_index = select(data, "train", tuple(cfg.objects))
+    data = load_datasets(data_paths)
+    train_index = select(data, "train", tuple(cfg.objects), drop_bottomed_out=cfg.drop_bottomed_out)
     spec = InputSpec.for_data(data, train_index, clamp_ut=cfg.clamp_ut, axes=cfg.axes, clamp_std=cfg.clamp_std)
     mcfg = model_config(cfg, data)
     train_set = TensorPairs(data, train_index).to(device)
-    val_set = TensorPairs(data, select(data, "val", tuple(cfg.objects))).to(device)
+    val_set = TensorPairs(data, select(data, "val", tuple(cfg.objects), drop_bottomed_out=cfg.drop_bottomed_out)
+                          ).to(device)
     model = SuperMagCVAE(mcfg).to(device)
     opt = torch.optim.AdamW(model.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
     state = {"epoch": 0, "history": [], "best_psnr": -math.inf, "best_epoch": 0, "seconds": 0.0}
