@@ -36,6 +36,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "find-port": ("tactile_manip.commands.find_port", "list serial ports that may be the sensor board"),
     "view": ("tactile_manip.commands.view", "show the 4x4x3 field of a sensor live (or save a snapshot)"),
     "trials": ("tactile_manip.commands.trials", "run grasp-estimate-reorient trials per method and report"),
+    "calibrate": ("tactile_manip.commands.calibrate",
+                  "fit a model's confidence to P(angle within tolerance) on held-out presses, with a reliability plot"),
     "score": ("tactile_manip.commands.score", "re-score a saved trial run at another tolerance (no re-run)"),
     "collect": ("tactile_manip.commands.collect", "calibrate the VBTS and record synchronized MBTS/VBTS pairs"),
     "bench": ("tactile_manip.commands.bench", "speed vs error of every method and runtime on this machine"),

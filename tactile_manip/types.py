@@ -52,7 +52,10 @@ class AngleEstimate:
         saturated_chips: chips with an axis at the ADC rail or beyond the chip's range (clamped before the
             reconstruction); the confidence is scaled by the fraction of chips without.
         timings_s: named durations of the estimate's stages in s (e.g. "reconstruct", "pose", "total"; and
-            "age", from the reading's arrival to the estimate), empty when not measured.
+            "age", from the reading's arrival to the estimate; "escalate" when extra inference ran), empty when
+            not measured.
+        escalated: the first pass was below the estimator's ``escalate_below`` and this estimate comes from its
+            ``escalation`` reconstructor (extra inference: prior samples, symmetry averaging).
     """
 
     angle_rad: float
@@ -63,3 +66,4 @@ class AngleEstimate:
     reason: str = ""
     saturated_chips: int = 0
     timings_s: dict[str, float] = field(default_factory=dict, compare=False)
+    escalated: bool = False

@@ -10,6 +10,9 @@ behaviour's ``min_confidence = 0.9`` means "act when 9 in 10 such estimates were
 :func:`reliability_table` bins estimates by confidence (deciles by default) and reports, per bin, the mean
 predicted probability, the observed share within tolerance and the median / p95 error: the reliability
 diagram in numbers. numpy only (the figure needs matplotlib).
+
+A model's calibration lives beside it as ``<model>.calibration.json`` (:func:`calibration_path`; written by
+``tactile-manip calibrate``); :func:`load_calibration_beside` finds it.
 """
 
 from __future__ import annotations
@@ -90,6 +93,18 @@ class ConfidenceCalibration:
             return cls.from_dict(json.loads(Path(path).read_text()))
         except (OSError, ValueError, KeyError, TypeError) as e:
             raise ValueError(f"{path}: not a confidence calibration ({type(e).__name__}: {e})") from e
+
+
+def calibration_path(model_path: str | Path) -> Path:
+    """Where the calibration of the model at ``model_path`` lives: ``models/x.onnx`` -> ``models/x.calibration.json``."""
+    p = Path(model_path)
+    return p.with_name(f"{p.stem}.calibration.json")
+
+
+def load_calibration_beside(model_path: str | Path) -> ConfidenceCalibration | None:
+    """The calibration beside the model at ``model_path``, None when it has none (ValueError when unreadable)."""
+    path = calibration_path(model_path)
+    return ConfidenceCalibration.load(path) if path.is_file() else None
 
 
 def _pool_adjacent_violators(x: np.ndarray, y: np.ndarray, min_count: int) -> list[tuple[float, float]]:

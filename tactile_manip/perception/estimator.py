@@ -26,6 +26,16 @@ a value beyond the chip's full scale, which every reconstructor clamps: see
 The estimate's ``saturated_chips`` counts those chips. With a ``calibration``
 (:class:`~tactile_manip.perception.confidence.ConfidenceCalibration`), that raw confidence is finally mapped
 onto the probability, measured on held-out presses, that the angle is within the calibration's tolerance.
+
+Extra inference only when it is needed: with an ``escalation`` reconstructor (e.g. the same model averaged over
+the sensor's symmetries, :class:`~tactile_manip.perception.symmetry.SymmetrizedReconstructor`, or drawing K
+prior samples) and ``escalate_below``, an estimate whose (calibrated) confidence is below that level is made
+again from the same reading by the escalation reconstructor; that estimate replaces the first
+(``escalated=True``, its cost in ``timings_s["escalate"]``)::
+
+    model = load_reconstructor("models/supermag_robust.onnx")
+    estimator = TactilePoseEstimator(model, calibration=ConfidenceCalibration.load(
+        "models/supermag_robust.calibration.json"), escalation=SymmetrizedReconstructor(model), escalate_below=0.9)
 """
 
 from __future__ import annotations
@@ -86,7 +96,8 @@ class TactilePoseEstimator:
     """
 
     def __init__(self, reconstructor: Reconstructor, params: PoseParams | None = None, *,
-                 min_field_ut: float = 20.0, calibration: ConfidenceCalibration | None = None) -> None:
+                 min_field_ut: float = 20.0, calibration: ConfidenceCalibration | None = None,
+                 escalation: Reconstructor | None = None, escalate_below: float = 0.0) -> None:
         if not isinstance(reconstructor, Reconstructor):
             raise TypeError(f"reconstructor must be a Reconstructor, got {type(reconstructor).__name__}")
         if not (np.isfinite(min_field_ut) and min_field_ut >= 0):
@@ -97,6 +108,17 @@ class TactilePoseEstimator:
         if calibration is not None and not isinstance(calibration, ConfidenceCalibration):
             raise TypeError(f"calibration must be a ConfidenceCalibration, got {type(calibration).__name__}")
         self.calibration = calibration
+        if escalation is not None and not isinstance(escalation, Reconstructor):
+            raise TypeError(f"escalation must be a Reconstructor, got {type(escalation).__name__}")
+        if not (np.isfinite(escalate_below) and 0.0 <= escalate_below <= 1.0):
+            raise ValueError(f"escalate_below must be a confidence in [0, 1], got {escalate_below!r}")
+        if escalation is not None and (escalation.input_shape != reconstructor.input_shape
+                                       or escalation.pixel_mm != reconstructor.pixel_mm):
+            raise ValueError(f"escalation {escalation.name} takes {escalation.input_shape} readings at "
+                             f"{escalation.pixel_mm} mm/px; {reconstructor.name} takes {reconstructor.input_shape} "
+                             f"at {reconstructor.pixel_mm}: they must match")
+        self.escalation = escalation
+        self.escalate_below = float(escalate_below)
 
     @property
     def name(self) -> str:
@@ -143,26 +165,38 @@ class TactilePoseEstimator:
               rec: Reconstruction, t0: float, t1: float) -> AngleEstimate:
         """Post-processing and PCA of ``rec``, reconstructed from ``field`` (R, C, 3) uT between ``t0`` and
         ``t1``; ``saturated`` (R, C, 3) flags from the sensor or None; ``reading`` (the newest frame, or None)
-        dates the estimate."""
-        if np.max(np.abs(field)) < self.min_field_ut:  # NaN fails this test and stays with the reconstructor
-            est = AngleEstimate(0.0, 0.0, False, reason="no contact field")
-        else:
-            est = angle_from_image(rec.depth_mm, pixel_mm=self.reconstructor.pixel_mm, params=self.params)
-        if est.defined and rec.spread_mm is not None:
-            est = replace(est, confidence=est.confidence * _sample_agreement(rec, self.params.threshold_mm))
+        dates the estimate. Escalates a low-confidence estimate when the estimator has an escalation."""
         flags = out_of_range(field)
         if saturated is not None:
             flags |= np.asarray(saturated, dtype=bool)
-        chips = int(flags.any(axis=-1).sum())
-        if est.defined and chips:
-            est = replace(est, confidence=est.confidence * _unsaturated_fraction(flags))
-        if est.defined and self.calibration is not None:
-            est = replace(est, confidence=float(self.calibration(est.confidence)))
+        contact = bool(np.max(np.abs(field)) >= self.min_field_ut)  # NaN stays with the reconstructor
+        est = self._angle(rec, flags, contact)
         t2 = time.perf_counter()
         timings = {"reconstruct": t1 - t0, "pose": t2 - t1, "total": t2 - t0}
+        if self.escalation is not None and contact and est.confidence < self.escalate_below:
+            est = replace(self._angle(self.escalation.reconstruct(field), flags, contact), escalated=True)
+            timings["escalate"] = time.perf_counter() - t2
+            timings["total"] = time.perf_counter() - t0
         if reading is not None:
             timings["age"] = time.monotonic() - reading.t_host_s
-        return replace(est, saturated_chips=chips, timings_s=timings)
+        return replace(est, saturated_chips=int(flags.any(axis=-1).sum()), timings_s=timings)
+
+    def _angle(self, rec: Reconstruction, flags: np.ndarray, contact: bool) -> AngleEstimate:
+        """The angle of ``rec`` and its confidence: PCA, times the prior samples' agreement and the unsaturated
+        fraction of chips (``flags`` (R, C, 3)), calibrated when the estimator has a calibration."""
+        if not contact:
+            return AngleEstimate(0.0, 0.0, False, reason="no contact field")
+        est = angle_from_image(rec.depth_mm, pixel_mm=self.reconstructor.pixel_mm, params=self.params)
+        if not est.defined:
+            return est
+        confidence = est.confidence
+        if rec.spread_mm is not None:
+            confidence *= _sample_agreement(rec, self.params.threshold_mm)
+        if flags.any():
+            confidence *= _unsaturated_fraction(flags)
+        if self.calibration is not None:
+            confidence = float(self.calibration(confidence))
+        return replace(est, confidence=confidence)
 
     def estimate_frames(self, readings: Sequence[TactileReading | np.ndarray]) -> AngleEstimate:
         """Angle from the mean of several consecutive readings of one static contact (less chip noise)."""

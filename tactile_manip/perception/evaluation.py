@@ -94,6 +94,33 @@ def rod_angle_errors(data: PairedDataset, idx: np.ndarray, pred: np.ndarray) -> 
     return errors
 
 
+def rod_estimates(data: PairedDataset, idx: np.ndarray, estimator, *, chunk: int = 256
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Single-frame estimates of the elongated objects' presses among ``idx``: their indices, the estimator's
+    confidence (0 when undefined) and the angle error against the true yaw, deg (90 when undefined).
+
+    ``estimator`` is a :class:`~tactile_manip.perception.estimator.TactilePoseEstimator`; readings go through
+    it ``chunk`` at a time (:meth:`~tactile_manip.perception.estimator.TactilePoseEstimator.estimate_many`).
+    """
+    if not data.has("pose"):
+        raise ValueError("the dataset has no 'pose' per sample: the true angles of its presses are unknown")
+    names = data.objects(idx)
+    rods = np.asarray(idx)[[any(str(n).startswith(e) for e in ELONGATED) for n in names]]
+    if rods.size == 0:
+        raise ValueError(f"no presses of elongated objects ({', '.join(ELONGATED)}) among the "
+                         f"{len(idx)} selected: their angle is what the confidence is calibrated on")
+    yaw = data.extra("pose")[rods, 2]
+    conf, err = np.zeros(rods.size), np.full(rods.size, 90.0)
+    for start in range(0, rods.size, chunk):
+        part = slice(start, start + chunk)
+        for i, est in enumerate(estimator.estimate_many(list(data.readings[rods[part]].astype(np.float64))),
+                                start=start):
+            if est.defined:
+                conf[i] = est.confidence
+                err[i] = abs(math.degrees(wrap_axial(est.angle_rad - float(yaw[i]))))
+    return rods, conf, err
+
+
 def _angle_summary(errors: np.ndarray) -> dict[str, float]:
     """Median, p95, shares within 2 and 5 deg, count and undefined fraction of the rod angle errors."""
     e = errors[np.isfinite(errors)]

@@ -120,7 +120,7 @@ def angle_from_image(depth_mm: np.ndarray, *, pixel_mm: float = 0.1, threshold_m
     sigma_px = p.sigma_mm / pixel_mm
     radius_px = int(GAUSS_TRUNCATE * sigma_px + 0.5) if sigma_px > 0 else 0  # as scipy.ndimage rounds it
     weights, (r0, c0) = _weights(d, rows, cols, removed, p.threshold_mm, sigma_px, radius_px)
-    n_px = int(np.count_nonzero(weights))
+    n_px = int(np.count_nonzero(weights > 0))  # (the comparison and a bool count beat a float count)
     if n_px < p.min_contact_px:
         return _undefined(p, n_px, raw_px, level, pixel_mm)
     h, w = d.shape
@@ -205,7 +205,7 @@ def _kept_contact(d: np.ndarray, threshold_mm: float, min_fraction: float):
     cols = np.flatnonzero(mask.any(axis=0))
     r0, r1, c0, c1 = int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1
     box = mask[r0:r1, c0:c1]
-    labels, n = ndimage.label(box)  # the same regions as over the whole image
+    labels, n = ndimage.label(box, _CROSS)  # the same regions as over the whole image
     if n <= 1:
         return ((r0, r1), (c0, c1)), int(np.count_nonzero(box)), None
     # a few regions (speckle beside one contact): a comparison per region beats bincount's int64 copy
@@ -222,6 +222,9 @@ def _kept_contact(d: np.ndarray, threshold_mm: float, min_fraction: float):
     rows, cols = np.flatnonzero(kept.any(axis=1)), np.flatnonzero(kept.any(axis=0))
     kept_rows, kept_cols = (r0 + int(rows[0]), r0 + int(rows[-1]) + 1), (c0 + int(cols[0]), c0 + int(cols[-1]) + 1)
     return (kept_rows, kept_cols), int(sizes[keep].sum()), (removed, r0, c0)
+
+
+_CROSS = ndimage.generate_binary_structure(2, 1)  # 4-connectivity, scipy.ndimage.label's default
 
 
 def _weights(d: np.ndarray, rows: tuple[int, int], cols: tuple[int, int], removed, threshold_mm: float,

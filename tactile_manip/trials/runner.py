@@ -27,6 +27,7 @@ from tactile_manip.extras import require
 from tactile_manip.perception.estimator import TactilePoseEstimator
 from tactile_manip.perception.pose import wrap_axial
 from tactile_manip.perception.reconstruct import load_reconstructor
+from tactile_manip.perception.confidence import load_calibration_beside
 from tactile_manip.perception.symmetry import SymmetrizedReconstructor
 from tactile_manip.robot.frames import hand_T_finger_pad, rotation_about, transform
 from tactile_manip.sensors.config import SimulatedSensorConfig
@@ -103,7 +104,17 @@ def build_estimators(scene: TrialScene, scene_path: Path | None = None) -> dict[
         reconstructor = load_reconstructor(target, **kwargs)
         if spec.symmetrize:
             reconstructor = SymmetrizedReconstructor(reconstructor)
-        out[spec.name] = TactilePoseEstimator(reconstructor)
+        model = target not in ("bilinear", "bicubic")
+        calibration = load_calibration_beside(target) if model and spec.calibrated else None
+        escalation = None
+        if spec.escalate_below > 0:
+            escalation = (SymmetrizedReconstructor(reconstructor) if spec.escalation == "symmetry" else
+                          load_reconstructor(target, threads=spec.threads, samples=spec.escalation_samples)
+                          if model else None)
+            if escalation is None:
+                raise ValueError(f"method {spec.name}: the 'samples' escalation needs an ONNX model, not {target}")
+        out[spec.name] = TactilePoseEstimator(reconstructor, calibration=calibration, escalation=escalation,
+                                              escalate_below=spec.escalate_below)
     return out
 
 

@@ -34,6 +34,13 @@ class MethodSpec:
         threads: onnxruntime intra-op threads.
         symmetrize: average the reconstruction over the sensor's 8 symmetries
             (:class:`~tactile_manip.perception.symmetry.SymmetrizedReconstructor`; 8 readings per estimate).
+        calibrated: use the model's confidence calibration when it has one beside it
+            (``<model>.calibration.json``, from ``tactile-manip calibrate``): the confidence the behaviour's
+            ``min_confidence`` compares is then P(angle within the calibration's tolerance).
+        escalate_below: spend extra inference only on estimates whose confidence is below this (0: never).
+        escalation: the extra inference: "symmetry" (the reading's 8 symmetric copies averaged) or "samples"
+            (``escalation_samples`` prior samples, their spread lowering the confidence).
+        escalation_samples: prior samples per reading of the "samples" escalation.
     """
 
     name: str
@@ -42,12 +49,22 @@ class MethodSpec:
     samples: int = 1
     threads: int = 1
     symmetrize: bool = False
+    calibrated: bool = True
+    escalate_below: float = 0.0
+    escalation: str = "symmetry"
+    escalation_samples: int = 8
 
     def __post_init__(self) -> None:
         if not self.name or not self.name.replace("_", "").replace("-", "").isalnum():
             raise ValueError(f"methods.name must be a non-empty word (letters, digits, _ or -), got {self.name!r}")
-        if self.output_px < 0 or self.samples < 1 or self.threads < 1:
-            raise ValueError(f"method {self.name}: output_px >= 0, samples >= 1 and threads >= 1 are required")
+        if self.output_px < 0 or self.samples < 1 or self.threads < 1 or self.escalation_samples < 2:
+            raise ValueError(f"method {self.name}: output_px >= 0, samples >= 1, threads >= 1 and "
+                             "escalation_samples >= 2 are required")
+        if not (math.isfinite(self.escalate_below) and 0.0 <= self.escalate_below <= 1.0):
+            raise ValueError(f"method {self.name}: escalate_below must be a confidence in [0, 1], got "
+                             f"{self.escalate_below}")
+        if self.escalation not in ("symmetry", "samples"):
+            raise ValueError(f"method {self.name}: escalation must be 'symmetry' or 'samples', got {self.escalation!r}")
 
 
 @dataclass(frozen=True)

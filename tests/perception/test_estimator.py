@@ -344,3 +344,44 @@ def test_a_calibration_maps_the_raw_confidence_of_defined_estimates(pair) -> Non
     assert not empty.defined and empty.confidence == 0.0  # an undefined angle stays at 0
     with pytest.raises(TypeError, match="ConfidenceCalibration"):
         TactilePoseEstimator(rec, calibration={"knots": [0, 1]})
+
+
+def test_escalation_runs_only_below_the_level_and_replaces_the_estimate(pair) -> None:
+    from tactile_manip.perception.symmetry import SymmetrizedReconstructor
+
+    calls = []
+
+    class Counting(SymmetrizedReconstructor):
+        def _run(self, fields_ut):
+            calls.append(len(fields_ut))
+            return super()._run(fields_ut)
+
+    model = load_reconstructor(MODEL)
+    field = _rod_field(pair, 25.0)
+    plain = TactilePoseEstimator(model).estimate(field)
+    assert plain.defined and not plain.escalated and "escalate" not in plain.timings_s
+    never = TactilePoseEstimator(model, escalation=Counting(model), escalate_below=0.0).estimate(field)
+    assert calls == [] and never.angle_rad == plain.angle_rad and not never.escalated
+    always = TactilePoseEstimator(model, escalation=Counting(model), escalate_below=1.0)
+    est = always.estimate(field)
+    assert calls == [1] and est.escalated and est.timings_s["escalate"] > 0
+    assert est.timings_s["total"] >= est.timings_s["escalate"] + est.timings_s["reconstruct"]
+    want = TactilePoseEstimator(SymmetrizedReconstructor(model)).estimate(field)
+    assert est.angle_rad == want.angle_rad and est.confidence == want.confidence
+    # no contact field: nothing to escalate
+    assert not always.estimate(np.zeros((4, 4, 3))).escalated and calls == [1]
+    # several pads: only the low ones escalate, each with its own reading
+    both = always.estimate_many([field, np.zeros((4, 4, 3))])
+    assert [e.escalated for e in both] == [True, False] and calls == [1, 1]
+
+
+def test_escalation_is_checked_at_construction(pair) -> None:
+    model = load_reconstructor(MODEL)
+    with pytest.raises(TypeError, match="escalation must be a Reconstructor"):
+        TactilePoseEstimator(model, escalation="symmetry", escalate_below=0.5)
+    for bad in (-0.1, 1.5, float("nan")):
+        with pytest.raises(ValueError, match="escalate_below"):
+            TactilePoseEstimator(model, escalate_below=bad)
+    other = load_reconstructor("bilinear", output_px=16)
+    with pytest.raises(ValueError, match="must match"):
+        TactilePoseEstimator(model, escalation=other, escalate_below=0.5)

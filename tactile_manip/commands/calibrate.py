@@ -1,0 +1,108 @@
+"""``tactile-manip calibrate``: fit a model's confidence to the probability its angle is within tolerance.
+
+Runs the estimator (one pass per reading, as the trials run it) on the rod presses of ``--fit`` (held-out
+presses: ``configs/dataset/calibration.toml`` holds rods of sizes used neither in training nor in the tests),
+fits :class:`~tactile_manip.perception.confidence.ConfidenceCalibration` (isotonic) on "angle error <=
+tolerance", and checks it on the rod presses of ``--report`` (unseen shapes): the error per confidence decile
+before and after calibration, and a reliability plot. Writes the calibration (``--out``, by default beside the
+model as ``<model>.calibration.json``, where estimators built by the trials find it), and beside it
+``<name>.reliability.md``, ``.json`` and ``.png``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from pathlib import Path
+
+MAX_TOLERANCE_DEG = 90.0
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--model", required=True, help="an exported .onnx model (or 'bilinear' / 'bicubic')")
+    p.add_argument("--fit", required=True, metavar="DATA", help="paired dataset whose rod presses fit the calibration")
+    p.add_argument("--fit-split", default="test", choices=("train", "val", "test"),
+                   help="split of --fit to use (default test: configs/dataset/calibration.toml puts its rods there)")
+    p.add_argument("--report", default=None, metavar="DATA",
+                   help="paired dataset whose rod presses check the calibration (default: --fit itself)")
+    p.add_argument("--report-split", default="test", choices=("train", "val", "test"))
+    p.add_argument("--tolerance-deg", type=float, default=5.0, help="the error the probability is about (default 5)")
+    p.add_argument("--samples", type=int, default=1,
+                   help="prior samples per reading, as the estimator will run (default 1: one pass)")
+    p.add_argument("--out", default=None, help="calibration JSON (default: beside the model)")
+    p.add_argument("--force", action="store_true", help="replace an earlier calibration and its report")
+
+
+def run(args: argparse.Namespace) -> int:
+    import json
+
+    import numpy as np
+
+    from tactile_manip.data import check_dataset_file, load_dataset
+    from tactile_manip.errors import ConfigError
+    from tactile_manip.outputs import check_output_file
+    from tactile_manip.perception import TactilePoseEstimator, load_reconstructor
+    from tactile_manip.perception.confidence import (ConfidenceCalibration, calibration_path, reliability_figure,
+                                                     reliability_table)
+    from tactile_manip.perception.evaluation import rod_estimates
+
+    tol = args.tolerance_deg
+    if not (math.isfinite(tol) and 0.0 < tol <= MAX_TOLERANCE_DEG):
+        raise ConfigError(f"--tolerance-deg must be in (0, {MAX_TOLERANCE_DEG:g}] deg, got {tol}")
+    if args.samples < 1:
+        raise ConfigError(f"--samples must be >= 1, got {args.samples}")
+    out = Path(args.out) if args.out else calibration_path(args.model)
+    stem = out.with_suffix("")
+    report_files = [out] + [Path(f"{stem}.reliability.{ext}") for ext in ("md", "json", "png")]
+    for path in report_files:
+        check_output_file(path, force=args.force)
+    for path in {args.fit, args.report or args.fit}:
+        check_dataset_file(path)
+    kwargs = {"samples": args.samples} if args.model not in ("bilinear", "bicubic") else {}
+    estimator = TactilePoseEstimator(load_reconstructor(args.model, **kwargs))
+    fit = load_dataset(args.fit)
+    _, fit_conf, fit_err = rod_estimates(fit, fit.indices(args.fit_split), estimator)
+    cal = ConfidenceCalibration.fit(fit_conf, fit_err, tolerance_deg=tol)
+    report = fit if args.report is None else load_dataset(args.report)
+    _, raw, err = rod_estimates(report, report.indices(args.report_split), estimator)
+    before = reliability_table(raw, err, tolerance_deg=tol)
+    after = reliability_table(cal(raw), err, tolerance_deg=tol)
+    cal.save(out)
+    summary = {"model": str(args.model), "tolerance_deg": tol, "samples": args.samples,
+               "fit": {"data": str(args.fit), "split": args.fit_split, "presses": int(fit_conf.size),
+                       "within_tolerance": float(np.mean(fit_err <= tol))},
+               "report": {"data": str(args.report or args.fit), "split": args.report_split, "presses": int(raw.size),
+                          "within_tolerance": float(np.mean(err <= tol)),
+                          "expected_calibration_error": _ece(after), "expected_calibration_error_raw": _ece(before)},
+               "deciles_raw": before, "deciles_calibrated": after, "calibration": cal.to_dict()}
+    report_files[2].write_text(json.dumps(summary, indent=1))
+    report_files[1].write_text(_markdown(summary))
+    reliability_figure(after, report_files[3], title=f"{Path(args.model).name}: calibrated confidence on "
+                                                     f"{raw.size} held-out rod presses (|error| <= {tol:g} deg)")
+    print(_markdown(summary))
+    print(f"wrote {out} and {stem}.reliability.{{md,json,png}}")
+    return 0
+
+
+def _ece(rows: list[dict]) -> float:
+    """Expected calibration error: the count-weighted mean |observed share - mean confidence| over the bins."""
+    n = sum(r["count"] for r in rows)
+    return float(sum(r["count"] * abs(r["within_tolerance"] - r["mean_confidence"]) for r in rows) / n)
+
+
+def _markdown(s: dict) -> str:
+    r, f = s["report"], s["fit"]
+    lines = [f"Confidence calibration of {s['model']} (P(|angle error| <= {s['tolerance_deg']:g} deg), "
+             f"{s['samples']} sample(s) per reading)", "",
+             f"- fitted on {f['presses']} rod presses of {f['data']} ({f['split']}): "
+             f"{100 * f['within_tolerance']:.1f} % within tolerance",
+             f"- checked on {r['presses']} rod presses of {r['data']} ({r['split']}): "
+             f"{100 * r['within_tolerance']:.1f} % within tolerance; expected calibration error "
+             f"{r['expected_calibration_error']:.3f} (raw confidence: {r['expected_calibration_error_raw']:.3f})", "",
+             "| decile | raw confidence | calibrated (mean) | observed within tol. | median err. deg | p95 err. deg | n |",
+             "|---|---|---|---|---|---|---|"]
+    for i, (a, b) in enumerate(zip(s["deciles_raw"], s["deciles_calibrated"]), start=1):
+        lines.append(f"| {i} | {a['confidence_low']:.3f}-{a['confidence_high']:.3f} | {b['mean_confidence']:.3f} | "
+                     f"{b['within_tolerance']:.3f} | {b['median_error_deg']:.2f} | {b['p95_error_deg']:.1f} | "
+                     f"{b['count']} |")
+    return "\n".join(lines) + "\n"

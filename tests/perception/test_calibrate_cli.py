@@ -1,0 +1,89 @@
+"""``tactile-manip calibrate`` end to end on a small simulated rod set, the estimates it is fitted on, and the
+trials building estimators with the calibration beside the model and an escalation."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tactile_manip.cli import main
+from tactile_manip.data import save_dataset
+from tactile_manip.perception import TactilePoseEstimator, load_reconstructor
+from tactile_manip.perception.confidence import ConfidenceCalibration, calibration_path, load_calibration_beside
+from tactile_manip.perception.evaluation import rod_estimates
+from tactile_manip.sim.dataset import DatasetConfig, ObjectSpec, PoseRanges, generate
+
+pytest.importorskip("onnxruntime")
+
+MODEL = Path(__file__).resolve().parents[2] / "models" / "supermag_compact.onnx"
+
+
+@pytest.fixture(scope="module")
+def rods(tmp_path_factory) -> Path:
+    cfg = DatasetConfig(objects=[ObjectSpec("cylinder", 30, "test", "cylinder_3mm", {"size_mm": 3.0}),
+                                 ObjectSpec("square_bar", 30, "test", "square_bar_4mm", {"size_mm": 4.0}),
+                                 ObjectSpec("letter_r", 10, "test")],
+                        poses=PoseRanges(offset_mm=3.0, force_n=(2.0, 15.0)), seed=7)
+    return save_dataset(tmp_path_factory.mktemp("rods") / "rods.npz", generate(cfg, workers=1))
+
+
+def test_rod_estimates_are_the_estimators_own_on_rods_only(rods) -> None:
+    from tactile_manip.data import load_dataset
+
+    data = load_dataset(rods)
+    estimator = TactilePoseEstimator(load_reconstructor(MODEL))
+    idx, conf, err = rod_estimates(data, data.indices("test"), estimator, chunk=7)
+    assert idx.size == 60 and set(data.objects(idx)) == {"cylinder_3mm", "square_bar_4mm"}
+    one = estimator.estimate(data.readings[idx[9]].astype(np.float64))
+    assert conf[9] == pytest.approx(one.confidence if one.defined else 0.0, abs=1e-12)
+    assert ((err >= 0) & (err <= 90)).all() and ((conf >= 0) & (conf <= 1)).all()
+    with pytest.raises(ValueError, match="no presses of elongated objects"):
+        rod_estimates(data, data.indices("test")[data.objects(data.indices("test")) == "letter_r"], estimator)
+
+
+def test_calibrate_writes_a_calibration_beside_the_model_and_its_reliability_report(rods, tmp_path, capsys) -> None:
+    model = tmp_path / "m.onnx"
+    shutil.copy(MODEL, model)
+    assert main(["calibrate", "--model", str(model), "--fit", str(rods), "--tolerance-deg", "5"]) == 0
+    cal = load_calibration_beside(model)
+    assert cal is not None and calibration_path(model) == tmp_path / "m.calibration.json"
+    assert cal.samples == 60 and cal.tolerance_deg == 5.0
+    report = json.loads((tmp_path / "m.calibration.reliability.json").read_text())
+    assert report["fit"]["presses"] == report["report"]["presses"] == 60
+    assert len(report["deciles_calibrated"]) == 10 and (tmp_path / "m.calibration.reliability.png").stat().st_size
+    # fitted and checked on the same presses: the mean calibrated confidence is the share within tolerance
+    rows = report["deciles_calibrated"]
+    mean_conf = sum(r["mean_confidence"] * r["count"] for r in rows) / 60
+    assert mean_conf == pytest.approx(report["report"]["within_tolerance"], abs=0.05)
+    assert "expected calibration error" in capsys.readouterr().out
+    # a second run refuses to replace it without --force, in one line
+    assert main(["calibrate", "--model", str(model), "--fit", str(rods)]) == 2
+    assert "exists" in capsys.readouterr().err
+    assert main(["calibrate", "--model", str(model), "--fit", str(rods), "--force", "--tolerance-deg", "91"]) == 2
+
+
+def test_trials_use_the_calibration_beside_the_model_and_build_the_escalation(rods, tmp_path) -> None:
+    from tactile_manip.perception.symmetry import SymmetrizedReconstructor
+    from tactile_manip.trials.runner import build_estimators
+    from tactile_manip.trials.scene import MethodSpec, PresentationConfig, TrialObject, TrialScene
+
+    model = tmp_path / "m.onnx"
+    shutil.copy(MODEL, model)
+    ConfidenceCalibration((0.2, 0.9), (0.1, 0.95), 5.0, 100).save(calibration_path(model))
+    scene = TrialScene(methods=[MethodSpec("a", str(model), escalate_below=0.5),
+                                MethodSpec("b", str(model), calibrated=False, escalate_below=0.5,
+                                           escalation="samples", escalation_samples=4),
+                                MethodSpec("c", "bilinear", output_px=16)],
+                       presentation=PresentationConfig(objects=[TrialObject("cylinder", "c3", {"size_mm": 3.0})]))
+    est = build_estimators(scene)
+    assert est["a"].calibration == ConfidenceCalibration((0.2, 0.9), (0.1, 0.95), 5.0, 100)
+    assert isinstance(est["a"].escalation, SymmetrizedReconstructor) and est["a"].escalate_below == 0.5
+    assert est["b"].calibration is None and est["b"].escalation.samples == 4
+    assert est["c"].calibration is None and est["c"].escalation is None
+    for bad in ({"escalate_below": 1.5}, {"escalation": "more"}, {"escalation_samples": 1}):
+        with pytest.raises(ValueError, match="method x"):
+            MethodSpec("x", str(model), **bad)
