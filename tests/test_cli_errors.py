@@ -87,6 +87,12 @@ CASES = {
     "trials": {"missing": lambda p: ["--config", p["missing"], "--quiet"],
                "readonly": lambda p: ["--config", SCENE, "--out", f"{p['ro']}/run", "--quiet"],
                "dir": lambda p: ["--config", p["dir"], "--quiet"]},
+    "calibrate": {"missing": lambda p: ["--model", str(ROOT / "models/supermag_compact.onnx"), "--fit", p["missing"],
+                                        "--report", p["missing"], "--out", f"{p['tmp']}/c.json"],
+                  "readonly": lambda p: ["--model", "bilinear", "--fit", p["file"], "--report", p["file"],
+                                         "--out", f"{p['ro']}/c.json"],
+                  "dir": lambda p: ["--model", "bilinear", "--fit", p["dir"], "--report", p["dir"],
+                                    "--out", f"{p['tmp']}/c.json"]},
     "score": {"missing": lambda p: [p["missing"]],
               "readonly": lambda p: [p["dir"], "--out", f"{p['ro']}/scores"],
               "dir": lambda p: [p["dir"], "--out", p["file"]]},  # a file where the report folder goes

@@ -1,11 +1,12 @@
 """``tactile-manip calibrate``: fit a model's confidence to the probability its angle is within tolerance.
 
-Runs the estimator (one pass per reading, as the trials run it) on the rod presses of ``--fit`` (held-out
-presses: ``configs/dataset/calibration.toml`` holds rods of sizes used neither in training nor in the tests),
-fits :class:`~tactile_manip.perception.confidence.ConfidenceCalibration` (isotonic) on "angle error <=
-tolerance", and checks it on the rod presses of ``--report`` (unseen shapes): the error per confidence decile
-before and after calibration, and a reliability plot. Writes the calibration (``--out``, by default beside the
-model as ``<model>.calibration.json``, where estimators built by the trials find it), and beside it
+Runs the estimator (one pass per reading by default; ``--samples K`` and ``--symmetrized`` calibrate those
+estimators instead) on the rod presses of ``--fit`` (held-out presses: ``configs/dataset/calibration.toml``
+holds rods of sizes used neither in training nor in the tests), fits
+:class:`~tactile_manip.perception.confidence.ConfidenceCalibration` (isotonic) on "angle error <= tolerance",
+and checks it on the rod presses of ``--report`` (other presses: unseen shapes), giving the error per confidence
+decile before and after calibration and a reliability plot. Writes the calibration (``--out``, by default
+beside the model as ``<model>.calibration.json``, where the trials find it), and beside it
 ``<name>.reliability.md``, ``.json`` and ``.png``.
 """
 
@@ -16,6 +17,8 @@ import math
 from pathlib import Path
 
 MAX_TOLERANCE_DEG = 90.0
+MIN_FIT_PRESSES = 40   # two isotonic blocks of 20 at least
+REPORT_BINS = 10       # confidence deciles in the report
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -23,12 +26,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--fit", required=True, metavar="DATA", help="paired dataset whose rod presses fit the calibration")
     p.add_argument("--fit-split", default="test", choices=("train", "val", "test"),
                    help="split of --fit to use (default test: configs/dataset/calibration.toml puts its rods there)")
-    p.add_argument("--report", default=None, metavar="DATA",
-                   help="paired dataset whose rod presses check the calibration (default: --fit itself)")
+    p.add_argument("--report", required=True, metavar="DATA",
+                   help="paired dataset whose rod presses check the calibration (other presses than --fit's)")
     p.add_argument("--report-split", default="test", choices=("train", "val", "test"))
     p.add_argument("--tolerance-deg", type=float, default=5.0, help="the error the probability is about (default 5)")
     p.add_argument("--samples", type=int, default=1,
-                   help="prior samples per reading, as the estimator will run (default 1: one pass)")
+                   help="ONNX models: prior samples per reading, as the estimator will run (default 1: one pass)")
+    p.add_argument("--symmetrized", action="store_true",
+                   help="calibrate the model averaged over the sensor's symmetries (SymmetrizedReconstructor)")
     p.add_argument("--out", default=None, help="calibration JSON (default: beside the model)")
     p.add_argument("--force", action="store_true", help="replace an earlier calibration and its report")
 
@@ -45,33 +50,47 @@ def run(args: argparse.Namespace) -> int:
     from tactile_manip.perception.confidence import (ConfidenceCalibration, calibration_path, reliability_figure,
                                                      reliability_table)
     from tactile_manip.perception.evaluation import rod_estimates
+    from tactile_manip.perception.symmetry import SymmetrizedReconstructor
 
     tol = args.tolerance_deg
     if not (math.isfinite(tol) and 0.0 < tol <= MAX_TOLERANCE_DEG):
         raise ConfigError(f"--tolerance-deg must be in (0, {MAX_TOLERANCE_DEG:g}] deg, got {tol}")
-    if args.samples < 1:
-        raise ConfigError(f"--samples must be >= 1, got {args.samples}")
+    baseline = args.model in ("bilinear", "bicubic")
+    if args.samples < 1 or (baseline and args.samples != 1):
+        raise ConfigError(f"--samples must be >= 1, and 1 for a baseline; got {args.samples} for {args.model}")
     out = Path(args.out) if args.out else calibration_path(args.model)
     stem = out.with_suffix("")
     report_files = [out] + [Path(f"{stem}.reliability.{ext}") for ext in ("md", "json", "png")]
     for path in report_files:
         check_output_file(path, force=args.force)
-    for path in {args.fit, args.report or args.fit}:
+    out.parent.mkdir(parents=True, exist_ok=True)
+    for path in (args.fit, args.report):
         check_dataset_file(path)
-    kwargs = {"samples": args.samples} if args.model not in ("bilinear", "bicubic") else {}
-    estimator = TactilePoseEstimator(load_reconstructor(args.model, **kwargs))
+    reconstructor = load_reconstructor(args.model, **({} if baseline else {"samples": args.samples}))
+    if args.symmetrized:
+        reconstructor = SymmetrizedReconstructor(reconstructor)
+    estimator = TactilePoseEstimator(reconstructor)
     fit = load_dataset(args.fit)
-    _, fit_conf, fit_err = rod_estimates(fit, fit.indices(args.fit_split), estimator)
-    cal = ConfidenceCalibration.fit(fit_conf, fit_err, tolerance_deg=tol)
-    report = fit if args.report is None else load_dataset(args.report)
-    _, raw, err = rod_estimates(report, report.indices(args.report_split), estimator)
-    before = reliability_table(raw, err, tolerance_deg=tol)
-    after = reliability_table(cal(raw), err, tolerance_deg=tol)
+    _, fit_conf, fit_err = _rods(rod_estimates, fit, "--fit", args.fit, args.fit_split, estimator)
+    if fit_conf.size < MIN_FIT_PRESSES:
+        raise ConfigError(f"--fit {args.fit} has {fit_conf.size} rod presses in split {args.fit_split!r}; "
+                          f"calibrating needs >= {MIN_FIT_PRESSES}")
+    cal = ConfidenceCalibration.fit(fit_conf, fit_err, tolerance_deg=tol, prior_samples=args.samples,
+                                    symmetrized=args.symmetrized)
+    report = load_dataset(args.report)
+    _, raw, err = _rods(rod_estimates, report, "--report", args.report, args.report_split, estimator)
+    if raw.size < REPORT_BINS:
+        raise ConfigError(f"--report {args.report} has {raw.size} rod presses in split {args.report_split!r}; "
+                          f"the decile table needs >= {REPORT_BINS}")
+    order = np.argsort(raw, kind="stable")  # the same presses in each decile before and after
+    before = reliability_table(raw, err, tolerance_deg=tol, bins=REPORT_BINS, order=order)
+    after = reliability_table(cal(raw), err, tolerance_deg=tol, bins=REPORT_BINS, order=order)
     cal.save(out)
     summary = {"model": str(args.model), "tolerance_deg": tol, "samples": args.samples,
+               "symmetrized": args.symmetrized,
                "fit": {"data": str(args.fit), "split": args.fit_split, "presses": int(fit_conf.size),
                        "within_tolerance": float(np.mean(fit_err <= tol))},
-               "report": {"data": str(args.report or args.fit), "split": args.report_split, "presses": int(raw.size),
+               "report": {"data": str(args.report), "split": args.report_split, "presses": int(raw.size),
                           "within_tolerance": float(np.mean(err <= tol)),
                           "expected_calibration_error": _ece(after), "expected_calibration_error_raw": _ece(before)},
                "deciles_raw": before, "deciles_calibrated": after, "calibration": cal.to_dict()}
@@ -84,6 +103,16 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+def _rods(rod_estimates, data, option: str, path: str, split: str, estimator):
+    """rod_estimates on ``split`` of ``data``, its errors naming the option, file and split."""
+    from tactile_manip.errors import ConfigError
+
+    try:
+        return rod_estimates(data, data.indices(split), estimator)
+    except ValueError as e:
+        raise ConfigError(f"{option} {path}, split {split!r}: {e}") from e
+
+
 def _ece(rows: list[dict]) -> float:
     """Expected calibration error: the count-weighted mean |observed share - mean confidence| over the bins."""
     n = sum(r["count"] for r in rows)
@@ -92,8 +121,8 @@ def _ece(rows: list[dict]) -> float:
 
 def _markdown(s: dict) -> str:
     r, f = s["report"], s["fit"]
-    lines = [f"Confidence calibration of {s['model']} (P(|angle error| <= {s['tolerance_deg']:g} deg), "
-             f"{s['samples']} sample(s) per reading)", "",
+    how = f"{s['samples']} sample(s) per reading" + (", symmetry-averaged" if s["symmetrized"] else "")
+    lines = [f"Confidence calibration of {s['model']} (P(|angle error| <= {s['tolerance_deg']:g} deg), {how})", "",
              f"- fitted on {f['presses']} rod presses of {f['data']} ({f['split']}): "
              f"{100 * f['within_tolerance']:.1f} % within tolerance",
              f"- checked on {r['presses']} rod presses of {r['data']} ({r['split']}): "

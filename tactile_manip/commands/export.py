@@ -14,8 +14,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--checkpoint", required=True, help="training checkpoint (RUN/best.pt)")
     p.add_argument("--out", required=True, help="output .onnx")
     p.add_argument("--force", action="store_true", help="replace an existing --out (and --card)")
-    p.add_argument("--data", default=None, help="the training dataset: real readings for the parity check, "
-                                                 "pixel size and provenance")
+    p.add_argument("--data", default=None, nargs="+", action="extend",
+                   help="the training dataset(s), as given to train: real readings for the parity check, pixel size "
+                        "and provenance")
     p.add_argument("--metrics", default=None, help="results.json of `tactile-manip evaluate` to store inside")
     p.add_argument("--pixel-mm", type=float, default=None, help="output pixel size (default: from --data or 0.1)")
     p.add_argument("--card", default=None, help="also write a model card (markdown) here")
@@ -30,7 +31,7 @@ def run(args: argparse.Namespace) -> int:
     require_torch()
     from tactile_manip.extras import require
     from tactile_manip.learning.export import export_onnx
-    from tactile_manip.data import load_dataset
+    from tactile_manip.data import load_datasets
     from tactile_manip.outputs import check_output_file
 
     require("onnx", "export")
@@ -40,11 +41,11 @@ def run(args: argparse.Namespace) -> int:
         check_output_file(args.card, force=args.force)
     readings, pixel_mm, extra = None, args.pixel_mm or 0.1, {}
     if args.data:
-        data = load_dataset(args.data)
+        data = load_datasets(args.data)
         readings = data.readings[data.indices("val")]
         pixel_mm = args.pixel_mm or data.image.pixel_mm or 0.1
         trained_on = sorted(set(data.objects(data.indices("train")).tolist()))
-        extra["training_data"] = {"path": str(args.data), "fingerprint": data.fingerprint(), "pairs": len(data),
+        extra["training_data"] = {"path": " ".join(args.data), "fingerprint": data.fingerprint(), "pairs": len(data),
                                   "objects": sorted(set(data.objects().tolist())),
                                   "objects_with_train_split": trained_on, "source": data.provenance.get("source"),
                                   "image": data.image.to_dict(),
@@ -85,7 +86,8 @@ def _commands(args: argparse.Namespace) -> list[str]:
     from pathlib import Path
 
     run = Path(args.checkpoint).parent
-    data = Path(args.data or "data/supermag.npz")
-    return [f"tactile-manip simulate --config configs/dataset/{data.stem}.toml --out {data}",
-            f"tactile-manip train --config configs/train/{run.name}.toml --data {data} --out {run}",
-            f"tactile-manip export --checkpoint {args.checkpoint} --out {args.out} --data {data} --force"]
+    data = [Path(d) for d in (args.data or ["data/supermag.npz"])]
+    files = " ".join(map(str, data))
+    return [*(f"tactile-manip simulate --config configs/dataset/{d.stem}.toml --out {d}" for d in data),
+            f"tactile-manip train --config configs/train/{run.name}.toml --data {files} --out {run}",
+            f"tactile-manip export --checkpoint {args.checkpoint} --out {args.out} --data {files} --force"]

@@ -168,8 +168,9 @@ def concatenate(datasets: list[PairedDataset] | tuple[PairedDataset, ...]) -> Pa
     """One dataset of several, in order: same channels and image spec; object names merged, groups kept apart.
 
     Splits are kept as each dataset has them. Extras are kept when every dataset has them with the same
-    per-sample shape; the others are left out and named in ``provenance["dropped_extras"]``. A dataset without
-    groups gets one group per sample, so no group spans two datasets.
+    per-sample shape; the others are left out and named in ``provenance["dropped_extras"]`` (a flag such as
+    ``bottomed_out`` that one producer did not record is not invented for its samples). When any dataset has
+    groups, one without gets one group per sample, so no group spans two datasets.
     """
     parts = list(datasets)
     if not parts:

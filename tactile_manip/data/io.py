@@ -114,9 +114,25 @@ def load_dataset(path: str | Path) -> PairedDataset:
 
 
 def load_datasets(paths: list[str | Path] | tuple[str | Path, ...]) -> PairedDataset:
-    """One dataset file, or several concatenated (:func:`~tactile_manip.data.dataset.concatenate`)."""
+    """One dataset file, or several concatenated (:func:`~tactile_manip.data.dataset.concatenate`; each part's
+    provenance then records its path).
+
+    Raises:
+        DatasetError: no path, or the same file given twice (its samples would count twice).
+    """
+    if not paths:
+        raise DatasetError("no dataset file given")
+    resolved = [Path(p).resolve() for p in paths]
+    twice = sorted({str(p) for p in paths if resolved.count(Path(p).resolve()) > 1})
+    if twice:
+        raise DatasetError(f"the same dataset is given more than once: {', '.join(twice)}")
     parts = [load_dataset(p) for p in paths]
-    return parts[0] if len(parts) == 1 else concatenate(parts)
+    if len(parts) == 1:
+        return parts[0]
+    both = concatenate(parts)
+    for part, path in zip(both.provenance["parts"], paths):
+        part["path"] = str(path)
+    return both
 
 
 def _metadata(path: Path, entry: np.ndarray) -> dict[str, Any]:

@@ -106,8 +106,12 @@ def select(data: PairedDataset, split: str, objects: tuple[str, ...] = (), *,
     ``bottomed_out``; data without it loses nothing): their images come from outside the layer model.
     """
     idx = data.indices(split, objects)
-    if drop_bottomed_out and data.has("bottomed_out"):
-        idx = idx[~data.extra("bottomed_out")[idx].astype(bool)]
+    if drop_bottomed_out and data.has("bottomed_out") and idx.size:
+        kept = idx[~data.extra("bottomed_out")[idx].astype(bool)]
+        if kept.size == 0:
+            raise ValueError(f"all {idx.size} presses of split {split!r} are flagged bottomed_out "
+                             "(drop_bottomed_out = true leaves none)")
+        idx = kept
     if idx.size == 0:
         raise ValueError(f"no samples in split {split!r}" + (f" for objects {list(objects)}" if objects else ""))
     return idx

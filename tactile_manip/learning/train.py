@@ -72,7 +72,8 @@ class TrainConfig:
     decoder: DecoderOverrides = field(default_factory=DecoderOverrides)  # decoder settings over the preset's
     axes: str = "xyz"                    # "xyz", or "z" for the z-axis-only variant
     objects: list[str] = field(default_factory=list)  # train only on these objects ([]: all)
-    drop_bottomed_out: bool = True       # leave out training/validation presses flagged as through the layer
+    drop_bottomed_out: bool = False      # leave out training/validation presses the data flags as through the
+                                         # layer (extra "bottomed_out"; data without the flag loses nothing)
     clamp_ut: float = 500.0              # input clamp, uT (SuperMag: +-500 scaled to [-1, 1])
     clamp_std: float = 5.0               # input clamp of readings not in uT, standard deviations of the training split
     epochs: int = 60
@@ -203,6 +204,11 @@ def _train(cfg: TrainConfig, data_paths: list[Path], out: Path, resume: bool, pr
         torch.backends.cuda.matmul.allow_tf32 = True
         torch.backends.cudnn.allow_tf32 = True
     data = load_datasets(data_paths)
+    if cfg.drop_bottomed_out and not data.has("bottomed_out") and dist.main:
+        dropped = data.provenance.get("dropped_extras", [])
+        why = " (only some of the datasets record it)" if "bottomed_out" in dropped else ""
+        print(f"note: drop_bottomed_out = true, but the data flags no press as bottomed out{why}: "
+              "every press is trained on", flush=True)
     train_index = select(data, "train", tuple(cfg.objects), drop_bottomed_out=cfg.drop_bottomed_out)
     spec = InputSpec.for_data(data, train_index, clamp_ut=cfg.clamp_ut, axes=cfg.axes, clamp_std=cfg.clamp_std)
     mcfg = model_config(cfg, data)
@@ -214,7 +220,7 @@ def _train(cfg: TrainConfig, data_paths: list[Path], out: Path, resume: bool, pr
     state = {"epoch": 0, "history": [], "best_psnr": -math.inf, "best_epoch": 0, "seconds": 0.0}
     out.mkdir(parents=True, exist_ok=True)
     if resume:
-        state = _load_checkpoint(out / "checkpoint.pt", model, opt, mcfg)
+        state = _load_checkpoint(out / "checkpoint.pt", model, opt, mcfg, data, cfg)
     state["device"] = torch.cuda.get_device_name(device) if device.type == "cuda" else "cpu"
     net = model
     if dist.world > 1:
@@ -344,7 +350,7 @@ def _save_checkpoint(path: Path, model, opt, mcfg: CVAEConfig, cfg: TrainConfig,
     tmp.replace(path)
 
 
-def _load_checkpoint(path: Path, model, opt, mcfg: CVAEConfig) -> dict:
+def _load_checkpoint(path: Path, model, opt, mcfg: CVAEConfig, data: PairedDataset, cfg: TrainConfig) -> dict:
     if not path.is_file():
         raise TrainingError(f"--resume: no checkpoint at {path}")
     payload = read_checkpoint(path)
@@ -352,6 +358,17 @@ def _load_checkpoint(path: Path, model, opt, mcfg: CVAEConfig) -> dict:
     if differences:
         raise TrainingError(f"--resume: {path} was trained with another architecture or dataset shape "
                             f"({'; '.join(differences)}); use the same config or start a new output folder")
+    if payload.get("data_fingerprint", data.fingerprint()) != data.fingerprint():
+        raise TrainingError(f"--resume: {path} was trained on data with fingerprint {payload['data_fingerprint']}, "
+                            f"the --data given now has {data.fingerprint()} (other files, or another order); "
+                            "resume with the same --data, in the same order")
+    selection = ("objects", "drop_bottomed_out", "axes")
+    before = payload.get("train_config", {})
+    changed = [f"{k}: {before[k]!r} -> {getattr(cfg, k)!r}" for k in selection
+               if k in before and before[k] != getattr(cfg, k)]
+    if changed:
+        raise TrainingError(f"--resume: the config selects other samples or inputs than {path} was trained on "
+                            f"({'; '.join(changed)}); use the same config or start a new output folder")
     model.load_state_dict(payload["model"])
     opt.load_state_dict(payload["optimizer"])
     return payload["state"]

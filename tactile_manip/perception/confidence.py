@@ -34,6 +34,8 @@ class ConfidenceCalibration:
     values: tuple[float, ...]     # calibrated probability at the knots, non-decreasing, in [0, 1]
     tolerance_deg: float = 5.0    # the error the probability is about, deg
     samples: int = 0              # held-out estimates it was fitted on
+    prior_samples: int = 1        # prior samples per reading of the estimator it was fitted for
+    symmetrized: bool = False     # fitted for the model averaged over the sensor's symmetries
 
     def __post_init__(self) -> None:
         k, v = np.asarray(self.knots, float), np.asarray(self.values, float)
@@ -54,9 +56,14 @@ class ConfidenceCalibration:
         out = np.interp(r, self.knots, self.values)
         return float(out) if out.ndim == 0 else out
 
+    def fits(self, *, prior_samples: int, symmetrized: bool) -> bool:
+        """Whether it was fitted for an estimator with these settings (the raw confidence of another is
+        distributed otherwise, so this map would not give its probability)."""
+        return self.prior_samples == prior_samples and self.symmetrized == symmetrized
+
     @classmethod
     def fit(cls, raw: np.ndarray, errors_deg: np.ndarray, *, tolerance_deg: float = 5.0,
-            min_per_knot: int = 20) -> ConfidenceCalibration:
+            min_per_knot: int = 20, prior_samples: int = 1, symmetrized: bool = False) -> ConfidenceCalibration:
         """Isotonic fit of "error within tolerance" on raw confidence (held-out estimates only).
 
         Undefined estimates enter with raw confidence 0 and their error (90 deg when unknown). Blocks of fewer
@@ -73,17 +80,20 @@ class ConfidenceCalibration:
         knots = [b[0] for b in blocks]
         values = [b[1] for b in blocks]
         knots, values = _strictly_increasing(knots, values)
-        return cls(tuple(knots), tuple(values), float(tolerance_deg), int(raw.size))
+        return cls(tuple(knots), tuple(values), float(tolerance_deg), int(raw.size), int(prior_samples),
+                   bool(symmetrized))
 
     def to_dict(self) -> dict[str, Any]:
         return {"knots": list(self.knots), "values": list(self.values), "tolerance_deg": self.tolerance_deg,
-                "samples": self.samples}
+                "samples": self.samples, "prior_samples": self.prior_samples, "symmetrized": self.symmetrized}
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> ConfidenceCalibration:
-        return cls(tuple(d["knots"]), tuple(d["values"]), float(d["tolerance_deg"]), int(d.get("samples", 0)))
+        return cls(tuple(d["knots"]), tuple(d["values"]), float(d["tolerance_deg"]), int(d.get("samples", 0)),
+                   int(d.get("prior_samples", 1)), bool(d.get("symmetrized", False)))
 
     def save(self, path: str | Path) -> Path:
+        Path(path).parent.mkdir(parents=True, exist_ok=True)
         Path(path).write_text(json.dumps(self.to_dict(), indent=1))
         return Path(path)
 
@@ -136,14 +146,19 @@ def _strictly_increasing(knots: list[float], values: list[float]) -> tuple[list[
 
 
 def reliability_table(confidence: np.ndarray, errors_deg: np.ndarray, *, tolerance_deg: float = 5.0,
-                      bins: int = 10) -> list[dict[str, float]]:
+                      bins: int = 10, order: np.ndarray | None = None) -> list[dict[str, float]]:
     """Per confidence bin (equal counts: deciles by default): confidence range, mean confidence, observed share
-    within tolerance, median and p95 error, count."""
+    within tolerance, median and p95 error, count.
+
+    ``order`` (a permutation) bins the estimates in that order instead of by ``confidence``: the raw
+    confidence's order puts the same estimates in each bin of a raw and a calibrated table (a calibration is
+    flat below its first and above its last knot, where its own order would break ties otherwise).
+    """
     conf = np.nan_to_num(np.asarray(confidence, float), nan=0.0)
     err = np.nan_to_num(np.abs(np.asarray(errors_deg, float)), nan=90.0)
     if conf.shape != err.shape or conf.ndim != 1 or conf.size < bins:
         raise ValueError(f"need matching 1-D confidences and errors, at least {bins}; got {conf.shape}, {err.shape}")
-    order = np.argsort(conf, kind="stable")
+    order = np.argsort(conf, kind="stable") if order is None else np.asarray(order)
     rows = []
     for part in np.array_split(order, bins):
         c, e = conf[part], err[part]

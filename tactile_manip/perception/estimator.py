@@ -33,9 +33,13 @@ prior samples) and ``escalate_below``, an estimate whose (calibrated) confidence
 again from the same reading by the escalation reconstructor; that estimate replaces the first
 (``escalated=True``, its cost in ``timings_s["escalate"]``)::
 
-    model = load_reconstructor("models/supermag_robust.onnx")
-    estimator = TactilePoseEstimator(model, calibration=ConfidenceCalibration.load(
-        "models/supermag_robust.calibration.json"), escalation=SymmetrizedReconstructor(model), escalate_below=0.9)
+    model = load_reconstructor("models/supermag_compact.onnx")
+    estimator = TactilePoseEstimator(model, calibration=load_calibration_beside("models/supermag_compact.onnx"),
+                                     escalation=SymmetrizedReconstructor(model), escalate_below=0.5)
+
+The escalated estimate replaces the first whatever its confidence, which the same calibration maps (it was
+fitted on the one-pass estimator, so for the escalated one it is an approximation); a contact whose angle is
+undefined (confidence 0) escalates too.
 """
 
 from __future__ import annotations
@@ -112,11 +116,14 @@ class TactilePoseEstimator:
             raise TypeError(f"escalation must be a Reconstructor, got {type(escalation).__name__}")
         if not (np.isfinite(escalate_below) and 0.0 <= escalate_below <= 1.0):
             raise ValueError(f"escalate_below must be a confidence in [0, 1], got {escalate_below!r}")
-        if escalation is not None and (escalation.input_shape != reconstructor.input_shape
-                                       or escalation.pixel_mm != reconstructor.pixel_mm):
-            raise ValueError(f"escalation {escalation.name} takes {escalation.input_shape} readings at "
-                             f"{escalation.pixel_mm} mm/px; {reconstructor.name} takes {reconstructor.input_shape} "
-                             f"at {reconstructor.pixel_mm}: they must match")
+        if escalation is not None:
+            def io(r: Reconstructor) -> tuple:
+                return (tuple(r.input_shape), tuple(r.output_shape), r.pixel_mm, r.board_layout, r.magnetic_ut)
+
+            if io(escalation) != io(reconstructor):
+                raise ValueError(f"escalation {escalation.name} maps (input shape, output shape, mm/px, board layout, "
+                                 f"readings in uT) {io(escalation)}, {reconstructor.name} {io(reconstructor)}: they "
+                                 "must match")
         self.escalation = escalation
         self.escalate_below = float(escalate_below)
 
@@ -138,14 +145,15 @@ class TactilePoseEstimator:
         t0 = time.perf_counter()
         field = _field(reading)
         rec = self.reconstructor.reconstruct(field)  # refuses NaN / inf, clamps values beyond the chip's range
-        return self._pose(field, _saturated(reading), _dated(reading), rec, t0, time.perf_counter()), rec
+        return self._pose(field, _saturated(reading), _dated(reading), rec, t0, time.perf_counter(), image=True)
 
     def estimate_many(self, readings: Sequence[TactileReading | np.ndarray]) -> list[AngleEstimate]:
         """Angles of several readings (e.g. both pads of a gripper), reconstructed in one batched model run.
 
         Each estimate equals what :meth:`estimate` returns for its reading (the same reconstruction, bit for
         bit, and the same post-processing); in ``timings_s``, "reconstruct" is the whole batch's time and
-        "total" runs from the call to that estimate's completion.
+        "total" runs from the call to that estimate's completion. An estimate that escalates runs its
+        escalation on its own reading, after the batch.
 
         Raises:
             ValueError: readings of different shapes, or any with NaN / infinite values (nothing is estimated).
@@ -162,24 +170,27 @@ class TactilePoseEstimator:
         return [self._pose(f, _saturated(r), _dated(r), rec, t0, t1) for r, f, rec in zip(readings, fields, recs)]
 
     def _pose(self, field: np.ndarray, saturated: np.ndarray | None, reading: TactileReading | None,
-              rec: Reconstruction, t0: float, t1: float) -> AngleEstimate:
+              rec: Reconstruction, t0: float, t1: float, *, image: bool = False):
         """Post-processing and PCA of ``rec``, reconstructed from ``field`` (R, C, 3) uT between ``t0`` and
         ``t1``; ``saturated`` (R, C, 3) flags from the sensor or None; ``reading`` (the newest frame, or None)
-        dates the estimate. Escalates a low-confidence estimate when the estimator has an escalation."""
+        dates the estimate. Escalates a low-confidence estimate when the estimator has an escalation. Returns
+        the estimate, or with ``image`` the estimate and the reconstruction it came from."""
         flags = out_of_range(field)
         if saturated is not None:
             flags |= np.asarray(saturated, dtype=bool)
-        contact = bool(np.max(np.abs(field)) >= self.min_field_ut)  # NaN stays with the reconstructor
+        contact = bool(np.max(np.abs(field)) >= self.min_field_ut)  # the reconstructor has refused NaN already
         est = self._angle(rec, flags, contact)
         t2 = time.perf_counter()
         timings = {"reconstruct": t1 - t0, "pose": t2 - t1, "total": t2 - t0}
         if self.escalation is not None and contact and est.confidence < self.escalate_below:
-            est = replace(self._angle(self.escalation.reconstruct(field), flags, contact), escalated=True)
+            rec = self.escalation.reconstruct(field)
+            est = replace(self._angle(rec, flags, contact), escalated=True)
             timings["escalate"] = time.perf_counter() - t2
             timings["total"] = time.perf_counter() - t0
         if reading is not None:
             timings["age"] = time.monotonic() - reading.t_host_s
-        return replace(est, saturated_chips=int(flags.any(axis=-1).sum()), timings_s=timings)
+        est = replace(est, saturated_chips=int(flags.any(axis=-1).sum()), timings_s=timings)
+        return (est, rec) if image else est
 
     def _angle(self, rec: Reconstruction, flags: np.ndarray, contact: bool) -> AngleEstimate:
         """The angle of ``rec`` and its confidence: PCA, times the prior samples' agreement and the unsaturated

@@ -101,18 +101,19 @@ def build_estimators(scene: TrialScene, scene_path: Path | None = None) -> dict[
             kwargs = {"output_px": spec.output_px} if spec.output_px else {}
         else:
             kwargs = {"threads": spec.threads, "samples": spec.samples}
-        reconstructor = load_reconstructor(target, **kwargs)
-        if spec.symmetrize:
-            reconstructor = SymmetrizedReconstructor(reconstructor)
+        base = load_reconstructor(target, **kwargs)
+        reconstructor = SymmetrizedReconstructor(base) if spec.symmetrize else base
         model = target not in ("bilinear", "bicubic")
         calibration = load_calibration_beside(target) if model and spec.calibrated else None
+        if calibration is not None and not calibration.fits(prior_samples=spec.samples, symmetrized=spec.symmetrize):
+            calibration = None  # fitted for another estimator: its map would not give this one's probability
         escalation = None
-        if spec.escalate_below > 0:
-            escalation = (SymmetrizedReconstructor(reconstructor) if spec.escalation == "symmetry" else
-                          load_reconstructor(target, threads=spec.threads, samples=spec.escalation_samples)
-                          if model else None)
-            if escalation is None:
-                raise ValueError(f"method {spec.name}: the 'samples' escalation needs an ONNX model, not {target}")
+        if spec.escalate_below > 0 and spec.escalation == "symmetry":
+            escalation = SymmetrizedReconstructor(base)
+        elif spec.escalate_below > 0:  # "samples" (MethodSpec refuses it for baselines)
+            escalation = load_reconstructor(target, threads=spec.threads, samples=spec.escalation_samples)
+            if spec.symmetrize:
+                escalation = SymmetrizedReconstructor(escalation, spread=True)
         out[spec.name] = TactilePoseEstimator(reconstructor, calibration=calibration, escalation=escalation,
                                               escalate_below=spec.escalate_below)
     return out
@@ -254,7 +255,7 @@ def make_record(p: Presentation, method: str, target_rad: float, result: Reorien
         error_rad=result.error_rad, outcome=outcome, detail=detail,
         timings_s={k: round(v, 6) for k, v in result.timings_s.items()},
         extra={"force_n": round(p.force_n, 4), "grasp_width_m": result.grasp_width_m, **_sensor_extra(p),
-               "correction_rad": result.correction_rad,
+               "correction_rad": result.correction_rad, "escalated": bool(est is not None and est.escalated),
                "estimate_timings_s": dict(est.timings_s) if est is not None else {}})
 
 

@@ -35,8 +35,9 @@ class MethodSpec:
         symmetrize: average the reconstruction over the sensor's 8 symmetries
             (:class:`~tactile_manip.perception.symmetry.SymmetrizedReconstructor`; 8 readings per estimate).
         calibrated: use the model's confidence calibration when it has one beside it
-            (``<model>.calibration.json``, from ``tactile-manip calibrate``): the confidence the behaviour's
-            ``min_confidence`` compares is then P(angle within the calibration's tolerance).
+            (``<model>.calibration.json``, from ``tactile-manip calibrate``) fitted for this method's
+            ``samples`` and ``symmetrize``: the confidence the behaviour's ``min_confidence`` compares is then
+            P(angle within the calibration's tolerance); a calibration fitted for another estimator is not used.
         escalate_below: spend extra inference only on estimates whose confidence is below this (0: never).
         escalation: the extra inference: "symmetry" (the reading's 8 symmetric copies averaged) or "samples"
             (``escalation_samples`` prior samples, their spread lowering the confidence).
@@ -65,6 +66,12 @@ class MethodSpec:
                              f"{self.escalate_below}")
         if self.escalation not in ("symmetry", "samples"):
             raise ValueError(f"method {self.name}: escalation must be 'symmetry' or 'samples', got {self.escalation!r}")
+        if self.escalate_below > 0 and self.escalation == "symmetry" and self.symmetrize:
+            raise ValueError(f"method {self.name}: symmetrize = true already averages every reading over the "
+                             "symmetries; escalate with escalation = \"samples\" or not at all")
+        if self.escalate_below > 0 and self.escalation == "samples" and self.reconstructor in ("bilinear", "bicubic"):
+            raise ValueError(f"method {self.name}: the 'samples' escalation draws prior samples of an ONNX model; "
+                             f"{self.reconstructor} has none")
 
 
 @dataclass(frozen=True)

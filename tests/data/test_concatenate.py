@@ -60,7 +60,13 @@ def test_load_datasets_reads_one_or_several_files(tmp_path):
     a, b = _data(6, ["x"]), _data(3, ["y"], seed=1)
     pa, pb = save_dataset(tmp_path / "a.npz", a), save_dataset(tmp_path / "b.npz", b)
     assert load_datasets([pa]).fingerprint() == a.fingerprint()
-    assert load_datasets([pa, pb]).fingerprint() == concatenate([a, b]).fingerprint()
+    both = load_datasets([pa, pb])
+    assert both.fingerprint() == concatenate([a, b]).fingerprint()
+    assert [p["path"] for p in both.provenance["parts"]] == [str(pa), str(pb)]
+    with pytest.raises(DatasetError, match="more than once"):
+        load_datasets([pa, tmp_path / "." / "a.npz"])
+    with pytest.raises(DatasetError, match="no dataset file"):
+        load_datasets([])
 
 
 def test_select_drops_flagged_presses_and_keeps_data_without_the_flag():
@@ -75,5 +81,5 @@ def test_select_drops_flagged_presses_and_keeps_data_without_the_flag():
     plain = _data(9, ["x"])
     assert select(plain, "train", drop_bottomed_out=True).tolist() == [0, 3, 6]
     flagged[6] = True
-    with pytest.raises(ValueError, match="no samples in split 'train'"):
+    with pytest.raises(ValueError, match="all 3 presses of split 'train' are flagged bottomed_out"):
         select(_data(9, ["x"], extra={"bottomed_out": flagged}), "train", drop_bottomed_out=True)

@@ -48,22 +48,28 @@ def test_rod_estimates_are_the_estimators_own_on_rods_only(rods) -> None:
 def test_calibrate_writes_a_calibration_beside_the_model_and_its_reliability_report(rods, tmp_path, capsys) -> None:
     model = tmp_path / "m.onnx"
     shutil.copy(MODEL, model)
-    assert main(["calibrate", "--model", str(model), "--fit", str(rods), "--tolerance-deg", "5"]) == 0
+    args = ["calibrate", "--model", str(model), "--fit", str(rods), "--report", str(rods)]
+    assert main([*args, "--tolerance-deg", "5"]) == 0
     cal = load_calibration_beside(model)
     assert cal is not None and calibration_path(model) == tmp_path / "m.calibration.json"
     assert cal.samples == 60 and cal.tolerance_deg == 5.0
     report = json.loads((tmp_path / "m.calibration.reliability.json").read_text())
     assert report["fit"]["presses"] == report["report"]["presses"] == 60
     assert len(report["deciles_calibrated"]) == 10 and (tmp_path / "m.calibration.reliability.png").stat().st_size
-    # fitted and checked on the same presses: the mean calibrated confidence is the share within tolerance
+    # (here fitted and checked on the same presses) the mean calibrated confidence is the share within tolerance
     rows = report["deciles_calibrated"]
     mean_conf = sum(r["mean_confidence"] * r["count"] for r in rows) / 60
     assert mean_conf == pytest.approx(report["report"]["within_tolerance"], abs=0.05)
     assert "expected calibration error" in capsys.readouterr().out
     # a second run refuses to replace it without --force, in one line
-    assert main(["calibrate", "--model", str(model), "--fit", str(rods)]) == 2
+    assert main(args) == 2
     assert "exists" in capsys.readouterr().err
-    assert main(["calibrate", "--model", str(model), "--fit", str(rods), "--force", "--tolerance-deg", "91"]) == 2
+    assert main([*args, "--force", "--tolerance-deg", "91"]) == 2
+    assert main([*args, "--force", "--fit-split", "train"]) == 2  # no rods there: one line naming the split
+    assert "split 'train'" in capsys.readouterr().err
+    # a symmetry-averaged estimator gets its own calibration, marked as such
+    assert main([*args, "--symmetrized", "--out", str(tmp_path / "sym" / "m.json")]) == 0
+    assert ConfidenceCalibration.load(tmp_path / "sym" / "m.json").symmetrized
 
 
 def test_trials_use_the_calibration_beside_the_model_and_build_the_escalation(rods, tmp_path) -> None:
@@ -77,13 +83,17 @@ def test_trials_use_the_calibration_beside_the_model_and_build_the_escalation(ro
     scene = TrialScene(methods=[MethodSpec("a", str(model), escalate_below=0.5),
                                 MethodSpec("b", str(model), calibrated=False, escalate_below=0.5,
                                            escalation="samples", escalation_samples=4),
-                                MethodSpec("c", "bilinear", output_px=16)],
+                                MethodSpec("c", "bilinear", output_px=16),
+                                MethodSpec("d", str(model), symmetrize=True)],
                        presentation=PresentationConfig(objects=[TrialObject("cylinder", "c3", {"size_mm": 3.0})]))
     est = build_estimators(scene)
     assert est["a"].calibration == ConfidenceCalibration((0.2, 0.9), (0.1, 0.95), 5.0, 100)
     assert isinstance(est["a"].escalation, SymmetrizedReconstructor) and est["a"].escalate_below == 0.5
     assert est["b"].calibration is None and est["b"].escalation.samples == 4
     assert est["c"].calibration is None and est["c"].escalation is None
-    for bad in ({"escalate_below": 1.5}, {"escalation": "more"}, {"escalation_samples": 1}):
+    assert est["d"].calibration is None  # fitted for the one-pass estimator, not the symmetry-averaged one
+    for bad in ({"escalate_below": 1.5}, {"escalation": "more"}, {"escalation_samples": 1},
+                {"symmetrize": True, "escalate_below": 0.5},
+                {"reconstructor": "bilinear", "escalate_below": 0.5, "escalation": "samples"}):
         with pytest.raises(ValueError, match="method x"):
-            MethodSpec("x", str(model), **bad)
+            MethodSpec(**{"name": "x", "reconstructor": str(model), **bad})
