@@ -125,7 +125,9 @@ def test_the_shipped_scenes_load() -> None:
         assert scene.presentation.objects and scene.methods, path
     robust = load_scene(REPO / "configs/scenes/reorient_robust.toml")
     assert robust.presentation.force_n == (2.0, 15.0) and robust.presentation.sensor_spread == 1.0
-    assert robust.trials >= 300 and [m.name for m in robust.methods] == ["supermag", "bilinear"]
+    assert robust.trials >= 300 and [m.name for m in robust.methods] == ["supermag", "supermag_esc", "bilinear"]
+    assert robust.methods[1].escalate_below == 0.5 and robust.methods[1].escalation == "symmetry"
+    assert robust.behaviour.min_confidence == 0.8  # compared with the calibrated confidence
 
 
 def test_the_cell_wires_the_grasp_to_the_sensor() -> None:
