@@ -57,7 +57,7 @@ def default_models(root: str | Path = ".") -> list[ModelEntry]:
     r = Path(root)
     candidates = [ModelEntry(c.stem, r / "runs" / c.stem / "model.onnx", r / "runs" / c.stem / "best.pt",
                              untrained_preset=str(c), runtimes=("ort-1",)) for c in sorted(r.glob(DECODER_CANDIDATES))]
-    return [ModelEntry("compact", r / "models/supermag_compact.onnx", r / "runs/robust/best.pt", symmetrized=True),
+    return [ModelEntry("compact", r / "models/supermag_compact.onnx", r / "runs/compact/best.pt", symmetrized=True),
             ModelEntry("small_8ep", r / "runs/variant_small/model.onnx", r / "runs/variant_small/best.pt"),
             ModelEntry("compact_8ep", r / "runs/table1_full/model.onnx", r / "runs/table1_full/best.pt"),
             ModelEntry("large_8ep", r / "runs/variant_large/model.onnx", r / "runs/variant_large/best.pt"),
