@@ -35,6 +35,7 @@ GAUSS_TRUNCATE = 4.0           # the Gaussian kernel's reach in standard deviati
 CROSS_MOMENT_NOISE = 1e-7      # |sxy| below this fraction of sxx + syy is float32 rounding (angle shift < 1e-5 deg)
 FEW_REGIONS = 8                # up to this many contact regions are sized one by one, more by bincount
 FILTER_BLOCK_PX = 24           # output rows per filter block: small enough that OpenBLAS stays on one thread
+_CROSS = ndimage.generate_binary_structure(2, 1)  # 4-connectivity (scipy.ndimage.label's default), built once
 
 
 @dataclass(frozen=True)
@@ -222,9 +223,6 @@ def _kept_contact(d: np.ndarray, threshold_mm: float, min_fraction: float):
     rows, cols = np.flatnonzero(kept.any(axis=1)), np.flatnonzero(kept.any(axis=0))
     kept_rows, kept_cols = (r0 + int(rows[0]), r0 + int(rows[-1]) + 1), (c0 + int(cols[0]), c0 + int(cols[-1]) + 1)
     return (kept_rows, kept_cols), int(sizes[keep].sum()), (removed, r0, c0)
-
-
-_CROSS = ndimage.generate_binary_structure(2, 1)  # 4-connectivity, scipy.ndimage.label's default
 
 
 def _weights(d: np.ndarray, rows: tuple[int, int], cols: tuple[int, int], removed, threshold_mm: float,
