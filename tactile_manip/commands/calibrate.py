@@ -49,7 +49,6 @@ def run(args: argparse.Namespace) -> int:
     from tactile_manip.perception import TactilePoseEstimator, load_reconstructor
     from tactile_manip.perception.confidence import (ConfidenceCalibration, calibration_path, reliability_figure,
                                                      reliability_table)
-    from tactile_manip.perception.evaluation import rod_estimates
     from tactile_manip.perception.symmetry import SymmetrizedReconstructor
 
     tol = args.tolerance_deg
@@ -71,14 +70,14 @@ def run(args: argparse.Namespace) -> int:
         reconstructor = SymmetrizedReconstructor(reconstructor)
     estimator = TactilePoseEstimator(reconstructor)
     fit = load_dataset(args.fit)
-    _, fit_conf, fit_err = _rods(rod_estimates, fit, "--fit", args.fit, args.fit_split, estimator)
+    _, fit_conf, fit_err = _rods(fit, "--fit", args.fit, args.fit_split, estimator)
     if fit_conf.size < MIN_FIT_PRESSES:
         raise ConfigError(f"--fit {args.fit} has {fit_conf.size} rod presses in split {args.fit_split!r}; "
                           f"calibrating needs >= {MIN_FIT_PRESSES}")
     cal = ConfidenceCalibration.fit(fit_conf, fit_err, tolerance_deg=tol, prior_samples=args.samples,
                                     symmetrized=args.symmetrized)
     report = load_dataset(args.report)
-    _, raw, err = _rods(rod_estimates, report, "--report", args.report, args.report_split, estimator)
+    _, raw, err = _rods(report, "--report", args.report, args.report_split, estimator)
     if raw.size < REPORT_BINS:
         raise ConfigError(f"--report {args.report} has {raw.size} rod presses in split {args.report_split!r}; "
                           f"the decile table needs >= {REPORT_BINS}")
@@ -103,9 +102,11 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _rods(rod_estimates, data, option: str, path: str, split: str, estimator):
-    """rod_estimates on ``split`` of ``data``, its errors naming the option, file and split."""
+def _rods(data, option: str, path: str, split: str, estimator):
+    """:func:`~tactile_manip.perception.evaluation.rod_estimates` on ``split`` of ``data``, its errors naming the
+    option, file and split."""
     from tactile_manip.errors import ConfigError
+    from tactile_manip.perception.evaluation import rod_estimates
 
     try:
         return rod_estimates(data, data.indices(split), estimator)

@@ -190,7 +190,9 @@ def concatenate(datasets: list[PairedDataset] | tuple[PairedDataset, ...]) -> Pa
         names = list(dict.fromkeys(name for d in parts
                                    for name in (["all"] if d.object_names is None else d.object_names.tolist())))
         lookup = {name: i for i, name in enumerate(names)}
-        object_index = np.concatenate([np.array([lookup[o] for o in d.objects()], dtype=np.int16) for d in parts])
+        object_index = np.concatenate([np.full(len(d), lookup["all"], np.int16) if d.object_names is None else
+                                       np.array([lookup[n] for n in d.object_names.tolist()], np.int16)[d.object_index]
+                                       for d in parts])  # each part's own index, mapped onto the merged names
     groups = None
     if any(d.groups is not None for d in parts):
         chunks, start = [], 0
