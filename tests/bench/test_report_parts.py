@@ -139,6 +139,8 @@ def test_default_models_include_the_decoder_candidates_on_one_thread_only(tiny_m
     assert configs and all(entries[c].runtimes == ("ort-1",) for c in configs)
     assert entries[configs[0]].untrained_preset.endswith(f"{configs[0]}.toml")  # timed untrained until trained
     assert entries["compact"].runtimes is None
+    for run in ("fast_full", "fast40_full"):  # full-recipe runs: measured when trained, never exported untrained
+        assert entries[run].runtimes == ("ort-1",) and entries[run].untrained_preset is None
     notes: list[str] = []
     entry = ModelEntry("candidate", tiny_model, runtimes=("ort-1",))
     found = model_candidates(entry, tmp_path, runtimes=("ort-1", "ort-all", "ort-int8"), notes=notes)
