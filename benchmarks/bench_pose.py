@@ -83,10 +83,10 @@ def measure(estimator: TactilePoseEstimator, fields: np.ndarray, angles: np.ndar
         total_s.append(est.timings_s["total"])
         if len(errors) < len(fields):
             errors.append(abs(math.degrees(wrap_axial(est.angle_rad - angles[i]))) if est.defined else 90.0)
+    model_ms, post_ms = np.array(model_s) * 1e3, np.array(post_s) * 1e3
     out = {"latency_p50_ms": _pct(one_ms, 50), "latency_p99_ms": _pct(one_ms, 99), "pair_p50_ms": _pct(pair_ms, 50),
-           "pair_p99_ms": _pct(pair_ms, 99), "model_p50_ms": _pct(np.array(model_s) * 1e3, 50),
-           "model_p99_ms": _pct(np.array(model_s) * 1e3, 99), "postprocess_p50_ms": _pct(np.array(post_s) * 1e3, 50),
-           "postprocess_p99_ms": _pct(np.array(post_s) * 1e3, 99),
+           "pair_p99_ms": _pct(pair_ms, 99), "model_p50_ms": _pct(model_ms, 50), "model_p99_ms": _pct(model_ms, 99),
+           "postprocess_p50_ms": _pct(post_ms, 50), "postprocess_p99_ms": _pct(post_ms, 99),
            "postprocess_share": float(sum(post_s) / sum(total_s)),
            "best_p99_ms": _pct(list(best_ms.values()), 99),
            "readings": int(len(fields)), "calls": len(one_ms), "untrained": untrained}

@@ -48,25 +48,26 @@ class ModelEntry:
 
 
 DECODER_CANDIDATES = "configs/train/decoder_*.toml"  # faster decoders (issue 15), timed untrained until trained
-FAST_RUNS = ("fast", "fast40")  # the fast decoder on the full recipe (configs/train/fast*.toml): measured when trained
+FAST_CONFIGS = "configs/train/fast*.toml"  # the fast decoder on the full recipe: measured when trained, else skipped
 
 
 def default_models(root: str | Path = ".") -> list[ModelEntry]:
     """The shipped model and the size variants on one 8-epoch recipe, the paper preset, the fast decoder's
-    full-recipe runs (``runs/fast*``, on one thread, skipped when not trained), and the decoder candidates of
+    full-recipe runs of ``configs/train/fast*.toml`` (``runs/<stem>/``, as ``<stem>_full``, on one thread,
+    skipped when not trained), and the decoder candidates of
     ``configs/train/decoder_*.toml`` (their run's export when trained, else an untrained export timed on one
     thread) (paths under ``root``)."""
     r = Path(root)
     candidates = [ModelEntry(c.stem, r / "runs" / c.stem / "model.onnx", r / "runs" / c.stem / "best.pt",
                              untrained_preset=str(c), runtimes=("ort-1",)) for c in sorted(r.glob(DECODER_CANDIDATES))]
+    fast = [ModelEntry(f"{c.stem}_full", r / "runs" / c.stem / "model.onnx", r / "runs" / c.stem / "best.pt",
+                       runtimes=("ort-1",)) for c in sorted(r.glob(FAST_CONFIGS))]
     return [ModelEntry("compact", r / "models/supermag_compact.onnx", r / "runs/compact/best.pt", symmetrized=True),
             ModelEntry("small_8ep", r / "runs/variant_small/model.onnx", r / "runs/variant_small/best.pt"),
             ModelEntry("compact_8ep", r / "runs/table1_full/model.onnx", r / "runs/table1_full/best.pt"),
             ModelEntry("large_8ep", r / "runs/variant_large/model.onnx", r / "runs/variant_large/best.pt"),
             ModelEntry("paper", r / "runs/paper/model.onnx", r / "runs/paper/best.pt", untrained_preset="paper"),
-            *[ModelEntry(f"{run}_full", r / "runs" / run / "model.onnx", r / "runs" / run / "best.pt",
-                         runtimes=("ort-1",)) for run in FAST_RUNS],
-            *candidates]
+            *fast, *candidates]
 
 
 def parse_model_spec(spec: str) -> ModelEntry:
