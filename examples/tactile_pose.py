@@ -15,7 +15,7 @@ from tactile_manip.sim.shapes import make_indenter
 
 
 def main() -> None:
-    estimator = TactilePoseEstimator(load_reconstructor("models/supermag_compact.onnx"))
+    estimator = TactilePoseEstimator(load_reconstructor("models/supermag_fast.onnx"))
     bar = make_indenter("hex_bar", size_mm=4.0)
     with SimulatedSensor() as sensor:
         sensor.calibrate_baseline()                       # nothing on the pad: 1 s of frames

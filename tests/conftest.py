@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-SHIPPED_MODEL = Path(__file__).resolve().parents[1] / "models" / "supermag_compact.onnx"
+SHIPPED_MODEL = Path(__file__).resolve().parents[1] / "models" / "supermag_fast.onnx"
 
 
 @pytest.fixture

@@ -48,21 +48,27 @@ class ModelEntry:
 
 
 DECODER_CANDIDATES = "configs/train/decoder_*.toml"  # faster decoders (issue 15), timed untrained until trained
+SHIPPED_MODEL = "models/supermag_fast.onnx"
+SHIPPED_RECIPE = "models/supermag_fast.train.toml"  # the training config copied beside it
 FAST_CONFIGS = "configs/train/fast*.toml"  # the fast decoder on the full recipe: measured when trained, else skipped
 
 
 def default_models(root: str | Path = ".") -> list[ModelEntry]:
-    """The shipped model and the size variants on one 8-epoch recipe, the paper preset, the fast decoder's
-    full-recipe runs of ``configs/train/fast*.toml`` (``runs/<stem>/``, as ``<stem>_full``, on one thread,
-    skipped when not trained), and the decoder candidates of
+    """The shipped model (``fast``) and the one shipped before it (``compact``, the accuracy reference), the
+    size variants on one 8-epoch recipe, the paper preset, the other full-recipe runs of
+    ``configs/train/fast*.toml`` (``runs/<stem>/``, as ``<stem>_full``, on one thread, skipped when not
+    trained; the shipped model's own recipe is ``fast``), and the decoder candidates of
     ``configs/train/decoder_*.toml`` (their run's export when trained, else an untrained export timed on one
     thread) (paths under ``root``)."""
     r = Path(root)
     candidates = [ModelEntry(c.stem, r / "runs" / c.stem / "model.onnx", r / "runs" / c.stem / "best.pt",
                              untrained_preset=str(c), runtimes=("ort-1",)) for c in sorted(r.glob(DECODER_CANDIDATES))]
+    shipped_recipe = r / SHIPPED_RECIPE
+    shipped_text = shipped_recipe.read_text() if shipped_recipe.is_file() else None
     fast = [ModelEntry(f"{c.stem}_full", r / "runs" / c.stem / "model.onnx", r / "runs" / c.stem / "best.pt",
-                       runtimes=("ort-1",)) for c in sorted(r.glob(FAST_CONFIGS))]
-    return [ModelEntry("compact", r / "models/supermag_compact.onnx", r / "runs/compact/best.pt", symmetrized=True),
+                       runtimes=("ort-1",)) for c in sorted(r.glob(FAST_CONFIGS)) if c.read_text() != shipped_text]
+    return [ModelEntry("fast", r / SHIPPED_MODEL, r / "runs/fast_b48/best.pt", symmetrized=True),
+            ModelEntry("compact", r / "models/supermag_compact.onnx", r / "runs/compact/best.pt", symmetrized=True),
             ModelEntry("small_8ep", r / "runs/variant_small/model.onnx", r / "runs/variant_small/best.pt"),
             ModelEntry("compact_8ep", r / "runs/table1_full/model.onnx", r / "runs/table1_full/best.pt"),
             ModelEntry("large_8ep", r / "runs/variant_large/model.onnx", r / "runs/variant_large/best.pt"),

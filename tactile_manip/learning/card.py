@@ -26,8 +26,9 @@ def model_card(meta: dict[str, Any], history: dict[str, Any], *, table_md: str =
     scaling = (f"clamped to +-{inp['clamp_ut']} uT and scaled to [-1, 1] inside the graph" if not inp.get("offset")
                else f"normalised per channel by the training split, clamped to +-{inp['clamp_std']} standard "
                     "deviations and scaled to [-1, 1] inside the graph")
-    source = "simulated pairs" if str(data.get("source", "")).endswith("simulate") or "source" not in data \
-        else f"pairs ({data['source']})"
+    # datasets written by `simulate` before it recorded its name in the provenance carry no source
+    source = ("simulated pairs" if data.get("source") is None or str(data["source"]).endswith("simulate")
+              else f"pairs ({data['source']})")
     lines = [
         f"# SuperMag CVAE, `{meta['preset']}` preset",
         "",

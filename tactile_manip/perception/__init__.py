@@ -3,7 +3,7 @@
 The pose API users plug into their tasks::
 
     from tactile_manip.perception import TactilePoseEstimator, load_reconstructor
-    estimator = TactilePoseEstimator(load_reconstructor("models/supermag_compact.onnx"))
+    estimator = TactilePoseEstimator(load_reconstructor("models/supermag_fast.onnx"))
     estimate = estimator.estimate(field_ut)     # (4, 4, 3) uT -> AngleEstimate
 
 (numpy and scipy at import; onnxruntime only when an ONNX model is loaded.)

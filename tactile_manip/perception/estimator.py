@@ -10,7 +10,7 @@ batched model run (:meth:`TactilePoseEstimator.estimate_many`), and stream estim
 :class:`~tactile_manip.sensors.base.TactileSensor` at the sensor's rate, always from the newest frame::
 
     from tactile_manip.perception import StreamStats, TactilePoseEstimator, load_reconstructor
-    estimator = TactilePoseEstimator(load_reconstructor("models/supermag_compact.onnx"))
+    estimator = TactilePoseEstimator(load_reconstructor("models/supermag_fast.onnx"))
     stats = StreamStats()
     for est in estimator.stream(sensor, stats=stats):   # one estimate per new frame; stale ones skipped
         if est.defined and est.confidence > 0.5:
@@ -33,8 +33,8 @@ prior samples) and ``escalate_below``, an estimate whose (calibrated) confidence
 again from the same reading by the escalation reconstructor; that estimate replaces the first
 (``escalated=True``, its cost in ``timings_s["escalate"]``)::
 
-    model = load_reconstructor("models/supermag_compact.onnx")
-    estimator = TactilePoseEstimator(model, calibration=load_calibration_beside("models/supermag_compact.onnx"),
+    model = load_reconstructor("models/supermag_fast.onnx")
+    estimator = TactilePoseEstimator(model, calibration=load_calibration_beside("models/supermag_fast.onnx"),
                                      escalation=SymmetrizedReconstructor(model), escalate_below=0.5)
 
 The escalated estimate replaces the first whatever its confidence, which the same calibration maps (it was

@@ -52,6 +52,14 @@ class PoseParams:
             background is not zero, like the interpolation baselines' fitted offset of 0.14 mm, would otherwise
             count the whole pad as contact; contacts covering less than half the image are unaffected);
             "none" keeps the image as it is.
+        aperture: "disc" takes the moments over a disc centred in the image (:func:`aperture_disc`, radius
+            half the image's width less two filter widths: 9.4 mm on the 20 mm pad): a rod wider than the
+            pad's clear width is cut by the square edges into a sheared band whose principal axis leans
+            towards the diagonal (up to 1.4 deg on exact depth images, 6-8 deg on reconstructions of 5-8 mm
+            bars at 55-65 deg), while a disc cuts any straight band symmetrically, so its axis is the rod's;
+            contacts inside the disc are unaffected, and one with fewer than ``min_contact_px`` pixels
+            inside it keeps the whole-image moments. "none": the whole image (the paper's pipeline). The
+            contact's centroid and area are over the whole image either way.
     """
 
     threshold_mm: float = DEFAULT_THRESHOLD_MM
@@ -60,10 +68,13 @@ class PoseParams:
     min_contact_px: int = MIN_CONTACT_PX
     isotropy_limit: float = ISOTROPY_LIMIT
     background: str = "median"
+    aperture: str = "disc"
 
     def __post_init__(self) -> None:
         if self.background not in ("median", "none"):
             raise ValueError(f"PoseParams.background must be 'median' or 'none', got {self.background!r}")
+        if self.aperture not in ("disc", "none"):
+            raise ValueError(f"PoseParams.aperture must be 'disc' or 'none', got {self.aperture!r}")
         checks = {"threshold_mm": self.threshold_mm >= 0, "sigma_mm": self.sigma_mm >= 0,
                   "outlier_fraction": 0 <= self.outlier_fraction <= 1, "min_contact_px": self.min_contact_px >= 1,
                   "isotropy_limit": 0 < self.isotropy_limit <= 1}
@@ -127,7 +138,14 @@ def angle_from_image(depth_mm: np.ndarray, *, pixel_mm: float = 0.1, threshold_m
     h, w = d.shape
     x = (np.arange(c0, c0 + weights.shape[1]) - (w - 1) / 2) * pixel_mm
     y = -(np.arange(r0, r0 + weights.shape[0]) - (h - 1) / 2) * pixel_mm
-    cx, cy, sxx, syy, sxy = _second_moments(weights, x, y)
+    windowed = (_in_aperture(weights, r0, c0, (h, w), sigma_px, p.min_contact_px) if p.aperture == "disc"
+                else weights)
+    cx, cy, sxx, syy, sxy = _second_moments(windowed, x, y)
+    if windowed is not weights:  # the centroid of the whole contact
+        wt = weights.astype(np.float64)
+        col, row = np.ones(wt.shape[0]) @ wt, wt @ np.ones(wt.shape[1])  # (BLAS: 2x faster than .sum(axis))
+        total = float(col.sum())
+        cx, cy = float(col @ x) / total, float(row @ y) / total
     area = n_px * pixel_mm**2
     half_diff = 0.5 * (sxx - syy)
     radius = math.hypot(half_diff, sxy)
@@ -255,6 +273,32 @@ def _weights(d: np.ndarray, rows: tuple[int, int], cols: tuple[int, int], remove
     return np.maximum(out, 0.0, out=out), (o0, p0)
 
 
+def _in_aperture(weights: np.ndarray, r0: int, c0: int, shape: tuple[int, int], sigma_px: float,
+                 min_px: int) -> np.ndarray:
+    """``weights`` (a box at pixel (r0, c0) of an image of ``shape``) times :func:`aperture_disc`, unless
+    fewer than ``min_px`` of its pixels are left (then unchanged). A box inside the disc (every contact
+    smaller than about 65 % of the pad's width) is returned as it is, without a copy."""
+    bh, bw = weights.shape
+    disc = aperture_disc(*shape, sigma_px, weights.dtype.char)
+    if min(disc[r0, c0], disc[r0, c0 + bw - 1], disc[r0 + bh - 1, c0], disc[r0 + bh - 1, c0 + bw - 1]) == 1:
+        return weights  # a disc is convex: its four corners inside, so is the box
+    windowed = weights * disc[r0:r0 + bh, c0:c0 + bw]
+    return windowed if np.count_nonzero(windowed > 0) >= min_px else weights
+
+
+@lru_cache(maxsize=8)
+def aperture_disc(h: int, w: int, sigma_px: float, dtype: str = "d") -> np.ndarray:
+    """(h, w) weights of the moments' aperture (read-only): 1 inside the centred disc of radius
+    ``min(h, w) / 2 - 2 sigma_px`` pixels, 0 outside, the pixel's covered fraction on its edge (a hard edge's
+    staircase biases a band's axis by up to 0.1 deg). The margin of two filter widths keeps the disc off the
+    image border, where the filter's zero padding would thin a band on one side (0.13 deg without it)."""
+    y, x = np.ogrid[:h, :w]
+    radius = max(min(h, w) / 2 - 2 * sigma_px, 0.5)
+    disc = np.clip(radius + 0.5 - np.hypot(x - (w - 1) / 2, y - (h - 1) / 2), 0.0, 1.0).astype(dtype)
+    disc.setflags(write=False)
+    return disc
+
+
 def _banded_rows(g: np.ndarray, a: np.ndarray, a0: int, rows: tuple[int, int], radius_px: int) -> np.ndarray:
     """Rows ``rows`` of ``g @ A`` for a banded ``g`` (n, n) of half-width ``radius_px``, where ``a`` holds
     the rows ``a0 ..`` of A (zero elsewhere): in blocks of output rows, each reading only the input rows
@@ -291,8 +335,8 @@ def _second_moments(weights: np.ndarray, x: np.ndarray, y: np.ndarray) -> tuple[
     output is symmetric only to rounding) is zero, so such a contact lands exactly on 0 or on +pi/2 as the
     float64 pipeline puts it, not a rounding error either side of the wrap.
     """
-    wt = weights.astype(np.float64)
-    col = wt.sum(axis=0)
+    wt = np.asarray(weights, np.float64)
+    col = np.ones(wt.shape[0]) @ wt  # (BLAS: 2x faster than .sum(axis=0))
     total = float(col.sum())
     cx = float(col @ x) / total
     dx = x - cx

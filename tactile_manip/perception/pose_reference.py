@@ -2,7 +2,8 @@
 
 :func:`reference_angle_from_image` is the paper's post-processing and PCA exactly as the project first
 implemented it (median background, :func:`~tactile_manip.perception.pose.remove_outliers` over the whole
-image, a full-image Gaussian filter, moments over every pixel, all in float64). It is kept, unchanged, as
+image, a full-image Gaussian filter, moments over every pixel, all in float64), with the moments' aperture
+(``PoseParams.aperture``) added in the same plain form. It is kept as
 the definition :func:`~tactile_manip.perception.pose.angle_from_image` (which crops to the contact and runs
 in float32) is checked against: in tests/perception/test_pose_fast.py on synthetic images and in
 ``python -m benchmarks.check_pose_parity`` on the shipped model's reconstructions of the test split.
@@ -17,8 +18,8 @@ import numpy as np
 from scipy import ndimage
 
 from tactile_manip.checks import check_finite_scalar
-from tactile_manip.perception.pose import (DEFAULT_SIGMA_MM, DEFAULT_THRESHOLD_MM, PoseParams, minus_background,
-                                           remove_outliers, wrap_axial)
+from tactile_manip.perception.pose import (DEFAULT_SIGMA_MM, DEFAULT_THRESHOLD_MM, PoseParams, aperture_disc,
+                                           minus_background, remove_outliers, wrap_axial)
 from tactile_manip.types import AngleEstimate
 
 
@@ -54,6 +55,12 @@ def reference_angle_from_image(depth_mm: np.ndarray, *, pixel_mm: float = 0.1,
     x = (np.arange(w) - (w - 1) / 2) * pixel_mm
     y = -(np.arange(h) - (h - 1) / 2) * pixel_mm
     total = weights.sum()
+    centroid = (float((weights.sum(0) * x).sum() / total), float((weights.sum(1) * y).sum() / total))
+    if p.aperture == "disc":  # the moments over the largest centred disc when it holds enough of the contact
+        windowed = weights * aperture_disc(h, w, sigma_mm / pixel_mm)
+        if np.count_nonzero(windowed) >= p.min_contact_px:
+            weights = windowed
+    total = weights.sum()
     cx = float((weights.sum(0) * x).sum() / total)
     cy = float((weights.sum(1) * y).sum() / total)
     dx, dy = x[None, :] - cx, y[:, None] - cy
@@ -65,6 +72,6 @@ def reference_angle_from_image(depth_mm: np.ndarray, *, pixel_mm: float = 0.1,
     major, minor = 0.5 * (sxx + syy) + radius, 0.5 * (sxx + syy) - radius
     ratio = minor / major if major > 0 else 1.0
     if ratio > p.isotropy_limit:
-        return AngleEstimate(0.0, 0.0, False, (cx, cy), area, f"isotropic contact (eigenvalue ratio {ratio:.2f})")
+        return AngleEstimate(0.0, 0.0, False, centroid, area, f"isotropic contact (eigenvalue ratio {ratio:.2f})")
     angle = wrap_axial(0.5 * math.atan2(2.0 * sxy, sxx - syy))
-    return AngleEstimate(angle, float(np.clip(1.0 - ratio, 0.0, 1.0)), True, (cx, cy), area)
+    return AngleEstimate(angle, float(np.clip(1.0 - ratio, 0.0, 1.0)), True, centroid, area)

@@ -136,6 +136,11 @@ HARD = {
         (_pad_xy()[1] > 0.7) & (_pad_xy()[1] < 3.0) & (_pad_xy()[0] > 0.0) & (_pad_xy()[0] < 2.5), 0.099, 0.0)),
     "bar through the corner": lambda: bar(math.radians(45.0), length_mm=12.0, centre_mm=(9.0, 9.0)),
     "bar across the pad": lambda: bar(math.radians(-20.0), length_mm=40.0, width_mm=3.0),
+    "wide bar across the pad at 60 deg": lambda: bar(math.radians(60.0), length_mm=40.0, width_mm=6.0,
+                                                     centre_mm=(1.5, -1.0)),
+    "bar ending outside the aperture": lambda: bar(math.radians(-35.0), length_mm=10.0, centre_mm=(6.0, 5.0)),
+    "bar only in the corner beyond the aperture": lambda: bar(math.radians(45.0), length_mm=3.0,
+                                                              centre_mm=(9.2, -9.2)),
     "half the pad": lambda: np.broadcast_to(np.where(_pad_xy()[0] < 0, 1.9, 0.0), (SIZE_PX, SIZE_PX)),
     "a 1x1 image": lambda: np.ones((1, 1)),
     "no pixels": lambda: np.zeros((0, 0)),
@@ -155,7 +160,7 @@ def test_hard_images_match_the_reference(case, dtype) -> None:
                                     PoseParams(threshold_mm=0.0), PoseParams(threshold_mm=0.5),
                                     PoseParams(outlier_fraction=0.0), PoseParams(outlier_fraction=1.0),
                                     PoseParams(background="none"), PoseParams(min_contact_px=5000),
-                                    PoseParams(isotropy_limit=0.2)])
+                                    PoseParams(isotropy_limit=0.2), PoseParams(aperture="none")])
 def test_other_parameters_match_the_reference(params) -> None:
     rng = np.random.default_rng(0)
     img = bar(0.7, centre_mm=(2.0, -3.0)) + 0.6 * blob(1.0, 0.6, -0.4, (-6.0, 5.0)) + 0.12

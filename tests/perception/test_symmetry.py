@@ -16,7 +16,7 @@ from tactile_manip.sim.objects import IndenterPose
 from tactile_manip.sim.pair import SensorPair
 from tactile_manip.sim.shapes import make_indenter
 
-MODEL = Path(__file__).resolve().parents[2] / "models" / "supermag_compact.onnx"
+MODEL = Path(__file__).resolve().parents[2] / "models" / "supermag_fast.onnx"
 GROUP = symmetry_group((4, 4, 3), (200, 200))
 
 
