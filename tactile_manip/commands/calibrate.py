@@ -75,7 +75,7 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError(f"--fit {args.fit} has {fit_conf.size} rod presses in split {args.fit_split!r}; "
                           f"calibrating needs >= {MIN_FIT_PRESSES}")
     cal = ConfidenceCalibration.fit(fit_conf, fit_err, tolerance_deg=tol, prior_samples=args.samples,
-                                    symmetrized=args.symmetrized)
+                                    symmetrized=args.symmetrized, aperture=estimator.params.aperture)
     report = load_dataset(args.report)
     _, raw, err = _rods(report, "--report", args.report, args.report_split, estimator)
     if raw.size < REPORT_BINS:

@@ -36,6 +36,7 @@ class ConfidenceCalibration:
     samples: int = 0              # held-out estimates it was fitted on
     prior_samples: int = 1        # prior samples per reading of the estimator it was fitted for
     symmetrized: bool = False     # fitted for the model averaged over the sensor's symmetries
+    aperture: str = "disc"        # the pose pipeline's moments aperture it was fitted with (PoseParams.aperture)
 
     def __post_init__(self) -> None:
         k, v = np.asarray(self.knots, float), np.asarray(self.values, float)
@@ -56,14 +57,16 @@ class ConfidenceCalibration:
         out = np.interp(r, self.knots, self.values)
         return float(out) if out.ndim == 0 else out
 
-    def fits(self, *, prior_samples: int, symmetrized: bool) -> bool:
+    def fits(self, *, prior_samples: int, symmetrized: bool, aperture: str = "disc") -> bool:
         """Whether it was fitted for an estimator with these settings (the raw confidence of another is
         distributed otherwise, so this map would not give its probability)."""
-        return self.prior_samples == prior_samples and self.symmetrized == symmetrized
+        return (self.prior_samples == prior_samples and self.symmetrized == symmetrized
+                and self.aperture == aperture)
 
     @classmethod
     def fit(cls, raw: np.ndarray, errors_deg: np.ndarray, *, tolerance_deg: float = 5.0,
-            min_per_knot: int = 20, prior_samples: int = 1, symmetrized: bool = False) -> ConfidenceCalibration:
+            min_per_knot: int = 20, prior_samples: int = 1, symmetrized: bool = False,
+            aperture: str = "disc") -> ConfidenceCalibration:
         """Isotonic fit of "error within tolerance" on raw confidence (held-out estimates only).
 
         Undefined estimates enter with raw confidence 0 and their error (90 deg when unknown). Blocks of fewer
@@ -81,16 +84,18 @@ class ConfidenceCalibration:
         values = [b[1] for b in blocks]
         knots, values = _strictly_increasing(knots, values)
         return cls(tuple(knots), tuple(values), float(tolerance_deg), int(raw.size), int(prior_samples),
-                   bool(symmetrized))
+                   bool(symmetrized), str(aperture))
 
     def to_dict(self) -> dict[str, Any]:
         return {"knots": list(self.knots), "values": list(self.values), "tolerance_deg": self.tolerance_deg,
-                "samples": self.samples, "prior_samples": self.prior_samples, "symmetrized": self.symmetrized}
+                "samples": self.samples, "prior_samples": self.prior_samples, "symmetrized": self.symmetrized,
+                "aperture": self.aperture}
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> ConfidenceCalibration:
+        # a file without "aperture" predates it: it was fitted with the whole-image moments
         return cls(tuple(d["knots"]), tuple(d["values"]), float(d["tolerance_deg"]), int(d.get("samples", 0)),
-                   int(d.get("prior_samples", 1)), bool(d.get("symmetrized", False)))
+                   int(d.get("prior_samples", 1)), bool(d.get("symmetrized", False)), str(d.get("aperture", "none")))
 
     def save(self, path: str | Path) -> Path:
         Path(path).parent.mkdir(parents=True, exist_ok=True)

@@ -25,7 +25,7 @@ from tactile_manip.behaviours.reorient import ReorientResult, grasp_estimate_reo
 from tactile_manip.errors import ConfigError
 from tactile_manip.extras import require
 from tactile_manip.perception.estimator import TactilePoseEstimator
-from tactile_manip.perception.pose import wrap_axial
+from tactile_manip.perception.pose import PoseParams, wrap_axial
 from tactile_manip.perception.reconstruct import load_reconstructor
 from tactile_manip.perception.confidence import load_calibration_beside
 from tactile_manip.perception.symmetry import SymmetrizedReconstructor
@@ -105,7 +105,8 @@ def build_estimators(scene: TrialScene, scene_path: Path | None = None) -> dict[
         reconstructor = SymmetrizedReconstructor(base) if spec.symmetrize else base
         model = target not in ("bilinear", "bicubic")
         calibration = load_calibration_beside(target) if model and spec.calibrated else None
-        if calibration is not None and not calibration.fits(prior_samples=spec.samples, symmetrized=spec.symmetrize):
+        if calibration is not None and not calibration.fits(prior_samples=spec.samples, symmetrized=spec.symmetrize,
+                                                            aperture=PoseParams().aperture):
             calibration = None  # fitted for another estimator: its map would not give this one's probability
         escalation = None
         if spec.escalate_below > 0 and spec.escalation == "symmetry":

@@ -55,3 +55,18 @@ def test_undefined_estimates_count_as_misses_and_the_figure_draws(tmp_path):
     assert cal(0.0) == 0.0 and cal(0.9) == 1.0
     path = reliability_figure(reliability_table(cal(np.nan_to_num(raw)), errors, bins=5), tmp_path / "r.png")
     assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_a_calibration_records_the_pose_aperture_it_was_fitted_with(tmp_path):
+    import json
+
+    raw, errors = _synthetic(200, np.random.default_rng(4))
+    cal = ConfidenceCalibration.fit(raw, errors, aperture="none")
+    back = ConfidenceCalibration.load(cal.save(tmp_path / "c.json"))
+    assert back.aperture == "none" and back == cal
+    assert not back.fits(prior_samples=1, symmetrized=False)  # the estimators' default is the disc
+    assert back.fits(prior_samples=1, symmetrized=False, aperture="none")
+    # a file written before the field existed was fitted with the whole-image moments
+    old = {k: v for k, v in ConfidenceCalibration.fit(raw, errors).to_dict().items() if k != "aperture"}
+    (tmp_path / "old.json").write_text(json.dumps(old))
+    assert ConfidenceCalibration.load(tmp_path / "old.json").aperture == "none"

@@ -130,6 +130,15 @@ def test_the_shipped_scenes_load() -> None:
     assert robust.behaviour.min_confidence == 0.8  # compared with the calibrated confidence
 
 
+@pytest.mark.parametrize("scene_file", ["configs/scenes/reorient_sim.toml", "configs/scenes/reorient_robust.toml"])
+def test_the_shipped_scenes_use_the_calibration_beside_their_model(scene_file) -> None:
+    """The calibration files shipped beside the models fit the trials' estimators (prior samples, symmetry,
+    the pose aperture); one that did not would be dropped and the re-grasp policy would read raw confidence."""
+    estimators = build_estimators(load_scene(REPO / scene_file))
+    assert estimators["supermag"].calibration is not None
+    assert estimators["bilinear"].calibration is None
+
+
 def test_the_cell_wires_the_grasp_to_the_sensor() -> None:
     cell = SimulatedCell(_scene())
     with cell.connected():
