@@ -55,7 +55,7 @@ class PoseParams:
         aperture: "disc" takes the moments over a disc centred in the image (:func:`aperture_disc`, radius
             half the image's width less two filter widths: 9.4 mm on the 20 mm pad): a rod wider than the
             pad's clear width is cut by the square edges into a sheared band whose principal axis leans
-            towards the diagonal (up to 1.4 deg on exact depth images, 6-8 deg on reconstructions of 5-8 mm
+            towards the diagonal (up to 1.7 deg on exact depth images, 5-8 deg on reconstructions of 5-8 mm
             bars at 55-65 deg), while a disc cuts any straight band symmetrically, so its axis is the rod's;
             contacts inside the disc are unaffected, and one with fewer than ``min_contact_px`` pixels
             inside it keeps the whole-image moments. "none": the whole image (the paper's pipeline). The
