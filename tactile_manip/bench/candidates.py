@@ -54,7 +54,8 @@ FAST_CONFIGS = "configs/train/fast*.toml"  # the fast decoder on the full recipe
 
 
 def default_models(root: str | Path = ".") -> list[ModelEntry]:
-    """The shipped model (``fast``) and the one shipped before it (``compact``, the accuracy reference), the
+    """The shipped model (``fast``), the one shipped before it (``compact``, the accuracy reference) and the
+    robust-trained one (``robust``, on one thread: the fast model's graph), the
     size variants on one 8-epoch recipe, the paper preset, the other full-recipe runs of
     ``configs/train/fast*.toml`` (``runs/<stem>/``, as ``<stem>_full``, on one thread, skipped when not
     trained; the shipped model's own recipe is ``fast``), and the decoder candidates of
@@ -69,6 +70,7 @@ def default_models(root: str | Path = ".") -> list[ModelEntry]:
                        runtimes=("ort-1",)) for c in sorted(r.glob(FAST_CONFIGS)) if c.read_text() != shipped_text]
     return [ModelEntry("fast", r / SHIPPED_MODEL, r / "runs/fast_b48/best.pt", symmetrized=True),
             ModelEntry("compact", r / "models/supermag_compact.onnx", r / "runs/compact/best.pt", symmetrized=True),
+            ModelEntry("robust", r / "models/supermag_robust.onnx", r / "runs/robust_b48/best.pt", runtimes=("ort-1",)),
             ModelEntry("small_8ep", r / "runs/variant_small/model.onnx", r / "runs/variant_small/best.pt"),
             ModelEntry("compact_8ep", r / "runs/table1_full/model.onnx", r / "runs/table1_full/best.pt"),
             ModelEntry("large_8ep", r / "runs/variant_large/model.onnx", r / "runs/variant_large/best.pt"),
