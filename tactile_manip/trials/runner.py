@@ -105,8 +105,9 @@ def build_estimators(scene: TrialScene, scene_path: Path | None = None) -> dict[
         reconstructor = SymmetrizedReconstructor(base) if spec.symmetrize else base
         model = target not in ("bilinear", "bicubic")
         calibration = load_calibration_beside(target) if model and spec.calibrated else None
+        params = PoseParams()  # the estimator's pose parameters, which the calibration must have been fitted with
         if calibration is not None and not calibration.fits(prior_samples=spec.samples, symmetrized=spec.symmetrize,
-                                                            aperture=PoseParams().aperture):
+                                                            aperture=params.aperture):
             calibration = None  # fitted for another estimator: its map would not give this one's probability
         escalation = None
         if spec.escalate_below > 0 and spec.escalation == "symmetry":
@@ -115,7 +116,7 @@ def build_estimators(scene: TrialScene, scene_path: Path | None = None) -> dict[
             escalation = load_reconstructor(target, threads=spec.threads, samples=spec.escalation_samples)
             if spec.symmetrize:
                 escalation = SymmetrizedReconstructor(escalation, spread=True)
-        out[spec.name] = TactilePoseEstimator(reconstructor, calibration=calibration, escalation=escalation,
+        out[spec.name] = TactilePoseEstimator(reconstructor, params, calibration=calibration, escalation=escalation,
                                               escalate_below=spec.escalate_below)
     return out
 
