@@ -4,10 +4,10 @@
     python -m benchmarks.check_pose_parity --model runs/x/model.onnx --data other.npz
 
 Reconstructs every test-split reading (unseen objects) with the model, then runs
-:func:`~tactile_manip.perception.pose.angle_from_image` and the full-image float64
-:func:`~tactile_manip.perception.pose_reference.reference_angle_from_image` on each image, interleaved, and
-prints the largest differences (angle in degrees, confidence, centroid, area), the number of images whose
-defined flag or reason differ, and the post-processing time of both (p50 / p99, one thread). Writes
+:func:`~tactile_manip.perception.pose.angle_from_image` (on its C kernel, when built, and on its numpy path) and
+the full-image float64 :func:`~tactile_manip.perception.pose_reference.reference_angle_from_image` on each
+image, interleaved, and prints per path the largest differences (angle in degrees, confidence, centroid, area),
+the number of images whose defined flag or reason differ, and the post-processing time (p50 / p99, one thread). Writes
 benchmarks/results/pose_parity.json. The acceptance bar of issue 15 is a largest angle difference of
 0.05 deg with no flag changed; the script reports, it does not assert.
 """
@@ -25,7 +25,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # before numpy: the filter's
 import numpy as np  # noqa: E402
 
 from benchmarks._common import machine_info, publish  # noqa: E402
-from tactile_manip.perception import load_reconstructor, wrap_axial  # noqa: E402
+from tactile_manip.perception import load_reconstructor, pose_kernel, wrap_axial  # noqa: E402
 from tactile_manip.perception.pose import DEFAULT_THRESHOLD_MM, angle_from_image  # noqa: E402
 from tactile_manip.perception.pose_reference import reference_angle_from_image  # noqa: E402
 from tactile_manip.data import load_dataset  # noqa: E402
@@ -77,20 +77,30 @@ def compare(images: np.ndarray, pixel_mm: float) -> dict[str, Any]:
 
 
 def markdown(report: dict[str, Any]) -> str:
-    r, d = report["result"], report["result"]["max_diff"]
-    return "\n".join([
-        f"Pose parity on {report['source']} ({r['images']} images, {r['defined']} with a defined angle), "
-        f"model {report['model']}", "",
-        "| largest angle diff deg | confidence | centroid mm | area mm2 | flag/reason changes | within bar |",
-        "|---|---|---|---|---|---|",
-        f"| {d['angle_deg']:.2e} | {d['confidence']:.2e} | {d['centroid_mm']:.2e} | {d['area_mm2']:.3f} | "
-        f"{r['flag_changes']} | {'yes' if r['within_bar'] else 'NO'} (bar {ANGLE_BAR_DEG} deg) |", "",
-        "| post-processing | p50 ms | p99 ms |", "|---|---|---|",
-        f"| angle_from_image (cropped, float32) | {r['fast_p50_ms']:.3f} | {r['fast_p99_ms']:.3f} |",
-        f"| reference (full image, float64) | {r['reference_p50_ms']:.3f} | {r['reference_p99_ms']:.3f} |", "",
-        "| contact's bounding box (share of the image) | images | angle_from_image p50 ms |", "|---|---|---|",
-        *[f"| {g['box_share'][0]:.0%}-{g['box_share'][1]:.0%} | {g['images']} | "
-          + ("-" if g["fast_p50_ms"] is None else f"{g['fast_p50_ms']:.3f}") + " |" for g in r["by_box"]]])
+    results = report["results"]
+    first = next(iter(results.values()))
+    lines = [f"Pose parity on {report['source']} ({first['images']} images, {first['defined']} with a defined "
+             f"angle), model {report['model']}", "",
+             "| path of angle_from_image | largest angle diff deg | confidence | centroid mm | area mm2 | "
+             "flag/reason changes | within bar |", "|---|---|---|---|---|---|---|"]
+    for path, r in results.items():
+        d = r["max_diff"]
+        lines.append(f"| {path} | {d['angle_deg']:.2e} | {d['confidence']:.2e} | {d['centroid_mm']:.2e} | "
+                     f"{d['area_mm2']:.3f} | {r['flag_changes']} | {'yes' if r['within_bar'] else 'NO'} "
+                     f"(bar {ANGLE_BAR_DEG} deg) |")
+    lines += ["", "| post-processing | p50 ms | p99 ms |", "|---|---|---|",
+              *[f"| angle_from_image, {path} | {r['fast_p50_ms']:.3f} | {r['fast_p99_ms']:.3f} |"
+                for path, r in results.items()],
+              f"| reference (full image, float64) | {first['reference_p50_ms']:.3f} | "
+              f"{first['reference_p99_ms']:.3f} |", "",
+              "| contact's bounding box (share of the image) | images | "
+              + " | ".join(f"{path} p50 ms" for path in results) + " |", "|---|---|" + "---|" * len(results)]
+    for k, g in enumerate(first["by_box"]):
+        cells = ["-" if r["by_box"][k]["fast_p50_ms"] is None else f"{r['by_box'][k]['fast_p50_ms']:.3f}"
+                 for r in results.values()]
+        lines.append(f"| {g['box_share'][0]:.0%}-{g['box_share'][1]:.0%} | {g['images']} | " + " | ".join(cells)
+                     + " |")
+    return "\n".join(lines)
 
 
 def main() -> None:
@@ -103,8 +113,13 @@ def main() -> None:
     data = load_dataset(args.data)
     rec = load_reconstructor(args.model, threads=1)
     images = rec.reconstruct_batch(data.field_ut[data.indices(args.split)])
+    results = {}
+    if pose_kernel.available():
+        results["C kernel"] = compare(images, rec.pixel_mm)
+    with pose_kernel.numpy_path():
+        results["numpy"] = compare(images, rec.pixel_mm)
     report = {"machine": machine_info(), "model": args.model, "source": f"{args.data} {args.split} split",
-              "result": compare(images, rec.pixel_mm)}
+              "results": results}
     publish(report, args.out, markdown)
 
 

@@ -44,9 +44,24 @@ COMMANDS: dict[str, tuple[str, str]] = {
 }
 
 
+class _Version(argparse.Action):
+    """``--version``: the version and which path the pose stage runs (looked up only when asked: the pose
+    kernel's module imports numpy)."""
+
+    def __init__(self, option_strings: Sequence[str], dest: str = argparse.SUPPRESS, **kwargs) -> None:
+        super().__init__(option_strings, dest=dest, default=argparse.SUPPRESS, nargs=0,
+                         help="show the version and which path the pose stage runs (C kernel or numpy), and exit")
+
+    def __call__(self, parser, namespace, values, option_string=None) -> None:
+        from tactile_manip.perception import pose_kernel
+
+        print(f"tactile_manip {__version__}\npose stage: {pose_kernel.describe()}")  # stdout, as argparse's version
+        parser.exit()
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="tactile-manip", description=__doc__.splitlines()[0])
-    parser.add_argument("--version", action="version", version=f"tactile_manip {__version__}")
+    parser.add_argument("--version", action=_Version)
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for name, (module, help_text) in COMMANDS.items():
         cmd = sub.add_parser(name, help=help_text, description=help_text)

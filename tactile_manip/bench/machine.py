@@ -82,10 +82,13 @@ def library_versions(names: tuple[str, ...] = LIBRARIES) -> dict[str, str | None
 
 
 def machine_info() -> dict[str, Any]:
-    """CPU model, core counts, load, interpreter and numpy/scipy versions, code version, time of the run."""
+    """CPU model, core counts, load, interpreter and numpy/scipy versions, which path the pose stage runs (C
+    kernel or numpy), code version, time of the run."""
     import scipy
+
+    from tactile_manip.perception import pose_kernel
 
     return {"cpu_model": cpu_model(), "cpu_count": os.cpu_count(), "usable_cores": usable_cores(),
             "load_average": load_average(), "python": sys.version.split()[0], "numpy": np.__version__,
-            "scipy": scipy.__version__, "platform": platform.platform(), "code_version": code_version(),
+            "scipy": scipy.__version__, "pose_stage": pose_kernel.describe(), "platform": platform.platform(), "code_version": code_version(),
             "time_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}

@@ -10,7 +10,10 @@ contacts give ``defined=False`` with a reason, never NaN.
 cost: in the image's own precision (float32 for reconstructions), and only over the contact's bounding box
 plus twice the Gaussian's reach (nothing outside can change the result: a pixel below the threshold
 everywhere within the filter radius filters to below the threshold), with the filter as small banded matrix
-products and the moments from a column sum and one matrix-vector product.
+products and the moments from a column sum and one matrix-vector product. On float32 images (reconstructions)
+all of that after the background runs in one call into C when the optional kernel is built
+(:mod:`~tactile_manip.perception.pose_kernel`, about a third of the numpy path's time), with the same results
+to float32 rounding; tests/perception/test_pose_fast.py holds both paths to the float64 reference.
 """
 
 from __future__ import annotations
@@ -23,6 +26,7 @@ import numpy as np
 from scipy import ndimage
 
 from tactile_manip.checks import check_finite_scalar
+from tactile_manip.perception import pose_kernel
 from tactile_manip.types import AngleEstimate
 
 DEFAULT_THRESHOLD_MM = 0.1     # pixels shallower than this are not contact
@@ -125,36 +129,55 @@ def angle_from_image(depth_mm: np.ndarray, *, pixel_mm: float = 0.1, threshold_m
     pixel_mm = check_finite_scalar("pixel_mm", pixel_mm, low=0.0, low_open=True)
     p = params or PoseParams(threshold_mm=threshold_mm, sigma_mm=sigma_mm)
     d, level = _prepared(depth_mm, median=p.background == "median")
-    contact = _kept_contact(d, p.threshold_mm, p.outlier_fraction)
-    if contact is None:
-        return _undefined(p, 0, 0, level, pixel_mm)
-    (rows, cols), raw_px, removed = contact
     sigma_px = p.sigma_mm / pixel_mm
     radius_px = int(GAUSS_TRUNCATE * sigma_px + 0.5) if sigma_px > 0 else 0  # as scipy.ndimage rounds it
+    disc = aperture_disc(*d.shape, sigma_px, d.dtype.char) if p.aperture == "disc" and d.size else None
+    if d.dtype == np.float32 and d.size and pose_kernel.available():
+        m = pose_kernel.contact_moments(d, threshold_mm=p.threshold_mm, outlier_fraction=p.outlier_fraction,
+                                        kernel=_gaussian_taps(sigma_px, radius_px), disc=disc,
+                                        min_px=p.min_contact_px, pixel_mm=pixel_mm)
+    else:
+        m = _contact_moments(d, p, pixel_mm, sigma_px, radius_px, disc)
+    if m.status != pose_kernel.OK:
+        return _undefined(p, m.n_px, m.raw_px, level, pixel_mm)
+    sxx, syy, sxy = m.sxx, m.syy, m.sxy
+    if abs(sxy) <= CROSS_MOMENT_NOISE * (sxx + syy):
+        # a contact symmetric about an axis, whose float32 filter output is symmetric only to rounding: it lands
+        # exactly on 0 or on +pi/2 as the float64 pipeline puts it, not a rounding error either side of the wrap
+        sxy = 0.0
+    area = m.n_px * pixel_mm**2
+    half_diff = 0.5 * (sxx - syy)
+    radius = math.hypot(half_diff, sxy)
+    major, minor = 0.5 * (sxx + syy) + radius, 0.5 * (sxx + syy) - radius
+    ratio = minor / major if major > 0 else 1.0
+    if ratio > p.isotropy_limit:
+        return AngleEstimate(0.0, 0.0, False, m.centroid_mm, area, f"isotropic contact (eigenvalue ratio {ratio:.2f})")
+    angle = wrap_axial(0.5 * math.atan2(2.0 * sxy, sxx - syy))
+    return AngleEstimate(angle, float(np.clip(1.0 - ratio, 0.0, 1.0)), True, m.centroid_mm, area)
+
+
+def _contact_moments(d: np.ndarray, p: PoseParams, pixel_mm: float, sigma_px: float, radius_px: int,
+                     disc: np.ndarray | None) -> pose_kernel.ContactMoments:
+    """What :func:`~tactile_manip.perception.pose_kernel.contact_moments` computes in C, in numpy (any dtype)."""
+    contact = _kept_contact(d, p.threshold_mm, p.outlier_fraction)
+    if contact is None:
+        return pose_kernel.ContactMoments(pose_kernel.EMPTY, 0, 0, (0.0, 0.0), 0.0, 0.0, 0.0)
+    (rows, cols), raw_px, removed = contact
     weights, (r0, c0) = _weights(d, rows, cols, removed, p.threshold_mm, sigma_px, radius_px)
     n_px = int(np.count_nonzero(weights > 0))  # (the comparison and a bool count beat a float count)
     if n_px < p.min_contact_px:
-        return _undefined(p, n_px, raw_px, level, pixel_mm)
+        return pose_kernel.ContactMoments(pose_kernel.TOO_SMALL, raw_px, n_px, (0.0, 0.0), 0.0, 0.0, 0.0)
     h, w = d.shape
     x = (np.arange(c0, c0 + weights.shape[1]) - (w - 1) / 2) * pixel_mm
     y = -(np.arange(r0, r0 + weights.shape[0]) - (h - 1) / 2) * pixel_mm
-    windowed = (_in_aperture(weights, r0, c0, (h, w), sigma_px, p.min_contact_px) if p.aperture == "disc"
-                else weights)
+    windowed = _in_aperture(weights, r0, c0, disc, p.min_contact_px) if disc is not None else weights
     cx, cy, sxx, syy, sxy = _second_moments(windowed, x, y)
     if windowed is not weights:  # the centroid of the whole contact
         wt = weights.astype(np.float64)
         col, row = np.ones(wt.shape[0]) @ wt, wt @ np.ones(wt.shape[1])  # (BLAS: 2x faster than .sum(axis))
         total = float(col.sum())
         cx, cy = float(col @ x) / total, float(row @ y) / total
-    area = n_px * pixel_mm**2
-    half_diff = 0.5 * (sxx - syy)
-    radius = math.hypot(half_diff, sxy)
-    major, minor = 0.5 * (sxx + syy) + radius, 0.5 * (sxx + syy) - radius
-    ratio = minor / major if major > 0 else 1.0
-    if ratio > p.isotropy_limit:
-        return AngleEstimate(0.0, 0.0, False, (cx, cy), area, f"isotropic contact (eigenvalue ratio {ratio:.2f})")
-    angle = wrap_axial(0.5 * math.atan2(2.0 * sxy, sxx - syy))
-    return AngleEstimate(angle, float(np.clip(1.0 - ratio, 0.0, 1.0)), True, (cx, cy), area)
+    return pose_kernel.ContactMoments(pose_kernel.OK, raw_px, n_px, (cx, cy), sxx, syy, sxy)
 
 
 def _undefined(p: PoseParams, n_px: int, raw_px: int, level: float, pixel_mm: float) -> AngleEstimate:
@@ -273,13 +296,11 @@ def _weights(d: np.ndarray, rows: tuple[int, int], cols: tuple[int, int], remove
     return np.maximum(out, 0.0, out=out), (o0, p0)
 
 
-def _in_aperture(weights: np.ndarray, r0: int, c0: int, shape: tuple[int, int], sigma_px: float,
-                 min_px: int) -> np.ndarray:
-    """``weights`` (a box at pixel (r0, c0) of an image of ``shape``) times :func:`aperture_disc`, unless
-    fewer than ``min_px`` of its pixels are left (then unchanged). A box inside the disc (every contact
-    smaller than about 65 % of the pad's width) is returned as it is, without a copy."""
+def _in_aperture(weights: np.ndarray, r0: int, c0: int, disc: np.ndarray, min_px: int) -> np.ndarray:
+    """``weights`` (a box at pixel (r0, c0) of the image) times the image's aperture ``disc``, unless fewer than
+    ``min_px`` of its pixels are left (then unchanged). A box inside the disc (every contact smaller than about
+    65 % of the pad's width) is returned as it is, without a copy."""
     bh, bw = weights.shape
-    disc = aperture_disc(*shape, sigma_px, weights.dtype.char)
     if min(disc[r0, c0], disc[r0, c0 + bw - 1], disc[r0 + bh - 1, c0], disc[r0 + bh - 1, c0 + bw - 1]) == 1:
         return weights  # a disc is convex: its four corners inside, so is the box
     windowed = weights * disc[r0:r0 + bh, c0:c0 + bw]
@@ -327,14 +348,20 @@ def _gaussian_matrix(n: int, sigma_px: float, radius_px: int, dtype: str) -> np.
     return out
 
 
+@lru_cache(maxsize=16)
+def _gaussian_taps(sigma_px: float, radius_px: int) -> np.ndarray:
+    """The float32 taps of the filter (2 radius_px + 1) that :func:`_gaussian_matrix` puts in its rows
+    (``[1.0]``: no filter), for the C kernel."""
+    if radius_px == 0:
+        return np.ones(1, np.float32)
+    taps = np.ascontiguousarray(_gaussian_matrix(2 * radius_px + 1, sigma_px, radius_px, "f")[radius_px])
+    taps.setflags(write=False)
+    return taps
+
+
 def _second_moments(weights: np.ndarray, x: np.ndarray, y: np.ndarray) -> tuple[float, float, float, float, float]:
     """Centroid (cx, cy) and central second moments (sxx, syy, sxy) of ``weights`` (h, w) at pixel
-    coordinates ``x`` (w,) and ``y`` (h,), mm: a column sum and one product with (1, x - cx), float64.
-
-    A cross moment within float32 rounding of zero (a contact symmetric about an axis, whose float32 filter
-    output is symmetric only to rounding) is zero, so such a contact lands exactly on 0 or on +pi/2 as the
-    float64 pipeline puts it, not a rounding error either side of the wrap.
-    """
+    coordinates ``x`` (w,) and ``y`` (h,), mm: a column sum and one product with (1, x - cx), float64."""
     wt = np.asarray(weights, np.float64)
     col = np.ones(wt.shape[0]) @ wt  # (BLAS: 2x faster than .sum(axis=0))
     total = float(col.sum())
@@ -344,5 +371,4 @@ def _second_moments(weights: np.ndarray, x: np.ndarray, y: np.ndarray) -> tuple[
     cy = float(rows[:, 0] @ y) / total
     dy = y - cy
     sxx, syy = float(col @ (dx * dx)) / total, float(rows[:, 0] @ (dy * dy)) / total
-    sxy = float(dy @ rows[:, 1]) / total
-    return cx, cy, sxx, syy, (0.0 if abs(sxy) <= CROSS_MOMENT_NOISE * (sxx + syy) else sxy)
+    return cx, cy, sxx, syy, float(dy @ rows[:, 1]) / total

@@ -91,3 +91,18 @@ def onnx_4x4(tmp_path_factory: pytest.TempPathFactory) -> ExportedModel:
 def onnx_5x6(tmp_path_factory: pytest.TempPathFactory) -> ExportedModel:
     """A 5x6x3-taxel model with 24x32 images: another grid, non-square output."""
     return _export(tmp_path_factory.mktemp("onnx_5x6"), rows=5, cols=6, h=24, w=32, pixel_mm=0.25)
+
+
+@pytest.fixture(params=["C kernel", "numpy"])
+def pose_path(request):
+    """Runs a test once with the pose stage's C kernel (skipped where it is not built) and once on the numpy
+    path, which runs where the kernel is missing."""
+    from tactile_manip.perception import pose_kernel
+
+    if request.param == "C kernel" and not pose_kernel.available():
+        pytest.skip(f"the C pose kernel is not available here ({pose_kernel.describe()})")
+    if request.param == "numpy":
+        with pose_kernel.numpy_path():
+            yield request.param
+    else:
+        yield request.param

@@ -13,6 +13,8 @@ import pytest
 
 from tactile_manip.perception.pose import PoseParams, angle_from_image, aperture_disc, wrap_axial
 
+pytestmark = pytest.mark.usefixtures("pose_path")  # every test on both paths of the pose stage
+
 PIXEL_MM = 0.1
 SIZE_PX = 200  # the 20 mm pad of the shipped model's images
 NONE = PoseParams(aperture="none")
