@@ -90,6 +90,8 @@ class PoseParams:
 
 def wrap_axial(angle_rad: float | np.ndarray) -> float | np.ndarray:
     """Wrap an axial angle (period pi) to (-pi/2, pi/2]."""
+    if type(angle_rad) is float:  # a scalar without numpy's overhead (Python's % is np.mod for floats)
+        return -((-angle_rad + math.pi / 2) % math.pi) + math.pi / 2
     wrapped = -np.mod(-np.asarray(angle_rad, dtype=np.float64) + np.pi / 2, np.pi) + np.pi / 2
     return float(wrapped) if np.ndim(angle_rad) == 0 else wrapped
 
@@ -153,7 +155,7 @@ def angle_from_image(depth_mm: np.ndarray, *, pixel_mm: float = 0.1, threshold_m
     if ratio > p.isotropy_limit:
         return AngleEstimate(0.0, 0.0, False, m.centroid_mm, area, f"isotropic contact (eigenvalue ratio {ratio:.2f})")
     angle = wrap_axial(0.5 * math.atan2(2.0 * sxy, sxx - syy))
-    return AngleEstimate(angle, float(np.clip(1.0 - ratio, 0.0, 1.0)), True, m.centroid_mm, area)
+    return AngleEstimate(angle, min(max(1.0 - ratio, 0.0), 1.0), True, m.centroid_mm, area)
 
 
 def _contact_moments(d: np.ndarray, p: PoseParams, pixel_mm: float, sigma_px: float, radius_px: int,

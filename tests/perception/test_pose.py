@@ -67,6 +67,14 @@ def test_wrap_axial_range_and_period() -> None:
     assert isinstance(wrap_axial(0.3), float)
 
 
+def test_wrap_axial_of_a_float_is_the_array_path_bit_for_bit() -> None:
+    # floats take a path without numpy; it must agree exactly, at the ends of the range too
+    ends = [math.pi / 2, -math.pi / 2, 0.0, -0.0, math.pi, -math.pi, 1.5 * math.pi, math.pi / 2 + 1e-16, 1e-300, 1e10]
+    angles = np.concatenate([np.random.default_rng(1).uniform(-50.0, 50.0, 5000), ends])
+    np.testing.assert_array_equal([wrap_axial(float(a)) for a in angles], wrap_axial(angles))
+    assert math.isnan(wrap_axial(math.nan))
+
+
 # ---------------------------------------------------------------- known angles
 
 
