@@ -189,7 +189,8 @@ def markdown_report(report: dict[str, Any]) -> str:
     out = [f"# Speed vs error ({'quick' if s.get('quick') else 'full'} run)", "",
            f"Machine: {m['cpu_model']}, {m['usable_cores']} usable cores (of {m['cpu_count']}), load average "
            f"{m.get('load_average')} at the start; Python {m['python']}; {libs}; code {m['code_version']}; "
-           f"{m['time_utc']}; the report took {report['seconds']:.0f} s.{quiet}", "",
+           f"{m['time_utc']}; the report took {report['seconds']:.0f} s.{quiet}"
+           + (f" Pose stage: {m['pose_stage']}." if m.get("pose_stage") else ""), "",
            f"Readings: {rd['source']} ({rd['readings']} readings, {rd['rod_readings']} of rods). Image metrics as "
            "`tactile-manip evaluate` (PSNR/SSIM data range 2 mm; rod angle error of the PCA pipeline against the "
            "true yaw). Latency: one reading through `Reconstructor.reconstruct`; pose: reading -> angle through "

@@ -199,6 +199,29 @@ def randomised_values(params: Any) -> dict[str, float]:
     return {row["name"]: float(row["value"]) for row in describe(params) if row["rand"] is not None}
 
 
+def with_values(params: Any, values: dict[str, float], _prefix: str = "") -> Any:
+    """A copy of ``params`` with the fields named in ``values`` (dotted names, as :func:`randomised_values`
+    gives them) set: the sensor a dataset's ``sensor_params`` extra recorded, rebuilt.
+
+    Raises:
+        KeyError: a name that is not a field of ``params`` (the message names it).
+    """
+    nested: dict[str, dict[str, float]] = {}
+    changes: dict[str, Any] = {}
+    names = {f.name for f in dataclasses.fields(params)}
+    for name, value in values.items():
+        head, _, rest = name.partition(".")
+        if head not in names:
+            raise KeyError(f"{_prefix + name!r}: {type(params).__name__} has no field {head!r}")
+        if rest:
+            nested.setdefault(head, {})[rest] = value
+        else:
+            changes[head] = value
+    for head, sub in nested.items():
+        changes[head] = with_values(getattr(params, head), sub, f"{_prefix}{head}.")
+    return dataclasses.replace(params, **changes)
+
+
 def describe(params: Any, prefix: str = "") -> list[dict[str, Any]]:
     """Flatten a parameter tree into rows ``{name, value, unit, source, rand}`` (for docs and reports)."""
     rows = []

@@ -17,6 +17,10 @@ import pytest
 from tactile_manip.config import from_dict, to_dict
 from tactile_manip.errors import DatasetError
 from tactile_manip.sim.dataset import DatasetConfig, ObjectSpec, PoseRanges, generate, load_dataset_config
+from tactile_manip.sim.objects import IndenterPose
+from tactile_manip.sim.pair import SensorPair
+from tactile_manip.sim.params import SimParams, randomised_values, with_values
+from tactile_manip.sim.shapes import make_indenter
 from tactile_manip.data import FORMAT_VERSION, PairedDataset, load_dataset, save_dataset
 from tactile_manip.version import __version__, code_version
 
@@ -265,6 +269,29 @@ def test_randomised_sensors_are_recorded_per_sample():
     forces = d.extra("force_n")
     assert ((2.0 <= forces) & (forces <= 15.0)).all()
     assert not generate(dataclasses.replace(cfg, randomise_spread=0.0), workers=1).has("sensor_params")
+
+
+def test_a_recorded_sensor_is_rebuilt_from_its_values_and_the_press_repeats():
+    # what benchmarks/angle_information.py relies on: sensor_params + pose + force give the same noise-free
+    # field change as the press that made the sample
+    spec = ObjectSpec("hex_bar", count=2, kwargs={"size_mm": 4.0})
+    cfg = DatasetConfig(objects=[spec], randomise_spread=1.0, poses=PoseRanges(force_n=(2.0, 15.0)))
+    d = generate(cfg, workers=1)
+    names = d.provenance["sensor_param_names"]
+    for i in range(2):
+        params = with_values(SimParams(), dict(zip(names, map(float, d.extra("sensor_params")[i]))))
+        assert list(randomised_values(params).values()) == pytest.approx(d.extra("sensor_params")[i], rel=1e-6)
+        pose = IndenterPose(*map(float, d.extra("pose")[i]))
+        pair = SensorPair(params, seed=cfg.sensor_seed)
+        again = pair.press(make_indenter("hex_bar", size_mm=4.0), pose, float(d.extra("force_n")[i]),
+                           np.random.default_rng(0), render_depth=False)
+        # the reading without noise, drift and quantisation, against the recorded one: within a few sigma
+        expected = pair.chips.expected_ut(pair.baseline_field_ut + again.field_change_ut) - pair.baseline_ut
+        sigma = math.hypot(max(params.chip.noise_xy_ut, params.chip.noise_z_ut), params.chip.drift_ut)
+        assert np.abs(expected - d.readings[i]).max() < 5 * sigma + 0.5
+        assert np.abs(again.field_change_ut).max() > 20 * sigma  # a press, not noise: the check has teeth
+    with pytest.raises(KeyError, match="'chip.nois_xy_ut'"):
+        with_values(SimParams(), {"chip.nois_xy_ut": 2.0})
 
 
 def test_presses_through_the_layer_are_flagged_or_redrawn():

@@ -1,0 +1,198 @@
+"""How well could any estimator know a rod's angle from one reading? The Cramer-Rao bound per test press.
+
+    python -m benchmarks.angle_information                         # data/robust.npz: 600 unseen rods, 2-15 N
+    python -m benchmarks.angle_information --data data/supermag.npz   # the paper's protocol, for comparison
+    python -m benchmarks.angle_information --limit 60 --workers 1     # a quick look
+
+Each unseen-rod press of the dataset's test split is rebuilt from what the dataset recorded (its drawn sensor
+from the ``sensor_params`` extra, or the nominal sensor; its pose; its force; the rod), and the noise-free
+reading (the chips' expected values, misalignment included) is differentiated by central differences with
+respect to the rod's in-plane angle and three nuisances a real estimator does not know: the rod's x and y
+offsets and the force. The chips' Gaussian noise (the drawn sigma_xy and sigma_z, plus the quantisation step's
+variance, plus the per-press drift as more noise unless the baseline is tared just before the press) makes a
+reading Gaussian about that value, so the Fisher information J of its 48 channels bounds the standard
+deviation of any unbiased angle estimate:
+
+- ``oracle``: everything but the angle known: sigma >= 1 / sqrt(J_aa), the most optimistic bound;
+- ``nuisance``: the offsets and the force unknown as well: sigma >= sqrt([J^-1]_aa).
+
+Saturated channels carry no information. The share of presses within 5 deg (2 deg) that an efficient estimator
+would reach is the mean over presses of erf(tol / (sqrt(2) sigma)). Where the signal is weak the bound is
+loose (estimators there have threshold effects, e.g. a 90 deg ambiguity, that the local bound does not see),
+so these shares are upper bounds on what any method can do from such readings, not predictions. Reported for
+one frame as the dataset records it (drift included), four frames averaged, and one frame after a tare (drift
+removed); per force band and per tercile of the drawn chip noise. Prints markdown and writes
+benchmarks/results/angle_information.json; asserts nothing.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import multiprocessing
+import os
+import time
+from concurrent.futures import ProcessPoolExecutor
+from typing import Any
+
+import numpy as np
+
+from benchmarks._common import machine_info, publish
+from tactile_manip.data import load_dataset
+
+RODS = ("cylinder", "hex_bar", "square_bar")
+STEPS = {"angle_rad": math.radians(1.0), "x_mm": 0.1, "y_mm": 0.1, "force_rel": 0.02}
+FORCE_BANDS_N = ((2.0, 5.0), (5.0, 8.0), (8.0, 11.0), (11.0, 15.0))
+TOLERANCES_DEG = (5.0, 2.0)
+CASES = {"one frame": (1, True), "four frames averaged": (4, True), "one frame, baseline tared": (1, False)}
+
+
+def rod_presses(data, split: str) -> tuple[np.ndarray, dict[str, tuple[str, dict]]]:
+    """Indices of the rod presses of ``split`` and each rod label's (kind, kwargs) from the dataset's config."""
+    objects = data.provenance["config"]["objects"]
+    specs = {(o.get("label") or o["name"]): (o["name"], o.get("kwargs", {})) for o in objects}
+    names = data.object_names
+    idx = [i for i in data.indices(split) if specs.get(names[data.object_index[i]], ("",))[0] in RODS]
+    return np.array(idx, dtype=int), specs
+
+
+def _jobs(data, idx: np.ndarray, specs: dict) -> list[dict[str, Any]]:
+    names = data.provenance.get("sensor_param_names")
+    drawn = data.extra("sensor_params") if data.has("sensor_params") else None
+    saturated = data.extra("saturated") if data.has("saturated") else np.zeros((len(data.readings), 4, 4, 3), bool)
+    seed = int(data.provenance["config"].get("sensor_seed", 0))
+    jobs = []
+    for i in idx:
+        label = str(data.object_names[data.object_index[i]])
+        kind, kwargs = specs[label]
+        jobs.append({"index": int(i), "label": label, "kind": kind, "kwargs": kwargs, "sensor_seed": seed,
+                     "params": None if drawn is None else dict(zip(names, map(float, drawn[i]))),
+                     "pose": [float(v) for v in data.extra("pose")[i]], "force_n": float(data.extra("force_n")[i]),
+                     "saturated": saturated[i].tolist()})
+    return jobs
+
+
+def _information(job: dict[str, Any]) -> dict[str, Any]:
+    """The derivatives of one press's noise-free reading, and its noise: what the Fisher matrix needs."""
+    from tactile_manip.sim.objects import IndenterPose
+    from tactile_manip.sim.pair import SensorPair
+    from tactile_manip.sim.params import SimParams, with_values
+    from tactile_manip.sim.shapes import make_indenter
+
+    params = SimParams() if job["params"] is None else with_values(SimParams(), job["params"])
+    pair = SensorPair(params, seed=job["sensor_seed"])
+    rod = make_indenter(job["kind"], **job["kwargs"])
+    x, y, yaw, tx, ty = job["pose"]
+    force = job["force_n"]
+    rng = np.random.default_rng(0)  # the noise draw is not used: only the noise-free field change
+
+    def reading(dx=0.0, dy=0.0, dyaw=0.0, scale=1.0) -> np.ndarray:
+        s = pair.press(rod, IndenterPose(x + dx, y + dy, yaw + dyaw, tx, ty), force * scale, rng, render_depth=False)
+        return pair.chips.expected_ut(pair.baseline_field_ut + s.field_change_ut).ravel()
+
+    h = STEPS
+    columns = [(reading(dyaw=h["angle_rad"]) - reading(dyaw=-h["angle_rad"])) / (2 * h["angle_rad"]),
+               (reading(dx=h["x_mm"]) - reading(dx=-h["x_mm"])) / (2 * h["x_mm"]),
+               (reading(dy=h["y_mm"]) - reading(dy=-h["y_mm"])) / (2 * h["y_mm"]),
+               (reading(scale=1 + h["force_rel"]) - reading(scale=1 - h["force_rel"])) / (2 * h["force_rel"] * force)]
+    c = params.chip
+    noise = np.tile([c.noise_xy_ut, c.noise_xy_ut, c.noise_z_ut], 16) ** 2
+    lsb = np.tile([c.lsb_xy_ut, c.lsb_xy_ut, c.lsb_z_ut], 16) ** 2 / 12.0
+    return {"index": job["index"], "label": job["label"], "force_n": force, "jacobian": np.stack(columns, 1).tolist(),
+            "white_var": (noise + lsb).tolist(), "drift_var": c.drift_ut ** 2, "noise_xy_ut": c.noise_xy_ut,
+            "saturated": np.asarray(job["saturated"], bool).ravel().tolist()}
+
+
+def bounds_deg(info: dict[str, Any], frames: int, drift: bool) -> tuple[float, float]:
+    """The oracle and nuisance bounds (deg) on the angle's standard deviation for one press."""
+    jac = np.asarray(info["jacobian"])
+    var = np.asarray(info["white_var"]) / frames + (info["drift_var"] if drift else 0.0)
+    jac = np.where(np.asarray(info["saturated"])[:, None], 0.0, jac)
+    fisher = jac.T @ (jac / var[:, None])
+    oracle = 1.0 / math.sqrt(fisher[0, 0]) if fisher[0, 0] > 0 else math.inf
+    try:
+        nuisance = math.sqrt(max(np.linalg.inv(fisher)[0, 0], 0.0))
+    except np.linalg.LinAlgError:
+        nuisance = math.inf
+    return math.degrees(oracle), math.degrees(nuisance)
+
+
+def within(sigma_deg: np.ndarray, tol_deg: float) -> float:
+    """The mean over presses of P(|N(0, sigma^2)| < tol): an efficient estimator's share within ``tol``."""
+    return float(np.mean([math.erf(tol_deg / (math.sqrt(2) * s)) if s > 0 else 1.0 for s in sigma_deg]))
+
+
+def summarise(infos: list[dict[str, Any]]) -> dict[str, Any]:
+    force = np.array([i["force_n"] for i in infos])
+    noise = np.array([i["noise_xy_ut"] for i in infos])
+    terciles = np.quantile(noise, [1 / 3, 2 / 3]) if len(set(noise)) > 1 else None
+    groups = {"all": np.ones(len(infos), bool)}
+    groups |= {f"{lo:g}-{hi:g} N": (force >= lo) & (force < hi) for lo, hi in FORCE_BANDS_N}
+    if terciles is not None:
+        groups |= {"chip noise low third": noise <= terciles[0],
+                   "chip noise mid third": (noise > terciles[0]) & (noise <= terciles[1]),
+                   "chip noise high third": noise > terciles[1]}
+    out: dict[str, Any] = {}
+    for case, (frames, drift) in CASES.items():
+        sig = np.array([bounds_deg(i, frames, drift) for i in infos])
+        out[case] = {}
+        for name, sel in groups.items():
+            if not sel.any():
+                continue
+            row = {"presses": int(sel.sum())}
+            for k, label in enumerate(("oracle", "nuisance")):
+                row[f"{label}_median_sigma_deg"] = float(np.median(sig[sel, k]))
+                for tol in TOLERANCES_DEG:
+                    row[f"{label}_within_{tol:g}"] = within(sig[sel, k], tol)
+            out[case][name] = row
+    return out
+
+
+def markdown(report: dict[str, Any]) -> str:
+    lines = [f"Angle information on {report['source']}: {report['presses']} unseen-rod presses, rebuilt in "
+             f"{report['seconds']:.0f} s; Cramer-Rao bounds on the angle's standard deviation from one reading.", ""]
+    for case, groups in report["bounds"].items():
+        lines += [f"**{case}**", "",
+                  "| presses | n | oracle median sigma deg | within 5 / 2 deg (oracle) | nuisance median sigma deg "
+                  "| within 5 / 2 deg (offsets, force unknown) |", "|---|---|---|---|---|---|"]
+        for name, r in groups.items():
+            lines.append(f"| {name} | {r['presses']} | {r['oracle_median_sigma_deg']:.2f} | "
+                         f"{r['oracle_within_5']:.1%} / {r['oracle_within_2']:.1%} | "
+                         f"{r['nuisance_median_sigma_deg']:.2f} | "
+                         f"{r['nuisance_within_5']:.1%} / {r['nuisance_within_2']:.1%} |")
+        lines.append("")
+    lines.append("Within shares are upper bounds for efficient unbiased estimators (erf of the tolerance over the "
+                 "bound); a real single-frame method does worse where the signal is weak.")
+    return "\n".join(lines)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--data", default="data/robust.npz")
+    parser.add_argument("--split", default="test")
+    parser.add_argument("--limit", type=int, default=0, help="the first N rod presses only (0: all)")
+    parser.add_argument("--workers", type=int, default=0, help="processes (0: all cores)")
+    parser.add_argument("--out", default="benchmarks/results/angle_information.json")
+    args = parser.parse_args()
+    data = load_dataset(args.data)
+    idx, specs = rod_presses(data, args.split)
+    if args.limit:
+        idx = idx[:args.limit]
+    jobs = _jobs(data, idx, specs)
+    start = time.perf_counter()
+    workers = args.workers or os.cpu_count() or 1
+    if workers == 1:
+        infos = [_information(j) for j in jobs]
+    else:
+        with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn")) as pool:
+            infos = list(pool.map(_information, jobs, chunksize=8))
+    report = {"machine": machine_info(), "source": f"{args.data} {args.split} split", "presses": len(infos),
+              "seconds": time.perf_counter() - start, "steps": STEPS, "bounds": summarise(infos),
+              "per_press": [{k: v for k, v in i.items() if k not in ("jacobian", "white_var", "saturated")}
+                            | dict(zip(("oracle_sigma_deg", "nuisance_sigma_deg"), bounds_deg(i, 1, True)))
+                            for i in infos]}
+    publish(report, args.out, markdown)
+
+
+if __name__ == "__main__":
+    main()
