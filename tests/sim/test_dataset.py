@@ -288,8 +288,9 @@ def test_a_recorded_sensor_is_rebuilt_from_its_values_and_the_press_repeats():
         # the reading without noise, drift and quantisation, against the recorded one: within a few sigma
         expected = pair.chips.expected_ut(pair.baseline_field_ut + again.field_change_ut) - pair.baseline_ut
         sigma = math.hypot(max(params.chip.noise_xy_ut, params.chip.noise_z_ut), params.chip.drift_ut)
-        assert np.abs(expected - d.readings[i]).max() < 5 * sigma + 0.5
-        assert np.abs(again.field_change_ut).max() > 20 * sigma  # a press, not noise: the check has teeth
+        tolerance = 5 * sigma + 0.5
+        assert np.abs(expected - d.readings[i]).max() < tolerance
+        assert np.abs(again.field_change_ut).max() > 2 * tolerance  # a press well above the noise: it has teeth
     with pytest.raises(KeyError, match="'chip.nois_xy_ut'"):
         with_values(SimParams(), {"chip.nois_xy_ut": 2.0})
 
