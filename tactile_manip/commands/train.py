@@ -18,6 +18,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     again.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.pt")
     again.add_argument("--force", action="store_true",
                        help="start over in an OUT that holds a run, replacing its best.pt and checkpoint.pt")
+    p.add_argument("--init", default=None, metavar="CHECKPOINT",
+                   help="fine-tune: start from this checkpoint's weights and input normalisation (e.g. the best.pt "
+                        "of a run; configs/train/finetune_robust.toml), with a fresh optimiser and the config's "
+                        "schedule")
     p.add_argument("--epochs", type=int, default=None, help="override the config's epochs")
     p.add_argument("--seed", type=int, default=None, help="override the config's seed")
     p.add_argument("--threads", type=int, default=None, help="torch CPU threads per process")
@@ -34,10 +38,14 @@ def run(args: argparse.Namespace) -> int:
 
     from tactile_manip.learning.train import load_train_config, resolve_device, train, with_overrides
     from tactile_manip.data import check_dataset_file
+    from tactile_manip.errors import ConfigError
 
     _check_run_folder(args)
     for path in args.data:
         check_dataset_file(path)  # before the progress bar: a missing file is one line
+    if args.init and args.resume:
+        raise ConfigError("--init starts a new run from a checkpoint's weights; --resume continues this run's own "
+                          "checkpoint: give one of them")
     cfg = with_overrides(load_train_config(args.config), epochs=args.epochs, seed=args.seed, threads=args.threads,
                          device=args.device, max_minutes=args.max_minutes)
     resolve_device(cfg.device)  # a missing GPU is one line before any progress bar or output folder
@@ -51,7 +59,8 @@ def run(args: argparse.Namespace) -> int:
         bars[0].set_postfix(loss=f"{row['loss']:.0f}", val_psnr=f"{row['val_psnr']:.2f}")
 
     try:
-        summary = train(cfg, args.data, args.out, resume=args.resume, progress=progress, on_start=start)
+        summary = train(cfg, args.data, args.out, resume=args.resume, init=args.init, progress=progress,
+                        on_start=start)
     finally:
         for bar in bars:
             bar.close()

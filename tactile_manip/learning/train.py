@@ -175,12 +175,17 @@ def resolve_device(name: str, dist: _Dist | None = None) -> torch.device:
 
 
 def train(cfg: TrainConfig, data_path: str | Path | list[str | Path], out_dir: str | Path, *, resume: bool = False,
-          progress: Callable[[dict[str, float]], None] | None = None,
+          init: str | Path | None = None, progress: Callable[[dict[str, float]], None] | None = None,
           on_start: Callable[[int], None] | None = None) -> dict[str, Any]:
     """Train a model and return the run summary (also written to ``out_dir/history.json``).
 
     ``data_path`` is one dataset file or several, trained on as one (:func:`~tactile_manip.data.concatenate`:
     each keeps its splits).
+
+    ``init`` (a checkpoint, e.g. the ``best.pt`` beside a shipped model) fine-tunes: the model starts from its
+    weights and keeps its input normalisation (the inputs mean what they meant to those weights), with a
+    fresh optimiser and ``cfg``'s schedule (a fine-tuning config has a lower ``lr`` and few epochs). The
+    architecture ``cfg`` and the data give must be the checkpoint's. Not with ``resume``.
 
     ``progress(row)`` is called after each epoch; ``on_start(epochs_done)`` once everything is loaded and checked
     (data, model, a resumed checkpoint), just before the first epoch.
@@ -188,14 +193,14 @@ def train(cfg: TrainConfig, data_path: str | Path | list[str | Path], out_dir: s
     dist = _init_distributed()
     try:
         paths = [Path(p) for p in (data_path if isinstance(data_path, (list, tuple)) else [data_path])]
-        return _train(cfg, paths, Path(out_dir), resume, progress, dist, on_start)
+        return _train(cfg, paths, Path(out_dir), resume, progress, dist, on_start, init)
     finally:
         if dist.world > 1:
             torch.distributed.destroy_process_group()
 
 
 def _train(cfg: TrainConfig, data_paths: list[Path], out: Path, resume: bool, progress, dist: _Dist,
-           on_start=None) -> dict[str, Any]:
+           on_start=None, init: str | Path | None = None) -> dict[str, Any]:
     if cfg.threads:
         torch.set_num_threads(cfg.threads)
     torch.manual_seed(cfg.seed)
@@ -215,9 +220,15 @@ def _train(cfg: TrainConfig, data_paths: list[Path], out: Path, resume: bool, pr
     train_set = TensorPairs(data, train_index).to(device)
     val_set = TensorPairs(data, select(data, "val", tuple(cfg.objects), drop_bottomed_out=cfg.drop_bottomed_out)
                           ).to(device)
-    model = SuperMagCVAE(mcfg).to(device)
-    opt = torch.optim.AdamW(model.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
+    model = SuperMagCVAE(mcfg)
     state = {"epoch": 0, "history": [], "best_psnr": -math.inf, "best_epoch": 0, "seconds": 0.0}
+    if init is not None:
+        if resume:
+            raise TrainingError("--init starts a new run from a checkpoint's weights; --resume continues this "
+                                "run's own checkpoint: give one of them")
+        spec, state["init"] = _init_from(Path(init), model, mcfg, cfg)
+    model = model.to(device)
+    opt = torch.optim.AdamW(model.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
     out.mkdir(parents=True, exist_ok=True)
     if resume:
         state = _load_checkpoint(out / "checkpoint.pt", model, opt, mcfg, data, cfg)
@@ -374,6 +385,23 @@ def _load_checkpoint(path: Path, model, opt, mcfg: CVAEConfig, data: PairedDatas
     return payload["state"]
 
 
+def _init_from(path: Path, model, mcfg: CVAEConfig, cfg: TrainConfig) -> tuple[InputSpec, dict[str, Any]]:
+    """Load ``path``'s weights into ``model`` for fine-tuning; its input normalisation, and what to record."""
+    payload = read_checkpoint(path)
+    differences = config_differences(payload["model_config"], to_dict(mcfg))
+    if differences:
+        raise TrainingError(f"--init: {path} has another architecture or dataset shape than this config and data "
+                            f"({'; '.join(differences)}); fine-tune with the config the checkpoint was trained "
+                            "with (its train_config) on data of the same reading and image shapes")
+    spec = InputSpec(**payload["input"])
+    if spec.axes != cfg.axes:
+        raise TrainingError(f"--init: {path} reads the axes {spec.axes!r}, the config {cfg.axes!r}")
+    model.load_state_dict(payload["model"])
+    state = payload.get("state", {})
+    return spec, {"checkpoint": str(path), "data_fingerprint": payload.get("data_fingerprint"),
+                  "epochs": state.get("epoch"), "best_val_psnr": state.get("best_psnr")}
+
+
 def _write_history(out: Path, cfg: TrainConfig, mcfg: CVAEConfig, model, data: PairedDataset, state: dict,
                    dist: _Dist) -> None:
     summary = {"train_config": to_dict(cfg), "model_config": to_dict(mcfg),
@@ -382,7 +410,7 @@ def _write_history(out: Path, cfg: TrainConfig, mcfg: CVAEConfig, model, data: P
                "data_fingerprint": data.fingerprint(), "world_size": dist.world,
                "threads": torch.get_num_threads(), "device": state.get("device", "cpu"),
                "best_val_psnr": state["best_psnr"],
-               "best_epoch": state["best_epoch"], "epochs_run": state["epoch"],
+               "best_epoch": state["best_epoch"], "epochs_run": state["epoch"], "init": state.get("init"),
                "train_seconds": round(state["seconds"], 1), "history": state["history"]}
     (out / "history.json").write_text(json.dumps(summary, indent=1))
     _plot_losses(out / "loss.png", state["history"])

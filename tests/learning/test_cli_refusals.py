@@ -50,6 +50,22 @@ def test_resume_with_another_architecture_names_the_differing_fields(run, tiny_d
     assert "another architecture" in err and "latent" in err and "->" in err
 
 
+def test_init_from_a_missing_or_foreign_checkpoint_is_one_line_and_fine_tuning_runs(run, tiny_data, capsys):
+    args = ["train", "--config", str(run / "tiny.toml"), "--data", str(tiny_data)]
+    capsys.readouterr()
+    assert main([*args, "--out", str(run / "ft0"), "--init", str(run / "nothing.pt")]) == 2
+    assert "checkpoint not found" in _one_line(capsys, "train")
+    assert main([*args, "--out", str(run / "run"), "--init", str(run / "run" / "best.pt"), "--resume"]) == 2
+    assert "give one of them" in _one_line(capsys, "train")
+    other = run / "other_init.toml"
+    other.write_text(TINY.replace('"small"', '"compact"'))
+    assert main(["train", "--config", str(other), "--data", str(tiny_data), "--out", str(run / "ft1"),
+                 "--init", str(run / "run" / "best.pt")]) == 2
+    assert "another architecture" in _one_line(capsys, "train")
+    assert main([*args, "--out", str(run / "ft2"), "--init", str(run / "run" / "best.pt")]) == 0
+    assert (run / "ft2" / "best.pt").is_file()
+
+
 def test_export_refuses_to_replace_a_model_without_force(run, capsys):
     model = run / "m.onnx"
     before = model.read_bytes()

@@ -41,6 +41,29 @@ def test_resume_continues_where_it_stopped(tiny_data, tmp_path):
         train(TrainConfig(**TINY), tiny_data, tmp_path / "empty", resume=True)
 
 
+def test_init_fine_tunes_from_a_checkpoints_weights_and_normalisation(tiny_data, other_grid_data, tmp_path):
+    train(TrainConfig(**{**TINY, "epochs": 3}), tiny_data, tmp_path / "base")
+    base_model, base_spec, base = load_checkpoint(tmp_path / "base" / "best.pt")
+    tuned = train(TrainConfig(**{**TINY, "epochs": 1, "lr": 1e-9, "lr_schedule": "constant"}), tiny_data,
+                  tmp_path / "tuned", init=tmp_path / "base" / "best.pt")
+    assert tuned["init"]["checkpoint"] == str(tmp_path / "base" / "best.pt") and tuned["init"]["epochs"] >= 1
+    model, spec, _ = load_checkpoint(tmp_path / "tuned" / "best.pt")
+    assert spec == base_spec  # the inputs keep the meaning the weights learned
+    # at a vanishing learning rate one epoch leaves the weights where the checkpoint had them (BatchNorm running
+    # statistics move with the data; the learned parameters are what --init carries)
+    for (name, p), q in zip(model.named_parameters(), base_model.parameters()):
+        torch.testing.assert_close(p, q, rtol=0, atol=1e-6, msg=name)
+    # a fresh run starts elsewhere: the check above has teeth
+    fresh, _, _ = load_checkpoint(train(TrainConfig(**{**TINY, "epochs": 1, "lr": 1e-9, "seed": 7}), tiny_data,
+                                        tmp_path / "fresh") and tmp_path / "fresh" / "best.pt")
+    assert any(not torch.allclose(p, q) for p, q in zip(fresh.parameters(), base_model.parameters()))
+    with pytest.raises(TrainingError, match="another architecture or dataset shape"):
+        train(TrainConfig(**{**TINY, "epochs": 1}), other_grid_data, tmp_path / "other",
+              init=tmp_path / "base" / "best.pt")
+    with pytest.raises(TrainingError, match="give one of them"):
+        train(TrainConfig(**TINY), tiny_data, tmp_path / "tuned", init=tmp_path / "base" / "best.pt", resume=True)
+
+
 def test_early_stopping(tiny_data, tmp_path):
     summary = train(TrainConfig(**{**TINY, "epochs": 30, "patience": 1, "lr": 1e-9}), tiny_data, tmp_path)
     assert summary["epochs_run"] < 30
