@@ -8,9 +8,10 @@ Each unseen-rod press of the dataset's test split is rebuilt from what the datas
 from the ``sensor_params`` extra, or the nominal sensor; its pose; its force; the rod), and the noise-free
 reading (the chips' expected values, misalignment included) is differentiated by central differences with
 respect to the rod's in-plane angle and the nuisances a real estimator does not know: the rod's x and y
-offsets, the force and the two tilts, and the drawn sensor's magnet remanence, chip gap and skin modulus. The chips' Gaussian noise (the drawn sigma_xy and sigma_z, plus the quantisation step's
-variance, plus the per-press drift as more noise unless the baseline is tared just before the press) makes a
-reading Gaussian about that value, so the Fisher information J of its 48 channels bounds the standard
+offsets, the force and the two tilts, and the drawn sensor's magnet remanence, chip gap and skin modulus. The
+chips' Gaussian noise (the drawn sigma_xy and sigma_z, plus the quantisation step's variance, plus the
+per-press drift as more noise unless the baseline is tared just before the press) makes a reading Gaussian
+about that value, so the Fisher information J of its 48 channels bounds the standard
 deviation of any unbiased angle estimate:
 
 - ``oracle``: everything but the angle known: sigma >= 1 / sqrt(J_aa), the most optimistic bound;
@@ -179,7 +180,8 @@ def markdown(report: dict[str, Any]) -> str:
              f"{report['step_check_p95']:.1%} (p95).", ""]
     for case, groups in report["bounds"].items():
         lines += [f"**{case}**", "", "| presses | n | oracle sigma deg | oracle within 5 / 2 deg | pose unknown sigma "
-                  "| within 5 / 2 deg | + sensor unknown sigma | within 5 / 2 deg |", "|---|---|---|---|---|---|---|---|"]
+                  "| within 5 / 2 deg | + sensor unknown sigma | within 5 / 2 deg |",
+                  "|---|---|---|---|---|---|---|---|"]
         for name, r in groups.items():
             cells = [f"{r[f'{b}_median_sigma_deg']:.2f} | {r[f'{b}_within_5']:.1%} / {r[f'{b}_within_2']:.1%}"
                      for b in BOUNDS]

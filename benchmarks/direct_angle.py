@@ -106,8 +106,9 @@ def predict(net, readings: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def shares(errors: np.ndarray, force: np.ndarray | None) -> dict[str, Any]:
-    row = {"presses": int(errors.size), "within_5": float(np.mean(errors <= 5)), "within_2": float(np.mean(errors <= 2)),
-           "median_deg": float(np.median(errors)), "p95_deg": float(np.percentile(errors, 95))}
+    row = {"presses": int(errors.size), "within_5": float(np.mean(errors <= 5)),
+           "within_2": float(np.mean(errors <= 2)), "median_deg": float(np.median(errors)),
+           "p95_deg": float(np.percentile(errors, 95))}
     if force is not None:
         row["by_force"] = {f"{lo:g}-{hi:g} N": float(np.mean(errors[(force >= lo) & (force < hi)] <= 5))
                            for lo, hi in FORCE_BANDS_N}

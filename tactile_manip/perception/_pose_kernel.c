@@ -271,8 +271,9 @@ int tm_contact_moments(const float *d, int h, int w, float threshold, double min
     int *need_lo = spans + 2 * h, *need_hi = spans + 3 * h;
     for (int o = 0; o < oh; ++o) {
         int lo = w, hi = 0;
-        const int a = o0 + o - radius > r0 ? o0 + o - radius : r0, b = o0 + o + radius < r1 - 1 ? o0 + o + radius : r1 - 1;
-        for (int r = a; r <= b; ++r) {
+        const int first = o0 + o - radius > r0 ? o0 + o - radius : r0;
+        const int last = o0 + o + radius < r1 - 1 ? o0 + o + radius : r1 - 1;
+        for (int r = first; r <= last; ++r) {
             if (kept_lo[r] < lo) lo = kept_lo[r];
             if (kept_hi[r] > hi) hi = kept_hi[r];
         }
