@@ -2,9 +2,10 @@
 
 ``angle_from_image`` (on its C kernel and on its numpy path) must give what ``reference_angle_from_image`` (the
 pipeline as first written, kept in tactile_manip/perception/pose_reference.py) gives: the same defined flag and
-reason, and angle, confidence, centroid and area within float32 rounding. Images: simulated VBTS presses of the rods and the SuperMag
-objects, synthetic bars and blobs with speckle, hard cases (empty, isotropic, tiny, +-90 deg, NaN, huge
-values, a positive background, contact at the border), in float32 and float64, and other PoseParams.
+reason, and angle, confidence, centroid and area within float32 rounding. Images: simulated VBTS presses of
+the rods and the SuperMag objects, synthetic bars and blobs with speckle, hard cases (empty, isotropic, tiny,
++-90 deg, NaN, huge values, a positive background, contact at the border), in float32 and float64, and other
+PoseParams.
 """
 
 from __future__ import annotations
