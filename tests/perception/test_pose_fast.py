@@ -160,6 +160,7 @@ def test_hard_images_match_the_reference(case, dtype) -> None:
 
 
 @pytest.mark.parametrize("params", [PoseParams(sigma_mm=0.0), PoseParams(sigma_mm=0.05), PoseParams(sigma_mm=0.8),
+                                    PoseParams(sigma_mm=3.0),  # a filter wider than half the image
                                     PoseParams(threshold_mm=0.0), PoseParams(threshold_mm=0.5),
                                     PoseParams(outlier_fraction=0.0), PoseParams(outlier_fraction=1.0),
                                     PoseParams(background="none"), PoseParams(min_contact_px=5000),
