@@ -77,16 +77,16 @@ def describe() -> str:
 
 
 def _address(a: np.ndarray) -> int:
-    """The address of an array's data (an attribute lookup cached for the read-only arrays pose.py caches:
-    ``ndarray.ctypes`` costs about 1.5 us a call, a tenth of a small contact's kernel time)."""
+    """The address of a filter's taps or an aperture: read-only arrays pose.py builds once and caches, whose
+    address is looked up once here too (``ndarray.ctypes`` costs about 1.5 us a call, a tenth of a small
+    contact's kernel time). Any other array is looked up each time."""
     if a.flags.writeable:
         return a.ctypes.data
-    key = id(a)
-    hit = _ADDRESSES.get(key)
-    if hit is None or hit[0] is not a:
+    hit = _ADDRESSES.get(id(a))
+    if hit is None or hit[0] is not a:  # (the cache holds the array, so its id cannot be reused meanwhile)
         if len(_ADDRESSES) > 64:
             _ADDRESSES.clear()
-        hit = _ADDRESSES[key] = (a, a.ctypes.data)
+        hit = _ADDRESSES[id(a)] = (a, a.ctypes.data)
     return hit[1]
 
 
@@ -128,7 +128,7 @@ def contact_moments(depth_mm: np.ndarray, *, threshold_mm: float, outlier_fracti
         if disc.shape != d.shape:
             raise ValueError(f"aperture of shape {disc.shape} for an image of shape {d.shape}")
     out = (ctypes.c_double * _OUT_SIZE)()
-    status = _LIB.tm_contact_moments(_address(d), h, w, threshold_mm, outlier_fraction, _address(taps), taps.size,
+    status = _LIB.tm_contact_moments(d.ctypes.data, h, w, threshold_mm, outlier_fraction, _address(taps), taps.size,
                                      None if disc is None else _address(disc), min_px, pixel_mm, out)
     if status == NO_MEMORY:
         raise MemoryError(f"the pose kernel could not allocate its buffers for a {h}x{w} image")
