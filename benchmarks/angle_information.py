@@ -3,6 +3,8 @@
     python -m benchmarks.angle_information                         # data/robust.npz: 600 unseen rods, 2-15 N
     python -m benchmarks.angle_information --data data/supermag.npz   # the paper's protocol, for comparison
     python -m benchmarks.angle_information --limit 60 --workers 1     # a quick look
+    python -m benchmarks.angle_information --report docs/results/robust/information/angle_information.json \
+        --compare docs/results/robust/robust_b48/single_frame.json --plot bound.png   # the bound beside models
 
 Each unseen-rod press of the dataset's test split is rebuilt from what the dataset recorded (its drawn sensor
 from the ``sensor_params`` extra, or the nominal sensor; its pose; its force; the rod), and the noise-free
@@ -30,11 +32,13 @@ benchmarks/results/angle_information.json; asserts nothing.
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import multiprocessing
 import os
 import time
 from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -192,6 +196,39 @@ def markdown(report: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
+def plot(report: dict[str, Any], compare: list[str], path: str) -> None:
+    """Share within 5 deg per force band: the bounds (one frame; after a tare), beside the methods of each
+    ``tactile-manip evaluate`` results.json in ``compare`` (their per-force rod angles)."""
+    from tactile_manip.plots import _pyplot
+
+    bands = [f"{lo:g}-{hi:g} N" for lo, hi in FORCE_BANDS_N]
+    series = {"bound, one frame (pose and sensor unknown)":
+              [report["bounds"]["one frame"][b]["pose_sensor_within_5"] for b in bands],
+              "bound, one frame after a tare": [report["bounds"]["one frame, baseline tared"][b]["pose_sensor_within_5"]
+                                                for b in bands]}
+    for file in compare:
+        for res in json.loads(Path(file).read_text())["results"]:
+            force = res.get("per_group", {}).get("force", {})
+            if all(b in force for b in bands):
+                series[res["method"]] = [force[b]["angle_within_5_deg"] for b in bands]
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(9, 4.8), constrained_layout=True)
+    width = 0.8 / len(series)
+    for k, (name, values) in enumerate(series.items()):
+        hatch = "//" if name.startswith("bound") else None
+        ax.bar(np.arange(len(bands)) + (k - (len(series) - 1) / 2) * width, [100 * v for v in values], width,
+               label=name, hatch=hatch, edgecolor="black" if hatch else None, alpha=0.6 if hatch else 1.0)
+    ax.axhline(95, color="grey", linestyle="--", linewidth=1)
+    ax.set_xticks(np.arange(len(bands)), bands)
+    ax.set_ylabel("unseen rods within 5 deg [%]")
+    ax.set_ylim(0, 102)
+    ax.set_title(f"One reading: the Cramer-Rao bound against the methods ({report['source']})", fontsize=10)
+    ax.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.1), ncols=3)
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    print(f"wrote {path}")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--data", default="data/robust.npz")
@@ -199,7 +236,22 @@ def main() -> None:
     parser.add_argument("--limit", type=int, default=0, help="the first N rod presses only (0: all)")
     parser.add_argument("--workers", type=int, default=0, help="processes (0: all cores)")
     parser.add_argument("--out", default="benchmarks/results/angle_information.json")
+    parser.add_argument("--report", default=None,
+                        help="an earlier run's JSON: plot it (with --plot) instead of computing again")
+    parser.add_argument("--compare", action="append", default=[], metavar="RESULTS.json",
+                        help="a `tactile-manip evaluate` results.json on the same data: its methods in the plot")
+    parser.add_argument("--plot", default=None, help="PNG of the share within 5 deg per force band")
     args = parser.parse_args()
+    if args.report:
+        report = json.loads(Path(args.report).read_text())
+    else:
+        report = compute(args)
+        publish(report, args.out, markdown)
+    if args.plot:
+        plot(report, args.compare, args.plot)
+
+
+def compute(args: argparse.Namespace) -> dict[str, Any]:
     data = load_dataset(args.data)
     idx, specs = rod_presses(data, args.split)
     if args.limit:
@@ -213,13 +265,12 @@ def main() -> None:
         with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn")) as pool:
             infos = list(pool.map(_information, jobs, chunksize=8))
     checks = [i["step_check"] for i in infos]
-    report = {"machine": machine_info(), "source": f"{args.data} {args.split} split", "presses": len(infos),
-              "seconds": time.perf_counter() - start, "steps": STEPS, "nuisances": POSE_NUISANCES + SENSOR_NUISANCES,
-              "step_check_median": float(np.median(checks)), "step_check_p95": float(np.percentile(checks, 95)),
-              "bounds": summarise(infos),
-              "per_press": [{k: v for k, v in i.items() if k not in ("jacobian", "white_var", "saturated")}
-                            | dict(zip([f"{b}_sigma_deg" for b in BOUNDS], bounds_deg(i, 1, True))) for i in infos]}
-    publish(report, args.out, markdown)
+    return {"machine": machine_info(), "source": f"{args.data} {args.split} split", "presses": len(infos),
+            "seconds": time.perf_counter() - start, "steps": STEPS, "nuisances": POSE_NUISANCES + SENSOR_NUISANCES,
+            "step_check_median": float(np.median(checks)), "step_check_p95": float(np.percentile(checks, 95)),
+            "bounds": summarise(infos),
+            "per_press": [{k: v for k, v in i.items() if k not in ("jacobian", "white_var", "saturated")}
+                          | dict(zip([f"{b}_sigma_deg" for b in BOUNDS], bounds_deg(i, 1, True))) for i in infos]}
 
 
 if __name__ == "__main__":
