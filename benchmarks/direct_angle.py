@@ -16,7 +16,8 @@ reconstruction), each sample weighted by that PCA's confidence (round contacts t
 sensor's dihedral symmetries drawn at random (a quarter turn adds 90 deg, a mirror negates the angle).
 Tested on the unseen rods against their true yaw: the 600 of data/robust.npz (2-15 N, drawn sensors) per
 force band, and the 240 of data/supermag.npz (10-11 N, nominal sensor), beside the image route with
-``--model`` on the same presses. Prints markdown, writes benchmarks/results/direct_angle.json.
+``--model`` on the same presses and the paper's PCA on the true (VBTS) depth image: what the image route
+would reach with a perfect reconstruction. Prints markdown, writes benchmarks/results/direct_angle.json.
 """
 
 from __future__ import annotations
@@ -116,12 +117,17 @@ def shares(errors: np.ndarray, force: np.ndarray | None) -> dict[str, Any]:
 
 
 def evaluate(net, estimator, data, force_bands: bool) -> dict[str, Any]:
+    """The direct regressor, the image route and the PCA of the true image on the test split's rods."""
     idx, _, image_err = rod_estimates(data, data.indices("test"), estimator)
     angle, _ = predict(net, data.readings[idx])
     yaw = data.extra("pose")[idx, 2]
     direct_err = np.degrees(np.abs(wrap_axial(angle - yaw)))
+    truth = [angle_from_image(img, pixel_mm=data.image.pixel_mm) for img in data.depth_mm(idx)]
+    truth_err = np.array([math.degrees(abs(wrap_axial(t.angle_rad - y))) if t.defined else 90.0
+                          for t, y in zip(truth, yaw)])
     force = data.extra("force_n")[idx] if force_bands else None
-    return {"direct": shares(direct_err, force), "image": shares(image_err, force)}
+    return {"direct": shares(direct_err, force), "image": shares(image_err, force),
+            "PCA of the true image": shares(truth_err, force)}
 
 
 def markdown(report: dict[str, Any]) -> str:
