@@ -32,6 +32,14 @@
 #ifndef TM_CLONES
 #define TM_CLONES
 #endif
+#if defined(_MSC_VER)
+#define TM_EXPORT __declspec(dllexport)  /* ctypes finds only exported symbols in a DLL */
+#ifndef restrict
+#define restrict __restrict
+#endif
+#else
+#define TM_EXPORT
+#endif
 
 enum { TM_OK = 0, TM_EMPTY = 1, TM_TOO_SMALL = 2, TM_NO_MEMORY = -1, TM_BAD_ARGUMENT = -2 };
 
@@ -190,8 +198,9 @@ static void reduce_columns(const double *count, const double *s0, const double *
  * of all weights, the central second moments (sxx, syy, sxy) of the windowed or all weights, mm.
  * Returns TM_OK, TM_EMPTY (no pixel above the threshold), TM_TOO_SMALL (fewer than min_px weights: only the
  * counts are set), TM_NO_MEMORY or TM_BAD_ARGUMENT. */
-int tm_contact_moments(const float *d, int h, int w, float threshold, double min_fraction, const float *kernel,
-                       int taps, const float *disc, int min_px, double pixel_mm, double *out) {
+TM_EXPORT int tm_contact_moments(const float *d, int h, int w, float threshold, double min_fraction,
+                                 const float *kernel, int taps, const float *disc, int min_px, double pixel_mm,
+                                 double *out) {
     if (h <= 0 || w <= 0 || taps < 1 || taps % 2 == 0 || !(pixel_mm > 0.0)) return TM_BAD_ARGUMENT;
     for (int i = 0; i < O_SIZE; ++i) out[i] = 0.0;
     const int radius = taps / 2;
@@ -334,4 +343,4 @@ int tm_contact_moments(const float *d, int h, int w, float threshold, double min
 }
 
 /* setuptools builds this file as an extension module; it is loaded with ctypes, never imported. */
-void *PyInit__pose_kernel(void) { return 0; }
+TM_EXPORT void *PyInit__pose_kernel(void) { return 0; }
