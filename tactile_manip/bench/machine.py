@@ -90,5 +90,6 @@ def machine_info() -> dict[str, Any]:
 
     return {"cpu_model": cpu_model(), "cpu_count": os.cpu_count(), "usable_cores": usable_cores(),
             "load_average": load_average(), "python": sys.version.split()[0], "numpy": np.__version__,
-            "scipy": scipy.__version__, "pose_stage": pose_kernel.describe(), "platform": platform.platform(), "code_version": code_version(),
+            "scipy": scipy.__version__, "pose_stage": pose_kernel.describe(), "platform": platform.platform(),
+            "code_version": code_version(),
             "time_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}

@@ -226,7 +226,7 @@ def _train(cfg: TrainConfig, data_paths: list[Path], out: Path, resume: bool, pr
         if resume:
             raise TrainingError("--init starts a new run from a checkpoint's weights; --resume continues this "
                                 "run's own checkpoint: give one of them")
-        spec, state["init"] = _init_from(Path(init), model, mcfg, cfg)
+        spec, state["init"] = _init_from(Path(init), model, mcfg, cfg, data)
     model = model.to(device)
     opt = torch.optim.AdamW(model.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
     out.mkdir(parents=True, exist_ok=True)
@@ -385,7 +385,8 @@ def _load_checkpoint(path: Path, model, opt, mcfg: CVAEConfig, data: PairedDatas
     return payload["state"]
 
 
-def _init_from(path: Path, model, mcfg: CVAEConfig, cfg: TrainConfig) -> tuple[InputSpec, dict[str, Any]]:
+def _init_from(path: Path, model, mcfg: CVAEConfig, cfg: TrainConfig,
+               data: PairedDataset) -> tuple[InputSpec, dict[str, Any]]:
     """Load ``path``'s weights into ``model`` for fine-tuning; its input normalisation, and what to record."""
     payload = read_checkpoint(path)
     differences = config_differences(payload["model_config"], to_dict(mcfg))
@@ -396,6 +397,10 @@ def _init_from(path: Path, model, mcfg: CVAEConfig, cfg: TrainConfig) -> tuple[I
     spec = InputSpec(**payload["input"])
     if spec.axes != cfg.axes:
         raise TrainingError(f"--init: {path} reads the axes {spec.axes!r}, the config {cfg.axes!r}")
+    output = to_dict(OutputSpec.for_data(data))
+    if payload.get("output", output) != output:  # the decoder's outputs would mean other image values
+        raise TrainingError(f"--init: {path} was trained on images scaled as {payload['output']}, the --data "
+                            f"given now scales them as {output} (another image unit or range)")
     model.load_state_dict(payload["model"])
     state = payload.get("state", {})
     return spec, {"checkpoint": str(path), "data_fingerprint": payload.get("data_fingerprint"),

@@ -1,5 +1,6 @@
 """Training: the loss falls, runs resume, bad settings stop with a clear message, other sensors train."""
 
+import dataclasses
 import json
 
 import numpy as np
@@ -12,7 +13,7 @@ from tactile_manip.learning.export import export_onnx, load_checkpoint
 from tactile_manip.learning.model import SuperMagCVAE, count_parameters, preset
 from tactile_manip.learning.train import TrainConfig, TrainingError, resolve_device, train
 from tactile_manip.perception.reconstruct import OnnxReconstructor
-from tactile_manip.data import load_dataset
+from tactile_manip.data import ImageSpec, load_dataset, save_dataset
 
 TINY = dict(preset="small", batch_size=8, lr=3e-3, epochs=6, patience=50, threads=1, seed=0)
 
@@ -62,6 +63,12 @@ def test_init_fine_tunes_from_a_checkpoints_weights_and_normalisation(tiny_data,
               init=tmp_path / "base" / "best.pt")
     with pytest.raises(TrainingError, match="give one of them"):
         train(TrainConfig(**TINY), tiny_data, tmp_path / "tuned", init=tmp_path / "base" / "best.pt", resume=True)
+    # the same shapes, but images in another unit: the decoder's outputs would mean other values
+    grey = dataclasses.replace(load_dataset(tiny_data), image=ImageSpec(unit="grey", data_range=255.0,
+                                                                        scale=255.0 / 65535))
+    with pytest.raises(TrainingError, match="images scaled as"):
+        train(TrainConfig(**{**TINY, "epochs": 1}), save_dataset(tmp_path / "grey.npz", grey), tmp_path / "grey",
+              init=tmp_path / "base" / "best.pt")
 
 
 def test_early_stopping(tiny_data, tmp_path):
