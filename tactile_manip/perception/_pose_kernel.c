@@ -44,8 +44,7 @@
 enum { TM_OK = 0, TM_EMPTY = 1, TM_TOO_SMALL = 2, TM_NO_MEMORY = -1, TM_BAD_ARGUMENT = -2 };
 
 /* out[] slots, mirrored in pose_kernel.py */
-enum { O_RAW_PX, O_N_PX, O_CX, O_CY, O_SXX, O_SYY, O_SXY, O_WINDOWED, O_BOX_R0, O_BOX_R1, O_BOX_C0, O_BOX_C1,
-       O_SIZE };
+enum { O_RAW_PX, O_N_PX, O_CX, O_CY, O_SXX, O_SYY, O_SXY, O_SIZE };
 
 typedef struct { int row, c0, c1; } run_t;
 
@@ -194,7 +193,7 @@ static void reduce_columns(const double *count, const double *s0, const double *
  *   kernel (taps = 2 radius + 1): the float32 Gaussian kernel; taps = 1 with kernel {1}: no filter.
  *   disc (h, w) float32 or NULL: the moments' aperture; min_px: the fewest weighted pixels for a defined angle
  *   (and for the aperture to apply).
- * out (O_SIZE doubles): the kept contact's pixel count (raw) and box, the weights' count, the centroid (cx, cy)
+ * out (O_SIZE doubles): the kept contact's pixel count (raw), the weights' count, the centroid (cx, cy)
  * of all weights, the central second moments (sxx, syy, sxy) of the windowed or all weights, mm.
  * Returns TM_OK, TM_EMPTY (no pixel above the threshold), TM_TOO_SMALL (fewer than min_px weights: only the
  * counts are set), TM_NO_MEMORY or TM_BAD_ARGUMENT. */
@@ -242,7 +241,6 @@ TM_EXPORT int tm_contact_moments(const float *d, int h, int w, float threshold, 
         }
     }
     out[O_RAW_PX] = (double)raw_px;
-    out[O_BOX_R0] = r0; out[O_BOX_R1] = r1; out[O_BOX_C0] = c0; out[O_BOX_C1] = c1;
 
     /* the input the filter reads: the kept box plus twice the radius, zero-padded by the radius on every side
        (beyond the image: zero) so both passes run without bounds checks */
@@ -329,11 +327,7 @@ TM_EXPORT int tm_contact_moments(const float *d, int h, int w, float threshold, 
     if (m[0][0] < min_px) return TM_TOO_SMALL;
     out[O_CX] = m[0][2] / m[0][1];
     out[O_CY] = m[0][4] / m[0][1];
-    const double *s = m[0];
-    if (window && m[1][0] >= min_px) {
-        out[O_WINDOWED] = 1.0;
-        s = m[1];
-    }
+    const double *s = window && m[1][0] >= min_px ? m[1] : m[0];  /* the aperture's, when it holds enough */
     const double cx = s[2] / s[1], cy = s[4] / s[1];
     out[O_SXX] = s[3] / s[1] - cx * cx;
     out[O_SYY] = s[5] / s[1] - cy * cy;

@@ -22,7 +22,7 @@ import numpy as np
 
 ENV_VAR = "TACTILE_MANIP_POSE_KERNEL"  # "numpy": never use the kernel
 OK, EMPTY, TOO_SMALL, NO_MEMORY, BAD_ARGUMENT = 0, 1, 2, -1, -2
-_OUT_SIZE = 12  # the out[] slots of tm_contact_moments
+_OUT_SIZE = 7  # the out[] slots of tm_contact_moments
 _RAW_PX, _N_PX, _CX, _CY, _SXX, _SYY, _SXY = range(7)
 
 
@@ -76,23 +76,6 @@ def describe() -> str:
     return _SOURCE
 
 
-def _address(a: np.ndarray) -> int:
-    """The address of a filter's taps or an aperture: read-only arrays pose.py builds once and caches, whose
-    address is looked up once here too (``ndarray.ctypes`` costs about 1.5 us a call, a tenth of a small
-    contact's kernel time). Any other array is looked up each time."""
-    if a.flags.writeable:
-        return a.ctypes.data
-    hit = _ADDRESSES.get(id(a))
-    if hit is None or hit[0] is not a:  # (the cache holds the array, so its id cannot be reused meanwhile)
-        if len(_ADDRESSES) > 64:
-            _ADDRESSES.clear()
-        hit = _ADDRESSES[id(a)] = (a, a.ctypes.data)
-    return hit[1]
-
-
-_ADDRESSES: dict[int, tuple[np.ndarray, int]] = {}
-
-
 @contextmanager
 def numpy_path() -> Iterator[None]:
     """Within the block, the pose stage runs its numpy path even where the kernel is built (for benchmarks and
@@ -128,8 +111,8 @@ def contact_moments(depth_mm: np.ndarray, *, threshold_mm: float, outlier_fracti
         if disc.shape != d.shape:
             raise ValueError(f"aperture of shape {disc.shape} for an image of shape {d.shape}")
     out = (ctypes.c_double * _OUT_SIZE)()
-    status = _LIB.tm_contact_moments(d.ctypes.data, h, w, threshold_mm, outlier_fraction, _address(taps), taps.size,
-                                     None if disc is None else _address(disc), min_px, pixel_mm, out)
+    status = _LIB.tm_contact_moments(d.ctypes.data, h, w, threshold_mm, outlier_fraction, taps.ctypes.data,
+                                     taps.size, None if disc is None else disc.ctypes.data, min_px, pixel_mm, out)
     if status == NO_MEMORY:
         raise MemoryError(f"the pose kernel could not allocate its buffers for a {h}x{w} image")
     if status == BAD_ARGUMENT:

@@ -29,7 +29,7 @@ RADIUS_PX = 12
 def both_paths(img: np.ndarray, params: PoseParams = PoseParams(), pixel_mm: float = 0.1):
     """The kernel's and the numpy path's ContactMoments of a float32 image."""
     sigma_px = params.sigma_mm / pixel_mm
-    radius_px = int(4.0 * sigma_px + 0.5) if sigma_px > 0 else 0
+    radius_px = int(pose.GAUSS_TRUNCATE * sigma_px + 0.5) if sigma_px > 0 else 0
     disc = aperture_disc(*img.shape, sigma_px, "f") if params.aperture == "disc" else None
     c = pose_kernel.contact_moments(img, threshold_mm=params.threshold_mm, outlier_fraction=params.outlier_fraction,
                                     kernel=pose._gaussian_taps(sigma_px, radius_px), disc=disc,
