@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from tactile_manip.bench.machine import usable_cores
+from tactile_manip.perception import one_reading
 from tactile_manip.perception.reconstruct import Reconstructor, load_reconstructor, read_metadata
 from tactile_manip.trials.scene import MethodSpec
 
@@ -215,6 +216,7 @@ def _int8_copy(path: Path, workdir: Path, name: str, notes: list[str]) -> Path |
     quiet.setLevel(logging.ERROR)  # the quantiser logs a pre-processing advice on every call
     try:
         quantize_dynamic(str(path), str(out), weight_type=QuantType.QInt8)
+        _drop_one_reading_graph(out)
         read_metadata(out)  # the metadata must survive, or the reconstructor cannot load it
     except Exception as e:  # noqa: BLE001 - the quantiser raises many types; the report records why
         notes.append(f"{name}: int8 quantisation failed ({type(e).__name__}: {e})")
@@ -223,6 +225,16 @@ def _int8_copy(path: Path, workdir: Path, name: str, notes: list[str]) -> Path |
         quiet.setLevel(level)
     notes.append(f"{name}: int8 {_where_int8_applies(out)}")
     return out
+
+
+def _drop_one_reading_graph(path: Path) -> None:
+    """Remove the float one-reading graph the quantiser copied with the metadata: the int8 rows time the
+    quantised main graph (the one-reading graph would neither match it nor be int8)."""
+    import onnx
+
+    proto = onnx.load(str(path))
+    one_reading.remove_from(proto)
+    onnx.save(proto, str(path))
 
 
 def _where_int8_applies(path: Path) -> str:

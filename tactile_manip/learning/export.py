@@ -8,6 +8,11 @@ normalisation, the clamp, the scaling to [-1, 1] and the map back to the image u
 so the runtime cannot apply them differently from training. ``eps = 0`` with
 K = 1 gives the deterministic prior-mean reconstruction.
 
+Beside it, the file carries the prior-mean reconstruction of exactly one reading (``field_ut`` (1, R, C, A) ->
+``depth_mm`` (1, H, W), static shapes, no mean/spread tail), base64 under the metadata key
+:data:`~tactile_manip.perception.one_reading.ONE_READING_KEY`: what a control loop runs
+(:mod:`tactile_manip.perception.one_reading`).
+
 The JSON under the metadata key ``tactile_manip`` holds: format version, input layout, units, axes, clamp and
 scaling, output size and pixel size, preset and architecture, training config, data fingerprint, metrics,
 package version. Export re-runs the ONNX model with onnxruntime on real and random inputs and refuses to
@@ -16,6 +21,7 @@ write a file that disagrees with torch.
 
 from __future__ import annotations
 
+import io
 import json
 import math
 from pathlib import Path
@@ -29,9 +35,10 @@ from tactile_manip.errors import TactileManipError
 from tactile_manip.learning.checkpoint import CheckpointError, read_checkpoint
 from tactile_manip.learning.data import InputSpec, OutputSpec
 from tactile_manip.learning.model import CVAEConfig, SuperMagCVAE, count_parameters
+from tactile_manip.perception.one_reading import ONE_READING_KEY, encode, open_one_reading
+from tactile_manip.perception.reconstruct import METADATA_KEY
 from tactile_manip.version import __version__
 
-METADATA_KEY = "tactile_manip"
 FORMAT_VERSION = 1
 PARITY_TOLERANCE_MM = 1e-4
 
@@ -54,6 +61,15 @@ class InferenceGraph(nn.Module):
         if self.output != OutputSpec():  # the identity adds no nodes to depth models
             mean, spread = self.output.offset + self.output.scale * mean, self.output.scale * spread
         return mean, spread
+
+
+class OneReadingGraph(InferenceGraph):
+    """The prior-mean reconstruction of one reading: ``field_ut`` (1, R, C, A) -> ``depth_mm`` (1, H, W), what
+    :class:`InferenceGraph` gives with ``eps`` = 0 and K = 1, without the sample dimension and the tail."""
+
+    def forward(self, field_ut: torch.Tensor) -> torch.Tensor:  # type: ignore[override]
+        mean, _ = self.model.prior_mean_decode(self.spec.scale(field_ut), with_logvar=False)
+        return mean if self.output == OutputSpec() else self.output.offset + self.output.scale * mean
 
 
 def load_checkpoint(path: str | Path) -> tuple[SuperMagCVAE, InputSpec, dict[str, Any]]:
@@ -90,10 +106,15 @@ def export_onnx(checkpoint: str | Path, out: str | Path, *, pixel_mm: float, met
                       input_names=["field_ut", "eps"], output_names=["depth_mm", "spread_mm"],
                       dynamic_axes={"field_ut": {0: "batch"}, "eps": {0: "batch", 1: "samples"},
                                     "depth_mm": {0: "batch"}, "spread_mm": {0: "batch"}})
+    one = OneReadingGraph(model, spec, graph.output).eval()
+    one_bytes = io.BytesIO()
+    torch.onnx.export(one, (field[:1],), one_bytes, dynamo=False, opset_version=17, input_names=["field_ut"],
+                      output_names=["depth_mm"])
     meta = _metadata(model, spec, payload, pixel_mm, metrics or {}, extra or {})
     proto = onnx.load(str(out))
-    entry = proto.metadata_props.add()
-    entry.key, entry.value = METADATA_KEY, json.dumps(meta)
+    for key, value in ((METADATA_KEY, json.dumps(meta)), (ONE_READING_KEY, encode(one_bytes.getvalue()))):
+        entry = proto.metadata_props.add()
+        entry.key, entry.value = key, value
     proto.producer_name = "tactile_manip"
     onnx.save(proto, str(out))
     meta["parity_max_abs_mm"] = check_parity(graph, out, check_readings)
@@ -122,6 +143,11 @@ def _metadata(model: SuperMagCVAE, spec: InputSpec, payload: dict, pixel_mm: flo
                   "scaling": scaling},
         "noise": {"name": "eps", "shape": ["batch", "samples", cfg.latent], "distribution": "standard normal; "
                   "zeros with samples = 1 give the prior-mean reconstruction"},
+        "one_reading": {"metadata_key": ONE_READING_KEY, "encoding": "base64 ONNX",
+                        "input": {"name": "field_ut", "shape": [1, cfg.taxel_rows, cfg.taxel_cols, spec.channels]},
+                        "output": {"name": "depth_mm", "shape": [1, cfg.image_h, cfg.image_w]},
+                        "what": "the prior-mean reconstruction of one reading (eps = 0, samples = 1): the same "
+                                "image as the main graph, with static shapes and without the mean/spread tail"},
         "output": {"names": ["depth_mm", "spread_mm"], "shape": ["batch", cfg.image_h, cfg.image_w],
                    "units": "mm of indentation, >= 0" if image["unit"] == "mm" else image["unit"],
                    "image": image, "pixel_mm": pixel_mm,
@@ -144,7 +170,8 @@ def _training_record(state: dict) -> dict[str, Any]:
 
 
 def check_parity(graph: InferenceGraph, path: Path, readings: np.ndarray | None = None) -> float:
-    """Max |ONNX - torch| (mm) over real and random readings, K = 1 and K = 4; raises above tolerance."""
+    """Max |ONNX - torch| (mm) over real and random readings, K = 1 and K = 4, and of the one-reading graph on
+    each reading alone; raises above tolerance (and removes ``path``)."""
     import onnxruntime as ort
 
     cfg = graph.model.cfg
@@ -155,6 +182,15 @@ def check_parity(graph: InferenceGraph, path: Path, readings: np.ndarray | None 
     if readings is not None and len(readings):
         fields.append(np.asarray(readings[:16], dtype=np.float32))
     session = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
+    try:
+        one = open_one_reading(ort, session, where=str(path), options=ort.SessionOptions(),
+                               providers=["CPUExecutionProvider"],
+                               input_shape=(cfg.taxel_rows, cfg.taxel_cols, spec.channels),
+                               output_shape=(cfg.image_h, cfg.image_w), latent=cfg.latent, probe_centre=centre,
+                               probe_width=width, error=ExportError)
+    except ExportError:
+        path.unlink(missing_ok=True)
+        raise
     worst = 0.0
     for f in fields:
         for k in (1, 4):
@@ -163,6 +199,10 @@ def check_parity(graph: InferenceGraph, path: Path, readings: np.ndarray | None 
                 ref = [t.numpy() for t in graph(torch.from_numpy(f), torch.from_numpy(eps))]
             got = session.run(None, {"field_ut": f, "eps": eps})
             worst = max(worst, *(float(np.abs(a - b).max()) for a, b in zip(ref, got)))
+        with torch.no_grad():
+            ref = graph(torch.from_numpy(f), torch.zeros(len(f), 1, cfg.latent))[0].numpy()
+        got = np.concatenate([one.run(None, {"field_ut": reading[None]})[0] for reading in f])
+        worst = max(worst, float(np.abs(ref - got).max()))
     tolerance = PARITY_TOLERANCE_MM * graph.output.scale  # 1e-4 of the image range for images not in mm
     if not worst <= tolerance:
         path.unlink(missing_ok=True)

@@ -220,6 +220,11 @@ class Decoder(nn.Module):
         # per output pixel: mean and log-variance; the shuffle head makes native_scale^2 of each per native pixel
         self.per_pixel = cfg.native_scale**2 if cfg.head == "shuffle" else 1
         self.head = nn.Conv2d(ch[-1], 2 * self.per_pixel, 3, padding=1)
+        # A shuffle grid one native pixel too large on every side (the fast decoder: 52x52 native, 208x208 for
+        # 200x200): the head's unpadded convolution computes exactly the pixels the centre crop would keep.
+        native_hw = [n * 2**cfg.upsample_stages for n in cfg.base_hw]
+        self._trim = cfg.head == "shuffle" and [n * cfg.native_scale - 2 * cfg.native_scale for n in native_hw] == [
+            cfg.image_h, cfg.image_w]
 
     def forward(self, z: torch.Tensor, e: torch.Tensor, x: torch.Tensor | None = None, *,
                 with_logvar: bool = True) -> tuple[torch.Tensor, torch.Tensor | None]:
@@ -245,12 +250,19 @@ class Decoder(nn.Module):
             if i == 0:
                 h = self.mod[1](h, e)
         k = 2 * self.per_pixel if with_logvar else self.per_pixel  # the mean's channels come first
-        out = F.conv2d(h, self.head.weight[:k], self.head.bias[:k], padding=1)  # (B, k, native_h, native_w)
         if cfg.head == "shuffle":
-            out = _centre_crop(F.pixel_shuffle(out, cfg.native_scale), cfg.image_h, cfg.image_w)  # (B, k / s^2, H, W)
-        elif out.shape[-2:] != (self.cfg.image_h, self.cfg.image_w):
-            out = F.interpolate(out, size=(self.cfg.image_h, self.cfg.image_w), mode="bilinear",
-                                align_corners=False)
+            out = F.conv2d(h, self.head.weight[:k], self.head.bias[:k], padding=0 if self._trim else 1)
+            if not with_logvar:  # the mean only: its ReLU commutes with the shuffle and crop, and fuses into the conv
+                out = F.relu(out)
+            out = F.pixel_shuffle(out, cfg.native_scale)  # (B, k / s^2, H', W')
+            out = out if self._trim else _centre_crop(out, cfg.image_h, cfg.image_w)
+            if not with_logvar:
+                return out.reshape(out.shape[0], cfg.image_h, cfg.image_w), None
+        else:
+            out = F.conv2d(h, self.head.weight[:k], self.head.bias[:k], padding=1)  # (B, k, native_h, native_w)
+            if out.shape[-2:] != (self.cfg.image_h, self.cfg.image_w):
+                out = F.interpolate(out, size=(self.cfg.image_h, self.cfg.image_w), mode="bilinear",
+                                    align_corners=False)
         mean = F.relu(out[:, 0])  # indentation is >= 0, and the background must be exactly 0 (SSIM)
         if not with_logvar:
             return mean, None
@@ -292,11 +304,13 @@ class SuperMagCVAE(nn.Module):
         return {"mean": mean, "logvar": logvar, "mu_q": mu_q, "logvar_q": logvar_q, "mu_p": mu_p,
                 "logvar_p": logvar_p}
 
-    def prior_mean_decode(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """Decode at the prior mean: the deterministic inference path (mean and log-variance images)."""
+    def prior_mean_decode(self, x: torch.Tensor, *, with_logvar: bool = True
+                          ) -> tuple[torch.Tensor, torch.Tensor | None]:
+        """Decode at the prior mean: the deterministic inference path (mean and log-variance images; the
+        log-variance is None with ``with_logvar=False``)."""
         e = self.embed_dec(x)
         mu, _ = self.prior(e)
-        return self.decoder(mu, e, x)
+        return self.decoder(mu, e, x, with_logvar=with_logvar)
 
     def generate(self, x: torch.Tensor, eps: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Inference: ``eps`` (B, K, Z) standard normal -> mean depth (B, H, W) over K samples and its spread."""

@@ -149,3 +149,30 @@ def test_an_untrained_export_of_a_training_config_runs_on_onnxruntime(tmp_path):
     rec = load_reconstructor(path, threads=1)
     depth = rec.reconstruct(np.random.default_rng(0).normal(0.0, 100.0, (4, 4, 3))).depth_mm
     assert depth.shape == (200, 200) and np.isfinite(depth).all()
+
+
+@pytest.mark.parametrize("image_hw, trims", [((36, 36), True), ((40, 40), False), ((36, 38), False)])
+def test_the_shuffle_heads_unpadded_convolution_keeps_exactly_the_centre_crop(image_hw, trims):
+    """A native grid one pixel too large on every side: the unpadded head equals the padded head then cropped,
+    for the training output (mean and log-variance) and for the mean alone."""
+    from tactile_manip.learning.model import CVAEConfig
+
+    torch.manual_seed(0)
+    cfg = preset("small", image_h=image_hw[0], image_w=image_hw[1])
+    cfg = CVAEConfig(**{**cfg.__dict__, "native_scale": 2, "head": "shuffle"})
+    decoder = SuperMagCVAE(cfg).eval().decoder
+    with torch.no_grad():
+        torch.nn.init.normal_(decoder.head.weight, std=0.5)  # both signs: the ReLU and the clamp matter
+        for mod in decoder.mod:
+            torch.nn.init.normal_(mod.proj.weight, std=1.0)
+    assert decoder._trim is trims
+    z, e, x = torch.randn(3, cfg.latent), torch.randn(3, cfg.embed), torch.rand(3, 48) * 2 - 1
+    with torch.no_grad():
+        mean, logvar = decoder(z, e, x)
+        mean_only, none = decoder(z, e, x, with_logvar=False)
+        decoder._trim = False  # the reference: padded head, shuffle, centre crop
+        ref_mean, ref_logvar = decoder(z, e, x)
+    assert none is None and mean.shape == (3, *image_hw) and (mean > 0).any() and (mean == 0).any()
+    torch.testing.assert_close(mean, ref_mean, rtol=0, atol=1e-6)
+    torch.testing.assert_close(logvar, ref_logvar, rtol=0, atol=1e-6)
+    torch.testing.assert_close(mean_only, mean, rtol=0, atol=1e-6)
