@@ -150,10 +150,11 @@ class TactilePoseEstimator:
     def estimate_many(self, readings: Sequence[TactileReading | np.ndarray]) -> list[AngleEstimate]:
         """Angles of several readings (e.g. both pads of a gripper), reconstructed in one batched model run.
 
-        Each estimate equals what :meth:`estimate` returns for its reading (the same reconstruction, bit for
-        bit, and the same post-processing); in ``timings_s``, "reconstruct" is the whole batch's time and
-        "total" runs from the call to that estimate's completion. An estimate that escalates runs its
-        escalation on its own reading, after the batch.
+        Each estimate equals what :meth:`estimate` returns for its reading (the same reconstruction and the
+        same post-processing; a single reading runs the model file's one-reading graph, which gave the batch
+        graph's images bit for bit on every reading checked); in ``timings_s``, "reconstruct" is the whole
+        batch's time and "total" runs from the call to that estimate's completion. An estimate that escalates
+        runs its escalation on its own reading, after the batch.
 
         Raises:
             ValueError: readings of different shapes, or any with NaN / infinite values (nothing is estimated).

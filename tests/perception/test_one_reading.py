@@ -54,6 +54,8 @@ def test_an_export_carries_a_one_reading_graph_that_gives_the_main_graphs_images
         # a batch of one runs it too; batches and prior samples run the main graph
         np.testing.assert_allclose(fast.reconstruct_many(readings[:1])[0].depth_mm, batch[0], rtol=0, atol=1e-5)
         assert not OnnxReconstructor(model.path, samples=3).one_reading
+        # two sessions with their own spinning thread pools would fight over the cores: one thread only
+        assert not OnnxReconstructor(model.path, threads=2).one_reading
 
 
 def test_a_file_exported_before_the_one_reading_graph_runs_its_main_graph(onnx_4x4, tmp_path) -> None:
