@@ -51,8 +51,20 @@ def test_an_export_carries_a_one_reading_graph_that_gives_the_main_graphs_images
             assert got.spread_mm is None
             np.testing.assert_allclose(got.depth_mm, expected, rtol=0, atol=1e-5)
             np.testing.assert_allclose(main.reconstruct(reading).depth_mm, expected, rtol=0, atol=1e-5)
-        # a batch of one runs it too; batches and prior samples run the main graph
+        # single readings and a batch of one run it (not the main graph); batches and prior samples do not
+        calls = []
+        one = fast._one
+
+        class Spy:
+            def run(self, *args, **kwargs):
+                calls.append(len(args[1]["field_ut"]))
+                return one.run(*args, **kwargs)
+
+        fast._one = Spy()
+        fast.reconstruct(readings[0])
         np.testing.assert_allclose(fast.reconstruct_many(readings[:1])[0].depth_mm, batch[0], rtol=0, atol=1e-5)
+        fast.reconstruct_batch(readings)
+        assert calls == [1, 1]
         assert not OnnxReconstructor(model.path, samples=3).one_reading
         # two sessions with their own spinning thread pools would fight over the cores: one thread only
         assert not OnnxReconstructor(model.path, threads=2).one_reading
