@@ -250,19 +250,17 @@ class Decoder(nn.Module):
             if i == 0:
                 h = self.mod[1](h, e)
         k = 2 * self.per_pixel if with_logvar else self.per_pixel  # the mean's channels come first
+        out = F.conv2d(h, self.head.weight[:k], self.head.bias[:k], padding=0 if self._trim else 1)  # (B, k, ...)
         if cfg.head == "shuffle":
-            out = F.conv2d(h, self.head.weight[:k], self.head.bias[:k], padding=0 if self._trim else 1)
             if not with_logvar:  # the mean only: its ReLU commutes with the shuffle and crop, and fuses into the conv
                 out = F.relu(out)
             out = F.pixel_shuffle(out, cfg.native_scale)  # (B, k / s^2, H', W')
             out = out if self._trim else _centre_crop(out, cfg.image_h, cfg.image_w)
             if not with_logvar:
                 return out.reshape(out.shape[0], cfg.image_h, cfg.image_w), None
-        else:
-            out = F.conv2d(h, self.head.weight[:k], self.head.bias[:k], padding=1)  # (B, k, native_h, native_w)
-            if out.shape[-2:] != (self.cfg.image_h, self.cfg.image_w):
-                out = F.interpolate(out, size=(self.cfg.image_h, self.cfg.image_w), mode="bilinear",
-                                    align_corners=False)
+        elif out.shape[-2:] != (self.cfg.image_h, self.cfg.image_w):
+            out = F.interpolate(out, size=(self.cfg.image_h, self.cfg.image_w), mode="bilinear",
+                                align_corners=False)
         mean = F.relu(out[:, 0])  # indentation is >= 0, and the background must be exactly 0 (SSIM)
         if not with_logvar:
             return mean, None
