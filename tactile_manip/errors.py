@@ -84,3 +84,7 @@ class SafetyLimitError(RobotError, ValueError):
 
 class GripperError(RobotError, RuntimeError):
     """The gripper failed to move or to report its state (not a missed grasp: that is a GraspResult)."""
+
+
+class ClusterError(TactileManipError, RuntimeError):
+    """A compute cluster cannot be used: unreachable, lacking our package, or a run's blocks are inconsistent."""

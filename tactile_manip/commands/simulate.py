@@ -16,6 +16,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="multiply every object count (e.g. 0.05 for a quick small dataset)")
     p.add_argument("--seed", type=int, default=None, help="override the config's base seed")
     p.add_argument("--force", action="store_true", help="overwrite an existing output file")
+    p.add_argument("--ray", nargs="?", const="local", default=None, metavar="ADDRESS",
+                   help="run the presses as Ray tasks: 'local' (the default without ADDRESS: a private instance on "
+                        "this machine with --workers CPUs), 'auto' (the cluster this machine joined) or HOST:PORT; "
+                        "the result equals the local run's, and a restarted run keeps its finished blocks "
+                        "(extra 'ray')")
+    p.add_argument("--block-size", type=int, default=None,
+                   help="presses per Ray task (default 32); only with --ray")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -38,10 +45,19 @@ def run(args: argparse.Namespace) -> int:
     if args.seed is not None:
         cfg = dataclasses.replace(cfg, seed=args.seed)
     total = sum(o.count for o in cfg.objects)
-    workers = args.workers or os.cpu_count() or 1
-    with tqdm(total=total, unit="pair", desc=f"simulating ({workers} workers)") as bar:
-        data = generate(cfg, workers=workers, progress=bar.update)
+    if args.ray is not None:
+        data = _generate_on_ray(args, cfg, out, total)
+    else:
+        if args.block_size is not None:
+            raise ValueError("--block-size applies to --ray runs only")
+        workers = args.workers or os.cpu_count() or 1
+        with tqdm(total=total, unit="pair", desc=f"simulating ({workers} workers)") as bar:
+            data = generate(cfg, workers=workers, progress=bar.update)
     path = save_dataset(out, data)
+    if args.ray is not None:
+        from tactile_manip.cluster.blocks import remove_blocks
+
+        remove_blocks(out)
     counts = ", ".join(f"{s} {len(data.indices(s))}" for s in SPLITS)
     seconds = data.provenance["generation_seconds"]
     print(f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB): {len(data)} pairs ({counts}) in {seconds:.1f} s, "
@@ -49,6 +65,24 @@ def run(args: argparse.Namespace) -> int:
     for note in _physics_notes(data, thickness_mm=cfg.sim.layer.thickness_mm):
         print(f"note: {note}")
     return 0
+
+
+def _generate_on_ray(args: argparse.Namespace, cfg, out, total: int):
+    from tqdm import tqdm
+
+    from tactile_manip.cluster.connect import check_address
+    from tactile_manip.cluster.simulate import DEFAULT_BLOCK_SIZE, block_bounds, generate_on_ray
+
+    address = check_address(args.ray)
+    block_size = DEFAULT_BLOCK_SIZE if args.block_size is None else args.block_size
+    block_bounds(total, block_size)  # a bad --block-size fails here, before Ray starts
+    if address is not None and args.workers:
+        raise ValueError("--workers sets the CPUs of a private local Ray instance; a cluster (--ray ADDRESS) "
+                         "uses all of its own")
+    where = "a local Ray instance" if address is None else f"Ray at {address}"
+    with tqdm(total=total, unit="pair", desc=f"simulating on {where}") as bar:
+        return generate_on_ray(cfg, out, address=address, num_cpus=args.workers or None, block_size=block_size,
+                               progress=bar.update)
 
 
 def _physics_notes(data, *, thickness_mm: float) -> list[str]:

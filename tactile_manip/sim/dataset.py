@@ -217,6 +217,30 @@ def generate(cfg: DatasetConfig, *, workers: int = 0,
     return _assemble(cfg, tasks, results, seconds=time.perf_counter() - start, workers=workers)
 
 
+def sample_count(cfg: DatasetConfig) -> int:
+    """Number of samples ``cfg`` generates (sample indices run 0 .. count - 1)."""
+    return sum(o.count for o in cfg.objects)
+
+
+def simulate_block(cfg: DatasetConfig, start: int, stop: int) -> list[dict[str, Any]]:
+    """Simulate samples ``start .. stop - 1`` of ``cfg`` in this process: the unit of work of a distributed run.
+
+    Each sample draws from its own seed, so a block gives the same values in any process and in any order;
+    :func:`assemble` turns the blocks' results, concatenated in index order, into the dataset.
+    """
+    if _WORKER.get("cfg") != cfg:
+        _init_worker(cfg)
+    return [_simulate(t) for t in _tasks(cfg)[start:stop]]
+
+
+def assemble(cfg: DatasetConfig, results: list[dict[str, Any]], *, seconds: float, workers: int) -> PairedDataset:
+    """The dataset of every sample's result in index order (what :func:`generate` returns for the same cfg)."""
+    tasks = _tasks(cfg)
+    if len(results) != len(tasks):
+        raise ValueError(f"assemble: {len(results)} results for a config of {len(tasks)} samples")
+    return _assemble(cfg, tasks, results, seconds=seconds, workers=workers)
+
+
 @contextlib.contextmanager
 def _single_threaded_children():
     """One BLAS/OpenMP thread per worker: the workers already fill the cores, and threads would fight."""
