@@ -10,7 +10,9 @@ from __future__ import annotations
 
 import contextlib
 import os
+import sys
 import tempfile
+import warnings
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -21,6 +23,7 @@ from tactile_manip.extras import require
 LOCAL = "local"
 LOOPBACK = "127.0.0.1"
 # Every worker runs single-threaded numpy: the workers already fill the cores, and BLAS threads would fight.
+_SINGLE_MACHINE = "RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER"  # "0": Ray keeps every address of this node on loopback
 WORKER_ENV = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
 
 
@@ -59,10 +62,9 @@ def ray_session(address: str | None, *, num_cpus: int | None = None) -> Iterator
                               "runtime_env": {"env_vars": dict(WORKER_ENV)}}
     if address is None:
         kwargs.update(num_cpus=num_cpus, include_dashboard=False, _node_ip_address=LOOPBACK)
-    if address not in (None, "auto"):
-        _check_reachable(address)
+    preflight(address)
     try:
-        ray.init(address=address, **kwargs)
+        ray.init(address=address or LOCAL, **kwargs)  # "local": a new instance even where a cluster runs
     except Exception as e:  # Ray raises ConnectionError, RuntimeError or its own types for an unreachable address
         raise ClusterError(f"cannot reach the Ray cluster at {address or 'a new local instance'}: "
                            f"{_first_line(e)} (is `ray start --head` running there? use --ray local for a "
@@ -83,7 +85,11 @@ def _prepare_environment(address: str | None) -> None:
       with that token (``~/.ray/auth_token``).
     """
     if address is None or _is_loopback(_bootstrap_address(address)):
-        os.environ.setdefault("RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER", "0")
+        if "ray" in sys.modules and os.environ.get(_SINGLE_MACHINE) != "0":
+            warnings.warn("ray was imported before tactile_manip started its instance: Ray may listen on this "
+                          f"machine's network address, not only on loopback (set {_SINGLE_MACHINE}=0 before "
+                          "importing ray)", RuntimeWarning, stacklevel=3)
+        os.environ.setdefault(_SINGLE_MACHINE, "0")
     if address is not None and (Path.home() / ".ray" / "auth_token").is_file():
         os.environ.setdefault("RAY_AUTH_MODE", "token")
 
@@ -104,10 +110,12 @@ def _is_loopback(host_port: str) -> bool:
     return host == "localhost" or host.startswith("127.") or host == "::1"
 
 
-def _check_reachable(address: str, timeout_s: float = 5.0) -> None:
-    """Fail fast when nothing accepts TCP at ``address`` (Ray itself would retry for minutes)."""
+def preflight(address: str | None, timeout_s: float = 5.0) -> None:
+    """Fail fast when nothing accepts TCP at a HOST:PORT ``address`` (Ray itself would retry for minutes)."""
     import socket
 
+    if address in (None, "auto"):
+        return
     host, _, port = address.removeprefix("ray://").rpartition(":")
     try:
         with socket.create_connection((host.strip("[]"), int(port)), timeout=timeout_s):

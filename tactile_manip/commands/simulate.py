@@ -70,7 +70,7 @@ def run(args: argparse.Namespace) -> int:
 def _generate_on_ray(args: argparse.Namespace, cfg, out, total: int):
     from tqdm import tqdm
 
-    from tactile_manip.cluster.connect import check_address
+    from tactile_manip.cluster.connect import check_address, preflight
     from tactile_manip.cluster.simulate import DEFAULT_BLOCK_SIZE, block_bounds, generate_on_ray
 
     address = check_address(args.ray)
@@ -79,6 +79,7 @@ def _generate_on_ray(args: argparse.Namespace, cfg, out, total: int):
     if address is not None and args.workers:
         raise ValueError("--workers sets the CPUs of a private local Ray instance; a cluster (--ray ADDRESS) "
                          "uses all of its own")
+    preflight(address)  # an unreachable cluster fails here, before the progress bar
     where = "a local Ray instance" if address is None else f"Ray at {address}"
     with tqdm(total=total, unit="pair", desc=f"simulating on {where}") as bar:
         return generate_on_ray(cfg, out, address=address, num_cpus=args.workers or None, block_size=block_size,
