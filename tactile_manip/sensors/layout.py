@@ -1,6 +1,6 @@
 """Board layouts: where each chip of a board sits in the pad frame and which cell of the reading it feeds.
 
-Readings keep the ``(rows, cols, 3)`` layout of DESIGN.md section 4 (row 0 at +y, column 0 at -x, axes in
+Readings keep the ``(rows, cols, 3)`` layout of docs/design.md, Conventions (row 0 at +y, column 0 at -x, axes in
 the pad frame). A board's firmware sends its chips in its own order, each chip in its own axes; a
 :class:`BoardLayout` lists the chips in that order, each with its reading cell, its position (mm) and its
 rotation about the pad normal, and turns a ``(n_chips, 3)`` frame into a reading. Cells no chip feeds stay 0
