@@ -101,7 +101,8 @@ TRIAL_RUNS = (
              "docs/results/reorient_study/summary.json",
              {"supermag": "supermag_fast", "supermag_sym": "supermag_fast", "bilinear": None}),
     TrialRun("the main job's scene, 600 paired presentations (`docs/results/fast_model/compare_sim.toml`)",
-             "docs/results/fast_model/compare_sim_summary.md", {"fast": "supermag_fast", "compact": "supermag_compact"}),
+             "docs/results/fast_model/compare_sim_summary.md",
+             {"fast": "supermag_fast", "compact": "supermag_compact"}),
     TrialRun("the main job's scene, 600 paired presentations (`docs/results/robust/robust_b48/compare_sim.toml`)",
              "docs/results/robust/robust_b48/trials_main_scene_vs_fast.md",
              {"fast": "supermag_fast", "robust": "supermag_robust"}),
@@ -242,7 +243,8 @@ def headline(root: Path, doc: str) -> list[str]:
     runs = _link("trials", _readable(MAIN_JOB.summary, root), doc)
     rows = [
         [f"depth image of {presses} unseen test presses: PSNR / SSIM", f"{sm['psnr_db_mean']:.2f} dB / "
-         f"{sm['ssim_mean']:.3f}", f"{bl['psnr_db_mean']:.2f} dB / {bl['ssim_mean']:.3f}", _link("Table I", TABLE1_MD, doc)],
+         f"{sm['ssim_mean']:.3f}", f"{bl['psnr_db_mean']:.2f} dB / {bl['ssim_mean']:.3f}",
+         _link("Table I", TABLE1_MD, doc)],
         [f"rod angle error on {rods} unseen rod presses: median / p95", angle(sm), angle(bl),
          _link("Table I", TABLE1_MD, doc)],
         [f"main job: {main['supermag'].n} reorientations within 5 deg (6 unseen rods, 10-11 N)",
@@ -288,13 +290,14 @@ def trials_table(root: Path, doc: str) -> list[str]:
     for scene in dict.fromkeys(run.scene for run in TRIAL_RUNS):
         rows = []
         for run in (r for r in TRIAL_RUNS if r.scene == scene):
+            summary = _readable(run.summary, root)
             for method, r in trial_results(root, run).items():
                 if method not in run.models:
                     raise ValueError(f"{run.summary}: method {method!r} has no model in {Path(__file__).name}")
                 rows.append([f"`{method}`: {METHODS[method]}", _model(run.models[method]), f"{r.successes}/{r.n}",
                              f"{r.wilson[0]:.1f}-{r.wilson[1]:.1f} %",
                              f"{r.median_deg:.2f} / " + ("-" if r.p95_deg is None else f"{r.p95_deg:.2f}"),
-                             _link(_readable(run.summary, root).removeprefix("docs/results/"), _readable(run.summary, root), doc)])
+                             _link(summary.removeprefix("docs/results/"), summary, doc)])
         lines += [f"## {scene}", "", *_table(["method", "model", "success", "Wilson 95 %",
                                               "error median / p95 deg", "run"], rows), ""]
     return lines[:-1]
@@ -330,9 +333,9 @@ def latency(root: Path, doc: str) -> list[str]:
     lines += _table(["method", "runtime", "parameters", "1 reading", "reading -> angle", "2 pads -> angles",
                      "PSNR dB", "SSIM", "rod angle median / p95 deg", "trials"], rows)
     net = _json(root, NETWORK_LATENCY)
+    source = _link("latency.md", NETWORK_LATENCY.replace(".json", ".md"), doc)
     lines += ["", f"The network alone, one reading (`python -m benchmarks.bench_model`, "
-              f"{net['machine']['time_utc'][:10]}; {_link('latency.md', NETWORK_LATENCY.replace('.json', '.md'), doc)}):",
-              ""]
+              f"{net['machine']['time_utc'][:10]}; {source}):", ""]
     lines += _table(["model", "parameters", "threads", "p50 / p99 ms", "batch of 64, ms per reading"],
                     [[r["label"], f"{r['parameters']:,}", str(r["threads"]), f"{r['p50_ms']:.2f} / {r['p99_ms']:.2f}",
                       f"{r['batch_ms_per_reading']:.2f}"] for r in net["results"]])

@@ -17,7 +17,8 @@ def test_card_title_names_the_model():
     history = json.loads(path.with_suffix(".history.json").read_text())
     meta = read_metadata(path)
     titles = {model_card(meta, history, name=n).splitlines()[0] for n in ("supermag_fast", "other")}
-    assert titles == {"# `supermag_fast`: SuperMag CVAE, `compact` preset", "# `other`: SuperMag CVAE, `compact` preset"}
+    assert titles == {"# `supermag_fast`: SuperMag CVAE, `compact` preset",
+                      "# `other`: SuperMag CVAE, `compact` preset"}
     assert model_card(meta, history).splitlines()[0] == "# SuperMag CVAE, `compact` preset"
 
 
