@@ -36,6 +36,8 @@ LINKED = ("configs", "tasks", "examples", "benchmarks", "firmware", "docs", "REA
 COPIED = ("models",)
 LANGUAGES = ("bash", "python")
 TIMEOUT_S = 300
+# never run unmarked: they change the environment the tests run in, or run the tests themselves
+UNSAFE = re.compile(r"\b(pip|uv|conda)\s+install\b|\bpytest\b|\bsudo\b")
 SKIP = re.compile(r"<!--\s*doc-test:\s*skip\s*\((?P<reason>[^)]+)\)\s*-->")
 FENCE = re.compile(r"^```(?P<lang>[\w-]*)\s*$")
 
@@ -134,6 +136,9 @@ def test_page_blocks_run(page, tmp_path):
     if page in PENDING:
         pytest.skip(f"{page}: its blocks carry no doc-test markers yet")
     todo = [b for b in blocks(page, (ROOT / page).read_text()) if b.lang in LANGUAGES and b.skip is None]
+    unsafe = [b.where for b in todo if UNSAFE.search(b.code)]
+    assert not unsafe, (f"{', '.join(unsafe)}: installs packages or runs the tests; mark it "
+                        "<!-- doc-test: skip (installs packages) --> (nothing of this page was run)")
     if not todo:
         pytest.skip(f"{page}: no runnable block")
     cwd = workspace(tmp_path)
@@ -146,6 +151,11 @@ def test_page_blocks_run(page, tmp_path):
         assert done.returncode == 0, (f"{block.where} ({block.lang}) failed with status {done.returncode}:\n"
                                       f"{block.code}\n--- stderr ---\n{_tail(done.stderr)}\n--- stdout ---\n"
                                       f"{_tail(done.stdout, 10)}")
+
+
+def test_installs_are_never_run_unmarked():
+    assert UNSAFE.search('pip install -e ".[serial]"') and UNSAFE.search("python -m pytest tests/x")
+    assert not UNSAFE.search("tactile-manip simulate --out data/pip_install_notes.npz")
 
 
 def test_failing_block_is_reported_with_its_place(tmp_path):
