@@ -35,7 +35,7 @@ def test_check_fails_with_a_diff_when_a_result_changes(copy, capsys):
     (copy / rt.TABLE1).write_text(json.dumps(results))
     assert rt.main(["--check", "--root", str(copy)]) == 1
     out, err = capsys.readouterr()
-    assert "+| depth image of 440 unseen test presses: PSNR / SSIM | 30.00 dB / 0.838" in out
+    assert any(line.startswith("+| depth image of") and "| 30.00 dB / " in line for line in out.splitlines())
     assert "README.md" in err and "docs/results/tables/headline.md" in err and "models.md" in err
     assert rt.main(["--root", str(copy)]) == 0  # regenerate: then the check passes
     assert rt.main(["--check", "--root", str(copy)]) == 0
@@ -43,9 +43,13 @@ def test_check_fails_with_a_diff_when_a_result_changes(copy, capsys):
 
 def test_check_fails_when_a_table_is_edited_by_hand(copy, capsys):
     table = copy / rt.TABLES_DIR / "trials.md"
-    table.write_text(table.read_text().replace("297/300", "299/300"))
+    lines = table.read_text().splitlines(keepends=True)
+    row = next(i for i, line in enumerate(lines) if line.startswith("| `"))  # the first method's row
+    lines[row] = lines[row].replace(" |", " (edited) |", 1)
+    table.write_text("".join(lines))
     assert rt.main(["--check", "--root", str(copy)]) == 1
-    assert "-| `supermag`: one pass per reading | `supermag_robust` (robust scene) | 299/300" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert f"-{lines[row]}" in out and f"+{lines[row].replace(' (edited) |', ' |', 1)}" in out
 
 
 def test_trial_summary_in_markdown_reads_like_its_json(copy):
