@@ -21,11 +21,16 @@ def copy(tmp_path):
     """The result files, tables and README in a scratch root."""
     paths = {rt.TABLE1, rt.TABLE1_MD, rt.TABLE1_ROBUST, rt.NETWORK_LATENCY, rt.BENCH, rt.INFORMATION, rt.README,
              rt.BENCH.replace("report.json", "report.md"), *rt.SINGLE_FRAMES, *rt.CALIBRATIONS.values(),
-             *(run.summary for run in rt.TRIAL_RUNS), *(f"{rt.TABLES_DIR}/{name}" for name in rt.TABLES)}
+             *(run.summary for run in rt.TRIAL_RUNS), *(rt._readable(run.summary, ROOT) for run in rt.TRIAL_RUNS),
+             *(f"{rt.TABLES_DIR}/{name}" for name in rt.TABLES)}
     for path in paths:
         (tmp_path / path).parent.mkdir(parents=True, exist_ok=True)
         shutil.copy(ROOT / path, tmp_path / path)
     return tmp_path
+
+
+def test_the_copy_is_current(copy):
+    assert rt.stale(copy) == {}
 
 
 def test_check_fails_with_a_diff_when_a_result_changes(copy, capsys):
