@@ -43,3 +43,15 @@ def test_readme_links_the_docs_index_and_its_picture_is_committed():
     assert "docs/README.md" in targets
     pictures = [t for t in targets if t.endswith(".png")]
     assert pictures and all((ROOT / t).is_file() for t in pictures)
+
+
+SCRIPT = re.compile(r"python (?:-m (benchmarks\.\w+)|((?:examples|tasks|benchmarks)/\w+\.py))")
+
+
+@pytest.mark.parametrize("page", PAGES)
+def test_named_scripts_exist(page):
+    """`python -m benchmarks.x`, `python examples/x.py` and `python tasks/x.py` name files that exist."""
+    text = (ROOT / page).read_text()
+    missing = sorted({m or p for m, p in SCRIPT.findall(text)
+                      if not (ROOT / (p or m.replace(".", "/") + ".py")).is_file()})
+    assert not missing, f"{page} names scripts that do not exist: {', '.join(missing)}"
