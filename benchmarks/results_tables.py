@@ -87,7 +87,7 @@ class TrialRun:
 
 
 MAIN_JOB = TrialRun("main job: `configs/scenes/reorient_sim.toml`, 100 presentations of 6 unseen rods, 10-11 N",
-                    "docs/results/reorient_sim/summary.json",
+                    "docs/results/trials_fast/reorient_sim/summary.json",
                     {"supermag": "supermag_fast", "supermag_sym": "supermag_fast", "bilinear": None})
 ROBUST_SCENE = TrialRun("robust scene: `configs/scenes/reorient_robust.toml`, 300 presentations, 2-15 N, a drawn "
                         "sensor per trial, calibrated re-grasp below 0.8",
@@ -98,7 +98,7 @@ ROBUST_SCENE_FAST = TrialRun(ROBUST_SCENE.scene, "docs/results/robust/fast_vs_co
 TRIAL_RUNS = (
     MAIN_JOB,
     TrialRun("study: `tasks/reorient_study.toml`, 300 presentations of the same rods, another seed",
-             "docs/results/reorient_study/summary.json",
+             "docs/results/trials_fast/reorient_study/summary.json",
              {"supermag": "supermag_fast", "supermag_sym": "supermag_fast", "bilinear": None}),
     TrialRun("the main job's scene, 600 paired presentations (`docs/results/fast_model/compare_sim.toml`)",
              "docs/results/fast_model/compare_sim_summary.md",
@@ -111,10 +111,10 @@ TRIAL_RUNS = (
     TrialRun(ROBUST_SCENE.scene, "docs/results/robust/fast_vs_compact/trials_compact.md",
              {"supermag": "supermag_compact", "supermag_esc": "supermag_compact", "bilinear": None}),
     TrialRun("the paper's experiment: `tasks/paper_experiment.toml`, 3 rods x 2 angles (the paper: 6/6 against 1/6)",
-             "docs/results/paper_experiment/summary.json",
+             "docs/results/trials_fast/paper_experiment/summary.json",
              {"supermag": "supermag_fast", "supermag_sym": "supermag_fast", "bilinear": None}),
     TrialRun("slot insertion: `tasks/slot_insertion.py`, 60 presentations, within 5 deg and 1 mm of the slot",
-             "docs/results/slot_insertion/summary.md",
+             "docs/results/trials_fast/slot_insertion/summary.md",
              {"supermag": "supermag_fast", "supermag_sym": "supermag_fast", "bilinear": None}),
 )
 
