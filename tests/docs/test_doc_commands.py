@@ -93,6 +93,12 @@ def environment() -> dict[str, str]:
     return env
 
 
+def unsafe_code(block: Block) -> bool:
+    """Whether the block (its code, not its comments) installs packages or runs the tests."""
+    code = re.sub(r"(^|\s)#.*", "", block.code) if block.lang == "bash" else block.code
+    return bool(UNSAFE.search(code))
+
+
 def run_block(block: Block, cwd: Path) -> subprocess.CompletedProcess:
     if block.lang == "python":
         script = cwd / f"_doc_block_{block.line}.py"
@@ -136,7 +142,7 @@ def test_page_blocks_run(page, tmp_path):
     if page in PENDING:
         pytest.skip(f"{page}: its blocks carry no doc-test markers yet")
     todo = [b for b in blocks(page, (ROOT / page).read_text()) if b.lang in LANGUAGES and b.skip is None]
-    unsafe = [b.where for b in todo if UNSAFE.search(b.code)]
+    unsafe = [b.where for b in todo if unsafe_code(b)]
     assert not unsafe, (f"{', '.join(unsafe)}: installs packages or runs the tests; mark it "
                         "<!-- doc-test: skip (installs packages) --> (nothing of this page was run)")
     if not todo:
@@ -156,6 +162,10 @@ def test_page_blocks_run(page, tmp_path):
 def test_installs_are_never_run_unmarked():
     assert UNSAFE.search('pip install -e ".[serial]"') and UNSAFE.search("python -m pytest tests/x")
     assert not UNSAFE.search("tactile-manip simulate --out data/pip_install_notes.npz")
+    commented = blocks("p.md", '```bash\ntactile-manip import --arrays x.h5 --out d.npz  # pip install -e ".[hdf5]"\n'
+                                '```\n')
+    assert not unsafe_code(commented[0])
+    assert unsafe_code(blocks("p.md", "```bash\ntrue && pip install x  # quietly\n```\n")[0])
 
 
 def test_failing_block_is_reported_with_its_place(tmp_path):
