@@ -63,7 +63,7 @@ def run(args: argparse.Namespace) -> int:
         history = args.history or str(Path(args.checkpoint).with_name("history.json"))
         table = Path(args.table).read_text() if args.table else ""
         latency = Path(args.latency).read_text() if args.latency else ""
-        write_model_card(args.card, meta, history, table_md=table, machine=_cpu_name(),
+        write_model_card(args.card, meta, history, name=Path(args.out).stem, table_md=table, machine=_cpu_name(),
                          commands=_commands(args), latency=latency)
         print(f"wrote {args.card}")
     return 0
