@@ -230,7 +230,7 @@ def test_load_npz_missing_arrays(saved, tmp_path):
 def test_load_wrong_format_version(saved, tmp_path):
     path = _rewrite(saved, tmp_path / "v.npz", metadata=_metadata_with(saved, format_version=FORMAT_VERSION + 1))
     msg = _load_error(path)
-    assert f"format version {FORMAT_VERSION + 1}" in msg and f"reads 1 and {FORMAT_VERSION}" in msg
+    assert f"format version {FORMAT_VERSION + 1}" in msg and f"reads 1, 2, {FORMAT_VERSION}" in msg
 
 
 def test_load_metadata_not_json(saved, tmp_path):
