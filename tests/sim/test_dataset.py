@@ -26,7 +26,7 @@ from tactile_manip.version import __version__, code_version
 
 ROOT = Path(__file__).resolve().parents[2]
 SUPERMAG = ROOT / "configs" / "dataset" / "supermag.toml"
-ARRAYS = ("readings", "images", "object_index", "object_names", "split")
+ARRAYS = ("readings", "images", "targets", "object_index", "object_names", "split")
 EXTRAS = ("field_raw_ut", "saturated", "pose", "force_n", "approach_mm", "skin_approach_mm", "contact")
 
 
