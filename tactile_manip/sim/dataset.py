@@ -201,11 +201,16 @@ def _simulate(task: _Task) -> dict[str, Any]:
 
 def sample_targets(s: PairedSample) -> list[float]:
     """The :data:`SIM_TARGETS` of one press: centre of pressure on the magnetic skin (mm, pad frame), its
-    indentation depth (mm), normal force (N) and the contact flag; zeros for a press that misses the pad."""
+    indentation depth (mm), normal force (N) and the contact flag; zeros for a press that misses the pad.
+
+    A press that bottoms out (``bottomed_out``) indents the skin by its whole thickness, where the rigid base
+    stops it: its depth is that thickness, not the elastic model's extrapolation past it (which reaches tens
+    of millimetres on narrow shapes).
+    """
     if not (s.contact and s.pressure.area_mm2 > 0):
         return [0.0, 0.0, 0.0, 0.0, 0.0]
     x, y = s.pressure.centroid_mm
-    return [x, y, s.skin_approach_mm, s.force_n, 1.0]
+    return [x, y, min(s.skin_approach_mm, s.params.layer.thickness_mm), s.force_n, 1.0]
 
 
 def generate(cfg: DatasetConfig, *, workers: int = 0,

@@ -37,7 +37,7 @@ def test_targets_are_the_centre_of_pressure_depth_and_force():
     along = (x - pose[:, 0]) * np.cos(pose[:, 2]) + (y - pose[:, 1]) * np.sin(pose[:, 2])
     assert np.abs(along).max() > 0.5
     np.testing.assert_array_equal(data.target("force_n"), data.extra("force_n"))
-    np.testing.assert_array_equal(data.target("depth_mm"), data.extra("skin_approach_mm"))
+    np.testing.assert_array_equal(data.target("depth_mm"), np.minimum(data.extra("skin_approach_mm"), 2.5))
     assert (data.target("in_contact") == data.extra("contact")).all()
     assert (data.target("force_n") >= 2.0).all() and (data.target("force_n") <= 15.0).all()
     # the letter "R" (off-centre relief): its centre of pressure is not its origin either
@@ -54,6 +54,9 @@ def test_a_press_off_the_pad_has_zero_targets():
     assert not off.contact and sample_targets(off) == [0.0] * len(SIM_TARGETS)
     x, y, depth, force, flag = sample_targets(on)
     assert abs(y - 2.0) < 0.1 and abs(x) < 0.1 and depth > 0 and force == 5.0 and flag == 1.0
+    deep = pair.press(make_indenter("ridge", angle_deg=30.0, tip_radius_mm=0.0), IndenterPose(), 15.0, rng,
+                      render_depth=False)
+    assert deep.bottomed_out and deep.skin_approach_mm > 2.5 and sample_targets(deep)[2] == 2.5
 
 
 @pytest.mark.parametrize("name", ["contact_probe", "contact_unseen"])
