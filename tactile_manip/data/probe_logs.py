@@ -25,19 +25,17 @@ import numpy as np
 
 from tactile_manip.data.dataset import PairedDataset
 from tactile_manip.data.spec import ChannelSpec
-from tactile_manip.data.streams import Comparison, parse_comparison, read_csv_table, read_reading_stream
+from tactile_manip.data.streams import (TIME_COLUMN, Comparison, LabelStream, ReadingStream, board_layout,
+                                        label_stream, parse_comparison, reading_stream)
 from tactile_manip.data.targets import CONTACT_FLAG, target_from_label
 from tactile_manip.errors import DatasetError
 from tactile_manip.version import code_version
 
-TIME_COLUMN = "time_s"
 PROBE_SPLITS = ("chronological", "held_out_run")
 MATCHES = ("nearest", "linear")
 DEFAULT_LAYOUT = "anyskin-5"
 TOLERANCE_PERIODS = 3.0   # default matching tolerance, in median periods of the usable label rows
 
-ReadingStream = str | Path | np.ndarray | tuple  # a file, a (M, 1 + V) array, or (t_s, values)
-LabelStream = str | Path | np.ndarray | Mapping  # a CSV file, a (L, K) array, or {column: (L,) array}
 
 
 def from_probe_logs(readings: Sequence[ReadingStream], labels: Sequence[LabelStream], *, targets: Sequence[str],
@@ -79,7 +77,7 @@ def from_probe_logs(readings: Sequence[ReadingStream], labels: Sequence[LabelStr
     Raises:
         DatasetError: one line naming the run, file or column and what is wrong.
     """
-    board = _layout(layout)
+    board = board_layout(layout)
     if len(readings) != len(labels) or not readings:
         raise DatasetError(f"one label stream per sensor stream: got {len(readings)} sensor and {len(labels)} label "
                            f"streams")
@@ -93,8 +91,8 @@ def from_probe_logs(readings: Sequence[ReadingStream], labels: Sequence[LabelStr
     cond = parse_comparison(contact) if isinstance(contact, str) else contact
     names = _run_names(readings, run_names)
     plan = _TargetPlan(tuple(targets), cond)
-    runs = [_Run(names[i], *_reading_stream(readings[i], board, time_offset_s, baseline_s, names[i]),
-                 *_label_stream(labels[i], label_columns, names[i]), plan, cond, missing, tolerance_s, match)
+    runs = [_Run(names[i], *reading_stream(readings[i], board, time_offset_s, baseline_s, names[i]),
+                 *label_stream(labels[i], label_columns, names[i]), plan, cond, missing, tolerance_s, match)
             for i in range(len(readings))]
     split_arr = _split(runs, split, test_fraction, val_fraction, held_out_run)
     prov = {"source": "tactile_manip.data.from_probe_logs", "code_version": code_version(),
@@ -277,87 +275,6 @@ def _is_missing(values: np.ndarray, column: str, missing: Any) -> np.ndarray:
         return np.zeros(len(values), bool)
     value = missing.get(column) if isinstance(missing, Mapping) else missing
     return np.zeros(len(values), bool) if value is None else values == float(value)
-
-
-def _layout(layout: Any):
-    from tactile_manip.sensors.layout import BoardLayout, get_layout
-
-    if isinstance(layout, BoardLayout):
-        return layout
-    try:
-        return get_layout(str(layout))
-    except ValueError as e:
-        raise DatasetError(str(e)) from None
-
-
-def _reading_stream(item: ReadingStream, board, offset_s: float, baseline_s: float | None,
-                    run: str) -> tuple[np.ndarray, np.ndarray, dict]:
-    """(t_s (M,), readings (M, R, C, 3) float32 on the layout, info)."""
-    if isinstance(item, (str, Path)):
-        t, values, info = read_reading_stream(item)
-    elif isinstance(item, tuple):
-        if len(item) != 2:
-            raise DatasetError(f"run {run}: a sensor stream pair is (t_s, values), got {len(item)} items")
-        t, values, info = np.asarray(item[0], np.float64), np.asarray(item[1], np.float64), {"kind": "arrays"}
-    else:
-        table = np.asarray(item, np.float64)
-        if table.ndim != 2:
-            raise DatasetError(f"run {run}: a sensor stream array is (M, 1 + values), got shape {table.shape}")
-        t, values, info = table[:, 0], table[:, 1:], {"kind": "array", "columns": int(table.shape[1])}
-    where = info.get("source", f"run {run} readings")
-    if values.ndim == 4:  # a recording: already cells of its own layout
-        if info.get("layout") not in (None, board.name):
-            raise DatasetError(f"{where}: recorded with layout {info['layout']}, not {board.name}")
-        readings = values.astype(np.float32)
-    else:
-        flat = values.reshape(len(values), -1) if values.ndim == 3 else values
-        if flat.ndim != 2 or flat.shape[1] != 3 * board.n_chips:
-            if info["kind"] == "arrays":
-                raise DatasetError(f"{where}: values of shape {values.shape}, expected (M, {3 * board.n_chips}) or "
-                                   f"(M, {board.n_chips}, 3): x, y, z of each chip of layout {board.name}")
-            raise DatasetError(f"{where}: {flat.shape[1] + 1} columns, expected {1 + 3 * board.n_chips}: time (s), "
-                               f"then x, y, z of each of the {board.n_chips} chips of layout {board.name}")
-        readings = board.readings_from_chips(flat.reshape(len(flat), board.n_chips, 3))
-    if len(t) != len(readings):
-        raise DatasetError(f"{where}: {len(t)} times for {len(readings)} readings")
-    t = t + float(offset_s)
-    if baseline_s is not None:
-        first = np.isfinite(t) & (t <= np.nanmin(t) + baseline_s) & np.isfinite(readings).all(axis=(1, 2, 3))
-        if not first.any():
-            raise DatasetError(f"{where}: no finite reading in the first {baseline_s:g} s to take a baseline from")
-        readings = readings - readings[first].mean(axis=0, dtype=np.float64).astype(np.float32)
-        info = dict(info, baseline_rows=int(first.sum()))
-    return t, readings, info
-
-
-def _label_stream(item: LabelStream, columns: Sequence[str] | None, run: str) -> tuple[dict[str, np.ndarray], dict]:
-    """{column: (L,) float64} with a ``time_s`` column, and info."""
-    if isinstance(item, Mapping):
-        labels = {str(k): np.asarray(v, np.float64).reshape(-1) for k, v in item.items()}
-        info = {"kind": "mapping"}
-        where = f"run {run} labels"
-    else:
-        header = None
-        if isinstance(item, (str, Path)):
-            table, header = read_csv_table(item, what="labels")
-            info, where = {"source": str(item), "kind": "csv"}, f"labels {item}"
-        else:
-            table, info, where = np.asarray(item, np.float64), {"kind": "array"}, f"run {run} labels"
-            if table.ndim != 2:
-                raise DatasetError(f"{where}: expected a (rows, columns) array, got shape {table.shape}")
-        names = list(columns) if columns is not None else header
-        if names is None:
-            raise DatasetError(f"{where}: no header; name its columns (label columns, e.g. time_s,x_mm,y_mm,z_mm)")
-        if table.shape[1] != len(names):
-            raise DatasetError(f"{where}: {table.shape[1]} columns, but the label columns name {len(names)} "
-                               f"({','.join(names)})")
-        labels = {n: table[:, i] for i, n in enumerate(names)}
-    if TIME_COLUMN not in labels:
-        raise DatasetError(f"{where}: no {TIME_COLUMN!r} column among {','.join(labels)} (label times in s)")
-    lengths = {len(v) for v in labels.values()}
-    if len(lengths) != 1:
-        raise DatasetError(f"{where}: columns of different lengths {sorted(lengths)}")
-    return labels, info
 
 
 def _run_names(readings: Sequence[ReadingStream], names: Sequence[str] | None) -> list[str]:
