@@ -42,6 +42,7 @@ def run(args: argparse.Namespace) -> int:
     readings, pixel_mm, extra = None, args.pixel_mm or 0.1, {}
     if args.data:
         data = load_datasets(args.data)
+        data.require_images("export of an image model with --data")
         readings = data.readings[data.indices("val")]
         pixel_mm = args.pixel_mm or data.image.pixel_mm or 0.1
         trained_on = sorted(set(data.objects(data.indices("train")).tolist()))
