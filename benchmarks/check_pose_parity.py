@@ -8,7 +8,7 @@ Reconstructs every test-split reading (unseen objects) with the model, then runs
 the full-image float64 :func:`~tactile_manip.perception.pose_reference.reference_angle_from_image` on each
 image, interleaved, and prints per path the largest differences (angle in degrees, confidence, centroid, area),
 the number of images whose defined flag or reason differ, and the post-processing time (p50 / p99, one thread). Writes
-benchmarks/results/pose_parity.json. The acceptance bar of issue 15 is a largest angle difference of
+benchmarks/results/pose_parity.json. The acceptance bar is a largest angle difference of
 0.05 deg with no flag changed; the script reports, it does not assert.
 """
 

@@ -10,6 +10,9 @@ docs/collection.md); here every part is the simulated twin behind the same inter
 3. write the paired dataset, train a tiny CVAE with ``tactile-manip train``, export it, and evaluate it with
    ``tactile-manip evaluate`` on the unseen hex bar, all on the collected file as it is.
 
+Needs the extras 'serial' (the serial driver reads the emulated board) and 'train' (torch, onnx and
+onnxruntime, for the model); without one it stops at once with the line that installs it.
+
 Run: python examples/collect_walkthrough.py [--presses 18]  (about 1-2 minutes; writes examples_out/collect/)
 """
 
@@ -29,10 +32,23 @@ from tactile_manip.collection.collect_sim import SimulatedRig, calibrate_simulat
 from tactile_manip.sensors.emulator import FaultConfig
 from tactile_manip.collection.pair_log import dataset_from_pair_logs
 from tactile_manip.data import save_dataset
+from tactile_manip.extras import MissingExtraError, require
 from tactile_manip.sim.vbts import lookup_table
 
 OUT = Path("examples_out/collect")
 TINY_TRAIN = 'preset = "small"\nepochs = 2\nbatch_size = 8\nlr = 3e-3\nthreads = 1\n'
+# optional packages of the walkthrough: module of EXTRAS -> what needs it
+NEEDS = {"serial": "reading the emulated board", "torch": "training", "onnx": "export",
+         "onnxruntime": "export's parity check and evaluate"}
+
+
+def check_extras() -> None:
+    """Stop with one line naming the extra to install, before any work, when an optional package is missing."""
+    for module, purpose in NEEDS.items():
+        try:
+            require(module, f"the walkthrough ({purpose})")
+        except MissingExtraError as e:
+            raise SystemExit(f"collect_walkthrough.py: error: {e}") from None
 
 
 def calibrate(seed: int):
@@ -93,6 +109,7 @@ def main() -> None:
     p.add_argument("--presses", type=int, default=18, help="presses to collect (cycling Allen key, R, hex bar)")
     p.add_argument("--seed", type=int, default=0)
     args = p.parse_args()
+    check_extras()
     OUT.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     cal, camera_cfg = calibrate(args.seed)

@@ -25,7 +25,8 @@ from tactile_manip.version import __version__
 COMMANDS: dict[str, tuple[str, str]] = {
     "demo": ("tactile_manip.commands.demo", "press the paper's objects on the simulated sensor pair"),
     "simulate": ("tactile_manip.commands.simulate", "generate a paired dataset from a config"),
-    "import": ("tactile_manip.commands.import_data", "make a paired dataset from plain arrays (.npy, .npz, HDF5)"),
+    "import": ("tactile_manip.commands.import_data",
+               "make a dataset from plain arrays (.npy, .npz, HDF5) or from a probe rig's logs (labelled presses)"),
     "show": ("tactile_manip.commands.show", "render a sample (depth image and 4x4x3 field) to PNG"),
     "params": ("tactile_manip.commands.params", "list every simulator parameter with source and range"),
     "train": ("tactile_manip.commands.train", "train a SuperMag CVAE on a paired dataset"),

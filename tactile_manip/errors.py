@@ -44,7 +44,7 @@ class CalibrationError(SensorError, ValueError):
 
 
 class ProtocolError(SensorError, ValueError):
-    """Bytes or values that do not fit the MBTS wire protocol (DESIGN.md section 6)."""
+    """Bytes or values that do not fit the MBTS wire protocol (docs/design.md, Wire protocol)."""
 
 
 class RecordingError(SensorError, ValueError):

@@ -1,6 +1,6 @@
 """Optional packages: which pip extra installs each one, and one clear error when one is missing.
 
-Heavy or optional packages are imported where they are used (DESIGN.md section 2). :func:`require` imports
+Heavy or optional packages are imported where they are used (docs/design.md, Layers). :func:`require` imports
 one and, when it is missing, raises :class:`MissingExtraError` naming the extra and the command that installs
 it in a source checkout; :func:`missing_extra_message` turns any ImportError of such a package into that line.
 """

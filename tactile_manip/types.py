@@ -13,7 +13,7 @@ class TactileReading:
 
     Attributes:
         field_ut: (R, C, 3) float32, baseline-subtracted field in microtesla, axes (x, y, z) of the pad frame,
-            row 0 at +y, column 0 at -x (DESIGN.md section 4). Equal to ``field_raw_ut`` until a baseline is set.
+            row 0 at +y, column 0 at -x (docs/design.md). Equal to ``field_raw_ut`` until a baseline is set.
         field_raw_ut: (R, C, 3) float32, field as the chips report it, microtesla.
         saturated: (R, C, 3) bool, channels at the ADC rail (their value is a bound, not a measurement).
         t_host_s: host monotonic time (``time.monotonic()``) when the frame became available, s.

@@ -1,7 +1,9 @@
-"""Fixtures shared across layers: ONNX graphs carrying the shipped model's metadata (for load-time checks)."""
+"""Fixtures shared across layers: ONNX graphs carrying the shipped model's metadata (for load-time checks);
+the real eFlesh probe-rig runs where they are on disk."""
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable
 from pathlib import Path
 
@@ -9,6 +11,20 @@ import numpy as np
 import pytest
 
 SHIPPED_MODEL = Path(__file__).resolve().parents[1] / "models" / "supermag_fast.onnx"
+EFLESH_ENV = "TACTILE_MANIP_EFLESH_DIR"  # folder of the eFlesh characterisation runs (spatial_*/, normal_*/)
+
+
+@pytest.fixture(scope="session")
+def eflesh_dir() -> Path:
+    """The eFlesh development runs (two folders of sensor.csv, sensor_post_baselines.csv, states.csv): from
+    ``$TACTILE_MANIP_EFLESH_DIR``, else ``shared/data/eflesh_dev`` beside the checkout; skipped when absent."""
+    root = Path(__file__).resolve().parents[1]
+    candidates = [Path(os.environ[EFLESH_ENV])] if os.environ.get(EFLESH_ENV) else []
+    candidates += [root.parent / "shared" / "data" / "eflesh_dev", root.parents[1] / "shared" / "data" / "eflesh_dev"]
+    for folder in candidates:
+        if (folder / "spatial_20250316_155729" / "states.csv").is_file():
+            return folder
+    pytest.skip(f"the eFlesh runs are not on this machine (set {EFLESH_ENV} to their folder)")
 
 
 @pytest.fixture

@@ -1,4 +1,4 @@
-/* SuperMag wire frame (DESIGN.md section 6): encoder, CRC and the documented self-test pattern.
+/* SuperMag wire frame (docs/design.md, Wire protocol): encoder, CRC and the documented self-test pattern.
  *
  * Portable C99 with no Arduino or libc I/O dependency, so the sketch and the host tool `frame_dump`
  * compile the very same bytes. Little-endian on the wire whatever the CPU's byte order.

@@ -1,4 +1,4 @@
-/* SuperMag reference firmware: ESP32 + 16 MLX90393 on one SPI bus, streaming DESIGN.md section 6 at 125 Hz.
+/* SuperMag reference firmware: ESP32 + 16 MLX90393 on one SPI bus, streaming the wire protocol of docs/design.md at 125 Hz.
  *
  * Bus: VSPI (SCK 18, MISO 19, MOSI 23), mode 3, 4 MHz. Chip selects come from a 74HC154 4-to-16 decoder:
  * address lines A0..A3 on GPIO 25, 26, 27, 32 pick chip i (row-major over the 4x4 grid), and GPIO 33 drives

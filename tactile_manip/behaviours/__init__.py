@@ -5,5 +5,5 @@
 - :mod:`~tactile_manip.behaviours.place`: put a grasped rod into a slot at a commanded angle and position,
   correcting for the measured in-hand angle and contact offset.
 
-A behaviour receives its hardware; it never builds it (DESIGN.md section 2).
+A behaviour receives its hardware; it never builds it (docs/design.md, Layers).
 """

@@ -1,4 +1,4 @@
-"""Grasp, estimate, reorient: the paper's in-hand reorientation behaviour (DESIGN.md section 8).
+"""Grasp, estimate, reorient: the paper's in-hand reorientation behaviour (docs/design.md, Robot side).
 
 The object is between the open fingers. The gripper closes to the force threshold, the tactile sensor is
 read, the estimator gives the in-hand angle and its confidence, and the arm turns the hand (and with it the

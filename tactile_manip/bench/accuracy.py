@@ -53,6 +53,7 @@ def load_readings(data_path: str | Path | None, config_path: str | Path, *,
     description of where they came from."""
     if data_path is not None and Path(data_path).exists():  # a folder or a foreign file is refused, not replaced
         data = load_dataset(data_path)
+        data.require_images(f"bench on {data_path}")
         source = {"source": f"{data_path} test split", "data_fingerprint": data.fingerprint()}
         if per_object is not None:
             data = data.subset(first_per_object(data, "test", per_object))

@@ -48,7 +48,7 @@ class ModelEntry:
     runtimes: tuple[str, ...] | None = None
 
 
-DECODER_CANDIDATES = "configs/train/decoder_*.toml"  # faster decoders (issue 15), timed untrained until trained
+DECODER_CANDIDATES = "configs/train/decoder_*.toml"  # faster decoders, timed untrained until trained
 SHIPPED_MODEL = "models/supermag_fast.onnx"
 SHIPPED_RECIPE = "models/supermag_fast.train.toml"  # the training config copied beside it
 FAST_CONFIGS = "configs/train/fast*.toml"  # the fast decoder on the full recipe: measured when trained, else skipped

@@ -14,7 +14,7 @@ no-contact reference. :class:`DepthPipeline` does, per frame:
 6. *mirror*: the VBTS faces the MBTS in the symmetric gripper, so its pad frame is the MBTS pad frame turned
    about a pad axis (``mirror="x"``: x -> -x); *resize*: area-averaged to ``out_px`` (200) pixels a side.
 
-The output follows DESIGN.md section 4 in the MBTS pad frame: float32 (200, 200) mm, >= 0, pixel (0, 0) at
+The output follows the conventions of docs/design.md in the MBTS pad frame: float32 (200, 200) mm, >= 0, pixel (0, 0) at
 the (-x, +y) corner, 0.1 mm per pixel. The lookup table comes from a ball press
 (:mod:`tactile_manip.collection.vbts_calibration`).
 """
@@ -199,7 +199,7 @@ class DepthParams:
     threshold_levels: float = 2.0     # lighting threshold: grey differences below this read as 0, levels
     blur_mm: float = 0.05             # Gaussian sigma on the grey difference before the lookup, mm (0: off)
     smooth_mm: float = 0.07           # Gaussian sigma of each smoothing pass on the depth, mm (0: off)
-    smooth_passes: int = 3            # smoothing passes (DESIGN.md 5: three of ~0.07 mm)
+    smooth_passes: int = 3            # smoothing passes (docs/design.md, Physics sources: three of ~0.07 mm)
 
     def __post_init__(self) -> None:
         for name in ("threshold_levels", "blur_mm", "smooth_mm"):
@@ -305,7 +305,7 @@ class DepthPipeline:
         return depth
 
     def depth(self, image: np.ndarray) -> np.ndarray:
-        """Depth image (out_px, out_px) float32 mm >= 0 in the MBTS pad frame (DESIGN.md 4) from a camera frame.
+        """Depth image (out_px, out_px) float32 mm >= 0 in the MBTS pad frame (docs/design.md) from a camera frame.
 
         Raises:
             ValueError: the image is not uint8 (H, W) / (H, W, 3) of the calibrated camera shape.

@@ -70,6 +70,7 @@ def run(args: argparse.Namespace) -> int:
         reconstructor = SymmetrizedReconstructor(reconstructor)
     estimator = TactilePoseEstimator(reconstructor)
     fit = load_dataset(args.fit)
+    fit.require_images(f"calibrate --fit {args.fit}")
     _, fit_conf, fit_err = _rods(fit, "--fit", args.fit, args.fit_split, estimator)
     if fit_conf.size < MIN_FIT_PRESSES:
         raise ConfigError(f"--fit {args.fit} has {fit_conf.size} rod presses in split {args.fit_split!r}; "
@@ -77,6 +78,7 @@ def run(args: argparse.Namespace) -> int:
     cal = ConfidenceCalibration.fit(fit_conf, fit_err, tolerance_deg=tol, prior_samples=args.samples,
                                     symmetrized=args.symmetrized, aperture=estimator.params.aperture)
     report = load_dataset(args.report)
+    report.require_images(f"calibrate --report {args.report}")
     _, raw, err = _rods(report, "--report", args.report, args.report_split, estimator)
     if raw.size < REPORT_BINS:
         raise ConfigError(f"--report {args.report} has {raw.size} rod presses in split {args.report_split!r}; "

@@ -47,6 +47,7 @@ def run(args: argparse.Namespace) -> int:
     if args.model or args.symmetrized or args.inception_onnx:
         require("onnxruntime", "evaluating exported models")
     data = load_dataset(args.data)
+    data.require_images(f"evaluate's image metrics (PSNR, SSIM, angle) on {args.data}")
     if not len(data.indices(args.split)):
         raise DatasetError(f"{args.data} has no {args.split} split to evaluate (its splits: "
                            f"{', '.join(sorted(set(data.split.tolist()))) or 'none'}); choose one with --split, or "

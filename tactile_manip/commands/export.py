@@ -42,6 +42,7 @@ def run(args: argparse.Namespace) -> int:
     readings, pixel_mm, extra = None, args.pixel_mm or 0.1, {}
     if args.data:
         data = load_datasets(args.data)
+        data.require_images("export of an image model with --data")
         readings = data.readings[data.indices("val")]
         pixel_mm = args.pixel_mm or data.image.pixel_mm or 0.1
         trained_on = sorted(set(data.objects(data.indices("train")).tolist()))
@@ -63,7 +64,7 @@ def run(args: argparse.Namespace) -> int:
         history = args.history or str(Path(args.checkpoint).with_name("history.json"))
         table = Path(args.table).read_text() if args.table else ""
         latency = Path(args.latency).read_text() if args.latency else ""
-        write_model_card(args.card, meta, history, table_md=table, machine=_cpu_name(),
+        write_model_card(args.card, meta, history, name=Path(args.out).stem, table_md=table, machine=_cpu_name(),
                          commands=_commands(args), latency=latency)
         print(f"wrote {args.card}")
     return 0

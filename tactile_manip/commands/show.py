@@ -41,6 +41,7 @@ def _from_dataset(args: argparse.Namespace):
     from tactile_manip.data import load_dataset
 
     data = load_dataset(check_nonblank("--data", args.data))
+    data.require_images(f"show --data {args.data}")
     if not 0 <= args.index < len(data):
         raise ValueError(f"--index must be in [0, {len(data) - 1}], got {args.index}")
     i = args.index

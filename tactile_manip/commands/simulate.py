@@ -1,4 +1,5 @@
-"""``tactile-manip simulate``: generate a paired dataset (readings + depth images) from a config."""
+"""``tactile-manip simulate``: generate a dataset from a config: readings, depth images (unless the config
+says ``images = false``) and contact targets (centre of pressure, depth, force, contact flag)."""
 
 from __future__ import annotations
 
@@ -60,8 +61,9 @@ def run(args: argparse.Namespace) -> int:
         remove_blocks(out)
     counts = ", ".join(f"{s} {len(data.indices(s))}" for s in SPLITS)
     seconds = data.provenance["generation_seconds"]
-    print(f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB): {len(data)} pairs ({counts}) in {seconds:.1f} s, "
-          f"{len(data) / seconds:.1f} pairs/s")
+    what = "pairs" if data.has_images else "presses (no images)"
+    print(f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB): {len(data)} {what} ({counts}) in {seconds:.1f} s, "
+          f"{len(data) / seconds:.1f} presses/s; targets {', '.join(data.target_names)}")
     for note in _physics_notes(data, thickness_mm=cfg.sim.layer.thickness_mm):
         print(f"note: {note}")
     return 0

@@ -1,14 +1,17 @@
-"""A paired dataset in memory: readings with named channels, images with a unit, splits, groups, extras.
+"""A dataset in memory: readings with named channels, and images with a unit, per-sample targets, or both.
 
 Shapes (N samples):
 
 - ``readings`` (N, R, C, A) float32: one reading per sample, R x C taxels of A channels (``channels``);
-- ``images`` (N, H, W): the stored image values (any real dtype; ``image`` maps them to its unit);
+- ``images`` (N, H, W) or None: the stored image values (any real dtype; ``image`` maps them to its unit);
+- ``targets`` (N, K) float32 or None, named by ``target_names`` (K,) with their unit as suffix (``x_mm``,
+  ``y_mm``, ``depth_mm``, ``force_n``, ``shear_x_n``, ``shear_y_n``, ``in_contact`` 0/1; see
+  :mod:`tactile_manip.data.targets`): labelled presses. A dataset holds images, targets or both;
 - ``split`` (N,) str in ``SPLITS``;
 - ``object_index`` (N,) int16 into ``object_names`` (K,) str, optional: what was pressed (per-object tables,
   training-object filters);
-- ``groups`` (N,) int64, optional: samples that belong together (one contact, one participant); a split never
-  cuts a group;
+- ``groups`` (N,) int64, optional: samples that belong together (one contact, one participant, one recorded
+  run); a random split never cuts a group, a chronological split of recorded runs cuts each run in time;
 - ``extras``: optional per-sample arrays the producer has, e.g. ``pose`` (N, 5) ``[x_mm, y_mm, yaw_rad,
   tilt_x_rad, tilt_y_rad]``, ``force_n``, ``approach_mm``, ``skin_approach_mm``, ``contact`` (bool),
   ``field_raw_ut`` and ``saturated`` (N, R, C, A);
@@ -27,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from tactile_manip.data.spec import ChannelSpec, ImageSpec
+from tactile_manip.data.targets import check_target_names, check_targets, target_unit
 from tactile_manip.errors import DatasetError
 
 SPLITS = ("train", "val", "test")
@@ -34,10 +38,10 @@ SPLITS = ("train", "val", "test")
 
 @dataclass(frozen=True, eq=False)
 class PairedDataset:
-    """Arrays of a paired dataset (see the module docstring for shapes and units)."""
+    """Arrays of a dataset (see the module docstring for shapes and units)."""
 
     readings: np.ndarray
-    images: np.ndarray
+    images: np.ndarray | None
     split: np.ndarray
     channels: ChannelSpec = field(default_factory=ChannelSpec)
     image: ImageSpec = field(default_factory=ImageSpec)
@@ -46,14 +50,25 @@ class PairedDataset:
     groups: np.ndarray | None = None
     extras: dict[str, np.ndarray] = field(default_factory=dict)
     provenance: dict[str, Any] = field(default_factory=dict)
+    targets: np.ndarray | None = None
+    target_names: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         n = len(self)
         if self.readings.ndim != 4 or self.readings.shape[-1] != self.channels.count:
             raise DatasetError(f"readings: expected shape (N, rows, cols, {self.channels.count}) for channels "
                                f"{list(self.channels.names)}, got {self.readings.shape}")
-        if self.images.ndim != 3 or self.images.shape[0] != n:
+        if self.images is None and self.targets is None:
+            raise DatasetError("a dataset holds images, per-sample targets, or both; this one has neither")
+        if self.images is not None and (self.images.ndim != 3 or self.images.shape[0] != n):
             raise DatasetError(f"images: expected shape ({n}, H, W), got {self.images.shape}")
+        if self.targets is None:
+            if self.target_names:
+                raise DatasetError(f"target names {list(self.target_names)} without targets")
+        else:
+            names = check_target_names(self.target_names)
+            object.__setattr__(self, "target_names", names)
+            object.__setattr__(self, "targets", check_targets(self.targets, names, n))
         if self.split.shape != (n,):
             raise DatasetError(f"split: expected shape ({n},), got {self.split.shape}")
         if (self.object_index is None) != (self.object_names is None):
@@ -77,13 +92,48 @@ class PairedDataset:
 
     @property
     def image_shape(self) -> tuple[int, int]:
-        """Image height and width (H, W), pixels."""
-        return int(self.images.shape[1]), int(self.images.shape[2])
+        """Image height and width (H, W), pixels (DatasetError for a dataset without images)."""
+        images = self.require_images("image_shape")
+        return int(images.shape[1]), int(images.shape[2])
+
+    @property
+    def has_images(self) -> bool:
+        """Whether the dataset holds images (a labelled-press dataset may hold only targets)."""
+        return self.images is not None
+
+    @property
+    def has_targets(self) -> bool:
+        """Whether the dataset holds per-sample targets (``target_names`` says which)."""
+        return self.targets is not None
+
+    def require_images(self, what: str) -> np.ndarray:
+        """The stored images; for a dataset without them, DatasetError saying that ``what`` needs images.
+
+        Every consumer of images calls it first, so a targets-only dataset is refused in one line that says
+        what it holds and where labelled presses are trained instead.
+        """
+        if self.images is None:
+            names = ", ".join(self.target_names)
+            raise DatasetError(f"{what} needs images; this dataset holds targets only ({names}): labelled presses "
+                               f"train and evaluate as contact models (docs/contact.md)")
+        return self.images
 
     # --- values --------------------------------------------------------------------------------------------
+    def target(self, name: str) -> np.ndarray:
+        """Target ``name`` (N,) float32 in the unit its name carries; DatasetError naming the targets there are."""
+        if self.targets is None or name not in self.target_names:
+            have = ", ".join(self.target_names) or "none"
+            raise DatasetError(f"the dataset has no target {name!r} (its targets: {have})")
+        return self.targets[:, self.target_names.index(name)]
+
+    def target_units(self) -> dict[str, str]:
+        """Each target's unit, by name ("1" for the ``in_contact`` flag)."""
+        return {n: target_unit(n) for n in self.target_names}
+
     def image_values(self, index: np.ndarray | slice | None = None) -> np.ndarray:
         """Images (n, H, W) float32 in the image unit for ``index`` (all samples when None)."""
-        stored = self.images if index is None else self.images[index]
+        images = self.require_images("image_values()")
+        stored = images if index is None else images[index]
         out = stored.astype(np.float32) * np.float32(self.image.scale)
         return out + np.float32(self.image.offset) if self.image.offset else out
 
@@ -139,27 +189,34 @@ class PairedDataset:
         def take(a: np.ndarray | None) -> np.ndarray | None:
             return None if a is None else a[index]
 
-        return PairedDataset(readings=self.readings[index], images=self.images[index], split=self.split[index],
+        return PairedDataset(readings=self.readings[index], images=take(self.images), split=self.split[index],
                              channels=self.channels, image=self.image, object_index=take(self.object_index),
                              object_names=self.object_names, groups=take(self.groups),
-                             extras={k: v[index] for k, v in self.extras.items()}, provenance=self.provenance)
+                             extras={k: v[index] for k, v in self.extras.items()}, provenance=self.provenance,
+                             targets=take(self.targets), target_names=self.target_names)
 
     def fingerprint(self) -> str:
-        """SHA-256 (first 16 hex) over readings, stored images, splits and objects: identifies training data.
+        """SHA-256 (first 16 hex) over readings, stored images, splits, objects, groups and targets: identifies
+        training data.
 
-        Over the same bytes as format version 1 hashed, so a file converted from it keeps its fingerprint.
+        An image dataset hashes the same bytes as format version 1 did, so a file converted from it keeps its
+        fingerprint; targets and their names are hashed after them.
         """
         h = hashlib.sha256()
-        parts = [self.readings, self.images, self.split.astype("U5")]
+        parts = [a for a in (self.readings, self.images) if a is not None] + [self.split.astype("U5")]
         parts += [a for a in (self.object_index, self.groups) if a is not None]
+        if self.targets is not None:
+            parts += [self.targets, np.array(",".join(self.target_names))]
         for a in parts:
             h.update(np.ascontiguousarray(a).tobytes())
         return h.hexdigest()[:16]
 
     def describe(self) -> dict[str, Any]:
-        """What the data is, for model metadata and reports (JSON-able)."""
+        """What the data is, for model metadata and reports (JSON-able); image entries are None without images."""
         return {"samples": len(self), "grid": list(self.grid), "channels": self.channels.to_dict(),
-                "image_shape": list(self.image_shape), "image": self.image.to_dict(),
+                "image_shape": list(self.image_shape) if self.has_images else None,
+                "image": self.image.to_dict() if self.has_images else None,
+                "targets": self.target_units() if self.has_targets else None,
                 "splits": {s: int(np.sum(self.split == s)) for s in SPLITS}, "fingerprint": self.fingerprint(),
                 "source": self.provenance.get("source", "unknown")}
 
@@ -167,7 +224,8 @@ class PairedDataset:
 def concatenate(datasets: list[PairedDataset] | tuple[PairedDataset, ...]) -> PairedDataset:
     """One dataset of several, in order: same channels and image spec; object names merged, groups kept apart.
 
-    Splits are kept as each dataset has them. Extras are kept when every dataset has them with the same
+    Splits are kept as each dataset has them. Either every dataset has images or none has; likewise targets,
+    with the same names in the same order. Extras are kept when every dataset has them with the same
     per-sample shape; the others are left out and named in ``provenance["dropped_extras"]`` (a flag such as
     ``bottomed_out`` that one producer did not record is not invented for its samples). When any dataset has
     groups, one without gets one group per sample, so no group spans two datasets.
@@ -180,11 +238,18 @@ def concatenate(datasets: list[PairedDataset] | tuple[PairedDataset, ...]) -> Pa
         if d.channels != first.channels:
             raise DatasetError(f"dataset {i} has channels {d.channels.to_dict()}, dataset 0 has "
                                f"{first.channels.to_dict()}")
-        if d.image != first.image:
+        if d.has_images != first.has_images:
+            raise DatasetError(f"dataset {i} {'has' if d.has_images else 'has no'} images, dataset 0 "
+                               f"{'has' if first.has_images else 'has none'}")
+        if d.target_names != first.target_names:
+            raise DatasetError(f"dataset {i} has targets {list(d.target_names)}, dataset 0 has "
+                               f"{list(first.target_names)}")
+        if d.grid != first.grid:
+            raise DatasetError(f"dataset {i} has a {d.grid} grid, dataset 0 a {first.grid} grid")
+        if first.has_images and d.image != first.image:
             raise DatasetError(f"dataset {i} has images {d.image.to_dict()}, dataset 0 has {first.image.to_dict()}")
-        if d.grid != first.grid or d.image_shape != first.image_shape:
-            raise DatasetError(f"dataset {i} has a {d.grid} grid and {d.image_shape} images, dataset 0 a "
-                               f"{first.grid} grid and {first.image_shape} images")
+        if first.has_images and d.image_shape != first.image_shape:
+            raise DatasetError(f"dataset {i} has {d.image_shape} images, dataset 0 {first.image_shape} images")
     object_index, names = None, None
     if any(d.object_names is not None for d in parts):  # a dataset that names none is the object "all"
         names = list(dict.fromkeys(name for d in parts
@@ -207,8 +272,10 @@ def concatenate(datasets: list[PairedDataset] | tuple[PairedDataset, ...]) -> Pa
     extras = {k: np.concatenate([d.extras[k] for d in parts]) for k in common}
     provenance = {"source": "concatenate", "parts": [dict(d.provenance, fingerprint=d.fingerprint(), samples=len(d))
                                                      for d in parts], "dropped_extras": dropped}
-    return PairedDataset(readings=np.concatenate([d.readings for d in parts]),
-                         images=np.concatenate([d.images for d in parts]),
-                         split=np.concatenate([d.split for d in parts]), channels=first.channels, image=first.image,
-                         object_index=object_index, object_names=None if names is None else np.array(names),
-                         groups=groups, extras=extras, provenance=provenance)
+    def joined(name: str) -> np.ndarray | None:
+        return None if getattr(first, name) is None else np.concatenate([getattr(d, name) for d in parts])
+
+    return PairedDataset(readings=joined("readings"), images=joined("images"), split=joined("split"),
+                         channels=first.channels, image=first.image, object_index=object_index,
+                         object_names=None if names is None else np.array(names), groups=groups, extras=extras,
+                         provenance=provenance, targets=joined("targets"), target_names=first.target_names)

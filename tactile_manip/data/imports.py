@@ -18,14 +18,17 @@ from typing import Any
 import numpy as np
 
 from tactile_manip.data.dataset import SPLITS, PairedDataset
+from tactile_manip.data.io import numpy_file_kind
 from tactile_manip.data.spec import CHANNEL_KINDS, ChannelSpec, ImageSpec
+from tactile_manip.data.targets import check_target_names
 from tactile_manip.errors import DatasetError
 from tactile_manip.version import code_version
 
 HDF5_SUFFIXES = (".h5", ".hdf5", ".hdf")
 
 
-def from_arrays(readings: np.ndarray, images: np.ndarray, *, split: np.ndarray | None = None,
+def from_arrays(readings: np.ndarray, images: np.ndarray | None = None, *,
+                targets: dict[str, np.ndarray] | None = None, split: np.ndarray | None = None,
                 groups: np.ndarray | None = None, objects: np.ndarray | None = None,
                 val_fraction: float = 0.1, test_fraction: float = 0.1, seed: int = 0,
                 channel_names: Sequence[str] | None = None, channel_kind: str | None = None,
@@ -37,7 +40,10 @@ def from_arrays(readings: np.ndarray, images: np.ndarray, *, split: np.ndarray |
 
     Args:
         readings: (N, R, C, A) or (N, R, C) (one channel), any real dtype; stored as float32.
-        images: (N, H, W), any real dtype; stored as float32 (uint8 / uint16 are kept as they are).
+        images: (N, H, W), any real dtype; stored as float32 (uint8 / uint16 are kept as they are). May be
+            None when ``targets`` are given.
+        targets: per-sample targets by name, each (N,) (``{"x_mm": x, "force_n": f}``; names carry their
+            unit, see :mod:`tactile_manip.data.targets`); stored as one (N, K) float32 array.
         split: (N,) of 'train' / 'val' / 'test'; when None the samples (or whole ``groups``) are drawn at
             random into val and test by ``val_fraction`` and ``test_fraction`` with ``seed``.
         groups: (N,) ids of samples that belong together (one contact, one participant): never cut by a split.
@@ -52,20 +58,27 @@ def from_arrays(readings: np.ndarray, images: np.ndarray, *, split: np.ndarray |
     Raises:
         DatasetError: one line naming the array and what is wrong with it.
     """
-    readings, images = _as_real("readings", readings), _as_real("images", images)
+    if images is None and not targets:
+        raise DatasetError("images or targets: a dataset needs one of them (or both); neither was given")
+    readings = _as_real("readings", readings)
     if readings.ndim == 3:
         readings = readings[..., None]
     if readings.ndim != 4:
         raise DatasetError(f"readings: expected shape (N, rows, cols) or (N, rows, cols, channels), got "
                            f"{readings.shape} (rank {readings.ndim})")
-    if images.ndim != 3:
-        raise DatasetError(f"images: expected shape (N, H, W), got {images.shape} (rank {images.ndim})")
     n = readings.shape[0]
     if n == 0:
         raise DatasetError("readings: no samples (N = 0)")
-    _same_n("images", images, n)
     channels = _channels(readings.shape[-1], channel_names, channel_kind, reading_unit)
-    image = _image_spec(images, image_unit, pixel_mm, data_range, value_min)
+    target_arr, target_names = _targets(targets, n)
+    image, stored_images = ImageSpec(), None
+    if images is not None:
+        images = _as_real("images", images)
+        if images.ndim != 3:
+            raise DatasetError(f"images: expected shape (N, H, W), got {images.shape} (rank {images.ndim})")
+        _same_n("images", images, n)
+        image = _image_spec(images, image_unit, pixel_mm, data_range, value_min)
+        stored_images = images if images.dtype in (np.uint8, np.uint16) else images.astype(np.float32)
     groups_arr = None if groups is None else _same_n("groups", _as_ids("groups", groups), n)
     split_arr = (_random_split(n, groups_arr, val_fraction, test_fraction, seed) if split is None
                  else _check_split(_same_n("split", np.asarray(split), n), groups_arr))
@@ -75,12 +88,12 @@ def from_arrays(readings: np.ndarray, images: np.ndarray, *, split: np.ndarray |
         object_names, inverse = np.unique(names, return_inverse=True)
         object_index = inverse.astype(np.int16 if len(object_names) < 2**15 else np.int32)
     extras = {k: _same_n(f"extras[{k!r}]", np.asarray(v), n) for k, v in (extras or {}).items()}
-    stored_images = images if images.dtype in (np.uint8, np.uint16) else images.astype(np.float32)
     prov = {"source": "tactile_manip.data.from_arrays", "code_version": code_version(),
             "created_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()), **(provenance or {})}
     return PairedDataset(readings=readings.astype(np.float32), images=stored_images, split=split_arr,
                          channels=channels, image=image, object_index=object_index, object_names=object_names,
-                         groups=groups_arr, extras=extras, provenance=prov)
+                         groups=groups_arr, extras=extras, provenance=prov, targets=target_arr,
+                         target_names=target_names)
 
 
 def read_array(path: str | Path, key: str | None = None) -> np.ndarray:
@@ -94,6 +107,9 @@ def read_array(path: str | Path, key: str | None = None) -> np.ndarray:
         raise DatasetError(f"{path}: no such file" if not path.is_dir() else f"{path} is a directory, not an array file")
     if path.suffix.lower() in HDF5_SUFFIXES:
         return _read_hdf5(path, key)
+    if numpy_file_kind(path) == "other":  # np.load would take it for a pickle and say so: say what it is
+        raise DatasetError(f"{path}: not a numpy file (.npy or .npz); for CSV probe logs use --readings-csv and "
+                           f"--labels-csv")
     try:
         loaded = np.load(path, allow_pickle=False)
     except ValueError as e:  # object arrays need pickle: refused, files are data
@@ -152,6 +168,15 @@ def _as_ids(name: str, a: Any) -> np.ndarray:
     if not np.issubdtype(a.dtype, np.integer):
         raise DatasetError(f"{name}: expected integer or string ids, got dtype {a.dtype}")
     return a.astype(np.int64)
+
+
+def _targets(targets: dict[str, np.ndarray] | None, n: int) -> tuple[np.ndarray | None, tuple[str, ...]]:
+    if not targets:
+        return None, ()
+    names = check_target_names(list(targets))
+    columns = [_same_n(f"targets[{k!r}]", _as_real(f"targets[{k!r}]", np.asarray(targets[k]).reshape(-1)), n)
+               for k in names]
+    return np.stack(columns, axis=1).astype(np.float32), names
 
 
 def _same_n(name: str, a: np.ndarray, n: int) -> np.ndarray:

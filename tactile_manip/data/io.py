@@ -1,13 +1,16 @@
-"""The paired dataset file: one compressed ``.npz`` of arrays plus a JSON metadata string.
+"""The dataset file: one compressed ``.npz`` of arrays plus a JSON metadata string.
 
-Format version 2 (written by :func:`save_dataset`):
+Format version 3 (written by :func:`save_dataset`):
 
-- ``readings`` (N, R, C, A), ``images`` (N, H, W), ``split`` (N,) str;
+- ``readings`` (N, R, C, A), ``split`` (N,) str;
+- ``images`` (N, H, W), present when the dataset has images;
+- ``targets`` (N, K) float32, present when it has per-sample targets (labelled presses);
 - ``object_index`` (N,) int16 and ``object_names`` (K,) str, optional; ``groups`` (N,) int64, optional;
 - ``extra__<name>``: one per-sample extra each (``pose``, ``force_n``, ``field_raw_ut``, ...);
-- ``metadata`` () str: JSON ``{"format_version": 2, "channels": {...}, "image": {...}, "provenance": {...}}``.
+- ``metadata`` () str: JSON ``{"format_version": 3, "channels": {...}, "image": {...} or null,
+  "target_names": [...], "provenance": {...}}``.
 
-Format version 1 (``tactile-manip simulate`` and ``collect`` before the dataset layer) is still read:
+Format version 2 (images always present, no targets) is read as it was written. Format version 1 (``tactile-manip simulate`` and ``collect`` before the dataset layer) is still read:
 ``field_ut`` -> magnetic readings in uT, ``depth_q`` -> depth images in mm (``depth_scale_mm`` per level, data
 range 2 mm, the range every metric used then), its simulator fields -> extras. Files are data: they are read
 with ``allow_pickle=False``.
@@ -27,7 +30,8 @@ from tactile_manip.data.dataset import PairedDataset, concatenate
 from tactile_manip.data.spec import ChannelSpec, ImageSpec
 from tactile_manip.errors import DatasetError
 
-FORMAT_VERSION = 2
+FORMAT_VERSION = 3
+READABLE_VERSIONS = (1, 2, 3)
 DEPTH_SCALE_MM = 0.01       # the simulator's and collection's uint8 depth storage: 0.01 mm per level
 DEPTH_RANGE_MM = 2.0        # data range of depth images in mm (DTact saturates near 1.9 mm)
 _EXTRA = "extra__"
@@ -56,12 +60,13 @@ def save_dataset(path: str | Path, data: PairedDataset) -> Path:
     """Write ``data`` to ``path`` (``.npz`` appended if missing) atomically: a temp file, then rename."""
     path = dataset_path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    arrays: dict[str, np.ndarray] = {"readings": data.readings, "images": data.images, "split": data.split}
-    for name in ("object_index", "object_names", "groups"):
+    arrays: dict[str, np.ndarray] = {"readings": data.readings, "split": data.split}
+    for name in ("images", "targets", "object_index", "object_names", "groups"):
         if getattr(data, name) is not None:
             arrays[name] = getattr(data, name)
     arrays.update({_EXTRA + k: v for k, v in data.extras.items()})
-    meta = {"format_version": FORMAT_VERSION, "channels": data.channels.to_dict(), "image": data.image.to_dict(),
+    meta = {"format_version": FORMAT_VERSION, "channels": data.channels.to_dict(),
+            "image": data.image.to_dict() if data.has_images else None, "target_names": list(data.target_names),
             "provenance": data.provenance}
     arrays["metadata"] = np.array(json.dumps(meta))
     tmp = path.with_name(path.name + ".partial")
@@ -83,13 +88,16 @@ def check_dataset_file(path: str | Path) -> Path:
 
 
 def load_dataset(path: str | Path) -> PairedDataset:
-    """Read a dataset written by :func:`save_dataset` (format 2) or by earlier versions (format 1).
+    """Read a dataset written by :func:`save_dataset` (format 3) or by earlier versions (formats 1 and 2).
 
     Raises:
-        DatasetError: missing file, not an npz, not a dataset of ours, missing arrays, inconsistent lengths,
-            or a newer format.
+        DatasetError: missing file, not a numpy file, not a dataset of ours, missing arrays, inconsistent
+            lengths, or a newer format.
     """
     path = check_dataset_file(path)
+    if numpy_file_kind(path) == "other":  # np.load would call any other file a pickle
+        raise DatasetError(f"{path} is not a tactile_manip dataset: it is not a numpy file (.npz); "
+                           f"`tactile-manip import` makes a dataset from arrays or probe logs")
     try:
         z = np.load(path, allow_pickle=False)
         if not isinstance(z, np.lib.npyio.NpzFile):
@@ -101,12 +109,13 @@ def load_dataset(path: str | Path) -> PairedDataset:
                                    f"{sorted(z.files)[:8]}); `tactile-manip import` makes one from arrays")
             meta = _metadata(path, z["metadata"])
             version = meta.get("format_version")
-            if version in (1, FORMAT_VERSION):
+            if version in READABLE_VERSIONS:
                 try:
-                    return (_from_v1 if version == 1 else _from_v2)(path, z, meta)
+                    return _from_v1(path, z, meta) if version == 1 else _from_v2_or_v3(path, z, meta, version)
                 except DatasetError as e:
                     raise e if str(path) in str(e) else DatasetError(f"{path}: {e}") from e
-            raise DatasetError(f"{path}: dataset format version {version!r}, this code reads 1 and {FORMAT_VERSION}")
+            raise DatasetError(f"{path}: dataset format version {version!r}, this code reads "
+                               f"{', '.join(map(str, READABLE_VERSIONS))}")
     except DatasetError:
         raise
     except (zipfile.BadZipFile, ValueError, OSError, EOFError, KeyError) as e:
@@ -145,18 +154,35 @@ def _metadata(path: Path, entry: np.ndarray) -> dict[str, Any]:
     return meta
 
 
-def _from_v2(path: Path, z: np.lib.npyio.NpzFile, meta: dict[str, Any]) -> PairedDataset:
-    missing = [k for k in ("readings", "images", "split") if k not in z.files]
+def numpy_file_kind(path: str | Path) -> str:
+    """``"npy"``, ``"npz"`` (a zip archive) or ``"other"``, from the file's first bytes (nothing is unpickled)."""
+    with Path(path).open("rb") as f:
+        head = f.read(6)
+    if head == b"\x93NUMPY":
+        return "npy"
+    return "npz" if head[:4] in (b"PK\x03\x04", b"PK\x05\x06") else "other"
+
+
+def _from_v2_or_v3(path: Path, z: np.lib.npyio.NpzFile, meta: dict[str, Any], version: int) -> PairedDataset:
+    names = meta.get("target_names", []) if version >= 3 else []
+    required = ["readings", "split"] + (["images"] if version == 2 or meta.get("image") is not None else []) \
+        + (["targets"] if names else [])
+    missing = [k for k in required if k not in z.files]
     if missing:
         raise DatasetError(f"{path}: not a tactile_manip dataset, missing arrays {missing}")
     optional = {k: (z[k] if k in z.files else None) for k in ("object_index", "object_names", "groups")}
     extras = {k[len(_EXTRA):]: z[k] for k in z.files if k.startswith(_EXTRA)}
     try:
-        channels, image = ChannelSpec.from_dict(meta["channels"]), ImageSpec.from_dict(meta["image"])
+        channels = ChannelSpec.from_dict(meta["channels"])
+        image = ImageSpec() if meta.get("image") is None else ImageSpec.from_dict(meta["image"])
     except (KeyError, TypeError, ValueError) as e:
         raise DatasetError(f"{path}: metadata does not describe channels and images: {e}") from e
-    return PairedDataset(readings=z["readings"], images=z["images"], split=z["split"], channels=channels,
-                         image=image, extras=extras, provenance=dict(meta.get("provenance", {})), **optional)
+    if not isinstance(names, list):
+        raise DatasetError(f"{path}: metadata target_names is not a list of names")
+    return PairedDataset(readings=z["readings"], images=z["images"] if "images" in required else None,
+                         split=z["split"], channels=channels, image=image, extras=extras,
+                         provenance=dict(meta.get("provenance", {})), targets=z["targets"] if names else None,
+                         target_names=tuple(names), **optional)
 
 
 def _from_v1(path: Path, z: np.lib.npyio.NpzFile, meta: dict[str, Any]) -> PairedDataset:

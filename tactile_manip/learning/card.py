@@ -7,9 +7,12 @@ from pathlib import Path
 from typing import Any
 
 
-def model_card(meta: dict[str, Any], history: dict[str, Any], *, table_md: str = "", machine: str = "",
-               commands: list[str] | None = None, latency: str = "") -> str:
-    """Markdown text of the card from the export metadata, the training history and the evaluation table."""
+def model_card(meta: dict[str, Any], history: dict[str, Any], *, name: str = "", table_md: str = "",
+               machine: str = "", commands: list[str] | None = None, latency: str = "") -> str:
+    """Markdown text of the card from the export metadata, the training history and the evaluation table.
+
+    ``name`` (the model file's stem) heads the card, so that the cards of several models tell themselves apart.
+    """
     tc, mc = meta["train_config"], meta["model_config"]
     last = history["history"][-1]
     data = meta.get("training_data", {})
@@ -30,7 +33,7 @@ def model_card(meta: dict[str, Any], history: dict[str, Any], *, table_md: str =
     source = ("simulated pairs" if data.get("source") is None or str(data["source"]).endswith("simulate")
               else f"pairs ({data['source']})")
     lines = [
-        f"# SuperMag CVAE, `{meta['preset']}` preset",
+        f"# {'`' + name + '`: ' if name else ''}SuperMag CVAE, `{meta['preset']}` preset",
         "",
         f"Super-resolves one {reading} into a {mc['image_h']}x{mc['image_w']} {image}. "
         "Conditional VAE after SuperMag (IROS 2025); only the conditional prior and the decoder are in the "

@@ -128,7 +128,8 @@ class TensorPairs(torch.utils.data.Dataset):
     def __init__(self, data: PairedDataset, index: np.ndarray, output: OutputSpec | None = None) -> None:
         output = output or OutputSpec.for_data(data)
         self.field = torch.from_numpy(np.ascontiguousarray(data.readings[index], dtype=np.float32))
-        self.stored = torch.from_numpy(np.ascontiguousarray(data.images[index]))
+        images = data.require_images("image training pairs")
+        self.stored = torch.from_numpy(np.ascontiguousarray(images[index]))
         # stored -> target: (stored * image.scale + image.offset - output.offset) / output.scale
         self.scale = data.image.scale / output.scale
         self.offset = (data.image.offset - output.offset) / output.scale

@@ -209,6 +209,7 @@ def _train(cfg: TrainConfig, data_paths: list[Path], out: Path, resume: bool, pr
         torch.backends.cuda.matmul.allow_tf32 = True
         torch.backends.cudnn.allow_tf32 = True
     data = load_datasets(data_paths)
+    data.require_images("training the image model")
     if cfg.drop_bottomed_out and not data.has("bottomed_out") and dist.main:
         dropped = data.provenance.get("dropped_extras", [])
         why = " (only some of the datasets record it)" if "bottomed_out" in dropped else ""

@@ -6,7 +6,8 @@ shape arithmetic of dynamic batch and sample dimensions, and a mean/spread tail 
 ``tactile-manip export`` therefore also writes the prior-mean reconstruction of exactly one reading,
 ``field_ut`` (1, R, C, A) -> ``depth_mm`` (1, H, W), with static shapes and without the tail, base64 under the
 metadata key :data:`ONE_READING_KEY` of the same file, so the two cannot drift apart or be copied apart. On
-the shipped model it takes about 10 % less network time on one thread with identical output (docs/perception.md).
+the default model it takes about 10 % less network time on one thread with identical output
+(docs/results/perception_measurements.md).
 
 :func:`open_one_reading` opens it and refuses it unless it reproduces the main graph on probe readings.
 Files exported before it existed have none, and their readers fall back to the main graph.

@@ -2,9 +2,9 @@
 
 :func:`session_options` holds the settings :class:`~tactile_manip.perception.reconstruct.OnnxReconstructor`
 opens a model with. ``python -m benchmarks.bench_session_options`` measures each setting against the others,
-interleaved (docs/perception.md has the figures). On the shipped model, one thread, a busy 2-core VM: every
-graph optimisation ("all", onnxruntime's default) beat "basic" and "extended" by 9-15 % of CPU time; turning
-memory patterns or spinning off, parallel execution, a graph whose batch dimension is fixed to 1 and
+interleaved (docs/results/perception_measurements.md has the figures). On the compact model, one thread, a busy
+2-core VM: every graph optimisation ("all", onnxruntime's default) beat "basic" and "extended" by 9-15 % of CPU
+time; turning memory patterns or spinning off, parallel execution, a graph whose batch dimension is fixed to 1 and
 io_binding with buffers bound once each moved it by less than the noise (-0.1 to +5 %), so the reconstructor
 keeps the plain ``session.run``. What did pay, measured later with 4000 interleaved runs: static batch and
 sample dimensions together with no mean/spread tail, the one-reading graph of :mod:`.one_reading` (-11 %).

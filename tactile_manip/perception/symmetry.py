@@ -7,7 +7,7 @@ equivariant and cancels the part of the model's error that is not (for the shipp
 orientation bias towards the grid axes mostly cancels; see docs/trials.md). It costs one batch of 8 readings
 per reading (4 for a rectangular grid, whose group is the rectangle's: identity, half turn and two mirrors).
 
-Conventions (DESIGN.md section 4): readings (..., R, C, 3) with row 0 at +y and column 0 at -x, images
+Conventions (docs/design.md, Conventions): readings (..., R, C, 3) with row 0 at +y and column 0 at -x, images
 (..., H, W) in the same layout, so ``numpy.rot90`` on (row, column) is a counter-clockwise turn. The same
 transforms as the training augmentation (:func:`tactile_manip.learning.data.dihedral`, a test checks it).
 """

@@ -1,4 +1,4 @@
-"""Robot side (DESIGN.md section 8): the ``Arm`` and ``Gripper`` interfaces and their backends.
+"""Robot side (docs/design.md, Robot side): the ``Arm`` and ``Gripper`` interfaces and their backends.
 
 Modules:
     base: the ``Arm`` and ``Gripper`` interfaces, ``ArmState``, ``GripperState``, ``GraspResult``.

@@ -1,4 +1,4 @@
-"""The ``Arm`` and ``Gripper`` interfaces (DESIGN.md section 8) that every robot backend implements.
+"""The ``Arm`` and ``Gripper`` interfaces (docs/design.md, Robot side) that every robot backend implements.
 
 Backends: :mod:`tactile_manip.robot.twin` (kinematic FR3 twin on roboticstoolbox-python) and
 :mod:`tactile_manip.robot.franky_arm` (a real FR3 through franky-control). Behaviours receive an ``Arm`` and a

@@ -1,4 +1,4 @@
-"""A backend-agnostic behaviour check every ``Arm`` / ``Gripper`` pair must pass (DESIGN.md section 8).
+"""A backend-agnostic behaviour check every ``Arm`` / ``Gripper`` pair must pass (docs/design.md, Robot side).
 
 :func:`run_conformance` drives the arm only through the :class:`~tactile_manip.robot.base.Arm` interface
 (and a :class:`~tactile_manip.robot.safety.SafeArm` around it), so the kinematic twin and the franky backend

@@ -1,7 +1,7 @@
 """Rigid transforms and the tactile pad's frame on the Franka Hand (numpy only).
 
 The fingers close along the hand y axis, so each pad lies in the hand x-z plane. The sensor sits on the
-finger at +y; its pad frame (DESIGN.md section 4) has z along the outward normal, i.e. pointing at the object
+finger at +y; its pad frame (docs/design.md, Conventions) has z along the outward normal, i.e. pointing at the object
 (-y of the hand), x along the hand x axis and y = z cross x = hand z (towards the fingertips' approach
 direction). An in-hand angle is therefore a rotation about the hand y axis, and a correction is a Cartesian
 rotation of the hand about the pad normal through the contact.

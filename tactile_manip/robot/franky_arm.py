@@ -1,4 +1,4 @@
-"""The franky-control backend: a real FR3 and Franka Hand over the FCI (DESIGN.md section 8).
+"""The franky-control backend: a real FR3 and Franka Hand over the FCI (docs/design.md, Robot side).
 
 franky is imported on ``connect()`` only, so ``import tactile_manip.robot`` works without it; a missing franky
 raises :class:`FrankyMissingError` naming the pip extra. The robot is reached only at the host the user put in

@@ -1,4 +1,4 @@
-"""The ``TactileSensor`` interface: what every magnetic tactile sensor backend promises (DESIGN.md section 6).
+"""The ``TactileSensor`` interface: what every magnetic tactile sensor backend promises (docs/design.md, Wire protocol).
 
 A backend produces frames on its own thread and hands each one to :meth:`TactileSensor._publish`; this
 class keeps the ring buffer of recent readings, the "unseen frame" bookkeeping behind :meth:`wait_new`,

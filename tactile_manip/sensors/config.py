@@ -1,4 +1,4 @@
-"""Typed configs of the sensor backends and the explicit backend table (DESIGN.md sections 3 and 6).
+"""Typed configs of the sensor backends and the explicit backend table (docs/design.md, Scenes and Wire protocol).
 
 Each backend is a config dataclass plus a ``"module:Class"`` entry in :data:`BACKENDS`, imported only when
 chosen by :func:`make_sensor`. Every field carries its unit in a comment; ``__post_init__`` refuses bad values

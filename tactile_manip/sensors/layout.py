@@ -1,6 +1,6 @@
 """Board layouts: where each chip of a board sits in the pad frame and which cell of the reading it feeds.
 
-Readings keep the ``(rows, cols, 3)`` layout of DESIGN.md section 4 (row 0 at +y, column 0 at -x, axes in
+Readings keep the ``(rows, cols, 3)`` layout of docs/design.md, Conventions (row 0 at +y, column 0 at -x, axes in
 the pad frame). A board's firmware sends its chips in its own order, each chip in its own axes; a
 :class:`BoardLayout` lists the chips in that order, each with its reading cell, its position (mm) and its
 rotation about the pad normal, and turns a ``(n_chips, 3)`` frame into a reading. Cells no chip feeds stay 0
@@ -120,6 +120,19 @@ class BoardLayout:
         out = np.zeros((self.grid[0] * self.grid[1], 3), np.float32)
         out[self._index] = np.einsum("nij,nj->ni", self._rot, chips)
         return out.reshape(self.shape)
+
+    def readings_from_chips(self, chips_ut: np.ndarray) -> np.ndarray:
+        """(M, n_chips, 3) frames in chip axes, firmware order -> (M, rows, cols, 3) float32 readings in pad axes
+        (unused cells 0): :meth:`reading_from_chips` for a stack of frames (a probe log, a recording)."""
+        chips = np.asarray(chips_ut, dtype=np.float32)
+        if chips.ndim != 3 or chips.shape[1:] != (self.n_chips, 3):
+            raise ValueError(f"layout {self.name}: expected frames of shape (M, {self.n_chips}, 3), got {chips.shape}")
+        m = chips.shape[0]
+        if self._identity:
+            return chips.reshape(m, *self.shape)
+        out = np.zeros((m, self.grid[0] * self.grid[1], 3), np.float32)
+        out[:, self._index] = np.einsum("nij,mnj->mni", self._rot, chips)
+        return out.reshape(m, *self.shape)
 
     def chips_from_reading(self, reading_ut: np.ndarray) -> np.ndarray:
         """The inverse of :meth:`reading_from_chips`: (rows, cols, 3) pad-axes field -> (n_chips, 3) chip axes."""

@@ -1,4 +1,4 @@
-"""The MBTS wire protocol (DESIGN.md section 6) as a pure codec: frame layout, CRC, encoder, stream decoder.
+"""The MBTS wire protocol (docs/design.md, Wire protocol) as a pure codec: frame layout, CRC, encoder, stream decoder.
 
 A frame, little-endian::
 

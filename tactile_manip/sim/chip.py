@@ -1,6 +1,6 @@
 """MLX90393 magnetometer array under the skin: positions, Earth field, misalignment, noise and quantisation.
 
-Fields here are microtesla (``_ut``) and readings are (4, 4, 3) arrays ``[row, col, axis]`` (DESIGN.md 4):
+Fields here are microtesla (``_ut``) and readings are (4, 4, 3) arrays ``[row, col, axis]`` (docs/design.md):
 row 0 is +y, col 0 is -x. The chain from the magnet's field at the chips (pad axes) to a register value is
 
     field + Earth  ->  rotate into chip axes  ->  + drift + noise  ->  round(/ LSB)  ->  clip to the rail.

@@ -1,5 +1,11 @@
 """Generate a paired dataset from a config: presses of named objects at random poses, in parallel.
 
+Each press is stored with its magnetic reading, its depth image (unless ``images = false``) and its targets
+(:data:`SIM_TARGETS`): the centre of pressure of the contact patch on the magnetic skin (``x_mm``, ``y_mm``,
+pad frame; where the pressure acts, not the object's origin), the skin's indentation depth (``depth_mm``,
+the rigid approach into it), the normal force (``force_n``) and ``in_contact``; a press that misses the pad
+has 0 for all of them.
+
 Every sample ``i`` draws everything (pose, force, optional parameter randomisation, sensor noise) from
 ``np.random.default_rng([seed, i])``, and results are assembled in index order, so the output does not
 depend on the number of worker processes.
@@ -25,7 +31,7 @@ from tactile_manip.config import load_config, to_dict
 from tactile_manip.data import PairedDataset, depth_image_spec, quantise_depth
 from tactile_manip.sim.objects import Indenter, IndenterPose
 from tactile_manip.sim.shapes import SHAPES, check_shape_arguments, make_indenter
-from tactile_manip.sim.pair import SensorPair
+from tactile_manip.sim.pair import PairedSample, SensorPair
 from tactile_manip.sim.params import SimParams, randomise, randomised_values
 from tactile_manip.version import code_version
 
@@ -87,6 +93,7 @@ class DatasetConfig:
     randomise_spread: float = 0.0     # 0: one fixed sensor pair; 1: full domain randomisation per sample
     bottomed_out: Literal["keep", "redraw"] = "keep"  # a press through the layer: keep it (flagged), or draw
                                       # the sample's pose, force and sensor again (up to MAX_REDRAWS times)
+    images: bool = True               # render depth images; false: targets only (contact models need none)
     poses: PoseRanges = field(default_factory=PoseRanges)
     objects: list[ObjectSpec] = field(default_factory=list)
     sim: SimParams = field(default_factory=SimParams)
@@ -144,6 +151,7 @@ def _splits(cfg: DatasetConfig) -> np.ndarray:
     return np.array(out, dtype="U5")
 
 
+SIM_TARGETS = ("x_mm", "y_mm", "depth_mm", "force_n", "in_contact")
 _WORKER: dict[str, Any] = {}
 MAX_REDRAWS = 20   # bottomed_out = "redraw": draws per sample before a press through the layer is kept (flagged)
 
@@ -181,14 +189,28 @@ def _simulate(task: _Task) -> dict[str, Any]:
         if cfg.randomise_spread > 0:
             params = randomise(cfg.sim, rng, spread=cfg.randomise_spread)
             pair, drawn = SensorPair(params, seed=cfg.sensor_seed), {"sensor_params": randomised_values(params)}
-        s = pair.press(_indenter(cfg.objects[task.spec], task.variant), pose, force, rng)
+        s = pair.press(_indenter(cfg.objects[task.spec], task.variant), pose, force, rng, render_depth=cfg.images)
         if not (s.bottomed_out and cfg.bottomed_out == "redraw"):
             break
-    return {**drawn, "bottomed_out": s.bottomed_out, "field_ut": s.field_ut, "field_raw_ut": s.field_raw_ut, "saturated": s.saturated,
-            "depth_q": quantise_depth(s.depth_mm), "pose": [pose.x_mm, pose.y_mm, pose.yaw_rad,
-                                                              pose.tilt_x_rad, pose.tilt_y_rad],
+    return {**drawn, "bottomed_out": s.bottomed_out, "field_ut": s.field_ut, "field_raw_ut": s.field_raw_ut,
+            "saturated": s.saturated, "depth_q": None if s.depth_mm is None else quantise_depth(s.depth_mm),
+            "pose": [pose.x_mm, pose.y_mm, pose.yaw_rad, pose.tilt_x_rad, pose.tilt_y_rad],
             "force_n": s.force_n, "approach_mm": s.approach_mm, "skin_approach_mm": s.skin_approach_mm,
-            "contact": s.contact}
+            "contact": s.contact, "targets": sample_targets(s), "contact_area_mm2": s.pressure.area_mm2}
+
+
+def sample_targets(s: PairedSample) -> list[float]:
+    """The :data:`SIM_TARGETS` of one press: centre of pressure on the magnetic skin (mm, pad frame), its
+    indentation depth (mm), normal force (N) and the contact flag; zeros for a press that misses the pad.
+
+    A press that bottoms out (``bottomed_out``) indents the skin by its whole thickness, where the rigid base
+    stops it: its depth is that thickness, not the elastic model's extrapolation past it (which reaches tens
+    of millimetres on narrow shapes).
+    """
+    if not (s.contact and s.pressure.area_mm2 > 0):
+        return [0.0, 0.0, 0.0, 0.0, 0.0]
+    x, y = s.pressure.centroid_mm
+    return [x, y, min(s.skin_approach_mm, s.params.layer.thickness_mm), s.force_n, 1.0]
 
 
 def generate(cfg: DatasetConfig, *, workers: int = 0,
@@ -271,12 +293,13 @@ def _assemble(cfg: DatasetConfig, tasks: list[_Task], results: list[dict[str, An
               "pose": stack("pose", np.float32), "force_n": stack("force_n", np.float32),
               "approach_mm": stack("approach_mm", np.float32),
               "skin_approach_mm": stack("skin_approach_mm", np.float32), "contact": stack("contact", bool),
-              "bottomed_out": stack("bottomed_out", bool)}
+              "bottomed_out": stack("bottomed_out", bool), "contact_area_mm2": stack("contact_area_mm2", np.float32)}
     if cfg.randomise_spread > 0:  # each press on its own drawn sensor: record the draw (names in provenance)
         provenance["sensor_param_names"] = list(results[0]["sensor_params"])
         extras["sensor_params"] = np.array([list(r["sensor_params"].values()) for r in results], np.float32)
     return PairedDataset(
-        readings=stack("field_ut", np.float32), images=stack("depth_q", np.uint8), split=_splits(cfg),
-        image=depth_image_spec(cfg.sim.vbts.pixel_mm),
+        readings=stack("field_ut", np.float32), images=stack("depth_q", np.uint8) if cfg.images else None,
+        split=_splits(cfg), image=depth_image_spec(cfg.sim.vbts.pixel_mm), targets=stack("targets", np.float32),
+        target_names=SIM_TARGETS,
         object_index=np.array([unique.index(names[t.spec]) for t in tasks], dtype=np.int16),
         object_names=np.array(unique), extras=extras, provenance=provenance)

@@ -4,7 +4,7 @@ Lengths are millimetres, fields and polarisations tesla. A polarisation ``J = mu
 volume (mm^3) gives a moment in T*mm^3, and the field of such a moment at a distance in mm is in tesla
 (``B = (1 / 4 pi) (3 (m.r^) r^ - m) / r^3``): the mm^3 cancel, so no unit conversion appears anywhere.
 
-The pad frame (DESIGN.md 4): origin at the pad centre on the undeformed top surface, z along the outward
+The pad frame (docs/design.md, Conventions): origin at the pad centre on the undeformed top surface, z along the outward
 normal, the skin occupying ``z in [-thickness, 0]``.
 """
 

@@ -39,7 +39,7 @@ class PressureSummary:
 
 @dataclass(frozen=True)
 class PairedSample:
-    """One co-located reading pair. Arrays follow DESIGN.md section 4.
+    """One co-located reading pair. Arrays follow docs/design.md, Conventions.
 
     Attributes:
         field_ut: (4, 4, 3) float32, MBTS reading, baseline-subtracted, microtesla.

@@ -67,9 +67,9 @@ class LayerParams(_Validated):
     vbts_modulus_kpa: float = param(
         118.0, unit="kPa", rand=(85.0, 125.0),
         source="Ecoflex 00-30: datasheet 100 % secant modulus 69 kPa; a neo-Hookean solid has a secant "
-               "modulus of 0.58 E at 100 % strain, so E ~ 118 kPa. DESIGN.md gives 50-125 kPa; below "
-               "~85 kPa the Allen key at 10-11 N is pushed through >85 % of the 2.5 mm layer, outside "
-               "the linear model, so the randomisation range starts there")
+               "modulus of 0.58 E at 100 % strain, so E ~ 118 kPa. The design range is 50-125 kPa "
+               "(docs/design.md); below ~85 kPa the Allen key at 10-11 N is pushed through >85 % of the "
+               "2.5 mm layer, outside the linear model, so the randomisation range starts there")
     skin_modulus_kpa: float = param(
         200.0, unit="kPa", rand=(120.0, 300.0),
         source="Ecoflex 00-30 with MQP-15-7 powder (3:1:1 by weight, SuperMag Sec. III-B); particle "
@@ -103,10 +103,10 @@ class VbtsParams(_Validated):
     dead_band_levels: int = param(2, unit="grey levels", limits=(-1, 255),
                                   source="DTact lighting threshold: differences below 2 levels read as 0")
     noise_grey_levels: float = param(1.0, unit="grey levels", rand=(0.5, 2.0), limits=(-1e-12, 255.0),
-                                     source="camera read noise ~1 grey level (DESIGN.md 5)")
+                                     source="camera read noise ~1 grey level (docs/design.md)")
     blur_sigma_mm: float = param(0.07, unit="mm", rand=(0.05, 0.1), limits=(-1e-12, 10.0),
-                                 source="DTact depth smoothing, three Gaussian passes (DESIGN.md 5)")
-    blur_passes: int = param(3, unit="1", limits=(-1, 100), source="DTact depth smoothing (DESIGN.md 5)")
+                                 source="DTact depth smoothing, three Gaussian passes (docs/design.md)")
+    blur_passes: int = param(3, unit="1", limits=(-1, 100), source="DTact depth smoothing (docs/design.md)")
 
 
 @dataclass(frozen=True)
@@ -115,11 +115,12 @@ class MagnetParams(_Validated):
 
     remanence_t: float = param(0.05, unit="T", rand=(0.03, 0.055),
                                source="polarisation J_r of MQP-15-7 silicone composites (ReSkin-style "
-                                      "skins, DESIGN.md 5: 0.03-0.11 T); capped at 0.055 T because "
-                                      "above it the corner chips' z channel saturates (tested)")
+                                      "skins; design range 0.03-0.11 T, docs/design.md); capped at 0.055 T "
+                                      "because above it the corner chips' z channel saturates (tested)")
     chip_gap_mm: float = param(1.0, unit="mm", rand=(0.8, 2.0), limits=(1e-3, 100.0),
-                               source="skin-to-die distance of MLX90393 under a ReSkin skin (DESIGN.md 5: "
-                                      "0.5-2.0 mm); below 0.8 mm the corner chips saturate at J_r 0.055 T")
+                               source="skin-to-die distance of MLX90393 under a ReSkin skin (design range "
+                                      "0.5-2.0 mm, docs/design.md); below 0.8 mm the corner chips saturate at "
+                                      "J_r 0.055 T")
     cell_mm: float = param(0.5, unit="mm", limits=(1e-3, 5.0),
                            source="design choice: dipole cells 0.4-0.5 mm converge to <2 % (tested)")
     thickness_nodes: int = param(6, unit="1", limits=(0, 64),
@@ -149,7 +150,7 @@ class ChipParams(_Validated):
     earth_field_ut: float = param(50.0, unit="uT", rand=(25.0, 65.0), limits=(-1e-12, 1e4),
                                   source="geomagnetic field magnitude, 25-65 uT worldwide")
     drift_ut: float = param(5.0, unit="uT", rand=(0.0, 10.0), limits=(-1e-12, 1e4),
-                            source="per-press baseline drift (temperature, hysteresis), DESIGN.md 5")
+                            source="per-press baseline drift (temperature, hysteresis; docs/design.md)")
     rotation_deg: float = param(0.0, unit="deg", rand=(0.0, 3.0), limits=(-1e-12, 45.0),
                                 source="RMS mounting misalignment of each chip; 0 = ideal board")
     saturation_counts: int = param(32767, unit="LSB", limits=(0, 1 << 31),

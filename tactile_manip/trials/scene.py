@@ -1,6 +1,6 @@
 """A reorientation trial scene: the TOML file ``tactile-manip trials --config`` reads, as typed dataclasses.
 
-A scene names only what the job needs (DESIGN.md section 3): the methods compared, the objects and how they
+A scene names only what the job needs (docs/design.md, Scenes): the methods compared, the objects and how they
 are presented, the robot backend with its safety limits, the tactile sensor, the behaviour's parameters and
 (for robustness runs) a fault plan. See ``configs/scenes/reorient_sim.toml`` for a commented example.
 """

@@ -26,7 +26,7 @@ from tactile_manip.version import __version__, code_version
 
 ROOT = Path(__file__).resolve().parents[2]
 SUPERMAG = ROOT / "configs" / "dataset" / "supermag.toml"
-ARRAYS = ("readings", "images", "object_index", "object_names", "split")
+ARRAYS = ("readings", "images", "targets", "object_index", "object_names", "split")
 EXTRAS = ("field_raw_ut", "saturated", "pose", "force_n", "approach_mm", "skin_approach_mm", "contact")
 
 
@@ -230,7 +230,7 @@ def test_load_npz_missing_arrays(saved, tmp_path):
 def test_load_wrong_format_version(saved, tmp_path):
     path = _rewrite(saved, tmp_path / "v.npz", metadata=_metadata_with(saved, format_version=FORMAT_VERSION + 1))
     msg = _load_error(path)
-    assert f"format version {FORMAT_VERSION + 1}" in msg and f"reads 1 and {FORMAT_VERSION}" in msg
+    assert f"format version {FORMAT_VERSION + 1}" in msg and f"reads 1, 2, {FORMAT_VERSION}" in msg
 
 
 def test_load_metadata_not_json(saved, tmp_path):

@@ -1,4 +1,4 @@
-"""Wire formats of the serial backend: one decoder per format, chosen by name (DESIGN.md section 6).
+"""Wire formats of the serial backend: one decoder per format, chosen by name (docs/design.md, Wire protocol).
 
 :data:`WIRE_FORMATS` maps a name to its ``"module:Class"``; :func:`make_decoder` imports only the chosen one.
 

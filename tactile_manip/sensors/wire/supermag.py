@@ -1,4 +1,4 @@
-"""The SuperMag wire format (DESIGN.md section 6, spoken by ``firmware/``) behind the :class:`WireDecoder` interface.
+"""The SuperMag wire format (docs/design.md, spoken by ``firmware/``) behind the :class:`WireDecoder` interface.
 
 The codec itself is :mod:`tactile_manip.sensors.protocol`; this adapter converts its raw counts to
 microtesla with the chip's LSBs and hands the 16 chips on in firmware (row-major) order.

@@ -1,0 +1,28 @@
+"""The shipped models are found from the package, whatever the working folder."""
+
+import pytest
+
+from tactile_manip.shipped import DEFAULT_MODEL, SHIPPED_MODELS, models_dir, shipped_model
+
+
+@pytest.mark.parametrize("name", sorted(SHIPPED_MODELS))
+def test_shipped_model_resolves_from_any_folder(name, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    path = shipped_model(name)
+    assert path.is_absolute() and path.is_file()
+    assert path.parent == models_dir() and path.name == SHIPPED_MODELS[name]
+
+
+def test_default_is_the_fast_model():
+    assert shipped_model().name == "supermag_fast.onnx" == SHIPPED_MODELS[DEFAULT_MODEL]
+
+
+def test_unknown_name_is_refused():
+    with pytest.raises(ValueError, match="unknown shipped model 'tiny': expected one of fast, robust, compact"):
+        shipped_model("tiny")
+
+
+def test_missing_models_folder_says_where_they_are(monkeypatch, tmp_path):
+    monkeypatch.setattr("tactile_manip.shipped.models_dir", lambda: tmp_path)
+    with pytest.raises(FileNotFoundError, match="source checkout's models/ folder"):
+        shipped_model()
