@@ -22,6 +22,7 @@ import numpy as np
 from tactile_manip.errors import ClusterError
 
 _KEYS = "__keys__/"   # the key order of a nested dict (e.g. a drawn sensor's parameters), as a string array
+_NONE = "__none__"    # keys whose value is None in every result (e.g. no image in a targets-only dataset)
 
 
 def blocks_folder(output: str | Path) -> Path:
@@ -92,7 +93,11 @@ def remove_blocks(output: str | Path) -> None:
 
 def _stack(results: list[dict[str, Any]]) -> dict[str, np.ndarray]:
     arrays: dict[str, np.ndarray] = {}
+    none = [k for k in results[0] if all(r[k] is None for r in results)]
+    arrays[_NONE] = np.array(none, dtype=str)
     for key, value in results[0].items():
+        if key in none:
+            continue
         if isinstance(value, dict):
             names = list(value)
             arrays[_KEYS + key] = np.array(names, dtype=str)
@@ -104,12 +109,14 @@ def _stack(results: list[dict[str, Any]]) -> dict[str, np.ndarray]:
 
 def _unstack(arrays: dict[str, np.ndarray]) -> list[dict[str, Any]]:
     nested = {k[len(_KEYS):]: [str(n) for n in v] for k, v in arrays.items() if k.startswith(_KEYS)}
-    plain = {k: v for k, v in arrays.items() if not k.startswith(_KEYS)}
+    none = [str(k) for k in arrays.get(_NONE, [])]
+    plain = {k: v for k, v in arrays.items() if not k.startswith(_KEYS) and k != _NONE}
     count = len(next(iter(plain.values())))
     out: list[dict[str, Any]] = []
     for i in range(count):
         row: dict[str, Any] = {}
         for key, a in plain.items():
             row[key] = dict(zip(nested[key], a[i].tolist())) if key in nested else a[i]
+        row.update(dict.fromkeys(none))
         out.append(row)
     return out

@@ -11,7 +11,7 @@ from tactile_manip.errors import ClusterError
 def _results(n, rng):
     return [{"field_ut": rng.normal(size=(4, 4, 3)).astype(np.float32), "depth_q": rng.integers(0, 255, (5, 5), dtype=np.uint8),
              "pose": [float(v) for v in rng.normal(size=5)], "force_n": float(rng.uniform(2, 15)),
-             "contact": bool(i % 2), "sensor_params": {"gap_mm": float(rng.uniform()), "e_kpa": float(rng.uniform())}}
+             "contact": bool(i % 2), "no_image": None, "sensor_params": {"gap_mm": float(rng.uniform()), "e_kpa": float(rng.uniform())}}
             for i in range(n)]
 
 
@@ -28,6 +28,7 @@ def test_block_round_trip_is_exact(tmp_path):
         np.testing.assert_array_equal(a["field_ut"], b["field_ut"])
         assert b["field_ut"].dtype == np.float32 and b["depth_q"].dtype == np.uint8
         assert np.asarray(a["pose"]).tolist() == np.asarray(b["pose"]).tolist()
+        assert b["no_image"] is None
         assert a["force_n"] == b["force_n"] and bool(a["contact"]) == bool(b["contact"])
         assert a["sensor_params"] == b["sensor_params"] and list(a["sensor_params"]) == list(b["sensor_params"])
 
