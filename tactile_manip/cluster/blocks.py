@@ -22,6 +22,7 @@ import numpy as np
 from tactile_manip.errors import ClusterError
 
 _KEYS = "__keys__/"   # the key order of a nested dict (e.g. a drawn sensor's parameters), as a string array
+_ORDER = "__order__"  # the results' key order
 _NONE = "__none__"    # keys whose value is None in every result (e.g. no image in a targets-only dataset)
 
 
@@ -95,6 +96,7 @@ def _stack(results: list[dict[str, Any]]) -> dict[str, np.ndarray]:
     arrays: dict[str, np.ndarray] = {}
     none = [k for k in results[0] if all(r[k] is None for r in results)]
     arrays[_NONE] = np.array(none, dtype=str)
+    arrays[_ORDER] = np.array(list(results[0]), dtype=str)
     for key, value in results[0].items():
         if key in none:
             continue
@@ -110,7 +112,8 @@ def _stack(results: list[dict[str, Any]]) -> dict[str, np.ndarray]:
 def _unstack(arrays: dict[str, np.ndarray]) -> list[dict[str, Any]]:
     nested = {k[len(_KEYS):]: [str(n) for n in v] for k, v in arrays.items() if k.startswith(_KEYS)}
     none = [str(k) for k in arrays.get(_NONE, [])]
-    plain = {k: v for k, v in arrays.items() if not k.startswith(_KEYS) and k != _NONE}
+    plain = {k: v for k, v in arrays.items() if not k.startswith(_KEYS) and k not in (_NONE, _ORDER)}
+    order = [str(k) for k in arrays[_ORDER]]
     count = len(next(iter(plain.values())))
     out: list[dict[str, Any]] = []
     for i in range(count):
@@ -118,5 +121,5 @@ def _unstack(arrays: dict[str, np.ndarray]) -> list[dict[str, Any]]:
         for key, a in plain.items():
             row[key] = dict(zip(nested[key], a[i].tolist())) if key in nested else a[i]
         row.update(dict.fromkeys(none))
-        out.append(row)
+        out.append({k: row[k] for k in order})
     return out
