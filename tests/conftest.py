@@ -1,14 +1,37 @@
-"""Fixtures shared across layers: ONNX graphs carrying the shipped model's metadata (for load-time checks)."""
+"""Fixtures shared across layers: ONNX graphs carrying the shipped model's metadata (for load-time checks).
+
+Also the report's torch line: without torch about a hundred tests skip, so the header and the summary say so
+in words instead of leaving it to a count of skips.
+"""
 
 from __future__ import annotations
 
+import importlib.util
 from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 import pytest
+from checks import TORCH_MISSING
 
 SHIPPED_MODEL = Path(__file__).resolve().parents[1] / "models" / "supermag_fast.onnx"
+
+
+def _torch_installed() -> bool:
+    try:
+        return importlib.util.find_spec("torch") is not None
+    except (ImportError, ValueError):
+        return False
+
+
+def pytest_report_header(config) -> str | None:
+    return None if _torch_installed() else f"WARNING: {TORCH_MISSING}; every test that needs it is skipped"
+
+
+def pytest_terminal_summary(terminalreporter, exitstatus, config) -> None:
+    skipped = [r for r in terminalreporter.stats.get("skipped", []) if TORCH_MISSING in str(r.longrepr)]
+    if skipped:
+        terminalreporter.write_sep("!", f"{len(skipped)} tests SKIPPED because {TORCH_MISSING}", red=True, bold=True)
 
 
 @pytest.fixture

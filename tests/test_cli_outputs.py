@@ -11,6 +11,7 @@ import time
 from pathlib import Path
 
 import pytest
+from checks import assert_one_line_error
 
 from tactile_manip.cli import main
 from tactile_manip.errors import ConfigError
@@ -24,13 +25,6 @@ DATASET_CONFIG = ROOT / "configs/dataset/supermag.toml"
 SCENE = ROOT / "configs/scenes/reorient_sim.toml"
 
 
-def _one_line(capsys, command: str) -> str:
-    err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1 and err.startswith(f"tactile-manip {command}: error: "), err
-    assert "Traceback" not in err
-    return err
-
-
 def test_simulate_checks_the_file_it_writes_and_refuses_it_the_second_time(tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(ROOT)
     args = ["simulate", "--config", str(DATASET_CONFIG), "--scale", "0.001", "--workers", "1",
@@ -41,7 +35,7 @@ def test_simulate_checks_the_file_it_writes_and_refuses_it_the_second_time(tmp_p
     before = written.read_bytes()
     t0 = time.perf_counter()
     assert main(args) == 2  # `x` does not exist, but `x.npz`, the file it would write, does
-    assert f"{written} exists; pass --force" in _one_line(capsys, "simulate")
+    assert_one_line_error(capsys.readouterr().err, "simulate", f"{written} exists; pass --force")
     assert written.read_bytes() == before
     assert time.perf_counter() - t0 < 5.0  # refused before simulating (the run above took longer)
 
@@ -51,7 +45,7 @@ def test_show_prints_the_path_it_wrote_and_refuses_to_replace_it(tmp_path, capsy
     assert capsys.readouterr().out.strip() == f"wrote {tmp_path / 'press.png'}"
     assert (tmp_path / "press.png").read_bytes()[:4] == b"\x89PNG"
     assert main(["show", "--object", "cylinder", "--out", str(tmp_path / "press.png")]) == 2
-    assert "exists; pass --force" in _one_line(capsys, "show")
+    assert_one_line_error(capsys.readouterr().err, "show", "exists; pass --force")
     assert main(["show", "--object", "cylinder", "--out", str(tmp_path / "press.png"), "--force"]) == 0
 
 
@@ -63,7 +57,7 @@ def test_show_prints_the_path_it_wrote_and_refuses_to_replace_it(tmp_path, capsy
 def test_report_folders_are_not_overwritten_without_force(argv, existing, tmp_path, capsys):
     (tmp_path / existing).write_text("an earlier run")
     assert main([a.format(d=tmp_path) for a in argv]) == 2
-    err = _one_line(capsys, argv[0])
+    err = assert_one_line_error(capsys.readouterr().err, argv[0])
     assert existing in err and "--force" in err
     assert (tmp_path / existing).read_text() == "an earlier run"
 
@@ -103,7 +97,7 @@ def test_a_bad_scene_leaves_no_run_folder_behind(old, new, named, tmp_path, monk
     assert scene != SCENE.read_text()
     (tmp_path / "s.toml").write_text(scene)
     assert main(["trials", "--config", str(tmp_path / "s.toml"), "--out", str(tmp_path / "run"), "--quiet"]) == 2
-    assert named in _one_line(capsys, "trials")
+    assert_one_line_error(capsys.readouterr().err, "trials", named)
     assert not (tmp_path / "run").exists()
 
 

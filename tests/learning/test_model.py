@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 import pytest
+from checks import require_torch
 
-torch = pytest.importorskip("torch")
+torch = require_torch()
 
 from tactile_manip.learning.model import SuperMagCVAE, mean_and_spread, preset, taxel_grid  # noqa: E402
 

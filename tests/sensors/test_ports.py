@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import pytest
+from checks import assert_one_line_error
 
 from tactile_manip.cli import main
 from tactile_manip.commands import serial_options
@@ -47,8 +48,7 @@ def test_a_board_is_found_by_its_serial_number(monkeypatch):
 def test_the_cli_offers_every_wire_format_and_refuses_a_bad_layout(tmp_path, capsys):
     assert serial_options.WIRE_FORMATS == tuple(WIRE_FORMATS)
     assert main(["record", "--port", "/dev/null-x", "--layout", "hexagon", "--out", str(tmp_path / "r")]) == 2
-    err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1 and "known layouts: supermag-4x4, anyskin-5" in err
+    assert_one_line_error(capsys.readouterr().err, "record", "known layouts: supermag-4x4, anyskin-5")
 
 
 def test_dtr_and_rts_levels_reach_the_port(monkeypatch):

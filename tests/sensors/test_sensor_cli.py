@@ -7,18 +7,13 @@ import subprocess
 import sys
 
 import pytest
+from checks import assert_one_line_error
 
 from tactile_manip.cli import COMMANDS, main
 from tactile_manip.sensors import read_recording
 from tactile_manip.sensors.ports import PortInfo, bridge_name, list_ports
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
-
-
-def _one_line_error(capsys, command: str) -> str:
-    err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1 and err.startswith(f"tactile-manip {command}: error: "), err
-    return err
 
 
 def test_the_four_commands_are_registered():
@@ -50,7 +45,7 @@ def test_emulate_prints_the_path_first_and_a_report_last(capsys):
 ])
 def test_emulate_bad_options_are_one_line_errors(capsys, args, match):
     assert main(["emulate", *args]) == 2
-    assert match in _one_line_error(capsys, "emulate")
+    assert_one_line_error(capsys.readouterr().err, "emulate", match)
 
 
 def test_record_the_simulated_sensor(tmp_path, capsys):
@@ -60,14 +55,14 @@ def test_record_the_simulated_sensor(tmp_path, capsys):
     rec = read_recording(out)
     assert 100 <= len(rec) <= 135 and rec.header["backend"] == "SimulatedSensor"
     assert main(["record", "--sim", "--out", str(out), "--seconds", "1"]) == 2
-    assert "--force" in _one_line_error(capsys, "record")
+    assert_one_line_error(capsys.readouterr().err, "record", "--force")
     assert main(["record", "--port", "/dev/null-x", "--out", str(tmp_path / "b"), "--press", "letter_r"]) == 2
-    assert "--sim" in _one_line_error(capsys, "record")
+    assert_one_line_error(capsys.readouterr().err, "record", "--sim")
 
 
 def test_record_a_missing_port_is_a_one_line_error(tmp_path, capsys):
     assert main(["record", "--port", str(tmp_path / "ttyUSB9"), "--out", str(tmp_path / "r.tmrec")]) == 2
-    assert "find-port" in _one_line_error(capsys, "record")
+    assert_one_line_error(capsys.readouterr().err, "record", "find-port")
 
 
 def test_find_port_lists_likely_boards_first(monkeypatch, capsys):
@@ -108,7 +103,7 @@ def test_live_view_without_a_display_says_what_to_do(capsys, monkeypatch):
     monkeypatch.delenv("DISPLAY", raising=False)
     monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
     assert main(["view", "--sim"]) == 2
-    assert "--snapshot" in _one_line_error(capsys, "view")
+    assert_one_line_error(capsys.readouterr().err, "view", "--snapshot")
 
 
 @pytest.mark.parametrize("argv", [
@@ -122,7 +117,7 @@ def test_live_view_without_a_display_says_what_to_do(capsys, monkeypatch):
 ])
 def test_an_empty_port_or_path_is_an_error_not_the_simulated_sensor(argv, tmp_path, capsys):
     assert main([a.replace("{tmp}", str(tmp_path)) for a in argv]) == 2
-    message = _one_line_error(capsys, argv[0])
+    message = assert_one_line_error(capsys.readouterr().err, argv[0])
     assert "must not be empty" in message
     assert list(tmp_path.iterdir()) == []  # nothing recorded, nothing created
 
@@ -134,7 +129,7 @@ def test_emulate_link_never_replaces_a_file_it_did_not_create(tmp_path, capsys):
     mine = tmp_path / "notes.txt"
     mine.write_text("my notes")
     assert main(["emulate", "--frames", "1", "--linger-s", "0", "--link", str(mine)]) == 2
-    assert "not an emulator's pty link" in _one_line_error(capsys, "emulate")
+    assert_one_line_error(capsys.readouterr().err, "emulate", "not an emulator's pty link")
     assert mine.read_text() == "my notes" and not mine.is_symlink()
     other = tmp_path / "other_link"
     other.symlink_to(mine)  # a link, but to the user's file, not to a pty
@@ -180,7 +175,7 @@ def test_view_a_recording_that_starts_under_load(tmp_path, capsys):
     _recording(tmp_path / "pressed.tmrec", load)
     assert main(["view", "--replay", str(tmp_path / "pressed.tmrec"), "--snapshot", str(tmp_path / "a"),
                  "--seconds", "0.2"]) == 2
-    err = _one_line_error(capsys, "view")
+    err = assert_one_line_error(capsys.readouterr().err, "view")
     assert "baseline refused" in err and "--baseline-from" in err and "--no-baseline" in err
     assert main(["view", "--replay", str(tmp_path / "pressed.tmrec"), "--snapshot", str(tmp_path / "a"),
                  "--seconds", "0.2", "--baseline-from", str(tmp_path / "free.tmrec")]) == 0
@@ -188,7 +183,7 @@ def test_view_a_recording_that_starts_under_load(tmp_path, capsys):
     assert (tmp_path / "a.png").read_bytes()[:8] == PNG_MAGIC
     assert main(["view", "--replay", str(tmp_path / "pressed.tmrec"), "--snapshot", str(tmp_path / "a.png"),
                  "--seconds", "0.2", "--no-baseline"]) == 2
-    assert "exists; pass --force" in _one_line_error(capsys, "view")
+    assert_one_line_error(capsys.readouterr().err, "view", "exists; pass --force")
 
 
 def test_view_replay_says_what_damage_it_skipped(tmp_path, capsys):
