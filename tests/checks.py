@@ -1,4 +1,4 @@
-"""Assertions shared by the test layers: the CLI's one-line errors, the estimate contract, the torch skip.
+"""Assertions shared by the test layers: the CLI's one-line errors, the estimate contract; the torch skip reason.
 
 Import them as ``from checks import ...`` (``tests/`` is on ``sys.path``: see ``pythonpath`` in pyproject.toml).
 """
@@ -7,16 +7,10 @@ from __future__ import annotations
 
 import math
 
-import pytest
-
-# The reason every torch-dependent test skips with; tests/conftest.py counts these skips and says so loudly.
+# The reason every torch-dependent test skips with (``pytest.importorskip("torch", reason=TORCH_MISSING)``);
+# tests/conftest.py counts these skips and says so loudly.
 TORCH_MISSING = ("torch is not installed: the training, export and model tests need it "
                  "(pip install torch==2.13.0, the CPU build, then pip install -e \".[dev]\")")
-
-
-def require_torch():
-    """The torch module, or a skip of the calling test (or module) that says torch is missing and how to get it."""
-    return pytest.importorskip("torch", reason=TORCH_MISSING)
 
 
 def assert_one_line_error(err: str, command: str, *needles: str, program: str = "tactile-manip") -> str:

@@ -31,7 +31,8 @@ def pytest_report_header(config) -> str | None:
 def pytest_terminal_summary(terminalreporter, exitstatus, config) -> None:
     skipped = [r for r in terminalreporter.stats.get("skipped", []) if TORCH_MISSING in str(r.longrepr)]
     if skipped:
-        terminalreporter.write_sep("!", f"{len(skipped)} tests SKIPPED because {TORCH_MISSING}", red=True, bold=True)
+        terminalreporter.write_sep("!", f"{len(skipped)} tests or test files SKIPPED: {TORCH_MISSING}", red=True,
+                                   bold=True)
 
 
 @pytest.fixture

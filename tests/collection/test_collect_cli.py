@@ -8,7 +8,7 @@ import json
 
 import numpy as np
 import pytest
-from checks import assert_one_line_error, require_torch
+from checks import TORCH_MISSING, assert_one_line_error
 
 from tactile_manip.cli import main
 from tactile_manip.collection.pair_log import read_pair_log
@@ -57,7 +57,7 @@ def test_finalize_merges_logs_and_tolerates_a_torn_tail(tmp_path, capsys, write_
 
 @pytest.mark.slow
 def test_collect_on_the_emulator_then_train_and_evaluate_without_conversion(tmp_path, capsys):
-    require_torch()
+    pytest.importorskip("torch", reason=TORCH_MISSING)
     cal, data, log = tmp_path / "cal.npz", tmp_path / "pairs.npz", tmp_path / "pairs.tmpairs"
     assert main(["collect", "calibrate", "--sim", "--ball-radius-mm", "4", "--frames", "6", "--out", str(cal)]) == 0
     assert main(["collect", "run", "--sim", "--calibration", str(cal), "--out", str(data), "--presses", "6",

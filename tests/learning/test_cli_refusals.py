@@ -5,9 +5,9 @@ import zipfile
 
 import numpy as np
 import pytest
-from checks import assert_one_line_error, require_torch
+from checks import TORCH_MISSING, assert_one_line_error
 
-torch = require_torch()
+torch = pytest.importorskip("torch", reason=TORCH_MISSING)
 
 from tactile_manip.cli import main
 from tactile_manip.data import load_dataset, save_dataset

@@ -2,9 +2,10 @@
 
 import json
 
-from checks import assert_one_line_error, require_torch
+import pytest
+from checks import TORCH_MISSING, assert_one_line_error
 
-require_torch()
+pytest.importorskip("torch", reason=TORCH_MISSING)
 
 from tactile_manip.cli import main
 from tactile_manip.perception.reconstruct import read_metadata

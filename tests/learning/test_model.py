@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import pytest
-from checks import require_torch
+from checks import TORCH_MISSING
 
-torch = require_torch()
+torch = pytest.importorskip("torch", reason=TORCH_MISSING)
 
 from tactile_manip.learning.model import SuperMagCVAE, mean_and_spread, preset, taxel_grid  # noqa: E402
 

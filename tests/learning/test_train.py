@@ -5,9 +5,9 @@ import json
 
 import numpy as np
 import pytest
-from checks import require_torch
+from checks import TORCH_MISSING
 
-require_torch()
+pytest.importorskip("torch", reason=TORCH_MISSING)
 import torch
 
 from tactile_manip.learning.export import export_onnx, load_checkpoint

@@ -22,9 +22,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from checks import assert_one_line_error, require_torch
+from checks import TORCH_MISSING, assert_one_line_error
 
-require_torch()
+pytest.importorskip("torch", reason=TORCH_MISSING)
 import torch
 
 from tactile_manip.cli import main
