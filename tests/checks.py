@@ -13,13 +13,19 @@ TORCH_MISSING = ("torch is not installed: the training, export and model tests n
                  "(pip install torch==2.13.0, the CPU build, then pip install -e \".[dev]\")")
 
 
-def assert_one_line_error(err: str, command: str, *needles: str, program: str = "tactile-manip") -> str:
+def assert_one_line_error(err: str, command: str, *needles: str, program: str = "tactile-manip",
+                          after_progress: bool = False) -> str:
     """``err`` (a command's whole stderr) is exactly the CLI's error line for ``command``, ending in one newline:
     ``tactile-manip COMMAND: error: ...``, with no traceback, containing every one of ``needles``.
 
-    ``program=""`` for the task scripts, whose line starts ``SCRIPT.py: error: ``. Returns the line (without its
-    newline) so callers can check more of it.
+    ``program=""`` for the task scripts, whose line starts ``SCRIPT.py: error: ``. ``after_progress``: the command
+    drew a progress bar on stderr before failing (``train``); the error must then be the last line, and nothing
+    before it an error or a traceback. Returns the line (without its newline) so callers can check more of it.
     """
+    if after_progress:
+        *progress, last = err.splitlines(keepends=True)
+        assert not any("error" in p or "Traceback" in p for p in progress), err
+        err = last
     assert err.endswith("\n") and err.count("\n") == 1, f"expected exactly one line on stderr, got:\n{err}"
     line = err[:-1]
     assert line.startswith(f"{program} {command}: error: ".lstrip()), line

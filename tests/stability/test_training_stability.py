@@ -190,7 +190,7 @@ def test_the_cli_reports_divergence_in_one_line(data, tmp_path, capsys):
                       'patience = 50\nthreads = 1\n')
     out = tmp_path / "run"
     assert main(["train", "--config", str(config), "--data", str(data), "--out", str(out)]) == 2
-    err = [line for line in capsys.readouterr().err.splitlines() if "error:" in line]
-    assert len(err) == 1 and DIVERGED.search(err[0]) and "lr 0.99" in err[0]
-    match = DIVERGED.search(err[0])
+    line = assert_one_line_error(capsys.readouterr().err, "train", "lr 0.99", after_progress=True)
+    match = DIVERGED.search(line)
+    assert match, line
     _assert_no_nan_model(out, before_epoch=int(match.group(1)))
