@@ -112,7 +112,7 @@ def test_two_boards_at_once_and_exclusive_ports(emulator):
         assert not np.array_equal(a.field_raw_ut, b.field_raw_ut)  # different seeds, different noise
         time.sleep(0.6)
         for h in boards.health():
-            assert h.frames > 60 and h.seq_gaps == 0 and abs(h.rate_hz - 125.0) < 0.1 * 125.0
+            assert h.frames > 60 and h.seq_gaps == 0 and 100.0 < h.rate_hz < 150.0  # the margin of the 125 Hz test
 
 
 def test_a_baseline_taken_during_a_press_is_refused(emulator):
