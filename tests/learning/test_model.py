@@ -75,7 +75,7 @@ def test_inference_decoder_gives_the_training_mean_without_the_variance_channel(
     torch.testing.assert_close(mean, full_mean)
 
 
-# ---------------------------------------------------------------- decoder options (issue 15: a faster decoder)
+# ---------------------------------------------------------------- decoder options (the faster decoder)
 
 
 @pytest.mark.parametrize("overrides", [{"native_scale": 4, "head": "shuffle"}, {"native_scale": 2, "head": "shuffle"},
