@@ -44,7 +44,7 @@ class AngleEstimate:
         angle_rad: principal axis, counter-clockwise from the pad +x axis, axial, in (-pi/2, pi/2];
             0.0 when ``defined`` is False.
         confidence: in [0, 1]: 1 - (minor / major eigenvalue) of the contact's second moments, times the
-            agreement of prior samples where those are available.
+            agreement of prior samples where those are available; 0.0 when ``defined`` is False.
         defined: False for an empty, too small or isotropic contact (then ``reason`` says which).
         centroid_mm: contact centroid (x, y) in the pad frame, mm.
         area_mm2: contact area, mm^2.

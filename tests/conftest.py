@@ -1,14 +1,20 @@
 """Fixtures shared across layers: ONNX graphs carrying the shipped model's metadata (for load-time checks);
-the real eFlesh probe-rig runs where they are on disk."""
+the real eFlesh probe-rig runs where they are on disk.
+
+Also the report's torch line: without torch about a hundred tests skip, so the header and the summary say so
+in words instead of leaving it to a count of skips.
+"""
 
 from __future__ import annotations
 
+import importlib.util
 import os
 from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 import pytest
+from checks import TORCH_MISSING
 
 SHIPPED_MODEL = Path(__file__).resolve().parents[1] / "models" / "supermag_fast.onnx"
 EFLESH_ENV = "TACTILE_MANIP_EFLESH_DIR"  # folder of the eFlesh characterisation runs (spatial_*/, normal_*/)
@@ -25,6 +31,24 @@ def eflesh_dir() -> Path:
         if (folder / "spatial_20250316_155729" / "states.csv").is_file():
             return folder
     pytest.skip(f"the eFlesh runs are not on this machine (set {EFLESH_ENV} to their folder)")
+
+
+def _torch_installed() -> bool:
+    try:
+        return importlib.util.find_spec("torch") is not None
+    except (ImportError, ValueError):
+        return False
+
+
+def pytest_report_header(config) -> str | None:
+    return None if _torch_installed() else f"WARNING: {TORCH_MISSING}; every test that needs it is skipped"
+
+
+def pytest_terminal_summary(terminalreporter, exitstatus, config) -> None:
+    skipped = [r for r in terminalreporter.stats.get("skipped", []) if TORCH_MISSING in str(r.longrepr)]
+    if skipped:
+        terminalreporter.write_sep("!", f"{len(skipped)} tests or test files SKIPPED: {TORCH_MISSING}", red=True,
+                                   bold=True)
 
 
 @pytest.fixture

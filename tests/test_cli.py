@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from checks import assert_one_line_error
 
 from tactile_manip.cli import COMMANDS, main
 from tactile_manip.commands.demo import DEMO_OBJECTS
@@ -34,14 +35,6 @@ def dataset(tmp_path_factory) -> Path:
         rc = main(["simulate", "--config", CONFIG, "--scale", "0.003", "--workers", "1", "--out", str(out)])
     assert rc == 0
     return out
-
-
-def _one_line_error(capsys, command: str) -> str:
-    err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1, err
-    assert err.startswith(f"tactile-manip {command}: error: ")
-    assert "Traceback" not in err
-    return err
 
 
 def _assert_png(path: Path) -> None:
@@ -94,7 +87,7 @@ def test_simulate_refuses_to_overwrite_without_force(at_root, dataset, capsys):
     before = dataset.read_bytes()
     rc = main(["simulate", "--config", CONFIG, "--scale", "0.003", "--workers", "1", "--out", str(dataset)])
     assert rc == 2
-    err = _one_line_error(capsys, "simulate")
+    err = assert_one_line_error(capsys.readouterr().err, "simulate")
     assert str(dataset) in err and "--force" in err
     assert dataset.read_bytes() == before
 
@@ -120,7 +113,7 @@ def test_simulate_bad_config_is_one_line(at_root, tmp_path, capsys, text, expect
     bad.write_text(text)
     out = tmp_path / "never.npz"
     assert main(["simulate", "--config", str(bad), "--workers", "1", "--out", str(out)]) == 2
-    err = _one_line_error(capsys, "simulate")
+    err = assert_one_line_error(capsys.readouterr().err, "simulate")
     assert str(bad) in err and expected in err
     assert not out.exists()
 
@@ -128,7 +121,7 @@ def test_simulate_bad_config_is_one_line(at_root, tmp_path, capsys, text, expect
 def test_simulate_missing_config_is_one_line(at_root, tmp_path, capsys):
     missing = tmp_path / "missing.toml"
     assert main(["simulate", "--config", str(missing), "--out", str(tmp_path / "z.npz")]) == 2
-    err = _one_line_error(capsys, "simulate")
+    err = assert_one_line_error(capsys.readouterr().err, "simulate")
     assert "not found" in err and str(missing) in err
 
 
@@ -138,7 +131,7 @@ def test_simulate_missing_config_is_one_line(at_root, tmp_path, capsys):
 ])
 def test_simulate_bad_arguments(at_root, tmp_path, capsys, args, expected):
     assert main(["simulate", "--out", str(tmp_path / "z.npz"), *args]) == 2
-    assert expected in _one_line_error(capsys, "simulate")
+    assert_one_line_error(capsys.readouterr().err, "simulate", expected)
 
 
 # ---------------------------------------------------------------- show
@@ -160,7 +153,7 @@ def test_show_simulated_press(tmp_path):
 def test_show_refuses_a_force_that_bottoms_out(tmp_path, capsys):
     out = tmp_path / "f.png"
     assert main(["show", "--object", "letter_r", "--force-n", "1e6", "--out", str(out)]) == 2
-    err = _one_line_error(capsys, "show")
+    err = assert_one_line_error(capsys.readouterr().err, "show")
     assert "into the 2.5 mm layer" in err and "smaller force" in err
     assert not out.exists()
 
@@ -177,7 +170,7 @@ def test_show_notes_an_object_off_the_pad(tmp_path, capsys):
 def test_show_index_out_of_range(dataset, tmp_path, capsys):
     out = tmp_path / "c.png"
     assert main(["show", "--data", str(dataset), "--index", "99999", "--out", str(out)]) == 2
-    err = _one_line_error(capsys, "show")
+    err = assert_one_line_error(capsys.readouterr().err, "show")
     assert "--index must be in [0, 27]" in err and "99999" in err
     assert not out.exists()
 
@@ -185,12 +178,12 @@ def test_show_index_out_of_range(dataset, tmp_path, capsys):
 def test_show_missing_dataset(tmp_path, capsys):
     missing = tmp_path / "none.npz"
     assert main(["show", "--data", str(missing), "--out", str(tmp_path / "d.png")]) == 2
-    assert "dataset not found" in _one_line_error(capsys, "show")
+    assert_one_line_error(capsys.readouterr().err, "show", "dataset not found")
 
 
 def test_show_unknown_object(tmp_path, capsys):
     assert main(["show", "--object", "teapot", "--out", str(tmp_path / "e.png")]) == 2
-    err = _one_line_error(capsys, "show")
+    err = assert_one_line_error(capsys.readouterr().err, "show")
     assert "teapot" in err and "letter_r" in err
 
 

@@ -22,6 +22,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from checks import assert_one_line_error
 
 from tactile_manip.cli import COMMANDS, main
 
@@ -130,9 +131,8 @@ def test_a_path_fault_is_one_line_and_status_2(command, fault, paths, capsys):
     rc = main([command, *CASES[command][fault](paths)])
     out, err = capsys.readouterr()
     assert rc == 2, (out, err)
-    lines = err.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith(f"tactile-manip {command}: error: "), err
-    assert "Traceback" not in out + err
+    assert_one_line_error(err, command)
+    assert "Traceback" not in out
     assert sorted(p.name for p in paths["tmp"].iterdir()) == before  # nothing was created on the way out
 
 
@@ -162,9 +162,8 @@ def test_a_missing_extra_names_its_install_line_before_any_work(module, argv, in
     if module == "serial":
         monkeypatch.setitem(sys.modules, "serial.tools.list_ports", None)
     assert main(argv) == 2
-    err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1 and err.startswith(f"tactile-manip {argv[0]}: error: ") and install in err
-    assert "Traceback" not in err and list(tmp_path.iterdir()) == []  # nothing written before the check
+    assert_one_line_error(capsys.readouterr().err, argv[0], install)
+    assert list(tmp_path.iterdir()) == []  # nothing written before the check
 
 
 def test_an_import_error_of_our_own_code_keeps_its_traceback(monkeypatch):

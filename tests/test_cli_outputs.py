@@ -1,16 +1,19 @@
 """Outputs are never overwritten unasked, the path printed is the path written, and configs fail in one line.
 
-Each case here is one of issue 14's: a second ``simulate --out x`` (which writes ``x.npz``), ``show`` to a
+The cases: a second ``simulate --out x`` (which writes ``x.npz``), ``show`` to a
 bare name, report folders of ``demo`` / ``score`` / ``bench``, a config that is a directory or not UTF-8,
-unknown shape arguments in a dataset or scene config, and a bad scene that must not leave a run folder.
+unknown shape arguments in a dataset or scene config, and a bad scene (or a real robot's scene whose board is
+not plugged in) that must not leave a run folder.
 """
 
 from __future__ import annotations
 
+import sys
 import time
 from pathlib import Path
 
 import pytest
+from checks import assert_one_line_error
 
 from tactile_manip.cli import main
 from tactile_manip.errors import ConfigError
@@ -22,13 +25,7 @@ from tactile_manip.trials.scene import load_scene
 ROOT = Path(__file__).resolve().parents[1]
 DATASET_CONFIG = ROOT / "configs/dataset/supermag.toml"
 SCENE = ROOT / "configs/scenes/reorient_sim.toml"
-
-
-def _one_line(capsys, command: str) -> str:
-    err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1 and err.startswith(f"tactile-manip {command}: error: "), err
-    assert "Traceback" not in err
-    return err
+FR3_SCENE = ROOT / "configs/scenes/reorient_fr3.toml"
 
 
 def test_simulate_checks_the_file_it_writes_and_refuses_it_the_second_time(tmp_path, monkeypatch, capsys):
@@ -41,7 +38,7 @@ def test_simulate_checks_the_file_it_writes_and_refuses_it_the_second_time(tmp_p
     before = written.read_bytes()
     t0 = time.perf_counter()
     assert main(args) == 2  # `x` does not exist, but `x.npz`, the file it would write, does
-    assert f"{written} exists; pass --force" in _one_line(capsys, "simulate")
+    assert_one_line_error(capsys.readouterr().err, "simulate", f"{written} exists; pass --force")
     assert written.read_bytes() == before
     assert time.perf_counter() - t0 < 5.0  # refused before simulating (the run above took longer)
 
@@ -51,7 +48,7 @@ def test_show_prints_the_path_it_wrote_and_refuses_to_replace_it(tmp_path, capsy
     assert capsys.readouterr().out.strip() == f"wrote {tmp_path / 'press.png'}"
     assert (tmp_path / "press.png").read_bytes()[:4] == b"\x89PNG"
     assert main(["show", "--object", "cylinder", "--out", str(tmp_path / "press.png")]) == 2
-    assert "exists; pass --force" in _one_line(capsys, "show")
+    assert_one_line_error(capsys.readouterr().err, "show", "exists; pass --force")
     assert main(["show", "--object", "cylinder", "--out", str(tmp_path / "press.png"), "--force"]) == 0
 
 
@@ -63,7 +60,7 @@ def test_show_prints_the_path_it_wrote_and_refuses_to_replace_it(tmp_path, capsy
 def test_report_folders_are_not_overwritten_without_force(argv, existing, tmp_path, capsys):
     (tmp_path / existing).write_text("an earlier run")
     assert main([a.format(d=tmp_path) for a in argv]) == 2
-    err = _one_line(capsys, argv[0])
+    err = assert_one_line_error(capsys.readouterr().err, argv[0])
     assert existing in err and "--force" in err
     assert (tmp_path / existing).read_text() == "an earlier run"
 
@@ -103,8 +100,29 @@ def test_a_bad_scene_leaves_no_run_folder_behind(old, new, named, tmp_path, monk
     assert scene != SCENE.read_text()
     (tmp_path / "s.toml").write_text(scene)
     assert main(["trials", "--config", str(tmp_path / "s.toml"), "--out", str(tmp_path / "run"), "--quiet"]) == 2
-    assert named in _one_line(capsys, "trials")
+    assert_one_line_error(capsys.readouterr().err, "trials", named)
     assert not (tmp_path / "run").exists()
+
+
+def test_a_robot_scene_whose_board_is_unplugged_fails_before_its_run_folder(tmp_path, monkeypatch, capsys):
+    """The FR3 scene with its sensor port missing: one line naming the port and find-port, status 2, no run.json
+    (nor any folder) left behind to block the next run."""
+    pytest.importorskip("serial", reason="the serial sensor needs pyserial (the serial extra)")
+    monkeypatch.chdir(ROOT)
+    port = tmp_path / "ttyUSB9"
+    scene = FR3_SCENE.read_text().replace('port = "/dev/ttyUSB0"', f'port = "{port}"')
+    assert str(port) in scene
+    (tmp_path / "s.toml").write_text(scene)
+    out = tmp_path / "run"
+    assert main(["trials", "--config", str(tmp_path / "s.toml"), "--out", str(out), "--quiet"]) == 2
+    assert_one_line_error(capsys.readouterr().err, "trials", str(port), "find-port")
+    assert not out.exists()
+    # the board is there (any existing path stands in for it) but franky is not: also before the run folder
+    port.write_bytes(b"")
+    monkeypatch.setitem(sys.modules, "franky", None)
+    assert main(["trials", "--config", str(tmp_path / "s.toml"), "--out", str(out), "--quiet"]) == 2
+    assert_one_line_error(capsys.readouterr().err, "trials", "franky-control", '".[franky]"')
+    assert not out.exists()
 
 
 def test_run_folders_started_in_the_same_second_stay_apart(tmp_path, monkeypatch):

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from checks import assert_one_line_message
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -102,10 +103,7 @@ def _supermag_with(old: str, new: str) -> str:
 def _error(path: Path) -> str:
     with pytest.raises(ConfigError) as info:
         load_dataset_config(path)
-    msg = str(info.value)
-    assert str(path) in msg
-    assert "\n" not in msg  # one line for the CLI
-    return msg
+    return assert_one_line_message(str(info.value), str(path))  # one line for the CLI
 
 
 BAD_FILES = {

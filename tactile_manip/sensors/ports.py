@@ -9,7 +9,9 @@ survives replugging (the /dev/tty* name does not).
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass
+from typing import Any
 
 from tactile_manip.errors import SensorDisconnectedError
 from tactile_manip.sensors.serial_sensor import import_serial
@@ -70,8 +72,15 @@ def list_ports(*, include_all: bool = False) -> list[PortInfo]:
     import_serial()  # a clear ImportError naming the extra when pyserial is missing
     from serial.tools import list_ports as lp
 
+    return candidate_ports(lp.comports(), include_all=include_all)
+
+
+def candidate_ports(comports: Iterable[Any], *, include_all: bool = False) -> list[PortInfo]:
+    """``comports`` (pyserial's ``ListPortInfo``: ``device``, ``description``, ``hwid``, ``vid``, ``pid``,
+    ``serial_number``) as PortInfo: the likely sensor boards (a known USB kind) first, then by device path;
+    without ``include_all``, ports without a USB vendor id (built-in UARTs, Bluetooth) are left out."""
     ports = []
-    for p in lp.comports():
+    for p in comports:
         if not include_all and p.vid is None:
             continue
         kind = usb_kind(p.vid, p.pid)

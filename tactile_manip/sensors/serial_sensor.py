@@ -14,6 +14,7 @@ imported on ``connect()`` only, so ``import tactile_manip.sensors`` works withou
 from __future__ import annotations
 
 import math
+import os
 import threading
 import time
 from typing import Any
@@ -56,6 +57,22 @@ class SerialSensor(TactileSensor):
     @property
     def wire_format(self) -> str:
         return self.config.wire_format
+
+    def check_port(self) -> None:
+        """Fail now, opening nothing, where :meth:`connect` would fail for certain: before a caller starts long
+        work or writes files on the board's behalf. A port that passes may still fail to open (held by another
+        program, no permission); ``connect()`` says why.
+
+        Raises:
+            MissingExtraError: pyserial is not installed (an ImportError naming the extra).
+            SensorDisconnectedError: the configured device path does not exist, or no connected USB port has
+                the configured serial number.
+        """
+        import_serial()
+        device = self._device()  # by serial number: the port that has it now, or SensorDisconnectedError
+        if os.path.isabs(device) and not os.path.exists(device):  # COM3 and the like are not paths: left to open
+            raise SensorDisconnectedError(f"{device} does not exist: is the board plugged in? "
+                                          "`tactile-manip find-port` lists the ports")
 
     # ------------------------------------------------------------------ TactileSensor hooks
 

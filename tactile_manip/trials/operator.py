@@ -24,6 +24,7 @@ import numpy as np
 
 from tactile_manip.behaviours.reorient import ReorientResult, grasp_estimate_reorient
 from tactile_manip.errors import ConfigError
+from tactile_manip.extras import require
 from tactile_manip.perception.estimator import TactilePoseEstimator
 from tactile_manip.robot.base import Arm, Gripper
 from tactile_manip.robot.frames import hand_T_pad
@@ -64,7 +65,12 @@ class OperatorTruth:
 
 class OperatorCell:
     """A real cell (see the module docstring). ``arm``/``gripper``/``sensor`` default to the scene's franky
-    backend and serial sensor; pass your own (e.g. franky-sim, or any Arm) to override."""
+    backend and serial sensor; pass your own (e.g. franky-sim, or any Arm) to override.
+
+    Building one opens nothing, but fails where connecting would fail for certain, so `tactile-manip trials`
+    stops before it writes its run folder: SensorDisconnectedError when the scene's board is not plugged in
+    (no such port, or no port with its serial number), MissingExtraError without pyserial or franky.
+    """
 
     def __init__(self, scene: TrialScene, *, arm: Arm | None = None, gripper: Gripper | None = None,
                  sensor: TactileSensor | None = None, ask: Callable[[str], str] = input,
@@ -75,18 +81,21 @@ class OperatorCell:
             raise ConfigError("sensor: a real robot needs the real board: give [sensor] a port "
                               "(e.g. port = \"/dev/ttyUSB0\")")
         self.scene, self._ask, self._say = scene, ask, say
-        if arm is None or gripper is None:
-            from tactile_manip.robot.franky_arm import FrankyArm, FrankyConfig, FrankyGripper
-            from tactile_manip.robot.safety import SafeArm
-
-            config = FrankyConfig(host=scene.robot.host, relative_dynamics_factor=scene.robot.relative_dynamics_factor,
-                                  home_q_rad=scene.robot.home_q_rad)
-            arm = arm or SafeArm(FrankyArm(config), scene.robot.safety)
-            gripper = gripper or FrankyGripper(config)
+        # what can be known to fail is checked here, before `tactile-manip trials` writes its run folder
         if sensor is None:
             from tactile_manip.sensors.serial_sensor import SerialSensor
 
             sensor = SerialSensor(scene.sensor)
+            sensor.check_port()
+        if arm is None or gripper is None:
+            from tactile_manip.robot.franky_arm import FrankyArm, FrankyConfig, FrankyGripper
+            from tactile_manip.robot.safety import SafeArm
+
+            require("franky", "the real FR3 (robot.backend = 'franky')")
+            config = FrankyConfig(host=scene.robot.host, relative_dynamics_factor=scene.robot.relative_dynamics_factor,
+                                  home_q_rad=scene.robot.home_q_rad)
+            arm = arm or SafeArm(FrankyArm(config), scene.robot.safety)
+            gripper = gripper or FrankyGripper(config)
         self.arm, self.gripper, self.sensor = arm, gripper, sensor
 
     @contextlib.contextmanager

@@ -6,6 +6,7 @@ import warnings
 from pathlib import Path
 
 import pytest
+from checks import TORCH_MISSING
 
 ROOT = Path(__file__).resolve().parents[2]
 DATASET_CONFIG = ROOT / "configs" / "dataset" / "supermag.toml"
@@ -24,7 +25,7 @@ def bench_data(tmp_path_factory: pytest.TempPathFactory) -> Path:
 def tiny_model(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A seeded, untrained ``small`` model with 200x200 output exported to RUN/model.onnx, its checkpoint at
     RUN/best.pt (as a training run leaves them). Its output depends on the reading (not all zero)."""
-    torch = pytest.importorskip("torch", reason="exporting a model needs torch (pip install -e '.[train]')")
+    torch = pytest.importorskip("torch", reason=TORCH_MISSING)
     pytest.importorskip("onnx", reason="exporting a model needs onnx (pip install -e '.[train]')")
     pytest.importorskip("onnxruntime", reason="running a model needs onnxruntime")
     from tactile_manip.config import to_dict

@@ -6,6 +6,7 @@ import json
 from pathlib import Path
 
 import pytest
+from checks import assert_one_line_error
 
 from tactile_manip.cli import main
 
@@ -44,5 +45,5 @@ def test_bench_writes_report_json_and_plot_and_prints_the_table(bench_data, tmp_
 
 def test_a_bad_model_spec_is_a_one_line_error(capsys, tmp_path) -> None:
     assert main(["bench", "--out", str(tmp_path), "--model", "no-equals-sign"]) == 2
-    err = capsys.readouterr().err.strip()
-    assert err.startswith("tactile-manip bench: error: --model must be NAME=PATH") and len(err.splitlines()) == 1
+    line = assert_one_line_error(capsys.readouterr().err, "bench")
+    assert line.startswith("tactile-manip bench: error: --model must be NAME=PATH"), line

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import time
 
 import numpy as np
 import pytest
@@ -72,35 +71,67 @@ def test_model_spec_needs_name_and_path_and_finds_the_checkpoint(tmp_path) -> No
             parse_model_spec(bad)
 
 
-class _Sleeper(Reconstructor):
-    """Takes ``delay_s`` per call plus ``per_reading_s`` per reading; outputs zeros."""
+class _Clock:
+    """A stand-in for the ``time`` module in bench.timing: ``perf_counter`` reads a clock that only the fake
+    reconstructor advances, so the timings are exact whatever else the machine is doing."""
+
+    def __init__(self) -> None:
+        self.now_s = 0.0
+
+    def perf_counter(self) -> float:
+        return self.now_s
+
+
+class _Timed(Reconstructor):
+    """Takes ``delay_s`` per call plus ``per_reading_s`` per reading of fake time (``first_s`` for the first
+    call instead, when given); counts its calls; outputs zeros."""
 
     output_shape = (4, 4)
 
-    def __init__(self, delay_s: float, per_reading_s: float = 0.0) -> None:
-        self.delay_s, self.per_reading_s = delay_s, per_reading_s
+    def __init__(self, clock: _Clock, delay_s: float, per_reading_s: float = 0.0, first_s: float | None = None):
+        self.clock, self.delay_s, self.per_reading_s, self.first_s = clock, delay_s, per_reading_s, first_s
+        self.calls = 0
 
     def _run(self, fields_ut):
-        time.sleep(self.delay_s + self.per_reading_s * len(fields_ut))
+        first = self.calls == 0 and self.first_s is not None
+        self.clock.now_s += self.first_s if first else self.delay_s + self.per_reading_s * len(fields_ut)
+        self.calls += 1
         return np.zeros((len(fields_ut), 4, 4), np.float32), None
 
 
-def test_timings_stop_at_the_time_budget_but_not_before_min_calls() -> None:
+@pytest.fixture
+def clock(monkeypatch) -> _Clock:
+    from tactile_manip.bench import timing
+
+    fake = _Clock()
+    monkeypatch.setattr(timing, "time", fake)
+    return fake
+
+
+def test_timings_stop_at_the_time_budget_but_not_before_min_calls(clock) -> None:
     readings = np.zeros((3, 4, 4, 3), np.float32)
     budget = TimingBudget(max_calls=1000, min_calls=5, max_seconds=0.05, warmup=1, batch=8, batch_rounds=3)
-    slow = single_reading_ms(_Sleeper(0.02), readings, budget)
-    assert slow["latency_calls"] == 5 and slow["latency_p50_ms"] >= 20.0
-    fast = single_reading_ms(_Sleeper(0.0), readings, TimingBudget(max_calls=50, max_seconds=10.0))
-    assert fast["latency_calls"] == 50
+    slow_rec = _Timed(clock, 0.02)
+    slow = single_reading_ms(slow_rec, readings, budget)
+    # 0.05 s are spent after 3 timed calls, but 5 are the minimum; plus the warm-up call
+    assert slow["latency_calls"] == 5 and slow_rec.calls == 6
+    assert slow["latency_p50_ms"] == pytest.approx(20.0) and slow["latency_p99_ms"] == pytest.approx(20.0)
+    budget = TimingBudget(max_calls=1000, min_calls=5, max_seconds=0.51)
+    assert single_reading_ms(_Timed(clock, 0.02), readings, budget)["latency_calls"] == 26  # 26 x 20 ms > 0.51 s
+    fast = single_reading_ms(_Timed(clock, 1e-4), readings, TimingBudget(max_calls=50, max_seconds=10.0))
+    assert fast["latency_calls"] == 50  # the call cap, long before the time budget
 
 
-def test_throughput_drops_the_warm_up_batch_unless_it_alone_exceeds_the_budget() -> None:
+def test_throughput_drops_the_warm_up_batch_unless_it_alone_exceeds_the_budget(clock) -> None:
     readings = np.zeros((3, 4, 4, 3), np.float32)
-    quick = batch_throughput(_Sleeper(0.0, 1e-4), readings, TimingBudget(batch=8, batch_rounds=3, max_seconds=10.0))
-    assert quick["warm"] and quick["batch_rounds"] == 3 and quick["batch"] == 8
-    assert quick["throughput_rps"] == pytest.approx(1e4, rel=0.5)
-    slow = batch_throughput(_Sleeper(0.06), readings, TimingBudget(batch=8, batch_rounds=3, max_seconds=0.05))
-    assert not slow["warm"] and slow["batch_rounds"] == 1
+    quick_rec = _Timed(clock, 0.0, 1e-4, first_s=1.0)  # a slow first batch (allocation), then 0.8 ms per batch
+    quick = batch_throughput(quick_rec, readings, TimingBudget(batch=8, batch_rounds=3, max_seconds=10.0))
+    assert quick["warm"] and quick["batch_rounds"] == 3 and quick["batch"] == 8 and quick_rec.calls == 4
+    assert quick["throughput_rps"] == pytest.approx(1e4)  # 8 readings per 0.8 ms: the warm-up is not counted
+    slow_rec = _Timed(clock, 0.06)
+    slow = batch_throughput(slow_rec, readings, TimingBudget(batch=8, batch_rounds=3, max_seconds=0.05))
+    assert not slow["warm"] and slow["batch_rounds"] == 1 and slow_rec.calls == 1
+    assert slow["throughput_rps"] == pytest.approx(8 / 0.06)  # then the warm-up batch is the measurement
 
 
 def test_other_load_is_the_busy_time_not_spent_by_this_process() -> None:

@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from checks import TORCH_MISSING
 
 from tactile_manip.bench.accuracy import rod_scene
 from tactile_manip.bench.candidates import ModelEntry
@@ -108,7 +109,7 @@ def test_a_corrupt_model_file_is_a_note(bench_data, tmp_path) -> None:
 
 
 def test_a_missing_preset_model_is_exported_untrained_for_latency_only(bench_data, tmp_path) -> None:
-    pytest.importorskip("torch")
+    pytest.importorskip("torch", reason=TORCH_MISSING)
     pytest.importorskip("onnx")
     entry = ModelEntry("unt", tmp_path / "missing.onnx", tmp_path / "no.pt", untrained_preset="small")
     report = _bench(bench_data, models=[entry], baselines=(), runtimes=["ort-1", "torch"])

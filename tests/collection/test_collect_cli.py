@@ -8,31 +8,24 @@ import json
 
 import numpy as np
 import pytest
+from checks import TORCH_MISSING, assert_one_line_error
 
 from tactile_manip.cli import main
 from tactile_manip.collection.pair_log import read_pair_log
 from tactile_manip.data import load_dataset
 
 
-def _one_line_error(capsys, *needles: str) -> str:
-    err = capsys.readouterr().err
-    assert err.count("\n") == 1, err
-    for n in needles:
-        assert n in err, err
-    return err
-
-
 def test_missing_calibration_is_one_line(tmp_path, capsys):
     assert main(["collect", "run", "--sim", "--calibration", str(tmp_path / "none.npz"),
                  "--out", str(tmp_path / "d.npz")]) == 2
-    _one_line_error(capsys, "VBTS calibration not found", "collect calibrate")
+    assert_one_line_error(capsys.readouterr().err, "collect", "VBTS calibration not found", "collect calibrate")
 
 
 @pytest.mark.skipif(importlib.util.find_spec("cv2") is not None, reason="opencv is installed here")
 def test_a_real_camera_without_opencv_names_the_extra(tmp_path, capsys):
     assert main(["collect", "calibrate", "--camera", "0", "--corners", "489,72 151,66 146,411 494,413",
                  "--ball-radius-mm", "4", "--out", str(tmp_path / "c.npz")]) == 2
-    _one_line_error(capsys, 'pip install -e ".[camera]"')
+    assert_one_line_error(capsys.readouterr().err, "collect", 'pip install -e ".[camera]"')
 
 
 def test_bad_corners_are_refused_by_the_parser(tmp_path, capsys):
@@ -48,7 +41,7 @@ def test_calibrate_sim_writes_a_calibration_and_reports_its_error(tmp_path, caps
     text = capsys.readouterr().out
     assert "table vs the simulated camera's true table" in text and out.is_file()
     assert main(["collect", "calibrate", "--sim", "--ball-radius-mm", "4", "--out", str(out)]) == 2  # no --force
-    _one_line_error(capsys, "exists; pass --force")
+    assert_one_line_error(capsys.readouterr().err, "collect", "exists; pass --force")
 
 
 def test_finalize_merges_logs_and_tolerates_a_torn_tail(tmp_path, capsys, write_log):
@@ -64,7 +57,7 @@ def test_finalize_merges_logs_and_tolerates_a_torn_tail(tmp_path, capsys, write_
 
 @pytest.mark.slow
 def test_collect_on_the_emulator_then_train_and_evaluate_without_conversion(tmp_path, capsys):
-    pytest.importorskip("torch", reason="training needs torch")
+    pytest.importorskip("torch", reason=TORCH_MISSING)
     cal, data, log = tmp_path / "cal.npz", tmp_path / "pairs.npz", tmp_path / "pairs.tmpairs"
     assert main(["collect", "calibrate", "--sim", "--ball-radius-mm", "4", "--frames", "6", "--out", str(cal)]) == 0
     assert main(["collect", "run", "--sim", "--calibration", str(cal), "--out", str(data), "--presses", "6",

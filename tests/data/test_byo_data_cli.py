@@ -9,8 +9,9 @@ import json
 
 import numpy as np
 import pytest
+from checks import TORCH_MISSING, assert_one_line_error
 
-pytest.importorskip("torch", reason="training tests need torch: pip install torch==2.13.0")
+pytest.importorskip("torch", reason=TORCH_MISSING)
 
 from tactile_manip.cli import main
 from tactile_manip.data import load_dataset
@@ -107,8 +108,7 @@ def test_bad_arrays_are_one_line_naming_the_array(make, problem, tmp_path, capsy
     if "outside" in problem:
         args += ["--data-range", "1"]
     assert main(args) == 2
-    err = capsys.readouterr().err
-    assert err.startswith("tactile-manip import: error: ") and problem in err and err.count("\n") == 1
+    assert_one_line_error(capsys.readouterr().err, "import", problem)
     assert not (tmp_path / "d.npz").exists()
 
 
@@ -125,8 +125,7 @@ def test_bad_split_group_and_kind_are_one_line(tmp_path, capsys):
              (["--readings", str(tmp_path / "missing.npy")], "missing.npy: no such file")]
     for extra, problem in cases:
         assert main(base + extra) == 2
-        err = capsys.readouterr().err
-        assert problem in err and err.count("\n") == 1, err
+        assert_one_line_error(capsys.readouterr().err, "import", problem)
     with pytest.raises(SystemExit):  # argparse refuses an unknown channel kind before any work
         main(base + ["--channel-kind", "vector"])
     assert "invalid choice: 'vector'" in capsys.readouterr().err

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from checks import TORCH_MISSING
 
 from tactile_manip.data import ChannelSpec, PairedDataset, concatenate, load_datasets, save_dataset
 from tactile_manip.errors import DatasetError
@@ -70,7 +71,7 @@ def test_load_datasets_reads_one_or_several_files(tmp_path):
 
 
 def test_select_drops_flagged_presses_and_keeps_data_without_the_flag():
-    torch = pytest.importorskip("torch")  # noqa: F841 (learning.data imports torch)
+    torch = pytest.importorskip("torch", reason=TORCH_MISSING)  # noqa: F841 (learning.data imports torch)
     from tactile_manip.learning.data import select
 
     flagged = np.zeros(9, bool)

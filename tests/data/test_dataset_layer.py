@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from checks import assert_one_line_message
 
 from tactile_manip.data import (ChannelSpec, ImageSpec, PairedDataset, from_arrays, load_dataset, read_array,
                                 save_dataset)
@@ -113,8 +114,8 @@ def test_bad_inputs_name_the_array(kwargs, array, problem):
     args.update(kwargs)
     with pytest.raises(DatasetError) as info:
         from_arrays(args.pop("readings"), args.pop("images"), **args)
-    msg = str(info.value)
-    assert msg.startswith(array) and problem in msg and "\n" not in msg
+    msg = assert_one_line_message(str(info.value), problem)
+    assert msg.startswith(array), msg
 
 
 def test_read_array_sources(tmp_path):

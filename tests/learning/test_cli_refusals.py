@@ -5,8 +5,9 @@ import zipfile
 
 import numpy as np
 import pytest
+from checks import TORCH_MISSING, assert_one_line_error
 
-torch = pytest.importorskip("torch", reason="training tests need torch: pip install torch==2.13.0")
+torch = pytest.importorskip("torch", reason=TORCH_MISSING)
 
 from tactile_manip.cli import main
 from tactile_manip.data import load_dataset, save_dataset
@@ -24,18 +25,11 @@ def run(tiny_data, tmp_path_factory):
     return tmp
 
 
-def _one_line(capsys, command: str) -> str:
-    err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1 and err.startswith(f"tactile-manip {command}: error: "), err
-    assert "Traceback" not in err
-    return err
-
-
 def test_train_refuses_an_existing_run_without_resume_or_force(run, tiny_data, capsys):
     before = (run / "run" / "best.pt").read_bytes()
     capsys.readouterr()
     assert main(["train", "--config", str(run / "tiny.toml"), "--data", str(tiny_data), "--out", str(run / "run")]) == 2
-    err = _one_line(capsys, "train")
+    err = assert_one_line_error(capsys.readouterr().err, "train")
     assert "checkpoint.pt" in err and "--resume" in err and "--force" in err
     assert (run / "run" / "best.pt").read_bytes() == before
 
@@ -46,7 +40,7 @@ def test_resume_with_another_architecture_names_the_differing_fields(run, tiny_d
     capsys.readouterr()
     assert main(["train", "--config", str(other), "--data", str(tiny_data), "--out", str(run / "run"),
                  "--resume"]) == 2
-    err = _one_line(capsys, "train")
+    err = assert_one_line_error(capsys.readouterr().err, "train")
     assert "another architecture" in err and "latent" in err and "->" in err
 
 
@@ -54,14 +48,14 @@ def test_init_from_a_missing_or_foreign_checkpoint_is_one_line_and_fine_tuning_r
     args = ["train", "--config", str(run / "tiny.toml"), "--data", str(tiny_data)]
     capsys.readouterr()
     assert main([*args, "--out", str(run / "ft0"), "--init", str(run / "nothing.pt")]) == 2
-    assert "checkpoint not found" in _one_line(capsys, "train")
+    assert_one_line_error(capsys.readouterr().err, "train", "checkpoint not found")
     assert main([*args, "--out", str(run / "run"), "--init", str(run / "run" / "best.pt"), "--resume"]) == 2
-    assert "give one of them" in _one_line(capsys, "train")
+    assert_one_line_error(capsys.readouterr().err, "train", "give one of them")
     other = run / "other_init.toml"
     other.write_text(TINY.replace('"small"', '"compact"'))
     assert main(["train", "--config", str(other), "--data", str(tiny_data), "--out", str(run / "ft1"),
                  "--init", str(run / "run" / "best.pt")]) == 2
-    assert "another architecture" in _one_line(capsys, "train")
+    assert_one_line_error(capsys.readouterr().err, "train", "another architecture")
     assert main([*args, "--out", str(run / "ft2"), "--init", str(run / "run" / "best.pt")]) == 0
     assert (run / "ft2" / "best.pt").is_file()
 
@@ -71,7 +65,7 @@ def test_export_refuses_to_replace_a_model_without_force(run, capsys):
     before = model.read_bytes()
     capsys.readouterr()
     assert main(["export", "--checkpoint", str(run / "run" / "best.pt"), "--out", str(model)]) == 2
-    assert "exists; pass --force" in _one_line(capsys, "export")
+    assert_one_line_error(capsys.readouterr().err, "export", "exists; pass --force")
     assert model.read_bytes() == before
     copy = run / "copy.onnx"
     copy.write_bytes(b"an older model")
@@ -105,7 +99,7 @@ def test_export_of_a_file_that_is_not_our_checkpoint_is_one_line(kind, expected,
     {"truncated": lambda: _truncated(path, run), "foreign": lambda: _torch_dict(path), "zip": lambda: _zip(path),
      "text": lambda: path.write_text("hello")}[kind]()
     assert main(["export", "--checkpoint", str(path), "--out", str(tmp_path / "x.onnx")]) == 2
-    assert expected in _one_line(capsys, "export")
+    assert_one_line_error(capsys.readouterr().err, "export", expected)
     assert not (tmp_path / "x.onnx").exists() and not (tmp_path / "x.onnx.partial").exists()
 
 
@@ -114,7 +108,7 @@ def test_evaluate_a_dataset_without_a_test_split_is_one_line(tiny_data, tmp_path
     no_test = dataclasses.replace(data, split=np.where(data.split == "test", "val", data.split))
     path = save_dataset(tmp_path / "no_test.npz", no_test)
     assert main(["evaluate", "--data", str(path), "--out", str(tmp_path / "eval")]) == 2
-    err = _one_line(capsys, "evaluate")
+    err = assert_one_line_error(capsys.readouterr().err, "evaluate")
     assert "has no test split" in err and "train, val" in err
     assert not (tmp_path / "eval").exists()
 
@@ -123,11 +117,11 @@ def test_inception_onnx_that_is_another_model_is_one_line(run, tiny_data, tmp_pa
     capsys.readouterr()
     assert main(["evaluate", "--data", str(tiny_data), "--out", str(tmp_path / "eval"),
                  "--inception-onnx", str(run / "m.onnx")]) == 2  # a SuperMag model, not an Inception network
-    assert "not an Inception-v3 feature network" in _one_line(capsys, "evaluate")
+    assert_one_line_error(capsys.readouterr().err, "evaluate", "not an Inception-v3 feature network")
     (tmp_path / "junk.onnx").write_bytes(b"\x00" * 64)
     assert main(["evaluate", "--data", str(tiny_data), "--out", str(tmp_path / "eval2"),
                  "--inception-onnx", str(tmp_path / "junk.onnx")]) == 2
-    assert "not a readable ONNX model" in _one_line(capsys, "evaluate")
+    assert_one_line_error(capsys.readouterr().err, "evaluate", "not a readable ONNX model")
 
 
 def test_evaluate_refuses_to_replace_an_earlier_report_without_force(tiny_data, tmp_path, capsys):
@@ -135,6 +129,7 @@ def test_evaluate_refuses_to_replace_an_earlier_report_without_force(tiny_data, 
     out.mkdir()
     (out / "results.json").write_text("{}")
     assert main(["evaluate", "--data", str(tiny_data), "--out", str(out)]) == 2
-    assert "results.json" in _one_line(capsys, "evaluate") and (out / "results.json").read_text() == "{}"
+    assert_one_line_error(capsys.readouterr().err, "evaluate", "results.json")
+    assert (out / "results.json").read_text() == "{}"
     assert main(["evaluate", "--data", str(tiny_data), "--out", str(out), "--force"]) == 0
     assert (out / "results.json").read_text() != "{}"

@@ -5,8 +5,9 @@ import subprocess
 import sys
 
 import pytest
+from checks import TORCH_MISSING
 
-pytest.importorskip("torch", reason="training tests need torch: pip install torch==2.13.0")
+pytest.importorskip("torch", reason=TORCH_MISSING)
 import torch
 
 from tactile_manip.learning.export import load_checkpoint

@@ -3,8 +3,9 @@
 import json
 
 import pytest
+from checks import TORCH_MISSING, assert_one_line_error
 
-pytest.importorskip("torch", reason="training tests need torch: pip install torch==2.13.0")
+pytest.importorskip("torch", reason=TORCH_MISSING)
 
 from tactile_manip.cli import main
 from tactile_manip.perception.reconstruct import read_metadata
@@ -36,13 +37,12 @@ def test_train_export_evaluate_round_trip(tiny_data, tmp_path, capsys):
 
 def test_export_refuses_a_missing_checkpoint_in_one_line(tmp_path, capsys):
     assert main(["export", "--checkpoint", str(tmp_path / "none.pt"), "--out", str(tmp_path / "x.onnx")]) == 2
-    err = capsys.readouterr().err
-    assert "checkpoint not found" in err and err.count("\n") == 1
+    assert_one_line_error(capsys.readouterr().err, "export", "checkpoint not found")
 
 
 def test_evaluate_refuses_a_bad_model_argument(tiny_data, tmp_path, capsys):
     assert main(["evaluate", "--data", str(tiny_data), "--model", "no-equals-sign", "--out", str(tmp_path)]) == 2
-    assert "LABEL=PATH" in capsys.readouterr().err
+    assert_one_line_error(capsys.readouterr().err, "evaluate", "LABEL=PATH")
 
 
 def test_evaluate_fits_the_baselines_on_the_named_objects_only(tiny_data, tmp_path, capsys):
@@ -58,8 +58,7 @@ def test_evaluate_fits_the_baselines_on_the_named_objects_only(tiny_data, tmp_pa
     assert fits[""]["gain_mm_per_ut"] != fits[first]["gain_mm_per_ut"]
     assert main(["evaluate", "--data", str(tiny_data), "--out", str(tmp_path / "x"),
                  "--baseline-objects", "no_such_object"]) == 2
-    err = capsys.readouterr().err
-    assert "no training presses of no_such_object" in err
+    assert_one_line_error(capsys.readouterr().err, "evaluate", "no training presses of no_such_object")
 
 
 def test_evaluation_breaks_down_by_force_band_and_sensor_draw(tmp_path):

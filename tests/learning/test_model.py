@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 import pytest
+from checks import TORCH_MISSING
 
-torch = pytest.importorskip("torch")
+torch = pytest.importorskip("torch", reason=TORCH_MISSING)
 
 from tactile_manip.learning.model import SuperMagCVAE, mean_and_spread, preset, taxel_grid  # noqa: E402
 
@@ -74,7 +75,7 @@ def test_inference_decoder_gives_the_training_mean_without_the_variance_channel(
     torch.testing.assert_close(mean, full_mean)
 
 
-# ---------------------------------------------------------------- decoder options (issue 15: a faster decoder)
+# ---------------------------------------------------------------- decoder options (the faster decoder)
 
 
 @pytest.mark.parametrize("overrides", [{"native_scale": 4, "head": "shuffle"}, {"native_scale": 2, "head": "shuffle"},
@@ -93,18 +94,34 @@ def test_decoder_options_give_full_size_images_and_the_same_mean_without_the_var
 
 
 def test_the_shuffle_head_places_each_native_pixel_over_its_own_block_of_output_pixels():
-    """A head that copies channel 0 of the last feature map to the mean's 16 sub-pixels: the output is that map
-    upsampled by repetition (4x4 blocks), centred on the 200x200 image (the 52x52 grid overhangs by 4 px)."""
+    """Through the decoder itself, on the trimmed path of the 200x200 scale-4 head (a 52x52 native grid, one
+    native pixel too large on every side): with a head that copies channel 0 of the last feature map to the
+    mean's 16 sub-pixels, the mean is that map upsampled by repetition (4x4 blocks), centred on the image."""
+    torch.manual_seed(0)
     cfg = preset("small", image_h=200, image_w=200, native_scale=4, head="shuffle")
-    decoder = SuperMagCVAE(cfg).decoder
+    decoder = SuperMagCVAE(cfg).eval().decoder
+    assert decoder._trim  # the unpadded head: 50x50 of the 52x52 grid, shuffled to exactly 200x200
     with torch.no_grad():
         decoder.head.weight.zero_()
         decoder.head.bias.zero_()
         decoder.head.weight[:16, 0, 1, 1] = 1.0
-    feat = torch.rand(1, cfg.channels[-1], 52, 52)
-    out = torch.nn.functional.conv2d(feat, decoder.head.weight[:16], decoder.head.bias[:16], padding=1)
-    img = torch.nn.functional.pixel_shuffle(out, 4)[0, 0, 4:204, 4:204]
-    torch.testing.assert_close(img, feat[0, 0].repeat_interleave(4, 0).repeat_interleave(4, 1)[4:204, 4:204])
+        for mod in decoder.mod:  # an input-dependent feature map (the zero-initialised modulation is not)
+            torch.nn.init.normal_(mod.proj.weight, std=1.0)
+    features = []
+    hook = decoder.ups[-1].register_forward_hook(lambda module, args, out: features.append(out))
+    z, e, x = torch.randn(2, cfg.latent), torch.randn(2, cfg.embed), torch.rand(2, cfg.condition_size) * 2 - 1
+    with torch.no_grad():
+        mean, logvar = decoder(z, e, x)
+        mean_only, _ = decoder(z, e, x, with_logvar=False)
+    hook.remove()
+    torch.testing.assert_close(features[1], features[0])
+    feat = features[0][:, 0]                            # (2, 52, 52): the last feature map, channel 0
+    assert feat.shape == (2, 52, 52) and mean.shape == logvar.shape == (2, 200, 200)
+    expected = torch.relu(feat.repeat_interleave(4, 1).repeat_interleave(4, 2)[:, 4:204, 4:204])
+    assert (expected > 0).any() and (expected == 0).any()  # both signs reach the ReLU
+    torch.testing.assert_close(mean, expected)
+    torch.testing.assert_close(mean_only, expected)
+    torch.testing.assert_close(logvar, torch.zeros_like(logvar))  # the log-variance channels are all zero
 
 
 def test_decoder_options_are_validated():

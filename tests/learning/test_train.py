@@ -5,8 +5,9 @@ import json
 
 import numpy as np
 import pytest
+from checks import TORCH_MISSING
 
-pytest.importorskip("torch", reason="training tests need torch: pip install torch==2.13.0")
+pytest.importorskip("torch", reason=TORCH_MISSING)
 import torch
 
 from tactile_manip.learning.export import export_onnx, load_checkpoint

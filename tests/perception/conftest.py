@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from checks import TORCH_MISSING
 
 
 
@@ -43,7 +44,7 @@ def _tiny_dataset(rows: int, cols: int, h: int, w: int, n: int = 6):
 
 def _export(tmp: Path, *, rows: int, cols: int, h: int, w: int, pixel_mm: float) -> ExportedModel:
     # torch and onnx are the "train" extra: skip (only) model tests without them
-    torch = pytest.importorskip("torch", reason="exporting a model needs torch (pip install -e '.[train]')")
+    torch = pytest.importorskip("torch", reason=TORCH_MISSING)
     pytest.importorskip("onnx", reason="exporting a model needs onnx (pip install -e '.[train]')")
     pytest.importorskip("onnxruntime", reason="running a model needs onnxruntime (pip install -e '.[onnx]')")
     from tactile_manip.learning.data import InputSpec

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from checks import assert_one_line_error
 
 from tactile_manip.cli import main
 from tactile_manip.data import save_dataset
@@ -63,10 +64,11 @@ def test_calibrate_writes_a_calibration_beside_the_model_and_its_reliability_rep
     assert "expected calibration error" in capsys.readouterr().out
     # a second run refuses to replace it without --force, in one line
     assert main(args) == 2
-    assert "exists" in capsys.readouterr().err
+    assert_one_line_error(capsys.readouterr().err, "calibrate", "exists")
     assert main([*args, "--force", "--tolerance-deg", "91"]) == 2
+    assert_one_line_error(capsys.readouterr().err, "calibrate", "tolerance")
     assert main([*args, "--force", "--fit-split", "train"]) == 2  # no rods there: one line naming the split
-    assert "split 'train'" in capsys.readouterr().err
+    assert_one_line_error(capsys.readouterr().err, "calibrate", "split 'train'")
     # a symmetry-averaged estimator gets its own calibration, marked as such
     assert main([*args, "--symmetrized", "--out", str(tmp_path / "sym" / "m.json")]) == 0
     assert ConfidenceCalibration.load(tmp_path / "sym" / "m.json").symmetrized

@@ -87,15 +87,22 @@ def test_threads_share_the_kernel_without_mixing_their_buffers() -> None:
         images.append((np.clip(1 - (along / (w / 3)) ** 2 - (across / 12) ** 2, 0, None)).astype(np.float32))
     serial = [angle_from_image(img) for img in images]
     results: dict[int, list] = {}
+    errors: dict[int, BaseException] = {}
 
     def work(t: int) -> None:
-        results[t] = [angle_from_image(images[(t + i) % len(images)]) for i in range(60)]
+        try:
+            results[t] = [angle_from_image(images[(t + i) % len(images)]) for i in range(60)]
+        except BaseException as e:  # noqa: BLE001 - a thread's exception is lost unless the test keeps it
+            errors[t] = e
 
     threads = [threading.Thread(target=work, args=(t,)) for t in range(4)]
     for th in threads:
         th.start()
     for th in threads:
-        th.join()
+        th.join(timeout=120)
+    assert not any(th.is_alive() for th in threads), "a thread is still running (deadlock in the kernel?)"
+    assert errors == {}, errors
+    assert sorted(results) == [0, 1, 2, 3] and all(len(got) == 60 for got in results.values())  # every thread reported
     for t, got in results.items():
         for i, est in enumerate(got):
             assert est == serial[(t + i) % len(images)]  # bit for bit: the same image, the same arithmetic

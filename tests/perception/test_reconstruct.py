@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from checks import assert_one_line_message
 
 from tactile_manip.perception.reconstruct import (BASELINES, BicubicReconstructor, BilinearReconstructor,
                                                   InterpolationReconstructor, ModelFileError, OnnxReconstructor,
@@ -349,8 +350,7 @@ def test_metadata_copied_onto_another_graph_is_refused(graph_with_shipped_metada
     read_metadata(path)  # the metadata alone looks fine
     with pytest.raises(ModelFileError, match=problem) as err:
         load_reconstructor(path)
-    message = str(err.value)
-    assert "\n" not in message and str(path) in message
+    message = assert_one_line_message(str(err.value), str(path))
     # names both sides: what the graph has and what the metadata describes
     assert "the graph maps (" in message and "the metadata describes (field_ut ['N', 4, 4, 3] float" in message
     if kind == "identity":

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from checks import TORCH_MISSING
 
 from tactile_manip.perception import TactilePoseEstimator, load_reconstructor, wrap_axial
 from tactile_manip.perception.symmetry import (SymmetrizedReconstructor, inverse_transform_image, symmetry_group,
@@ -52,7 +53,7 @@ def test_the_group_and_the_inverse() -> None:
 
 
 def test_the_same_transforms_as_the_training_augmentation() -> None:
-    torch = pytest.importorskip("torch")
+    torch = pytest.importorskip("torch", reason=TORCH_MISSING)
     from tactile_manip.learning.data import dihedral
 
     rng = np.random.default_rng(1)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import pytest
+from checks import assert_one_line_error
 
 from tactile_manip.cli import main
 from tactile_manip.commands import serial_options
@@ -44,11 +45,23 @@ def test_a_board_is_found_by_its_serial_number(monkeypatch):
         SerialSensorConfig(port="/dev/ttyUSB0", serial_number="PAD-LEFT")
 
 
+def test_check_port_fails_without_opening_where_connect_would_fail_for_certain(tmp_path, monkeypatch):
+    pytest.importorskip("serial", reason="the serial sensor needs pyserial (the serial extra)")
+    missing = tmp_path / "ttyUSB9"
+    with pytest.raises(SensorDisconnectedError, match=rf"{missing} does not exist.*find-port"):
+        SerialSensor(SerialSensorConfig(port=str(missing))).check_port()
+    missing.write_bytes(b"")  # a path that exists passes (opening it is connect()'s business)
+    SerialSensor(SerialSensorConfig(port=str(missing))).check_port()
+    fake = [PortInfo("/dev/ttyUSB0", "CP2102", "", "CP210x", "PAD-LEFT")]
+    monkeypatch.setattr("tactile_manip.sensors.ports.list_ports", lambda include_all=False: fake)
+    with pytest.raises(SensorDisconnectedError, match="no USB serial port with serial number 'PAD-RIGHT'"):
+        SerialSensor(SerialSensorConfig(serial_number="PAD-RIGHT")).check_port()
+
+
 def test_the_cli_offers_every_wire_format_and_refuses_a_bad_layout(tmp_path, capsys):
     assert serial_options.WIRE_FORMATS == tuple(WIRE_FORMATS)
     assert main(["record", "--port", "/dev/null-x", "--layout", "hexagon", "--out", str(tmp_path / "r")]) == 2
-    err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1 and "known layouts: supermag-4x4, anyskin-5" in err
+    assert_one_line_error(capsys.readouterr().err, "record", "known layouts: supermag-4x4, anyskin-5")
 
 
 def test_dtr_and_rts_levels_reach_the_port(monkeypatch):

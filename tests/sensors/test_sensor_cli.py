@@ -5,20 +5,16 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+from types import SimpleNamespace
 
 import pytest
+from checks import assert_one_line_error
 
 from tactile_manip.cli import COMMANDS, main
 from tactile_manip.sensors import read_recording
-from tactile_manip.sensors.ports import PortInfo, bridge_name, list_ports
+from tactile_manip.sensors.ports import PortInfo, bridge_name, candidate_ports, list_ports
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
-
-
-def _one_line_error(capsys, command: str) -> str:
-    err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1 and err.startswith(f"tactile-manip {command}: error: "), err
-    return err
 
 
 def test_the_four_commands_are_registered():
@@ -50,7 +46,7 @@ def test_emulate_prints_the_path_first_and_a_report_last(capsys):
 ])
 def test_emulate_bad_options_are_one_line_errors(capsys, args, match):
     assert main(["emulate", *args]) == 2
-    assert match in _one_line_error(capsys, "emulate")
+    assert_one_line_error(capsys.readouterr().err, "emulate", match)
 
 
 def test_record_the_simulated_sensor(tmp_path, capsys):
@@ -60,27 +56,63 @@ def test_record_the_simulated_sensor(tmp_path, capsys):
     rec = read_recording(out)
     assert 100 <= len(rec) <= 135 and rec.header["backend"] == "SimulatedSensor"
     assert main(["record", "--sim", "--out", str(out), "--seconds", "1"]) == 2
-    assert "--force" in _one_line_error(capsys, "record")
+    assert_one_line_error(capsys.readouterr().err, "record", "--force")
     assert main(["record", "--port", "/dev/null-x", "--out", str(tmp_path / "b"), "--press", "letter_r"]) == 2
-    assert "--sim" in _one_line_error(capsys, "record")
+    assert_one_line_error(capsys.readouterr().err, "record", "--sim")
 
 
 def test_record_a_missing_port_is_a_one_line_error(tmp_path, capsys):
     assert main(["record", "--port", str(tmp_path / "ttyUSB9"), "--out", str(tmp_path / "r.tmrec")]) == 2
-    assert "find-port" in _one_line_error(capsys, "record")
+    assert_one_line_error(capsys.readouterr().err, "record", "find-port")
 
 
-def test_find_port_lists_likely_boards_first(monkeypatch, capsys):
-    fake = [PortInfo("/dev/ttyUSB0", "CP2102 USB to UART Bridge Controller", "USB VID:PID=10C4:EA60",
-                     bridge_name(0x10C4, 0xEA60)),
-            PortInfo("/dev/ttyACM3", "USB JTAG/serial debug unit", "USB VID:PID=303A:1001",
-                     bridge_name(0x303A, 0x1001))]
-    monkeypatch.setattr("tactile_manip.sensors.ports.list_ports", lambda include_all=False: fake)
+def _comport(device: str, vid: int | None = None, pid: int | None = None, description: str = "",
+             serial_number: str | None = None) -> SimpleNamespace:
+    """What pyserial's comports() yields for one port (the fields list_ports reads)."""
+    hwid = f"USB VID:PID={vid:04X}:{pid:04X}" if vid is not None else "n/a"
+    return SimpleNamespace(device=device, vid=vid, pid=pid, description=description, hwid=hwid,
+                           serial_number=serial_number)
+
+
+# as the OS might list them: not in the order find-port shows them
+COMPORTS = [_comport("/dev/ttyS0", description="ttyS0"),                                       # built-in UART
+            _comport("/dev/ttyUSB1", 0x0403, 0x6001, "FT232R USB UART", "A10K"),                # FTDI bridge
+            _comport("/dev/ttyACM0", 0x1234, 0x5678, "some USB modem"),                         # USB, unknown kind
+            _comport("/dev/ttyUSB0", 0x10C4, 0xEA60, "CP2102 USB to UART Bridge Controller", "0001"),
+            _comport("/dev/ttyACM3", 0x303A, 0x1001, "USB JTAG/serial debug unit")]             # Espressif USB
+
+
+def test_candidate_ports_put_likely_boards_first_then_sort_by_device():
+    ports = candidate_ports(COMPORTS)
+    assert [p.device for p in ports] == ["/dev/ttyACM3", "/dev/ttyUSB0", "/dev/ttyUSB1", "/dev/ttyACM0"]
+    assert [p.likely for p in ports] == [True, True, True, False]
+    assert [p.native_usb for p in ports] == [True, False, False, False]
+    assert ports[1].bridge.startswith("Silicon Labs CP210x") and ports[1].serial_number == "0001"
+    assert ports[3].bridge == "" and ports[3].serial_number == ""
+    assert candidate_ports(list(reversed(COMPORTS))) == ports  # the OS's order does not matter
+
+
+def test_candidate_ports_leave_out_ports_without_usb_ids_unless_include_all():
+    assert "/dev/ttyS0" not in [p.device for p in candidate_ports(COMPORTS)]
+    every = candidate_ports(COMPORTS, include_all=True)
+    assert [p.device for p in every] == ["/dev/ttyACM3", "/dev/ttyUSB0", "/dev/ttyUSB1", "/dev/ttyACM0", "/dev/ttyS0"]
+    assert not every[-1].likely and every[-1].hwid == "n/a"
+    assert candidate_ports([COMPORTS[0]]) == []
+
+
+def test_find_port_prints_the_ports_in_list_ports_order(monkeypatch, capsys):
+    pytest.importorskip("serial", reason="find-port needs pyserial (the serial extra)")
+    import serial.tools.list_ports
+
+    monkeypatch.setattr(serial.tools.list_ports, "comports", lambda: list(COMPORTS))
     assert main(["find-port"]) == 0
+    rows = [line.split()[0] for line in capsys.readouterr().out.splitlines()[1:] if line.startswith("/dev/")]
+    assert rows == ["/dev/ttyACM3", "/dev/ttyUSB0", "/dev/ttyUSB1", "/dev/ttyACM0"]
+    assert main(["find-port", "--all"]) == 0
     out = capsys.readouterr().out
-    assert "/dev/ttyUSB0" in out and "CP210x" in out and "Espressif" in out and "yes" in out
-    monkeypatch.setattr("tactile_manip.sensors.ports.list_ports", lambda include_all=False: [])
-    assert main(["find-port"]) == 1
+    assert "CP210x" in out and "Espressif" in out and out.index("/dev/ttyACM0") < out.index("/dev/ttyS0")
+    monkeypatch.setattr(serial.tools.list_ports, "comports", lambda: [COMPORTS[0]])
+    assert main(["find-port"]) == 1  # only a built-in UART: nothing to offer without --all
     assert "no USB serial port" in capsys.readouterr().err
 
 
@@ -108,7 +140,7 @@ def test_live_view_without_a_display_says_what_to_do(capsys, monkeypatch):
     monkeypatch.delenv("DISPLAY", raising=False)
     monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
     assert main(["view", "--sim"]) == 2
-    assert "--snapshot" in _one_line_error(capsys, "view")
+    assert_one_line_error(capsys.readouterr().err, "view", "--snapshot")
 
 
 @pytest.mark.parametrize("argv", [
@@ -122,7 +154,7 @@ def test_live_view_without_a_display_says_what_to_do(capsys, monkeypatch):
 ])
 def test_an_empty_port_or_path_is_an_error_not_the_simulated_sensor(argv, tmp_path, capsys):
     assert main([a.replace("{tmp}", str(tmp_path)) for a in argv]) == 2
-    message = _one_line_error(capsys, argv[0])
+    message = assert_one_line_error(capsys.readouterr().err, argv[0])
     assert "must not be empty" in message
     assert list(tmp_path.iterdir()) == []  # nothing recorded, nothing created
 
@@ -134,7 +166,7 @@ def test_emulate_link_never_replaces_a_file_it_did_not_create(tmp_path, capsys):
     mine = tmp_path / "notes.txt"
     mine.write_text("my notes")
     assert main(["emulate", "--frames", "1", "--linger-s", "0", "--link", str(mine)]) == 2
-    assert "not an emulator's pty link" in _one_line_error(capsys, "emulate")
+    assert_one_line_error(capsys.readouterr().err, "emulate", "not an emulator's pty link")
     assert mine.read_text() == "my notes" and not mine.is_symlink()
     other = tmp_path / "other_link"
     other.symlink_to(mine)  # a link, but to the user's file, not to a pty
@@ -180,7 +212,7 @@ def test_view_a_recording_that_starts_under_load(tmp_path, capsys):
     _recording(tmp_path / "pressed.tmrec", load)
     assert main(["view", "--replay", str(tmp_path / "pressed.tmrec"), "--snapshot", str(tmp_path / "a"),
                  "--seconds", "0.2"]) == 2
-    err = _one_line_error(capsys, "view")
+    err = assert_one_line_error(capsys.readouterr().err, "view")
     assert "baseline refused" in err and "--baseline-from" in err and "--no-baseline" in err
     assert main(["view", "--replay", str(tmp_path / "pressed.tmrec"), "--snapshot", str(tmp_path / "a"),
                  "--seconds", "0.2", "--baseline-from", str(tmp_path / "free.tmrec")]) == 0
@@ -188,7 +220,7 @@ def test_view_a_recording_that_starts_under_load(tmp_path, capsys):
     assert (tmp_path / "a.png").read_bytes()[:8] == PNG_MAGIC
     assert main(["view", "--replay", str(tmp_path / "pressed.tmrec"), "--snapshot", str(tmp_path / "a.png"),
                  "--seconds", "0.2", "--no-baseline"]) == 2
-    assert "exists; pass --force" in _one_line_error(capsys, "view")
+    assert_one_line_error(capsys.readouterr().err, "view", "exists; pass --force")
 
 
 def test_view_replay_says_what_damage_it_skipped(tmp_path, capsys):

@@ -17,6 +17,7 @@ import re
 
 import numpy as np
 import pytest
+from checks import assert_sane_estimate
 
 from tactile_manip.perception.metrics import DEPTH_RANGE_MM, MAX_ABS_MM, psnr, ssim
 from tactile_manip.perception.pose import angle_from_image, wrap_axial
@@ -47,20 +48,13 @@ def bar(angle_rad: float, *, length_mm: float = 6.0, width_mm: float = 1.0, dept
     return depth_mm * ramp(length_mm / 2, along) * ramp(width_mm / 2, across)
 
 
-def _assert_sane(est: AngleEstimate) -> None:
-    values = (est.angle_rad, est.confidence, est.area_mm2, *est.centroid_mm)
-    assert all(math.isfinite(v) for v in values), est
-    assert 0.0 <= est.confidence <= 1.0 and -math.pi / 2 < est.angle_rad <= math.pi / 2, est
-    assert est.defined or (est.reason and est.confidence == 0.0), est
-
-
 def _axial_error_deg(a_rad: float, b_rad: float) -> float:
     return abs(math.degrees(wrap_axial(a_rad - b_rad)))
 
 
 def _estimate(img: np.ndarray) -> AngleEstimate:
     est = angle_from_image(img, pixel_mm=PIXEL_MM)
-    _assert_sane(est)
+    assert_sane_estimate(est)
     return est
 
 

@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from checks import assert_sane_estimate
 
 from tactile_manip.perception import TactilePoseEstimator, load_reconstructor, wrap_axial
 from tactile_manip.sim.objects import IndenterPose
@@ -76,15 +77,6 @@ def rail_ut(pair: SensorPair) -> np.ndarray:
     return chip.saturation_counts * np.array([chip.lsb_xy_ut, chip.lsb_xy_ut, chip.lsb_z_ut])
 
 
-def _assert_sane(est: AngleEstimate) -> None:
-    """The contract of every estimate: finite numbers, confidence in [0, 1], wrapped angle, defined or a reason."""
-    values = (est.angle_rad, est.confidence, est.area_mm2, *est.centroid_mm)
-    assert all(math.isfinite(v) for v in values), est
-    assert 0.0 <= est.confidence <= 1.0, est
-    assert -math.pi / 2 < est.angle_rad <= math.pi / 2, est
-    assert est.defined or (est.reason and est.confidence == 0.0), est
-
-
 def _same(a: AngleEstimate, b: AngleEstimate) -> None:
     """``a``, of a reading beyond the chips' full scale, is ``b``, of the same reading at the clamp, except
     that the chips out of range count as saturated in ``a`` and scale its confidence down."""
@@ -114,9 +106,9 @@ def test_shipped_model_at_and_beyond_the_500_ut_clamp_equals_the_clamp(estimator
     signs = {"plus": np.ones((4, 4, 3)), "minus": -np.ones((4, 4, 3)), "mixed": _signs()}[pattern]
     est = estimators("supermag")
     got = est.estimate(signs * magnitude_ut)
-    _assert_sane(got)
+    assert_sane_estimate(got)
     _same(got, est.estimate(signs * 500.0))
-    _assert_sane(estimators("supermag-x4").estimate(signs * magnitude_ut))  # random samples: no equality
+    assert_sane_estimate(estimators("supermag-x4").estimate(signs * magnitude_ut))  # random samples: no equality
 
 
 def test_shipped_model_on_readings_at_the_int16_rail_equals_the_clamp(estimators, pair):
@@ -129,7 +121,7 @@ def test_shipped_model_on_readings_at_the_int16_rail_equals_the_clamp(estimators
         reading = m.raw_ut - pair.baseline_ut
         assert np.abs(reading).min() > 500.0  # beyond the clamp on every channel, not vacuous
         got = est.estimate(reading)
-        _assert_sane(got)
+        assert_sane_estimate(got)
         _same(got, est.estimate(np.clip(reading, -500.0, 500.0)))
 
 
@@ -143,7 +135,7 @@ def test_baselines_at_saturation_are_undefined_with_a_reason(estimators, pair, r
     -z everywhere to a uniform deep image, all background: 'uniform contact'. Both undefined, never NaN."""
     reading = sign * (np.broadcast_to(rail_ut, (4, 4, 3)) if magnitude == "rail" else np.full((4, 4, 3), magnitude))
     got = estimators(name).estimate(reading)
-    _assert_sane(got)
+    assert_sane_estimate(got)
     assert not got.defined and reason in got.reason
 
 
@@ -157,7 +149,7 @@ def test_baselines_on_an_all_zero_reading_are_uniform_not_nan(estimators, name):
     model's case is in test_estimator.py). The estimator's no-contact-field gate is off here, so the image
     pipeline itself is what is tested."""
     got = TactilePoseEstimator(estimators(name).reconstructor, min_field_ut=0.0).estimate(np.zeros((4, 4, 3)))
-    _assert_sane(got)
+    assert_sane_estimate(got)
     assert not got.defined and "uniform contact" in got.reason
 
 
@@ -169,7 +161,7 @@ def test_denormal_readings_behave_like_zero(estimators, name, value):
     est = estimators(name)
     zero_est, zero_rec = est.estimate_with_image(np.zeros((4, 4, 3)))
     got, rec = est.estimate_with_image(np.full((4, 4, 3), value))
-    _assert_sane(got)
+    assert_sane_estimate(got)
     np.testing.assert_allclose(rec.depth_mm, zero_rec.depth_mm, atol=1e-6)
     assert not got.defined
     _same(got, zero_est)
@@ -185,7 +177,7 @@ def test_a_chip_stuck_at_zero_barely_moves_the_shipped_models_angle(estimators, 
         dead = reading.copy()
         dead[chip] = 0.0
         got = est.estimate(dead)
-        _assert_sane(got)
+        assert_sane_estimate(got)
         assert got.defined and got.confidence > 0.5
         assert _axial_error_deg(got.angle_rad, math.radians(yaw_deg)) < DEAD_CHIP_TOLERANCE_DEG
 
@@ -208,7 +200,7 @@ def test_a_dead_chip_gives_a_finite_estimate(estimators, pair, rod_readings, rai
         else:
             dead[chip] = (rail_ut if stuck == "rail+" else -rail_ut) - pair.baseline_ut[chip]
         got = est.estimate(dead)
-        _assert_sane(got)
+        assert_sane_estimate(got)
         if name == "supermag" and stuck != "zero":  # (4 random prior samples: no equality)
             assert np.abs(dead[chip]).min() > 500.0
             clamped = est.estimate(np.clip(dead, -500.0, 500.0))
@@ -240,5 +232,5 @@ def test_huge_float64_readings_are_not_reported_as_infinite(estimators):
         with warnings.catch_warnings():
             warnings.simplefilter("error")
             got = est.estimate(np.full((4, 4, 3), -1e300))
-        _assert_sane(got)
+        assert_sane_estimate(got)
         _same(got, est.estimate(np.full((4, 4, 3), -F32_MAX, np.float32)))

@@ -22,8 +22,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from checks import TORCH_MISSING, assert_one_line_error
 
-pytest.importorskip("torch", reason="training tests need torch: pip install torch==2.13.0")
+pytest.importorskip("torch", reason=TORCH_MISSING)
 import torch
 
 from tactile_manip.cli import main
@@ -111,8 +112,7 @@ def test_a_config_file_with_an_extreme_rate_is_one_clear_line_at_the_cli(tmp_pat
         load_train_config(config)
     out = tmp_path / "run"
     assert main(["train", "--config", str(config), "--data", str(data), "--out", str(out)]) == 2
-    err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1 and f"{key} must be in" in err and str(config) in err
+    assert_one_line_error(capsys.readouterr().err, "train", f"{key} must be in", str(config))
     assert not out.exists()  # nothing written, let alone a NaN model
 
 
@@ -122,8 +122,7 @@ def test_asking_for_a_gpu_that_is_not_there_is_one_clear_line(tmp_path, data, ca
     monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
     out = tmp_path / "run"
     assert main(["train", "--config", str(config), "--data", str(data), "--out", str(out), "--device", "cuda"]) == 2
-    err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1 and "no CUDA GPU" in err and "cpu" in err
+    assert_one_line_error(capsys.readouterr().err, "train", "no CUDA GPU", "cpu")
     assert not out.exists()
     assert main(["train", "--config", str(config), "--data", str(data), "--out", str(out), "--device", "cpu",
                  "--max-minutes", "5"]) == 0
@@ -191,7 +190,7 @@ def test_the_cli_reports_divergence_in_one_line(data, tmp_path, capsys):
                       'patience = 50\nthreads = 1\n')
     out = tmp_path / "run"
     assert main(["train", "--config", str(config), "--data", str(data), "--out", str(out)]) == 2
-    err = [line for line in capsys.readouterr().err.splitlines() if "error:" in line]
-    assert len(err) == 1 and DIVERGED.search(err[0]) and "lr 0.99" in err[0]
-    match = DIVERGED.search(err[0])
+    line = assert_one_line_error(capsys.readouterr().err, "train", "lr 0.99", after_progress=True)
+    match = DIVERGED.search(line)
+    assert match, line
     _assert_no_nan_model(out, before_epoch=int(match.group(1)))

@@ -118,9 +118,9 @@ def test_run_trials_writes_log_summary_and_plots(tmp_path) -> None:
 
 
 def test_the_shipped_scenes_load() -> None:
-    for path in [*sorted((REPO / "configs/scenes").glob("reorient_*.toml")), *sorted((REPO / "tasks").glob("*.toml"))]:
-        if "fr3" in path.name:
-            continue  # a real robot's scene: needs its host (tested in test_operator)
+    paths = [*sorted((REPO / "configs/scenes").glob("reorient_*.toml")), *sorted((REPO / "tasks").glob("*.toml"))]
+    assert REPO / "configs/scenes/reorient_fr3.toml" in paths
+    for path in paths:
         scene = load_scene(path)
         assert scene.presentation.objects and scene.methods, path
     robust = load_scene(REPO / "configs/scenes/reorient_robust.toml")
@@ -128,6 +128,22 @@ def test_the_shipped_scenes_load() -> None:
     assert robust.trials >= 300 and [m.name for m in robust.methods] == ["supermag", "supermag_esc", "bilinear"]
     assert robust.methods[1].escalate_below == 0.5 and robust.methods[1].escalation == "symmetry"
     assert robust.behaviour.min_confidence == 0.8  # compared with the calibrated confidence
+
+
+def test_the_real_robot_scene_parses_into_the_simulated_scenes_trials_on_franky_and_a_serial_board() -> None:
+    """Parsing needs no robot: the FR3 scene is the simulated scene's presentations, methods and behaviour, run
+    by the franky backend at low dynamics inside its workspace, with the board on a serial port."""
+    from tactile_manip.sensors.config import SerialSensorConfig
+
+    fr3 = load_scene(REPO / "configs/scenes/reorient_fr3.toml")
+    sim = load_scene(REPO / "configs/scenes/reorient_sim.toml")
+    assert (fr3.name, fr3.trials, fr3.tolerance_deg, fr3.target_deg) == ("reorient_fr3", 12, 5.0, 0.0)
+    assert (fr3.presentation, fr3.methods, fr3.behaviour) == (sim.presentation, sim.methods, sim.behaviour)
+    assert (fr3.robot.backend, fr3.robot.host, fr3.robot.relative_dynamics_factor) == ("franky", "172.16.0.2", 0.05)
+    assert fr3.robot.safety.workspace_min_m == (0.25, -0.4, 0.1) and fr3.robot.safety.max_speed_factor == 0.3
+    assert isinstance(fr3.sensor, SerialSensorConfig)
+    assert (fr3.sensor.port, fr3.sensor.serial_number, fr3.sensor.dtr) == ("/dev/ttyUSB0", "", False)
+    assert not fr3.faults.arm_fault_trials and not fr3.faults.sensor_stall_trials  # no injected faults on a robot
 
 
 @pytest.mark.parametrize("scene_file", ["configs/scenes/reorient_sim.toml", "configs/scenes/reorient_robust.toml"])

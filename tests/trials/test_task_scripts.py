@@ -5,6 +5,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+from checks import assert_one_line_error
+
 from tactile_manip.trials.log import FORMAT, FORMAT_VERSION, RUN_FILE
 
 REPO = Path(__file__).resolve().parents[2]
@@ -19,8 +21,7 @@ def test_a_task_script_refuses_an_occupied_run_folder_in_one_line(tmp_path):
     proc = subprocess.run([sys.executable, str(REPO / "tasks" / "paper_experiment.py"), "--out", str(run)],
                           capture_output=True, text=True, cwd=tmp_path, timeout=120)
     assert proc.returncode == 2
-    err = proc.stderr.strip().splitlines()
-    assert len(err) == 1 and "earlier-run" in err[0] and "--resume" in err[0]
+    assert_one_line_error(proc.stderr, "paper_experiment.py", "earlier-run", "--resume", program="")
     assert sorted(p.name for p in run.iterdir()) == before  # nothing written into the other run
 
 

@@ -9,6 +9,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from checks import assert_one_line_error
 
 from tactile_manip.cli import main
 from tactile_manip.trials.log import TrialLog
@@ -114,12 +115,6 @@ def test_importing_the_trial_modules_pulls_in_no_matplotlib():
 # ---------------------------------------------------------------- tactile-manip score
 
 
-def _one_line_error(capsys) -> str:
-    err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1 and err.startswith("tactile-manip score: error: "), err
-    return err
-
-
 def test_score_rescores_a_saved_run(run_dir, capsys):
     assert main(["score", str(run_dir), "--tolerance-deg", "10"]) == 0
     out = capsys.readouterr().out
@@ -140,25 +135,25 @@ def test_score_writes_to_out(run_dir, tmp_path, capsys):
 
 def test_score_missing_dir_is_a_one_line_error(tmp_path, capsys):
     assert main(["score", str(tmp_path / "nowhere")]) == 2
-    assert "no run directory at" in _one_line_error(capsys)
+    assert_one_line_error(capsys.readouterr().err, "score", "no run directory at")
 
 
 def test_score_dir_without_trials(tmp_path, capsys):
     assert main(["score", str(tmp_path)]) == 2
-    assert "holds no trials.jsonl" in _one_line_error(capsys)
+    assert_one_line_error(capsys.readouterr().err, "score", "holds no trials.jsonl")
 
 
 def test_score_empty_log(tmp_path, capsys):
     with TrialLog(tmp_path / "run", config={}, code_version="test"):
         pass
     assert main(["score", str(tmp_path / "run")]) == 2
-    assert "no trial records yet" in _one_line_error(capsys)
+    assert_one_line_error(capsys.readouterr().err, "score", "no trial records yet")
 
 
 @pytest.mark.parametrize("tolerance", ["-1", "0", "nan", "120"])
 def test_score_bad_tolerance(run_dir, capsys, tolerance):
     assert main(["score", str(run_dir), "--tolerance-deg", tolerance]) == 2
-    assert "--tolerance-deg must be in (0, 90]" in _one_line_error(capsys)
+    assert_one_line_error(capsys.readouterr().err, "score", "--tolerance-deg must be in (0, 90]")
 
 
 def test_score_corrupt_log_names_the_line(run_dir, capsys):
@@ -166,11 +161,11 @@ def test_score_corrupt_log_names_the_line(run_dir, capsys):
     lines = file.read_text().splitlines()
     file.write_text("\n".join([lines[0], "{oops", *lines[1:]]) + "\n")
     assert main(["score", str(run_dir)]) == 2
-    assert "trials.jsonl:2: not a JSON line" in _one_line_error(capsys)
+    assert_one_line_error(capsys.readouterr().err, "score", "trials.jsonl:2: not a JSON line")
 
 
 def test_score_inconsistent_log_is_a_one_line_error(run_dir, capsys):
     with open(run_dir / "trials.jsonl", "a") as f:
         f.write(json.dumps(paired_run()[0].to_dict()) + "\n")  # trial 0 of supermag again
     assert main(["score", str(run_dir)]) == 2
-    assert "logged twice" in _one_line_error(capsys)
+    assert_one_line_error(capsys.readouterr().err, "score", "logged twice")

@@ -67,9 +67,13 @@ def test_wilson_edges():
     assert wide[0] < narrow[0] < 0.3 < narrow[1] < wide[1]
 
 
-@pytest.mark.parametrize("k, n, conf", [(7, 6, 0.95), (-1, 6, 0.95), (1, 6, 1.0), (1.5, 6, 0.95)])
-def test_wilson_refuses_bad_input(k, n, conf):
-    with pytest.raises(ValueError):
+@pytest.mark.parametrize("k, n, conf, match", [(7, 6, 0.95, r"0 <= successes <= n, got successes=7, n=6"),
+                                              (-1, 6, 0.95, r"0 <= successes <= n, got successes=-1"),
+                                              (1, 6, 1.0, r"confidence must be in \(0, 1\), got 1.0"),
+                                              (1.5, 6, 0.95, r"successes and n must be integers, got 1.5")],
+                         ids=["more successes than trials", "negative successes", "confidence 1", "not an integer"])
+def test_wilson_refuses_bad_input(k, n, conf, match):
+    with pytest.raises(ValueError, match=match):
         wilson_interval(k, n, conf)
 
 
