@@ -9,6 +9,7 @@ import threading
 
 import numpy as np
 import pytest
+from checks import assert_one_line_error
 
 if importlib.util.find_spec("ray") is None:  # not imported here: ray_session sets its environment before import
     pytest.skip("the 'ray' extra is not installed", allow_module_level=True)
@@ -118,8 +119,7 @@ def _loopback(ip: str) -> bool:
 def test_cli_unreachable_address_is_one_line_and_writes_nothing(tmp_path, capsys):
     out = tmp_path / "d.npz"
     assert main(["simulate", "--scale", "0.005", "--ray", "127.0.0.1:9", "--out", str(out)]) == 2
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "cannot reach the Ray cluster at 127.0.0.1:9" in err[0]
+    assert_one_line_error(capsys.readouterr().err, "simulate", "cannot reach the Ray cluster at 127.0.0.1:9")
     assert not out.exists() and not blocks_folder(out).exists()
 
 
@@ -131,5 +131,5 @@ def test_cli_unreachable_address_is_one_line_and_writes_nothing(tmp_path, capsys
 def test_cli_bad_ray_options(tmp_path, capsys, argv, message):
     out = tmp_path / "d.npz"
     assert main(["simulate", "--scale", "0.005", "--out", str(out), *argv]) == 2
-    assert message in capsys.readouterr().err
+    assert_one_line_error(capsys.readouterr().err, "simulate", message)
     assert not out.exists()

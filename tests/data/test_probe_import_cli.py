@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from checks import assert_one_line_error
 
 from tactile_manip.cli import main
 from tactile_manip.data import load_dataset
@@ -93,9 +94,7 @@ def test_bad_input_is_one_line_exit_2_and_nothing_written(tmp_path, capsys):
     out = tmp_path / "d.npz"
     for args, problem in _bad_cases(tmp_path, rng):
         assert main(["import", *map(str, args), "--out", str(out)]) == 2, problem
-        err = capsys.readouterr().err
-        assert err.startswith("tactile-manip import: error: ") and err.count("\n") == 1, err
-        assert problem in err, err
+        assert_one_line_error(capsys.readouterr().err, "import", problem)
         assert not out.exists() and not list(tmp_path.glob("*.partial"))
 
 
@@ -106,8 +105,8 @@ def test_a_ragged_csv_names_the_file_and_row(tmp_path, capsys):
     lines[7] = ",".join(lines[7].split(",")[:-1])
     sensor.write_text("\n".join(lines) + "\n")
     assert _import(sensor, states, tmp_path / "d.npz", "--targets", "x_mm") == 2
-    err = capsys.readouterr().err
-    assert f"readings {sensor}: the number of columns changed from 16 to 15 at row 8" in err and err.count("\n") == 1
+    assert_one_line_error(capsys.readouterr().err, "import",
+                          f"readings {sensor}: the number of columns changed from 16 to 15 at row 8")
 
 
 def test_a_header_row_names_the_label_columns(tmp_path, capsys):

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from checks import assert_one_line_error
 
 from tactile_manip.data import (FORMAT_VERSION, PairedDataset, concatenate, from_arrays, load_dataset, read_array,
                                 save_dataset, target_from_label, target_unit)
@@ -170,7 +171,5 @@ def test_image_commands_refuse_a_targets_only_dataset_in_one_line(command, tmp_p
     data = save_dataset(tmp_path / "presses.npz", _labelled())
     args = [a.format(tmp=tmp_path) for a in command] + ["--data", str(data)]
     assert main(args) == 2
-    err = capsys.readouterr().err
-    assert err.startswith(f"tactile-manip {command[0]}: error: ") and err.count("\n") == 1, err
-    assert "needs images; this dataset holds targets only" in err
+    assert_one_line_error(capsys.readouterr().err, command[0], "needs images; this dataset holds targets only")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["presses.npz"]  # nothing written
