@@ -1,0 +1,210 @@
+"""Logging tactile frames to Rerun: the field as arrows, a Bz heat map, depth, angle and confidence over time.
+
+:class:`RerunLogger` writes one frame at a time (the live ``view --rerun`` and ``trials --rerun``);
+:mod:`tactile_manip.interop.rerun_export` writes whole episodes column-wise with the same entity paths.
+Entity paths for a sensor called ``name`` (default ``mbts``; all lengths in mm, the field in uT):
+
+- ``tactile/<name>/taxels`` (static): Points3D at the taxel positions of the board layout, z = 0;
+- ``tactile/<name>/field``: Arrows3D from each taxel, the (x, y, z) field times :data:`ARROW_MM_PER_UT`;
+- ``tactile/<name>/bz``: Tensor (R, C) of Bz in uT (a heat map in the viewer);
+- ``tactile/<name>/depth``: DepthImage (H, W) of the reconstructed depth in mm (``meter`` = 1000);
+- ``tactile/<name>/angle_deg``, ``tactile/<name>/confidence``: Scalars, logged where an estimate exists;
+- ``tactile/vbts/depth``: DepthImage of the vision-based sensor's measured depth (pair logs);
+- ``robot/joints_rad`` (7 series), ``robot/gripper_width_mm``, ``trial/target_angle_deg``: Scalars;
+  ``trial/phase`` and ``trial/episode``: TextLog lines when the phase or the episode changes.
+
+Timelines: ``sensor_time`` (duration on the sensor clock), ``host_time`` (duration: the host's clock when the
+frame arrived, as the source gives it), ``frame`` (sequence: the sensor's frame counter live, the row index
+in exports), and in exports ``episode_time`` (from each episode's first frame).
+
+Written for rerun-sdk 0.24 and later (``rr.set_time``, ``rr.Scalars``, ``rr.SeriesLines``, ``rr.TimeColumn``
+and ``rr.send_columns`` all exist from 0.23 on). rerun is imported only inside the functions that use it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+# arrow length per uT of field: a power of two, so vectors / ARROW_MM_PER_UT gives the logged field back
+# exactly (float32); 2**-5 mm/uT draws 100 uT as 3.1 mm against the 5 mm taxel pitch
+ARROW_MM_PER_UT = 2.0 ** -5
+DEPTH_METER = 1000.0  # depth images are in mm: 1000 units per metre
+JOINT_NAMES = tuple(f"fr3_joint{i}" for i in range(1, 8))
+APPLICATION_ID = "tactile_manip"
+
+
+@dataclass(frozen=True)
+class EntityPaths:
+    """The entity paths of one tactile sensor (see the module docstring)."""
+
+    name: str
+
+    def __post_init__(self) -> None:
+        if not self.name or not all(c.isalnum() or c in "_-" for c in self.name):
+            raise ValueError(f"sensor name: expected letters, digits, '_' or '-', got {self.name!r}")
+
+    @property
+    def root(self) -> str:
+        return f"tactile/{self.name}"
+
+    @property
+    def taxels(self) -> str:
+        return f"{self.root}/taxels"
+
+    @property
+    def field(self) -> str:
+        return f"{self.root}/field"
+
+    @property
+    def bz(self) -> str:
+        return f"{self.root}/bz"
+
+    @property
+    def depth(self) -> str:
+        return f"{self.root}/depth"
+
+    @property
+    def angle(self) -> str:
+        return f"{self.root}/angle_deg"
+
+    @property
+    def confidence(self) -> str:
+        return f"{self.root}/confidence"
+
+
+VBTS_DEPTH = "tactile/vbts/depth"
+JOINTS = "robot/joints_rad"
+GRIPPER = "robot/gripper_width_mm"
+TARGET = "trial/target_angle_deg"
+PHASE = "trial/phase"
+EPISODE = "trial/episode"
+
+
+def require_rerun(purpose: str):
+    """The ``rerun`` module (extra ``viz``), or MissingExtraError naming the extra."""
+    from tactile_manip.extras import require
+
+    return require("rerun", purpose)
+
+
+def taxel_origins_mm(grid: tuple[int, int], layout: Any = None) -> tuple[np.ndarray, np.ndarray]:
+    """(R*C, 3) float32 taxel positions (x, y, 0) in mm and the (R*C,) bool mask of cells a chip feeds.
+
+    ``layout``: a :class:`~tactile_manip.sensors.layout.BoardLayout` of this grid, or None for the default
+    5 mm grid centred on the pad (row 0 at +y, column 0 at -x).
+    """
+    rows, cols = grid
+    if layout is not None and tuple(layout.grid) == (rows, cols):
+        xy = layout.positions_mm().reshape(-1, 2)
+        mask = layout.mask.reshape(-1)
+    else:
+        c, r = np.meshgrid(np.arange(cols), np.arange(rows))
+        xy = np.stack([(c - (cols - 1) / 2) * 5.0, ((rows - 1) / 2 - r) * 5.0], axis=-1).reshape(-1, 2)
+        mask = np.ones(rows * cols, bool)
+    origins = np.zeros((rows * cols, 3), np.float32)
+    origins[:, :2] = np.nan_to_num(xy)
+    return origins, mask
+
+
+def arrows_from_field(field_ut: np.ndarray) -> np.ndarray:
+    """(..., R, C, 3) uT -> (..., R*C, 3) float32 arrow vectors in mm (exactly invertible, see ARROW_MM_PER_UT)."""
+    f = np.asarray(field_ut, dtype=np.float32)
+    return (f * np.float32(ARROW_MM_PER_UT)).reshape(*f.shape[:-3], -1, 3)
+
+
+def log_static(rr, recording, paths: EntityPaths, origins_mm: np.ndarray, *, robot: bool = True) -> None:
+    """The parts that do not change: pad axes, taxel points, the names and styles of the time series."""
+    rr.log(paths.root, rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True, recording=recording)
+    rr.log(paths.taxels, rr.Points3D(origins_mm, radii=0.4, colors=[150, 150, 150]), static=True,
+           recording=recording)
+    rr.log(paths.angle, rr.SeriesLines(names="angle (deg)"), static=True, recording=recording)
+    rr.log(paths.confidence, rr.SeriesLines(names="confidence"), static=True, recording=recording)
+    if robot:
+        rr.log(JOINTS, rr.SeriesLines(names=list(JOINT_NAMES)), static=True, recording=recording)
+        rr.log(GRIPPER, rr.SeriesLines(names="gripper width (mm)"), static=True, recording=recording)
+        rr.log(TARGET, rr.SeriesLines(names="target angle (deg)"), static=True, recording=recording)
+
+
+class RerunLogger:
+    """Logs frames of one sensor to a Rerun recording, one call per frame (about 0.1 ms each: see
+    ``benchmarks/bench_rerun.py``).
+
+    Args:
+        recording: a ``rerun.RecordingStream`` with a sink already set (save, spawn or connect).
+        name: the sensor's name in the entity paths (``tactile/<name>/...``).
+        grid: (rows, cols) of the readings.
+        layout: the board layout (taxel positions), or None for a 5 mm grid.
+    """
+
+    def __init__(self, recording, *, name: str = "mbts", grid: tuple[int, int] = (4, 4), layout: Any = None) -> None:
+        self.rr = require_rerun("logging to Rerun")
+        self.recording = recording
+        self.paths = EntityPaths(name)
+        self.origins_mm, self._mask = taxel_origins_mm(grid, layout)
+        self.grid = tuple(grid)
+        self._t0_sensor: float | None = None
+        self._phase: str | None = None
+        self.frames = 0
+        log_static(self.rr, recording, self.paths, self.origins_mm[self._mask])
+
+    def set_time(self, *, sensor_time_s: float, host_time_s: float, frame: int | None = None) -> None:
+        """Set the timelines of what is logged next (``sensor_time`` and ``host_time`` in s)."""
+        rr, rec = self.rr, self.recording
+        rr.set_time("sensor_time", duration=float(sensor_time_s), recording=rec)
+        if math.isfinite(host_time_s):
+            rr.set_time("host_time", duration=float(host_time_s), recording=rec)
+        if frame is not None:
+            rr.set_time("frame", sequence=int(frame), recording=rec)
+
+    def log_field(self, field_ut: np.ndarray) -> None:
+        """The (R, C, 3) field in uT: arrows at the taxels and the Bz heat map."""
+        rr, rec = self.rr, self.recording
+        f = np.asarray(field_ut, dtype=np.float32)
+        if f.shape != (*self.grid, 3):
+            raise ValueError(f"field_ut: expected shape {(*self.grid, 3)}, got {f.shape}")
+        rr.log(self.paths.field, rr.Arrows3D(vectors=arrows_from_field(f)[self._mask],
+                                             origins=self.origins_mm[self._mask]), recording=rec)
+        rr.log(self.paths.bz, rr.Tensor(f[..., 2], dim_names=("row", "col")), recording=rec)
+        self.frames += 1
+
+    def log_estimate(self, *, angle_rad: float, confidence: float, depth_mm: np.ndarray | None = None) -> None:
+        """An angle estimate (rad, in degrees on the plot) with its confidence, and its depth image in mm."""
+        rr, rec = self.rr, self.recording
+        if math.isfinite(angle_rad):
+            rr.log(self.paths.angle, rr.Scalars(math.degrees(angle_rad)), recording=rec)
+        if math.isfinite(confidence):
+            rr.log(self.paths.confidence, rr.Scalars(float(confidence)), recording=rec)
+        if depth_mm is not None:
+            rr.log(self.paths.depth, rr.DepthImage(np.asarray(depth_mm, dtype=np.float32), meter=DEPTH_METER),
+                   recording=rec)
+
+    def log_robot(self, *, joints_rad: np.ndarray | None = None, gripper_width_m: float = math.nan,
+                  target_angle_rad: float = math.nan, phase: str | None = None) -> None:
+        """Arm joints (rad), gripper width (m, plotted in mm), the commanded angle (rad, in deg) and the phase."""
+        rr, rec = self.rr, self.recording
+        if joints_rad is not None:
+            rr.log(JOINTS, rr.Scalars(np.asarray(joints_rad, dtype=np.float64)), recording=rec)
+        if math.isfinite(gripper_width_m):
+            rr.log(GRIPPER, rr.Scalars(gripper_width_m * 1e3), recording=rec)
+        if math.isfinite(target_angle_rad):
+            rr.log(TARGET, rr.Scalars(math.degrees(target_angle_rad)), recording=rec)
+        if phase is not None and phase != self._phase:
+            rr.log(PHASE, rr.TextLog(phase or "(none)"), recording=rec)
+            self._phase = phase
+
+    def log_reading(self, reading) -> None:
+        """A :class:`~tactile_manip.types.TactileReading` on its own clocks: ``sensor_time`` from the device
+        clock (the host's where the device sends none), from this logger's first reading."""
+        t = reading.t_device_s if math.isfinite(reading.t_device_s) else reading.t_host_s
+        if self._t0_sensor is None:
+            self._t0_sensor = t
+        self.set_time(sensor_time_s=t - self._t0_sensor, host_time_s=reading.t_host_s, frame=reading.seq)
+        self.log_field(reading.field_ut)
+
+    def log_text(self, entity: str, text: str) -> None:
+        """A line of text (e.g. a trial's outcome) at the current time."""
+        self.rr.log(entity, self.rr.TextLog(text), recording=self.recording)
