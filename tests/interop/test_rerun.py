@@ -1,0 +1,119 @@
+"""Rerun: episodes to .rrd read back with rerun's own reader (every frame, exact values), and `view --rerun`."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+rr = pytest.importorskip("rerun", reason="Rerun export needs rerun-sdk (extra 'viz')")
+
+from tactile_manip.cli import main  # noqa: E402
+from tactile_manip.interop.rerun_export import episode_starts_s, write_rrd  # noqa: E402
+from tactile_manip.interop.rerun_log import ARROW_MM_PER_UT, JOINTS, taxel_origins_mm  # noqa: E402
+from tactile_manip.interop.rerun_read import read_entity  # noqa: E402
+from tactile_manip.interop.rerun_sink import grpc_url, viewer_command  # noqa: E402
+from tactile_manip.sensors.layout import SUPERMAG_4X4  # noqa: E402
+
+
+def _frames(episodes):
+    return [f for e in episodes for f in e.frames]
+
+
+def test_every_field_frame_reads_back_exactly(tmp_path, episodes):
+    out = tmp_path / "run.rrd"
+    summary = write_rrd(episodes, out)
+    assert summary["frames"] == 80 and summary["episodes"] == 2
+    frames = _frames(episodes)
+    field = read_entity(out, "tactile/mbts/field")
+    assert list(field.times["frame"]) == list(range(80))
+    vectors = np.array(field.components["Arrows3D:vectors"], dtype=np.float32)      # (80, 16, 3) mm
+    np.testing.assert_array_equal(vectors / np.float32(ARROW_MM_PER_UT),
+                                  np.stack([f.field_ut.reshape(16, 3) for f in frames]))
+    origins, _ = taxel_origins_mm((4, 4), SUPERMAG_4X4)
+    np.testing.assert_array_equal(np.array(field.components["Arrows3D:origins"][7]), origins)
+    bz = read_entity(out, "tactile/mbts/bz")
+    np.testing.assert_array_equal(np.array([d[0]["buffer"] for d in bz.components["Tensor:data"]], np.float32),
+                                  np.stack([f.field_ut[..., 2].reshape(-1) for f in frames]))
+    assert bz.components["Tensor:data"][0][0]["shape"] == [4, 4]
+
+
+def test_timelines_hold_the_sensor_clock_per_episode_and_across_the_export(tmp_path, episodes):
+    out = tmp_path / "run.rrd"
+    write_rrd(episodes, out)
+    field = read_entity(out, "tactile/mbts/field")
+    t = np.concatenate([[f.t_s for f in e.frames] for e in episodes])
+    np.testing.assert_array_equal(field.times["episode_time"], np.round(t * 1e9).astype(np.int64))
+    starts = episode_starts_s(episodes)
+    assert starts[0] == 0.0 and starts[1] == pytest.approx(7.5, abs=1e-3)   # the hosts' gap is kept
+    sensor = np.concatenate([s + np.array([f.t_s for f in e.frames]) for s, e in zip(starts, episodes)])
+    np.testing.assert_allclose(field.seconds("sensor_time"), sensor, atol=1e-9)
+    assert (np.diff(field.times["sensor_time"]) > 0).all()
+    host = np.array([f.host_time_s for f in _frames(episodes)])
+    np.testing.assert_allclose(field.seconds("host_time"), host, atol=1e-9)
+
+
+def test_estimates_robot_and_depth_read_back_exactly(tmp_path, episodes):
+    out = tmp_path / "run.rrd"
+    write_rrd(episodes, out)
+    frames = _frames(episodes)
+    odd = [f for f in frames if math.isfinite(f.angle_rad)]
+    angle = read_entity(out, "tactile/mbts/angle_deg")
+    assert [v[0] for v in angle.components["Scalars:scalars"]] == [math.degrees(f.angle_rad) for f in odd]
+    conf = read_entity(out, "tactile/mbts/confidence")
+    assert [v[0] for v in conf.components["Scalars:scalars"]] == [f.confidence for f in odd]
+    joints = read_entity(out, JOINTS)
+    np.testing.assert_array_equal(np.array(joints.components["Scalars:scalars"]), np.stack([f.joints_rad for f in frames]))
+    depth = read_entity(out, "tactile/mbts/depth")
+    with_depth = [f for f in frames if f.depth_mm is not None]
+    assert len(depth) == len(with_depth) == 8
+    for buf, fmt, f in zip(depth.components["DepthImage:buffer"], depth.components["DepthImage:format"], with_depth):
+        image = np.frombuffer(bytes(buf[0]), np.float32).reshape(fmt[0]["height"], fmt[0]["width"])
+        np.testing.assert_array_equal(image, f.depth_mm)
+    vbts = read_entity(out, "tactile/vbts/depth")
+    assert len(vbts) == 4                                                         # the first episode only
+    phase = read_entity(out, "trial/phase")
+    texts = [t[0] for t in phase.components["TextLog:text"]]
+    assert texts == ["grasp", "estimate", "turn", "release"] * 2
+
+
+def test_refuses_nothing_to_export_and_mixed_sensors(tmp_path, episodes):
+    with pytest.raises(ValueError, match="no episode has frames"):
+        write_rrd([], tmp_path / "x.rrd")
+    episodes[1].meta["sensor_name"] = "left"
+    with pytest.raises(ValueError, match="share a sensor"):
+        write_rrd(episodes, tmp_path / "x.rrd")
+
+
+def test_viewer_and_server_listen_on_localhost_unless_asked():
+    cmd = viewer_command(serve=True, bind="127.0.0.1", port=9999)
+    assert cmd[cmd.index("--bind") + 1] == "127.0.0.1" and "--serve-grpc" in cmd
+    assert "--serve-grpc" not in viewer_command(serve=False, bind="127.0.0.1", port=9999)
+    assert grpc_url("0.0.0.0", 9876) == "rerun+http://127.0.0.1:9876/proxy"
+
+
+@pytest.mark.slow
+def test_view_sim_rerun_save_holds_every_frame_of_five_seconds(tmp_path, capsys):
+    out = tmp_path / "x.rrd"
+    assert main(["view", "--sim", "--rerun", "--save", str(out), "--seconds", "5", "--baseline-frames", "25"]) == 0
+    field = read_entity(out, "tactile/mbts/field")
+    assert 600 <= len(field) <= 630                                              # 125 Hz for 5 s
+    assert (np.diff(field.times["frame"]) == 1).all()                           # no frame skipped
+    assert 0 < len(read_entity(out, "tactile/mbts/depth")) <= 52                # --estimate-hz 10
+    assert len(read_entity(out, "tactile/mbts/confidence")) > 0
+    assert main(["view", "--sim", "--rerun", "--save", str(out), "--seconds", "1"]) == 2   # exists: no --force
+    assert "exists; pass --force" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("argv, match", [
+    (["--save", "x.rrd"], "--save needs --rerun"),
+    (["--rerun", "--snapshot", "x.png"], "does not go with --rerun"),
+    (["--rerun", "--save", "x.rrd", "--estimate-hz", "0"], "--estimate-hz"),
+])
+def test_view_rerun_option_errors_are_one_line(tmp_path, capsys, argv, match):
+    argv = [a.replace("x.", f"{tmp_path}/x.") for a in argv]
+    assert main(["view", "--sim", *argv]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and match in err[0]
+    assert not list(tmp_path.iterdir())
