@@ -21,37 +21,7 @@ from tactile_manip.interop.rerun_log import (
     APPLICATION_ID, DEPTH_METER, EPISODE, GRIPPER, JOINTS, PHASE, TARGET, VBTS_DEPTH, EntityPaths,
     arrows_from_field, log_static, require_rerun, taxel_origins_mm,
 )
-
-
-def sensor_name(episode: Episode) -> str:
-    """The tactile sensor's name in entity paths and topics: ``meta["sensor_name"]`` or ``"mbts"``."""
-    name = episode.meta.get("sensor_name", "mbts")
-    return name if isinstance(name, str) and name else "mbts"
-
-
-def layout_of(episode: Episode):
-    """The board layout named in ``meta["layout"]`` when it matches the frames' grid, else None (5 mm grid)."""
-    from tactile_manip.sensors.layout import LAYOUTS
-
-    layout = LAYOUTS.get(str(episode.meta.get("layout", "")))
-    return layout if layout is not None and tuple(layout.grid) == episode.grid else None
-
-
-def episode_starts_s(episodes: list[Episode]) -> list[float]:
-    """Each episode's start on the export's ``sensor_time``, s (see the module docstring)."""
-    starts, end = [], -math.inf
-    host0 = next((e.frames[0].host_time_s for e in episodes if e.frames and math.isfinite(e.frames[0].host_time_s)),
-                 math.nan)
-    for e in episodes:
-        if not e.frames:
-            starts.append(max(end, 0.0))
-            continue
-        gap = e.frames[0].host_time_s - host0
-        start = gap if math.isfinite(gap) else 0.0
-        start = max(start, end + 1.0 / e.fps) if math.isfinite(end) else max(start, 0.0)
-        starts.append(start)
-        end = start + e.frames[-1].t_s
-    return starts
+from tactile_manip.interop.timeline import check_exportable, episode_starts_s, layout_of
 
 
 def write_rrd(episodes: list[Episode], out: Path, *, ros2: bool = False) -> dict[str, Any]:
@@ -65,14 +35,8 @@ def write_rrd(episodes: list[Episode], out: Path, *, ros2: bool = False) -> dict
     """
     del ros2
     rr = require_rerun("export --format rrd")
-    episodes = [e for e in episodes if e.frames]
-    if not episodes:
-        raise ValueError("nothing to export: no episode has frames")
-    grids = {e.grid for e in episodes}
-    names = {sensor_name(e) for e in episodes}
-    if len(grids) > 1 or len(names) > 1:
-        raise ValueError(f"episodes of one export must share a sensor: grids {sorted(grids)}, names {sorted(names)}")
-    paths = EntityPaths(names.pop())
+    episodes, name = check_exportable(episodes)
+    paths = EntityPaths(name)
     rec = rr.RecordingStream(APPLICATION_ID)
     rr.save(str(out), recording=rec)
     origins, mask = taxel_origins_mm(episodes[0].grid, layout_of(episodes[0]))

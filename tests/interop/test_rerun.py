@@ -10,10 +10,11 @@ import pytest
 rr = pytest.importorskip("rerun", reason="Rerun export needs rerun-sdk (extra 'viz')")
 
 from tactile_manip.cli import main  # noqa: E402
-from tactile_manip.interop.rerun_export import episode_starts_s, write_rrd  # noqa: E402
+from tactile_manip.interop.rerun_export import write_rrd  # noqa: E402
 from tactile_manip.interop.rerun_log import ARROW_MM_PER_UT, JOINTS, taxel_origins_mm  # noqa: E402
 from tactile_manip.interop.rerun_read import read_entity  # noqa: E402
 from tactile_manip.interop.rerun_sink import grpc_url, viewer_command  # noqa: E402
+from tactile_manip.interop.timeline import episode_starts_s  # noqa: E402
 from tactile_manip.sensors.layout import SUPERMAG_4X4  # noqa: E402
 
 
