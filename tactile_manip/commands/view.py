@@ -17,6 +17,7 @@ import math
 import sys
 import time
 
+from tactile_manip.commands.rerun_options import add_rerun_options, check_rerun_options
 from tactile_manip.commands.serial_options import add_serial_options, serial_config
 
 DEFAULT_SIM_PRESS = "letter_r,t=0.3,force=10,yaw=20,rise=0.4,hold=0.6"
@@ -43,16 +44,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "(default: at Ctrl-C)")
     add_serial_options(p, src)
     p.add_argument("--force", action="store_true", help="with --snapshot or --save: overwrite an existing file")
-    rr = p.add_argument_group("Rerun (extra 'viz')")
-    rr.add_argument("--rerun", action="store_true", help="stream every frame to Rerun instead of a matplotlib window")
-    sink = rr.add_mutually_exclusive_group()
-    sink.add_argument("--save", metavar="RRD", help="with --rerun: write the recording to this .rrd file")
-    sink.add_argument("--spawn", action="store_true", help="with --rerun: start a Rerun viewer (the default)")
-    sink.add_argument("--serve", action="store_true",
-                      help="with --rerun: serve the stream over gRPC for viewers to connect to (`rerun --connect URL`)")
-    rr.add_argument("--bind", default="127.0.0.1",
-                    help="address the spawned viewer or server listens on (default 127.0.0.1: this machine only)")
-    rr.add_argument("--rerun-port", type=int, default=9876, help="its port (default 9876)")
+    add_rerun_options(p, what="every frame (instead of a matplotlib window)")
+    rr = p.add_argument_group("estimates in Rerun")
     rr.add_argument("--model", default="bilinear",
                     help="with --rerun: reconstructor for depth, angle and confidence: bilinear (default), bicubic, "
                          "an .onnx model, or none")
@@ -78,13 +71,9 @@ def run(args: argparse.Namespace) -> int:
 
     if args.port:
         require("serial", "viewing a serial port")
-    _check_rerun_options(args)
+    _check_view_options(args)
+    check_rerun_options(args)
     if args.rerun:
-        from tactile_manip.interop.rerun_log import require_rerun
-
-        require_rerun("view --rerun")
-        if args.save:
-            args.save = str(check_output_file(args.save, force=args.force))
         plt = None
     elif args.snapshot is None:
         plt = _interactive_pyplot()  # fail before connecting when there is no display
@@ -130,12 +119,8 @@ def run(args: argparse.Namespace) -> int:
         return view.live(fps=args.fps)
 
 
-def _check_rerun_options(args: argparse.Namespace) -> None:
-    """Rerun options only with --rerun, and --rerun not with --snapshot (checked before any device is opened)."""
-    used = [flag for flag, on in (("--save", args.save is not None), ("--spawn", args.spawn), ("--serve", args.serve))
-            if on]
-    if used and not args.rerun:
-        raise ValueError(f"{used[0]} needs --rerun")
+def _check_view_options(args: argparse.Namespace) -> None:
+    """--rerun not with --snapshot, positive durations and rates (checked before any device is opened)."""
     if args.rerun and args.snapshot:
         raise ValueError("--snapshot draws a matplotlib figure; it does not go with --rerun")
     if args.seconds is not None and not (args.seconds > 0 and math.isfinite(args.seconds)):

@@ -18,7 +18,8 @@ Encodings: ``ros2msg`` schemas and CDR messages (:mod:`tactile_manip.interop.cdr
 and Rerun's MCAP loader decode without ROS; ``ros2=True`` adds what rosbag2 writes (profile ``ros2`` and the
 QoS metadata of each channel), so ``ros2 bag`` reads the file. ``encoding="json"`` writes JSON messages with
 JSON Schemas instead (readable anywhere with a JSON parser; Rerun shows them only as raw bytes). Episode
-facts go to MCAP metadata records (``tactile_manip``, ``episode_000``, ...). mcap is imported only inside :func:`write_mcap`.
+facts go to MCAP metadata records (``tactile_manip``, ``episode_000``, ...). mcap is imported only inside
+:func:`write_mcap`.
 """
 
 from __future__ import annotations

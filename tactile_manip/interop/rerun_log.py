@@ -196,13 +196,18 @@ class RerunLogger:
             rr.log(PHASE, rr.TextLog(phase or "(none)"), recording=rec)
             self._phase = phase
 
-    def log_reading(self, reading) -> None:
-        """A :class:`~tactile_manip.types.TactileReading` on its own clocks: ``sensor_time`` from the device
-        clock (the host's where the device sends none), from this logger's first reading."""
+    def sensor_time_s(self, reading) -> float:
+        """A reading's ``sensor_time``: its device clock (the host's where the device sends none) from this
+        logger's first reading, s."""
         t = reading.t_device_s if math.isfinite(reading.t_device_s) else reading.t_host_s
         if self._t0_sensor is None:
             self._t0_sensor = t
-        self.set_time(sensor_time_s=t - self._t0_sensor, host_time_s=reading.t_host_s, frame=reading.seq)
+        return t - self._t0_sensor
+
+    def log_reading(self, reading) -> None:
+        """A :class:`~tactile_manip.types.TactileReading` at its own times (``sensor_time``, ``host_time``,
+        ``frame`` = its sequence number)."""
+        self.set_time(sensor_time_s=self.sensor_time_s(reading), host_time_s=reading.t_host_s, frame=reading.seq)
         self.log_field(reading.field_ut)
 
     def log_text(self, entity: str, text: str) -> None:

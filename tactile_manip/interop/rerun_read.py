@@ -16,6 +16,7 @@ import numpy as np
 from tactile_manip.interop.rerun_log import require_rerun
 
 ROW_ID = "rerun.controls.RowId"
+NO_TIME = np.iinfo(np.int64).min  # a row logged without this timeline
 
 
 @dataclass
@@ -23,7 +24,8 @@ class EntityData:
     """What one entity logged on timelines, one entry per row, in logging order.
 
     Attributes:
-        times: timeline -> (N,) int64 (durations and timestamps in ns, sequences as they are).
+        times: timeline -> (N,) int64 (durations and timestamps in ns, sequences as they are; ``NO_TIME`` where
+            a row was logged without that timeline).
         components: ``"Archetype:field"`` (e.g. ``"Scalars:scalars"``) -> N Python values (lists, dicts).
     """
 
@@ -87,7 +89,8 @@ def _entity_data(table) -> EntityData:
         if name == ROW_ID or name == "log_time":
             continue
         if pa.types.is_duration(col.type) or pa.types.is_timestamp(col.type) or pa.types.is_integer(col.type):
-            times[name] = np.asarray(col.cast(pa.int64()).to_numpy(zero_copy_only=False), dtype=np.int64)
+            ints = col.cast(pa.int64()).fill_null(NO_TIME)
+            times[name] = np.asarray(ints.to_numpy(zero_copy_only=False), dtype=np.int64)
         else:
             components[name] = col.to_pylist()
     return EntityData(times, components)

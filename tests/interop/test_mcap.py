@@ -117,7 +117,8 @@ def test_every_message_reads_back_with_exact_values(tmp_path, episodes, ros2, en
     field = by_topic["/tactile/mbts/field"]
     assert [t for t, _, _ in field] == ns == [p for _, p, _ in field]
     for (_, _, msg), f in zip(field, frames):
-        assert [(d["label"], d["size"], d["stride"]) for d in msg["layout"]["dim"]] == [("taxels", 16, 48), ("axes", 3, 3)]
+        dims = [(d["label"], d["size"], d["stride"]) for d in msg["layout"]["dim"]]
+        assert dims == [("taxels", 16, 48), ("axes", 3, 3)]
         np.testing.assert_array_equal(msg["data"].reshape(4, 4, 3), f.field_ut)
     odd = [(t, f) for t, f in zip(ns, frames) if math.isfinite(f.angle_rad)]
     assert [(t, m["data"]) for t, _, m in by_topic["/tactile/mbts/angle"]] == \

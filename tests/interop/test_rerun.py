@@ -65,7 +65,8 @@ def test_estimates_robot_and_depth_read_back_exactly(tmp_path, episodes):
     conf = read_entity(out, "tactile/mbts/confidence")
     assert [v[0] for v in conf.components["Scalars:scalars"]] == [f.confidence for f in odd]
     joints = read_entity(out, JOINTS)
-    np.testing.assert_array_equal(np.array(joints.components["Scalars:scalars"]), np.stack([f.joints_rad for f in frames]))
+    np.testing.assert_array_equal(np.array(joints.components["Scalars:scalars"]),
+                                  np.stack([f.joints_rad for f in frames]))
     depth = read_entity(out, "tactile/mbts/depth")
     with_depth = [f for f in frames if f.depth_mm is not None]
     assert len(depth) == len(with_depth) == 8
@@ -118,3 +119,35 @@ def test_view_rerun_option_errors_are_one_line(tmp_path, capsys, argv, match):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and match in err[0]
     assert not list(tmp_path.iterdir())
+
+
+def test_trials_rerun_logs_every_frame_and_each_outcome(tmp_path, capsys):
+    pytest.importorskip("roboticstoolbox", reason="simulated trials need roboticstoolbox-python (extra 'robot')")
+    from pathlib import Path
+
+    from tactile_manip.trials.log import read_trials
+
+    scene = Path(__file__).resolve().parents[2] / "configs" / "scenes" / "reorient_sim.toml"
+    out, rrd = tmp_path / "R", tmp_path / "t.rrd"
+    assert main(["trials", "--config", str(scene), "--trials", "2", "--methods", "bilinear", "--out", str(out),
+                 "--quiet", "--rerun", "--save", str(rrd)]) == 0
+    records = read_trials(out / "trials.jsonl")
+    field = read_entity(rrd, "tactile/mbts/field")
+    assert len(field) > 10 and (np.diff(field.times["frame"]) == 1).all()      # every frame, none skipped
+    lines = [t[0] for t in read_entity(rrd, "trial/episode").components["TextLog:text"]]
+    assert len(lines) == 4 and lines[1].startswith(f"trial 0 (bilinear): {records[0].outcome}")
+    angles = [v[0] for v in read_entity(rrd, "tactile/mbts/angle_deg").components["Scalars:scalars"]]
+    assert angles == [math.degrees(r.estimated_angle_rad) for r in records if r.estimated_angle_rad is not None]
+    assert len(read_entity(rrd, JOINTS)) >= 1
+
+
+def test_trials_refused_before_a_trial_leaves_no_recording(tmp_path, capsys):
+    pytest.importorskip("roboticstoolbox", reason="simulated trials need roboticstoolbox-python (extra 'robot')")
+    from pathlib import Path
+
+    text = (Path(__file__).resolve().parents[2] / "configs" / "scenes" / "reorient_sim.toml").read_text()
+    scene = tmp_path / "scene.toml"
+    scene.write_text(text.replace('"models/supermag_fast.onnx"', '"no_such_model.onnx"'))
+    assert main(["trials", "--config", str(scene), "--methods", "supermag", "--out", str(tmp_path / "R"),
+                 "--rerun", "--save", str(tmp_path / "t.rrd")]) == 2
+    assert "no_such_model" in capsys.readouterr().err and not (tmp_path / "t.rrd").exists()
