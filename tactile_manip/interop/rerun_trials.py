@@ -35,21 +35,16 @@ class RerunTrialObserver:
         self._stop = threading.Event()
         self._first_frame = threading.Event()
         self._thread: threading.Thread | None = None
-        self._lock = threading.Lock()  # the logger's time and its frame counter are shared with the frame thread
-        self._last_time: tuple[float, float, int] | None = None
         self.trials = 0
 
     def trial_started(self, p, method: str, cell) -> None:
         if self._thread is None:
             self._start(cell)
-        self._at_last_frame()
         self.logger.log_text(EPISODE, f"trial {p.trial} ({method}): {p.obj.display_name} at "
                                       f"{math.degrees(p.angle_rad):.1f} deg, {p.force_n:.1f} N")
-        rr = self.logger.rr
-        rr.log(TRUE_ANGLE, rr.Scalars(math.degrees(p.angle_rad)), recording=self.sink.recording)
+        self.logger.log_scalar(TRUE_ANGLE, math.degrees(p.angle_rad))
 
     def trial_finished(self, record) -> None:
-        self._at_last_frame()
         angle = record.estimated_angle_rad
         self.logger.log_estimate(angle_rad=math.nan if angle is None else angle, confidence=record.confidence)
         self.logger.log_robot(target_angle_rad=record.target_angle_rad)
@@ -62,6 +57,7 @@ class RerunTrialObserver:
         self._stop.set()
         if self._thread is not None:
             self._thread.join(timeout=5.0)
+            self.logger.flush()
         self.sink.close()
 
     def __enter__(self) -> RerunTrialObserver:
@@ -91,9 +87,7 @@ class RerunTrialObserver:
                     reading = subscription.get(timeout_s=0.2).reading
                 except SensorTimeoutError:
                     continue
-                with self._lock:
-                    self.logger.log_reading(reading)
-                    self._last_time = (self.logger.sensor_time_s(reading), reading.t_host_s, reading.seq)
+                self.logger.log_reading(reading)
                 self._first_frame.set()
                 if reading.t_host_s >= next_robot:
                     next_robot = reading.t_host_s + self.robot_period_s
@@ -106,10 +100,3 @@ class RerunTrialObserver:
         except Exception:  # noqa: BLE001 - watching must never stop the run
             return
         self.logger.log_robot(joints_rad=q, gripper_width_m=width)
-
-    def _at_last_frame(self) -> None:
-        """Log what follows (on the runner's thread) at the newest frame's time."""
-        with self._lock:
-            if self._last_time is not None:
-                sensor_s, host_s, seq = self._last_time
-                self.logger.set_time(sensor_time_s=sensor_s, host_time_s=host_s, frame=seq)

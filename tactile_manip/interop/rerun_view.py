@@ -46,8 +46,8 @@ def stream_to_rerun(sensor, *, save: str | Path | None = None, spawn: bool = Fal
     period = 1.0 / estimate_hz
     next_estimate = -math.inf
     end = math.inf if seconds is None else time.monotonic() + seconds
-    try:
-        with sink, sensor.subscribe() as frames:
+    with sink, sensor.subscribe() as frames:
+        try:
             while time.monotonic() < end:
                 try:
                     reading = frames.get(timeout_s=min(0.5, max(end - time.monotonic(), 0.0))).reading
@@ -59,7 +59,9 @@ def stream_to_rerun(sensor, *, save: str | Path | None = None, spawn: bool = Fal
                     est, rec = estimator.estimate_with_image(reading)
                     logger.log_estimate(angle_rad=est.angle_rad if est.defined else math.nan,
                                         confidence=est.confidence, depth_mm=rec.depth_mm)
-    except KeyboardInterrupt:
-        pass
+        except KeyboardInterrupt:
+            pass
+        finally:
+            logger.flush()
     print(f"view: logged {logger.frames} frames to Rerun ({sink.description})", file=sys.stderr)
     return 0 if logger.frames else 1
