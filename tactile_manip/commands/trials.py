@@ -69,10 +69,12 @@ def run(args: argparse.Namespace) -> int:
 def _rerun_observer(args: argparse.Namespace, name: str):
     import sys
 
+    from tactile_manip.interop.rerun_log import EntityPaths, blueprint
     from tactile_manip.interop.rerun_sink import open_live
     from tactile_manip.interop.rerun_trials import RerunTrialObserver
 
     sink = open_live(save=args.save, spawn=args.spawn or (args.save is None and not args.serve), serve=args.serve,
-                     bind=args.bind, port=args.rerun_port, recording_name=f"trials {name}")
+                     bind=args.bind, port=args.rerun_port, recording_name=f"trials {name}",
+                     default_blueprint=blueprint(EntityPaths("mbts"), robot=True, depth=False))
     print(f"trials: Rerun, {sink.description}" + "".join(f"\ntrials: {n}" for n in sink.notes), file=sys.stderr)
     return RerunTrialObserver(sink)

@@ -18,8 +18,8 @@ import numpy as np
 
 from tactile_manip.interop.frames import Episode, Frame
 from tactile_manip.interop.rerun_log import (
-    APPLICATION_ID, DEPTH_METER, EPISODE, GRIPPER, JOINTS, PHASE, TARGET, VBTS_DEPTH, EntityPaths,
-    arrows_from_field, log_static, require_rerun, taxel_origins_mm,
+    APPLICATION_ID, DEPTH_METER, DEPTH_RANGE_MM, EPISODE, GRIPPER, JOINTS, PHASE, TARGET, VBTS_DEPTH, EntityPaths,
+    arrows_from_field, blueprint, log_static, require_rerun, taxel_origins_mm,
 )
 from tactile_manip.interop.timeline import check_exportable, episode_starts_s, layout_of
 
@@ -38,7 +38,10 @@ def write_rrd(episodes: list[Episode], out: Path, *, ros2: bool = False) -> dict
     episodes, name = check_exportable(episodes)
     paths = EntityPaths(name)
     rec = rr.RecordingStream(APPLICATION_ID)
-    rr.save(str(out), recording=rec)
+    frames = [f for e in episodes for f in e.frames]
+    vbts = any(f.vbts_depth_mm is not None for f in frames)
+    robot = any(f.joints_rad is not None or math.isfinite(f.gripper_width_m) or f.phase for f in frames)
+    rr.save(str(out), default_blueprint=blueprint(paths, robot=robot, vbts=vbts), recording=rec)
     origins, mask = taxel_origins_mm(episodes[0].grid, layout_of(episodes[0]))
     entities: set[str] = set()
     log_static(rr, rec, paths, origins[mask])
@@ -109,7 +112,8 @@ def _depth_columns(rr, images: list[np.ndarray]):
     m, h, w = depth.shape
     fmt = rr.components.ImageFormat(width=w, height=h, channel_datatype="F32")
     return rr.DepthImage.columns(buffer=np.ascontiguousarray(depth).view(np.uint8).reshape(m, -1),
-                                 format=[fmt] * m, meter=np.full(m, DEPTH_METER, np.float32))
+                                 format=[fmt] * m, meter=np.full(m, DEPTH_METER, np.float32),
+                                 depth_range=[DEPTH_RANGE_MM] * m)
 
 
 def _send_bz(rr, rec, paths: EntityPaths, fields: np.ndarray, frames: list[Frame], *, start_s: float,

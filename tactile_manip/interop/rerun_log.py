@@ -33,6 +33,7 @@ import numpy as np
 # exactly (float32); 2**-5 mm/uT draws 100 uT as 3.1 mm against the 5 mm taxel pitch
 ARROW_MM_PER_UT = 2.0 ** -5
 DEPTH_METER = 1000.0  # depth images are in mm: 1000 units per metre
+DEPTH_RANGE_MM = (0.0, 2.0)  # the depth colour map's range: SuperMag's contacts stay within 2 mm
 JOINT_NAMES = tuple(f"fr3_joint{i}" for i in range(1, 8))
 APPLICATION_ID = "tactile_manip"
 
@@ -114,6 +115,28 @@ def arrows_from_field(field_ut: np.ndarray) -> np.ndarray:
     """(..., R, C, 3) uT -> (..., R*C, 3) float32 arrow vectors in mm (exactly invertible, see ARROW_MM_PER_UT)."""
     f = np.asarray(field_ut, dtype=np.float32)
     return (f * np.float32(ARROW_MM_PER_UT)).reshape(*f.shape[:-3], -1, 3)
+
+
+def blueprint(paths: EntityPaths, *, robot: bool = False, depth: bool = True, vbts: bool = False):
+    """The viewer layout: field arrows (3D) over the Bz heat map, the depth image(s), the angle and confidence
+    plots; with ``robot`` the joints, gripper, target and the trial lines. Rerun's own layout would put the
+    depth image into the 3D view of its parent, where it needs a camera."""
+    import rerun.blueprint as rrb
+
+    pad = rrb.Vertical(rrb.Spatial3DView(origin=paths.root, contents=[paths.taxels, paths.field],
+                                         name=f"{paths.name} field (arrows: 1 mm per {1 / ARROW_MM_PER_UT:g} uT)"),
+                       rrb.TensorView(origin=paths.bz, name="Bz (uT)"))
+    images = [rrb.Spatial2DView(origin=paths.depth, name=f"{paths.name} depth (mm)")] if depth else []
+    if vbts:
+        images.append(rrb.Spatial2DView(origin=VBTS_DEPTH, name="VBTS depth (mm)"))
+    series = [rrb.TimeSeriesView(origin=paths.angle, name="angle (deg)"),
+              rrb.TimeSeriesView(origin=paths.confidence, name="confidence")]
+    if robot:
+        series += [rrb.TimeSeriesView(origin="robot", name="arm and gripper"),
+                   rrb.TimeSeriesView(origin="trial", contents=[TARGET, "trial/true_angle_deg"], name="trial"),
+                   rrb.TextLogView(origin="trial", name="trial log")]
+    columns = [pad, rrb.Vertical(*images), rrb.Vertical(*series)] if images else [pad, rrb.Vertical(*series)]
+    return rrb.Blueprint(rrb.Horizontal(*columns), collapse_panels=True)
 
 
 def log_static(rr, recording, paths: EntityPaths, origins_mm: np.ndarray, *, robot: bool = True) -> None:
@@ -231,8 +254,8 @@ class RerunLogger:
         if math.isfinite(confidence):
             rr.log(self.paths.confidence, rr.Scalars(float(confidence)), recording=rec)
         if depth_mm is not None:
-            rr.log(self.paths.depth, rr.DepthImage(np.asarray(depth_mm, dtype=np.float32), meter=DEPTH_METER),
-                   recording=rec)
+            rr.log(self.paths.depth, rr.DepthImage(np.asarray(depth_mm, dtype=np.float32), meter=DEPTH_METER,
+                                                   depth_range=DEPTH_RANGE_MM), recording=rec)
 
     def log_robot(self, *, joints_rad: np.ndarray | None = None, gripper_width_m: float = math.nan,
                   target_angle_rad: float = math.nan, phase: str | None = None) -> None:

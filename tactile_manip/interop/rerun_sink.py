@@ -67,8 +67,9 @@ class LiveSink:
 
 
 def open_live(*, save: str | Path | None = None, spawn: bool = False, serve: bool = False, bind: str = LOCALHOST,
-              port: int = DEFAULT_PORT, recording_name: str = "") -> LiveSink:
-    """A recording stream with exactly one sink: ``save`` (a file), ``spawn`` (a viewer) or ``serve``.
+              port: int = DEFAULT_PORT, recording_name: str = "", default_blueprint=None) -> LiveSink:
+    """A recording stream with exactly one sink: ``save`` (a file), ``spawn`` (a viewer) or ``serve``; the
+    viewer lays it out by ``default_blueprint`` (e.g. :func:`~tactile_manip.interop.rerun_log.blueprint`).
 
     Raises:
         ValueError: none or several sinks asked for, or a port out of range.
@@ -83,13 +84,13 @@ def open_live(*, save: str | Path | None = None, spawn: bool = False, serve: boo
     if recording_name:
         rec.send_recording_name(recording_name)
     if save is not None:
-        rr.save(str(save), recording=rec)
+        rr.save(str(save), default_blueprint=default_blueprint, recording=rec)
         return LiveSink(rec, f"saving to {save}")
     url = grpc_url(bind, port)
     if _listening(grpc_host(bind), port):
         if serve:
             raise OSError(f"port {port} is taken on {grpc_host(bind)}; choose another with --rerun-port")
-        rr.connect_grpc(url, recording=rec)  # a viewer already runs there: use it, as rr.spawn does
+        rr.connect_grpc(url, default_blueprint=default_blueprint, recording=rec)  # a viewer runs there: use it
         return LiveSink(rec, f"viewer at {url}")
     cmd = viewer_command(serve=serve, bind=bind, port=port)
     proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
@@ -100,7 +101,7 @@ def open_live(*, save: str | Path | None = None, spawn: bool = False, serve: boo
         if proc.poll() is None:
             proc.terminate()
         raise
-    rr.connect_grpc(url, recording=rec)
+    rr.connect_grpc(url, default_blueprint=default_blueprint, recording=rec)
     sink = LiveSink(rec, f"{'serving' if serve else 'viewer'} at {url}", process=proc, stop_process=serve)
     if serve:
         sink.notes.append(f"connect a viewer with: rerun --connect {url}")

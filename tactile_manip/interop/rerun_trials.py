@@ -72,6 +72,8 @@ class RerunTrialObserver:
         sensor = cell.sensor
         self._cell = cell
         self.logger = RerunLogger(self.sink.recording, grid=sensor.layout.grid, layout=sensor.layout)
+        rr = self.logger.rr
+        rr.log(TRUE_ANGLE, rr.SeriesLines(names="true angle (deg)"), static=True, recording=self.sink.recording)
         subscription = sensor.subscribe()
         self._thread = threading.Thread(target=self._run, args=(subscription,), name="rerun-trials", daemon=True)
         self._thread.start()

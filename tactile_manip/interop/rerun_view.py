@@ -33,13 +33,13 @@ def stream_to_rerun(sensor, *, save: str | Path | None = None, spawn: bool = Fal
     """Log ``sensor``'s frames (and estimates from ``model``) until ``seconds`` pass or Ctrl-C; returns 0 when
     frames were logged, 1 when none came. With no sink given, a viewer is spawned."""
     from tactile_manip.errors import SensorTimeoutError
-    from tactile_manip.interop.rerun_log import RerunLogger
+    from tactile_manip.interop.rerun_log import EntityPaths, RerunLogger, blueprint
 
     estimator = load_estimator(model, sensor.layout.name)  # a bad model fails before a viewer starts
     if save is None and not serve:
         spawn = True
-    sink = open_live(save=save, spawn=spawn, serve=serve, bind=bind, port=port,
-                     recording_name=f"view {sensor.source}")
+    sink = open_live(save=save, spawn=spawn, serve=serve, bind=bind, port=port, recording_name=f"view {sensor.source}",
+                     default_blueprint=blueprint(EntityPaths(name)))
     print(f"view: {sensor.source} -> Rerun, {sink.description}" + "".join(f"\nview: {n}" for n in sink.notes),
           file=sys.stderr, flush=True)
     logger = RerunLogger(sink.recording, name=name, grid=sensor.layout.grid, layout=sensor.layout)
