@@ -195,3 +195,18 @@ def _same(a, b) -> bool:
     if isinstance(a, (bytes, bytearray)) or isinstance(b, (bytes, bytearray)):
         return bytes(a) == bytes(b)
     return a == b
+
+
+def test_the_ros2_decoder_of_mcap_ros2_support_reads_the_whole_file(tmp_path, episodes):
+    decoder = pytest.importorskip("mcap_ros2.decoder", reason="mcap-ros2-support is not installed")
+    mcap_reader = pytest.importorskip("mcap.reader", reason="MCAP export needs mcap (extra 'mcap')")
+    out = tmp_path / "run.mcap"
+    summary = write_mcap(episodes, out, ros2=True)
+    counts: dict[str, int] = {}
+    with open(out, "rb") as f:
+        for _, channel, _, msg in mcap_reader.make_reader(
+                f, decoder_factories=[decoder.DecoderFactory()]).iter_decoded_messages():
+            counts[channel.topic] = counts.get(channel.topic, 0) + 1
+            if channel.topic == "/tactile/mbts/field":
+                assert len(msg.data) == 48 and msg.layout.dim[0].label == "taxels"
+    assert counts == summary["topics"]
