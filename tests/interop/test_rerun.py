@@ -151,3 +151,45 @@ def test_trials_refused_before_a_trial_leaves_no_recording(tmp_path, capsys):
     assert main(["trials", "--config", str(scene), "--methods", "supermag", "--out", str(tmp_path / "R"),
                  "--rerun", "--save", str(tmp_path / "t.rrd")]) == 2
     assert "no_such_model" in capsys.readouterr().err and not (tmp_path / "t.rrd").exists()
+
+
+def test_serve_listens_on_localhost_only_and_receives_the_stream():
+    import socket
+
+    from tactile_manip.interop.rerun_sink import open_live
+
+    with socket.socket() as s:                                                # a free port
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    sink = open_live(serve=True, port=port)
+    try:
+        assert sink.process is not None and sink.process.poll() is None
+        assert "--bind" in sink.process.args and sink.process.args[sink.process.args.index("--bind") + 1] == "127.0.0.1"
+        with socket.create_connection(("127.0.0.1", port), timeout=2):
+            pass
+        for address in _outside_addresses():                                  # this host's other interfaces
+            with pytest.raises(OSError):
+                socket.create_connection((address, port), timeout=2).close()
+        with pytest.raises(OSError, match="taken"):
+            open_live(serve=True, port=port)
+        rr.log("x", rr.Scalars(1.0), recording=sink.recording)
+    finally:
+        sink.close()
+    assert sink.process.poll() is not None                                     # the server we started is stopped
+
+
+def _outside_addresses() -> list[str]:
+    """This host's IPv4 interface addresses other than loopback (Linux; none elsewhere)."""
+    import fcntl
+    import socket
+    import struct
+
+    found = set()
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        for _, name in socket.if_nameindex():
+            try:
+                packed = fcntl.ioctl(s.fileno(), 0x8915, struct.pack("256s", name[:15].encode()))  # SIOCGIFADDR
+            except OSError:
+                continue
+            found.add(socket.inet_ntoa(packed[20:24]))
+    return sorted(a for a in found if not a.startswith("127."))
