@@ -1,8 +1,9 @@
 """Reading a ``.rrd`` file back into numpy: one entity's timelines and components, in logging order.
 
 For checking an export or plotting what was logged without the viewer. rerun-sdk 0.41 reads chunks with
-``rerun.chunk.RrdReader``; releases before it that have ``rerun.dataframe`` are read through that instead
-(columns are renamed to the same ``Archetype:field`` names).
+``rerun.chunk.RrdReader``; releases before it that have ``rerun.dataframe`` (0.24) are queried through that
+on the ``frame`` timeline instead (columns renamed to the same ``Archetype:field`` names), which gives one
+row per frame number: rows logged at the same frame collapse into one there.
 """
 
 from __future__ import annotations
@@ -96,12 +97,13 @@ def _entity_data(table) -> EntityData:
     return EntityData(times, components)
 
 
-def _dataframe_table(path: Path, entity: str):  # pragma: no cover - rerun-sdk < 0.41
+def _dataframe_table(path: Path, entity: str):  # rerun-sdk 0.24 (tested against 0.24.1)
     import rerun.dataframe as rdf
 
     rec = rdf.load_recording(str(path))
     schema = rec.schema()
-    index = next(c.name for c in schema.index_columns() if c.name != "log_tick")
+    names = [c.name for c in schema.index_columns()]
+    index = "frame" if "frame" in names else next(n for n in names if n not in ("log_tick", "log_time"))
     table = rec.view(index=index, contents=entity).select().read_all()
     prefix = entity + ":"
     return table.rename_columns([n[len(prefix):] if n.startswith(prefix) else n for n in table.column_names])
