@@ -95,7 +95,6 @@ def test_viewer_and_server_listen_on_localhost_unless_asked():
     assert grpc_url("0.0.0.0", 9876) == "rerun+http://127.0.0.1:9876/proxy"
 
 
-@pytest.mark.slow
 def test_view_sim_rerun_save_holds_every_frame_of_five_seconds(tmp_path, capsys):
     out = tmp_path / "x.rrd"
     assert main(["view", "--sim", "--rerun", "--save", str(out), "--seconds", "5", "--baseline-frames", "25"]) == 0
