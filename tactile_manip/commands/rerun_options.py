@@ -20,11 +20,14 @@ def add_rerun_options(p: argparse.ArgumentParser, *, what: str) -> None:
 
 
 def check_rerun_options(args: argparse.Namespace) -> None:
-    """The sink options only with --rerun; with --save, the file is refused if it exists without --force."""
+    """The sink options only with --rerun, a valid port; with --save, the file is refused if it exists without
+    --force (checked before a device or a run folder is opened)."""
     used = [flag for flag, on in (("--save", args.save is not None), ("--spawn", args.spawn), ("--serve", args.serve))
             if on]
     if used and not args.rerun:
         raise ValueError(f"{used[0]} needs --rerun")
+    if not 0 < args.rerun_port < 65536:
+        raise ValueError(f"--rerun-port: expected 1..65535, got {args.rerun_port}")
     if args.rerun:
         from tactile_manip.interop.rerun_log import require_rerun
         from tactile_manip.outputs import check_output_file

@@ -111,6 +111,8 @@ def test_view_sim_rerun_save_holds_every_frame_of_five_seconds(tmp_path, capsys)
     (["--save", "x.rrd"], "--save needs --rerun"),
     (["--rerun", "--snapshot", "x.png"], "does not go with --rerun"),
     (["--rerun", "--save", "x.rrd", "--estimate-hz", "0"], "--estimate-hz"),
+    (["--rerun", "--serve", "--rerun-port", "70000"], "--rerun-port"),
+    (["--rerun", "--save", "x.rrd", "--model", "nope.onnx", "--seconds", "1"], "nope.onnx"),
 ])
 def test_view_rerun_option_errors_are_one_line(tmp_path, capsys, argv, match):
     argv = [a.replace("x.", f"{tmp_path}/x.") for a in argv]
