@@ -1,6 +1,6 @@
 """Logging tactile frames to Rerun: the field as arrows, a Bz heat map, depth, angle and confidence over time.
 
-:class:`RerunLogger` writes one frame at a time (the live ``view --rerun`` and ``trials --rerun``);
+:class:`RerunLogger` logs frames as they come (the live ``view --rerun`` and ``trials --rerun``);
 :mod:`tactile_manip.interop.rerun_export` writes whole episodes column-wise with the same entity paths.
 Entity paths for a sensor called ``name`` (default ``mbts``; all lengths in mm, the field in uT):
 
@@ -10,7 +10,8 @@ Entity paths for a sensor called ``name`` (default ``mbts``; all lengths in mm, 
 - ``tactile/<name>/depth``: DepthImage (H, W) of the reconstructed depth in mm (``meter`` = 1000);
 - ``tactile/<name>/angle_deg``, ``tactile/<name>/confidence``: Scalars, logged where an estimate exists;
 - ``tactile/vbts/depth``: DepthImage of the vision-based sensor's measured depth (pair logs);
-- ``robot/joints_rad`` (7 series), ``robot/gripper_width_mm``, ``trial/target_angle_deg``: Scalars;
+- ``robot/joints_rad`` (7 series), ``robot/gripper_width_mm``, ``trial/target_angle_deg`` (and, from
+  ``trials --rerun``, ``trial/true_angle_deg``): Scalars;
   ``trial/phase`` and ``trial/episode``: TextLog lines when the phase or the episode changes.
 
 Timelines: ``sensor_time`` (duration on the sensor clock), ``host_time`` (duration: the host's clock when the
@@ -81,6 +82,7 @@ VBTS_DEPTH = "tactile/vbts/depth"
 JOINTS = "robot/joints_rad"
 GRIPPER = "robot/gripper_width_mm"
 TARGET = "trial/target_angle_deg"
+TRUE_ANGLE = "trial/true_angle_deg"
 PHASE = "trial/phase"
 EPISODE = "trial/episode"
 
@@ -133,7 +135,7 @@ def blueprint(paths: EntityPaths, *, robot: bool = False, depth: bool = True, vb
               rrb.TimeSeriesView(origin=paths.confidence, name="confidence")]
     if robot:
         series += [rrb.TimeSeriesView(origin="robot", name="arm and gripper"),
-                   rrb.TimeSeriesView(origin="trial", contents=[TARGET, "trial/true_angle_deg"], name="trial"),
+                   rrb.TimeSeriesView(origin="trial", contents=[TARGET, TRUE_ANGLE], name="trial"),
                    rrb.TextLogView(origin="trial", name="trial log")]
     columns = [pad, rrb.Vertical(*images), rrb.Vertical(*series)] if images else [pad, rrb.Vertical(*series)]
     return rrb.Blueprint(rrb.Horizontal(*columns), collapse_panels=True)

@@ -2,10 +2,11 @@
 
 :class:`RerunTrialObserver` is handed to the trial runner. On the first trial it subscribes to the cell's
 sensor and logs every frame from a thread of its own (the field as arrows and the Bz heat map, the arm's joints
-and the gripper's width at ``robot_hz``), so the trials run exactly as without it. At each trial's start it logs
-a line naming the trial, the true in-hand angle and the target; at its end the estimate (angle, confidence)
-and the outcome. Everything sits on the sensor clock of the whole run (entity paths and timelines of
-:mod:`tactile_manip.interop.rerun_log`; ``trial/true_angle_deg`` is added here).
+and the gripper's width at ``robot_hz``), so the behaviour's own code and timing loop are untouched (the
+thread does take CPU time: ``benchmarks/bench_rerun.py``). At each trial's start it logs a line naming the
+trial, object, presented angle and force, and that angle as a scalar; at its end the estimate (angle,
+confidence), the target and the outcome. Everything sits on the sensor clock of the whole run (entity paths and timelines of
+:mod:`tactile_manip.interop.rerun_log`).
 """
 
 from __future__ import annotations
@@ -13,9 +14,7 @@ from __future__ import annotations
 import math
 import threading
 
-from tactile_manip.interop.rerun_log import EPISODE, RerunLogger
-
-TRUE_ANGLE = "trial/true_angle_deg"
+from tactile_manip.interop.rerun_log import EPISODE, TRUE_ANGLE, RerunLogger
 
 
 class RerunTrialObserver:
