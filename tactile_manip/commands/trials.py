@@ -50,7 +50,7 @@ def run(args: argparse.Namespace) -> int:
     observer = _rerun_observer(args, scene.name) if args.rerun else None
     try:
         summary = run_trials(scene, out, scene_path=args.config, resume=args.resume, progress=not args.quiet,
-                             observer=observer)
+                             trial_observer=observer)
     except BaseException:
         if observer is not None:
             observer.close()
