@@ -2,8 +2,8 @@
 
 For checking an export or plotting what was logged without the viewer. rerun-sdk 0.41 reads chunks with
 ``rerun.chunk.RrdReader``; releases before it that have ``rerun.dataframe`` (0.24) are queried through that
-on the ``frame`` timeline instead (columns renamed to the same ``Archetype:field`` names), which gives one
-row per frame number: rows logged at the same frame collapse into one there.
+instead (columns renamed to the same ``Archetype:field`` names) on ``log_tick``, one row per logging call,
+or for data sent column-wise, which has no ``log_tick``, on ``frame``, one row per frame number.
 """
 
 from __future__ import annotations
@@ -101,9 +101,16 @@ def _dataframe_table(path: Path, entity: str):  # rerun-sdk 0.24 (tested against
     import rerun.dataframe as rdf
 
     rec = rdf.load_recording(str(path))
-    schema = rec.schema()
-    names = [c.name for c in schema.index_columns()]
-    index = "frame" if "frame" in names else next(n for n in names if n not in ("log_tick", "log_time"))
-    table = rec.view(index=index, contents=entity).select().read_all()
+    names = [c.name for c in rec.schema().index_columns()]
+    table = None
+    # one row per index value: log_tick is unique per rr.log call; rows sent column-wise have none, and
+    # take the frame number (unique per frame)
+    for index in [n for n in ("log_tick", "frame") if n in names]:
+        table = rec.view(index=index, contents=entity).select().read_all()
+        if table.num_rows:
+            break
+    if table is None:
+        return None
     prefix = entity + ":"
-    return table.rename_columns([n[len(prefix):] if n.startswith(prefix) else n for n in table.column_names])
+    table = table.rename_columns([n[len(prefix):] if n.startswith(prefix) else n for n in table.column_names])
+    return table.drop_columns([n for n in ("log_tick",) if n in table.column_names])
