@@ -174,7 +174,7 @@ def write_mcap(episodes: list[Episode], out: Path, *, ros2: bool = False, encodi
     from mcap.writer import CompressionType, Writer
 
     episodes, name = check_exportable(episodes)
-    base_s = first_host_time_s(episodes)
+    base_s = max(first_host_time_s(episodes), 0.0)  # MCAP times are unsigned ns
     frames = 0
     with open(out, "wb") as f:
         writer = Writer(f, compression=CompressionType.ZSTD)
