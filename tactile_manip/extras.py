@@ -24,6 +24,8 @@ EXTRAS: dict[str, tuple[str, str]] = {
     "cv2": ("opencv-python-headless", "camera"),
     "franky": ("franky-control", "franky"),
     "ray": ("ray", "ray"),
+    "rerun": ("rerun-sdk", "viz"),
+    "mcap": ("mcap", "mcap"),
 }
 
 

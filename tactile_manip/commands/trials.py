@@ -2,12 +2,16 @@
 
 Writes ``OUT/trials.jsonl`` (one fsynced line per trial, so a killed run loses no completed trial; continue it
 with ``--resume``), then the summary (success rates with Wilson 95 % intervals, angle errors, the paired
-comparison) and plots. ``tactile-manip score OUT --tolerance-deg X`` re-scores it later.
+comparison) and plots. ``tactile-manip score OUT --tolerance-deg X`` re-scores it later. ``--rerun`` lets you
+watch the run in Rerun (every sensor frame, the arm, each estimate and outcome): in a viewer, a .rrd file or a
+gRPC server on this machine.
 """
 
 from __future__ import annotations
 
 import argparse
+
+from tactile_manip.commands.rerun_options import add_rerun_options, check_rerun_options
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -18,10 +22,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--methods", default=None, help="comma-separated subset of the scene's methods")
     p.add_argument("--resume", action="store_true", help="continue a killed run in --out (same scene)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--force", action="store_true", help="with --rerun --save: overwrite an existing .rrd file")
+    add_rerun_options(p, what="the run (every sensor frame, the arm, each estimate and outcome)")
 
 
 def run(args: argparse.Namespace) -> int:
     import dataclasses
+    from pathlib import Path
 
     from tactile_manip.outputs import check_output_dir
     from tactile_manip.trials.log import run_folder
@@ -38,10 +45,36 @@ def run(args: argparse.Namespace) -> int:
         if unknown:
             raise ValueError(f"--methods: {unknown} not in the scene's methods {sorted(known)}")
         scene = dataclasses.replace(scene, methods=[known[m] for m in wanted])
+    check_rerun_options(args)
     out = check_output_dir(run_folder(scene.name, args.out, resume=args.resume))
-    summary = run_trials(scene, out, scene_path=args.config, resume=args.resume, progress=not args.quiet)
+    observer = _rerun_observer(args, scene.name) if args.rerun else None
+    try:
+        summary = run_trials(scene, out, scene_path=args.config, resume=args.resume, progress=not args.quiet,
+                             trial_observer=observer)
+    except BaseException:
+        if observer is not None:
+            observer.close()
+            if args.save and observer.trials == 0:  # refused before any trial ran: leave no recording behind
+                Path(args.save).unlink(missing_ok=True)
+        raise
+    if observer is not None:
+        observer.close()
     md = out / "summary.md"
     if md.exists():
         print(md.read_text(), end="")
     print(f"wrote {out}/trials.jsonl, summary.md, summary.json and plots")
     return 0 if summary is not None else 1
+
+
+def _rerun_observer(args: argparse.Namespace, name: str):
+    import sys
+
+    from tactile_manip.interop.rerun_log import EntityPaths, blueprint
+    from tactile_manip.interop.rerun_sink import open_live
+    from tactile_manip.interop.rerun_trials import RerunTrialObserver
+
+    sink = open_live(save=args.save, spawn=args.spawn or (args.save is None and not args.serve), serve=args.serve,
+                     bind=args.bind, port=args.rerun_port, recording_name=f"trials {name}",
+                     default_blueprint=blueprint(EntityPaths("mbts"), robot=True, depth=False))
+    print(f"trials: Rerun, {sink.description}" + "".join(f"\ntrials: {n}" for n in sink.notes), file=sys.stderr)
+    return RerunTrialObserver(sink)

@@ -3,6 +3,11 @@
 ``--port`` reads the board (or the emulator), ``--sim`` the simulated sensor pressing an object again and
 again, ``--replay`` a recording. ``--snapshot out.png --seconds N`` runs headless for N seconds and saves the
 last frame, so the view works (and is tested) without a display.
+
+``--rerun`` streams every frame to Rerun instead (extra ``viz``): the field as arrows at the taxels, a Bz heat
+map, and, from ``--model`` at ``--estimate-hz``, the reconstructed depth and the angle and confidence, on the
+sensor clock. It goes to a file (``--save F.rrd``), a viewer it starts (``--spawn``, the default) or a gRPC
+server (``--serve``), both listening on 127.0.0.1 unless ``--bind`` names another address.
 """
 
 from __future__ import annotations
@@ -12,6 +17,7 @@ import math
 import sys
 import time
 
+from tactile_manip.commands.rerun_options import add_rerun_options, check_rerun_options
 from tactile_manip.commands.serial_options import add_serial_options, serial_config
 
 DEFAULT_SIM_PRESS = "letter_r,t=0.3,force=10,yaw=20,rise=0.4,hold=0.6"
@@ -33,9 +39,19 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--baseline-frames", type=int, default=125, help="frames averaged for the baseline (125)")
     p.add_argument("--fps", type=float, default=20.0, help="display refresh rate (default 20)")
     p.add_argument("--snapshot", metavar="PNG", help="run headless and save the last frame to this PNG")
-    p.add_argument("--seconds", type=float, default=2.0, help="with --snapshot: how long to read first, s")
+    p.add_argument("--seconds", type=float, default=None,
+                   help="with --snapshot: how long to read first, s (default 2); with --rerun: stop after this long "
+                        "(default: at Ctrl-C)")
     add_serial_options(p, src)
-    p.add_argument("--force", action="store_true", help="with --snapshot: overwrite an existing PNG")
+    p.add_argument("--force", action="store_true", help="with --snapshot or --save: overwrite an existing file")
+    add_rerun_options(p, what="every frame (instead of a matplotlib window)")
+    rr = p.add_argument_group("estimates in Rerun")
+    rr.add_argument("--model", default="bilinear",
+                    help="with --rerun: reconstructor for depth, angle and confidence: bilinear (default), bicubic, "
+                         "an .onnx model, or none")
+    rr.add_argument("--estimate-hz", type=float, default=10.0,
+                    help="with --rerun: estimates (and depth images) per second (default 10; the field is logged at "
+                         "the sensor rate)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -55,7 +71,11 @@ def run(args: argparse.Namespace) -> int:
 
     if args.port:
         require("serial", "viewing a serial port")
-    if args.snapshot is None:
+    _check_view_options(args)
+    check_rerun_options(args)
+    if args.rerun:
+        plt = None
+    elif args.snapshot is None:
         plt = _interactive_pyplot()  # fail before connecting when there is no display
     else:
         args.snapshot = check_output_file(figure_path(args.snapshot), force=args.force)
@@ -87,10 +107,26 @@ def run(args: argparse.Namespace) -> int:
         if args.sim:
             presses = [parse_press(s) for s in args.press or [DEFAULT_SIM_PRESS]]
             sensor.play(presses, period_s=max(p.end_s for p in presses) + 0.5)
+        if args.rerun:
+            from tactile_manip.interop.rerun_view import stream_to_rerun
+
+            return stream_to_rerun(sensor, save=args.save, spawn=args.spawn, serve=args.serve, bind=args.bind,
+                                   port=args.rerun_port, model=args.model, estimate_hz=args.estimate_hz,
+                                   seconds=args.seconds)
         view = FieldView(plt, sensor)
         if args.snapshot:
-            return view.snapshot(args.snapshot, seconds=args.seconds)
+            return view.snapshot(args.snapshot, seconds=2.0 if args.seconds is None else args.seconds)
         return view.live(fps=args.fps)
+
+
+def _check_view_options(args: argparse.Namespace) -> None:
+    """--rerun not with --snapshot, positive durations and rates (checked before any device is opened)."""
+    if args.rerun and args.snapshot:
+        raise ValueError("--snapshot draws a matplotlib figure; it does not go with --rerun")
+    if args.seconds is not None and not (args.seconds > 0 and math.isfinite(args.seconds)):
+        raise ValueError(f"--seconds: expected a positive duration, got {args.seconds}")
+    if not (args.estimate_hz > 0 and math.isfinite(args.estimate_hz)):
+        raise ValueError(f"--estimate-hz: expected a positive rate, got {args.estimate_hz}")
 
 
 def _baseline_from(path: str, frames: int):

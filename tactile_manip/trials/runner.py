@@ -280,11 +280,15 @@ def make_cell(scene: TrialScene):
 
 
 def run_scene(scene: TrialScene, write: Callable[[TrialRecord], None], *, estimators: dict[str, TactilePoseEstimator],
-              skip: set[tuple[int, str]] = frozenset(), progress: bool = True, cell=None) -> int:
+              skip: set[tuple[int, str]] = frozenset(), progress: bool = True, cell=None,
+              trial_observer=None) -> int:
     """Run every (trial, method) of ``scene`` not in ``skip``; ``write`` each record.
 
     ``cell`` (default: built from ``scene.robot.backend``: :class:`SimulatedCell` for the twin,
     :class:`~tactile_manip.trials.operator.OperatorCell` for a real FR3) provides ``connected()`` and ``run_one``.
+    ``trial_observer`` (e.g. :class:`~tactile_manip.interop.rerun_trials.RerunTrialObserver`), when given, is told
+    ``trial_started(presentation, method, cell)`` before each trial and ``trial_finished(record)`` after it
+    was written; it watches, it changes nothing.
 
     Returns the number of trials run. Outcomes other than "done" are recorded, never raised; only an
     interrupt (Ctrl-C) or a failure to build the cell stops the run.
@@ -300,6 +304,8 @@ def run_scene(scene: TrialScene, write: Callable[[TrialRecord], None], *, estima
                                 disable=not progress) as bar:
         for i, method in todo:
             p = draw_presentation(scene, i)
+            if trial_observer is not None:
+                trial_observer.trial_started(p, method, cell)
             t0 = time.perf_counter()
             try:
                 result = cell.run_one(p, estimators[method], arm_fault=i in faults.arm_fault_trials,
@@ -307,15 +313,21 @@ def run_scene(scene: TrialScene, write: Callable[[TrialRecord], None], *, estima
             except Exception as exc:  # noqa: BLE001 - a broken trial is recorded, the run goes on
                 result = ReorientResult(outcome="error", detail=f"{type(exc).__name__}: {exc}")
             result.timings_s.setdefault("trial", time.perf_counter() - t0)
-            write(make_record(p, method, target, result))
+            record = make_record(p, method, target, result)
+            write(record)
+            if trial_observer is not None:
+                trial_observer.trial_finished(record)
             count += 1
             bar.update()
     return count
 
 
 def run_trials(scene: TrialScene, out_dir: str | Path, *, scene_path: str | Path | None = None,
-               resume: bool = False, progress: bool = True, tolerance_deg: float | None = None):
+               resume: bool = False, progress: bool = True, tolerance_deg: float | None = None,
+               trial_observer=None):
     """Run ``scene`` into ``out_dir`` (trials.jsonl fsynced per trial, then the report) and return the summary.
+
+    ``trial_observer``: see :func:`run_scene`.
 
     With ``resume=True`` the (trial, method) pairs already in ``out_dir/trials.jsonl`` are skipped (the scene
     must be the same: the log refuses a different one).
@@ -330,7 +342,8 @@ def run_trials(scene: TrialScene, out_dir: str | Path, *, scene_path: str | Path
     cell = make_cell(scene)
     skip = completed_keys(out / "trials.jsonl") if resume and (out / "trials.jsonl").exists() else set()
     with TrialLog(out, config=to_dict(scene), resume=resume) as log:
-        run_scene(scene, log.append, estimators=estimators, skip=skip, progress=progress, cell=cell)
+        run_scene(scene, log.append, estimators=estimators, skip=skip, progress=progress, cell=cell,
+                  trial_observer=trial_observer)
     tolerance = math.radians(scene.tolerance_deg if tolerance_deg is None else tolerance_deg)
     return write_report(out, read_trials(out / "trials.jsonl"), tolerance, title=f"Reorientation trials: {scene.name}",
                         run_info=read_run_info(out))
