@@ -13,6 +13,9 @@ command-line parser (no run), so a renamed option fails here even where nothing 
 options, is fine there). docs/results/ holds measured results and their reproduction commands (hours of
 training), and is not run.
 
+The missing-extra lines that pages quote (in plain fenced blocks) are compared with what the commands print
+with the package hidden.
+
 One page, or one page's parse check: `pytest tests/docs -k "page_blocks_run and collection"`.
 """
 
@@ -323,3 +326,25 @@ def test_block_commands_are_found_and_checked():
     assert parse_error(["tactile-manip", "score", "--tolerance-deg", "2.5"], partial=False) is not None  # no RUN_DIR
     assert parse_error(["tactile-manip", "score", "--tolerance-deg", "2.5"]) is None  # a mention in prose
     assert "unrecognized arguments: --tolerance 2.5" in parse_error("tactile-manip score run --tolerance 2.5")
+
+
+# --- quoted missing-extra messages -----------------------------------------------------------------------------
+# (page, argv, the optional module hidden): the page quotes, in a plain fenced block, the line the command prints
+QUOTED_ERRORS = [
+    ("README.md", ["record", "--port", "/dev/ttyUSB0", "--out", "{tmp}/x.tmrec"], "serial"),
+    ("docs/sensors.md", ["view", "--port", "/dev/ttyUSB0"], "serial"),
+]
+
+
+@pytest.mark.parametrize(("page", "argv", "module"), QUOTED_ERRORS, ids=[q[0] for q in QUOTED_ERRORS])
+def test_quoted_missing_extra_lines_are_what_the_command_prints(page, argv, module, tmp_path, monkeypatch, capsys):
+    from tactile_manip.cli import main
+
+    for name in [m for m in sys.modules if m == module or m.startswith(module + ".")]:
+        monkeypatch.delitem(sys.modules, name)
+    monkeypatch.setitem(sys.modules, module, None)  # `import serial` raises ImportError, as when not installed
+    assert main([a.format(tmp=tmp_path) for a in argv]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1, err
+    quoted = {b.code.strip() for b in blocks(page, (ROOT / page).read_text()) if b.lang == ""}
+    assert err in quoted, f"{page} quotes no plain block with the line the command prints:\n{err}"
