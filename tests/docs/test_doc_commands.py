@@ -7,8 +7,9 @@ needs data, hardware or an install says so on the line above its fence:
 
     <!-- doc-test: skip (needs data/supermag.npz) -->
 
-and is not run; the `tactile-manip ...` commands of a skipped bash block are still parsed by the real
-command-line parser (no run), so a renamed option fails here even where nothing runs. Inline
+and is not run. The `tactile-manip ...` commands of every bash block, skipped ones included, are parsed by the
+real command-line parser with exact option names (no run), so a renamed option fails here even where nothing
+runs. Inline
 `tactile-manip ...` commands in the prose are parsed the same way (a partial mention, missing required
 options, is fine there). docs/results/ holds measured results and their reproduction commands (hours of
 training), and is not run.
