@@ -22,6 +22,7 @@ EXTRAS: dict[str, tuple[str, str]] = {
     "spatialmath": ("roboticstoolbox-python", "robot"),
     "trimesh": ("trimesh", "mesh"),
     "cv2": ("opencv-python-headless", "camera"),
+    "h5py": ("h5py", "hdf5"),
     "franky": ("franky-control", "franky"),
     "ray": ("ray", "ray"),
     "rerun": ("rerun-sdk", "viz"),

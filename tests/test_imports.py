@@ -1,4 +1,5 @@
-"""Importing the package and the simulator stays cheap: no heavy or optional package is pulled in (DESIGN.md 2).
+"""Importing the package and the simulator stays cheap: no heavy or optional package is pulled in
+(docs/design.md, Layers).
 
 Each check runs in a fresh interpreter, since this test process has long since imported everything.
 """

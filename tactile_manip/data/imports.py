@@ -257,11 +257,9 @@ def _random_split(n: int, groups: np.ndarray | None, val_fraction: float, test_f
 
 
 def _h5py() -> Any:
-    try:
-        import h5py
-    except ImportError as e:
-        raise ImportError('reading HDF5 needs h5py: pip install -e ".[hdf5]" (or pip install h5py)') from e
-    return h5py
+    from tactile_manip.extras import require
+
+    return require("h5py", "reading HDF5")
 
 
 def _read_hdf5(path: Path, key: str | None) -> np.ndarray:

@@ -216,6 +216,11 @@ def _train(cfg: TrainConfig, data_paths: list[Path], out: Path, resume: bool, pr
         print(f"note: drop_bottomed_out = true, but the data flags no press as bottomed out{why}: "
               "every press is trained on", flush=True)
     train_index = select(data, "train", tuple(cfg.objects), drop_bottomed_out=cfg.drop_bottomed_out)
+    if len(train_index) < cfg.batch_size:  # an epoch takes whole batches only: it would take no step at all
+        chosen = " (of the config's objects)" if cfg.objects else ""
+        raise TrainingError(f"the training split has {len(train_index)} samples{chosen}, fewer than one batch "
+                            f"(batch_size = {cfg.batch_size}): collect more data, or set batch_size to at most "
+                            f"{len(train_index)} in the training config")
     spec = InputSpec.for_data(data, train_index, clamp_ut=cfg.clamp_ut, axes=cfg.axes, clamp_std=cfg.clamp_std)
     mcfg = model_config(cfg, data)
     train_set = TensorPairs(data, train_index).to(device)

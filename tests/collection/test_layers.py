@@ -1,4 +1,4 @@
-"""DESIGN.md 2: collection/ builds on sensors/ and data/ and imports no perception, robot or learning code;
+"""docs/design.md, Layers: collection/ builds on sensors/ and data/ and imports no perception, robot or learning code;
 sensors/ holds sensors only and never imports collection/."""
 
 from __future__ import annotations

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -147,3 +148,14 @@ def test_a_dataset_checks_its_own_shapes():
         ChannelSpec(kind="tensor")
     with pytest.raises(ValueError, match="data_range must be > 0"):
         ImageSpec(data_range=0.0)
+
+
+def test_import_from_hdf5_without_h5py_is_one_line_naming_the_extra(tmp_path, monkeypatch, capsys):
+    from tactile_manip.cli import main
+
+    monkeypatch.setitem(sys.modules, "h5py", None)  # import h5py raises ImportError, as when not installed
+    (tmp_path / "mine.h5").write_bytes(b"")
+    assert main(["import", "--arrays", str(tmp_path / "mine.h5"), "--out", str(tmp_path / "d.npz")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.splitlines() == [err] and err.startswith("tactile-manip import: error: reading HDF5 needs h5py"), err
+    assert 'pip install -e ".[hdf5]"' in err and not (tmp_path / "d.npz").exists()

@@ -7,13 +7,22 @@ needs data, hardware or an install says so on the line above its fence:
 
     <!-- doc-test: skip (needs data/supermag.npz) -->
 
-and is not run. Inline `tactile-manip ...` commands in the prose are parsed by the real command-line parser
-(no run), so an option that does not exist, a wrong choice or a bad value fails here too. docs/results/ holds
-measured results and their reproduction commands (hours of training), and is not run.
+and is not run. The `tactile-manip ...` commands of every bash block, skipped ones included, are parsed by the
+real command-line parser with exact option names (no run), so a renamed option fails here even where nothing
+runs. Inline
+`tactile-manip ...` commands in the prose are parsed the same way (a partial mention, missing required
+options, is fine there). docs/results/ holds measured results and their reproduction commands (hours of
+training), and is not run.
+
+The missing-extra lines that pages quote (in plain fenced blocks) are compared with what the commands print
+with the package hidden.
+
+One page, or one page's parse check: `pytest tests/docs -k "page_blocks_run and collection"`.
 """
 
 from __future__ import annotations
 
+import argparse
 import contextlib
 import io
 import os
@@ -29,9 +38,6 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
 PAGES = ["README.md", *sorted(p.relative_to(ROOT).as_posix() for p in (ROOT / "docs").glob("*.md"))]
-# pages whose blocks do not carry their doc-test markers yet: reported as skipped until they do
-PENDING = {"docs/collection.md", "docs/data.md", "docs/perception.md", "docs/robot.md", "docs/sensors.md",
-           "docs/trials.md"}
 LINKED = ("configs", "tasks", "examples", "benchmarks", "firmware", "docs", "README.md", "pyproject.toml")
 COPIED = ("models",)
 LANGUAGES = ("bash", "python")
@@ -139,8 +145,6 @@ def test_marker_and_extraction():
 @pytest.mark.slow
 @pytest.mark.parametrize("page", PAGES)
 def test_page_blocks_run(page, tmp_path):
-    if page in PENDING:
-        pytest.skip(f"{page}: its blocks carry no doc-test markers yet")
     todo = [b for b in blocks(page, (ROOT / page).read_text()) if b.lang in LANGUAGES and b.skip is None]
     unsafe = [b.where for b in todo if unsafe_code(b)]
     assert not unsafe, (f"{', '.join(unsafe)}: installs packages or runs the tests; mark it "
@@ -190,30 +194,89 @@ def inline_commands(page: str, text: str) -> list[tuple[str, str]]:
         if line.startswith("```"):
             fenced = not fenced
             continue
-        for cmd in INLINE.findall("" if fenced else line):
-            if any(s in cmd for s in ("[", "|", "...", "(")):
-                continue
-            tokens = shlex.split(cmd)
-            if any(t.isupper() and len(t) > 1 or t in ("N", "I", "S", "F", "P") for t in tokens):
-                continue
-            out.append((f"{page}:{n}", cmd))
+        out += [(f"{page}:{n}", cmd) for cmd in INLINE.findall("" if fenced else line)
+                if concrete(cmd, shlex.split(cmd))]
     return out
 
 
-def parse_error(cmd: str) -> str | None:
-    """The parser's complaint about ``cmd`` (None when it parses; a partial mention missing required options
-    is fine in prose)."""
+def concrete(text: str, tokens: list[str]) -> bool:
+    """Whether a command is concrete, not a synopsis ([optional], a|b alternatives, (a | b), ...) or a form
+    with placeholders in capitals (N, RUN_DIR)."""
+    if any(s in text for s in ("[", "|", "...", "(")):
+        return False
+    return not any(t.isupper() and len(t) > 1 or t in ("N", "I", "S", "F", "P") for t in tokens)
+
+
+SHELL_OPERATORS = {"&&", "||", ";", "|", "&"}
+ASSIGNMENT = re.compile(r"^[A-Za-z_]\w*=")
+REDIRECT = re.compile(r"^[<>]")
+
+
+def block_commands(block: Block) -> list[tuple[str, list[str]]]:
+    """(page:line, argv) of each concrete `tactile-manip ...` (or `python -m tactile_manip ...`) command of a
+    bash block: comments dropped, continued lines joined, lines split at `&&`, `||`, `;`, `|` and `&`, a
+    command cut at a redirection, leading VAR=value assignments dropped; synopses are left out as in prose."""
+    out = []
+    logical, start, pending = [], 0, ""
+    for n, line in enumerate(block.code.splitlines(), block.line + 1):
+        start = start if pending else n
+        if line.endswith("\\"):
+            pending += line[:-1] + " "
+            continue
+        logical.append((start, pending + line))
+        pending = ""
+    for n, line in logical:
+        if not line.strip():
+            continue
+        lexer = shlex.shlex(line, posix=True, punctuation_chars=True)  # drops comments, splits at operators
+        lexer.whitespace_split = True
+        commands, command = [], []
+        for token in [*lexer, ";"]:
+            if token in SHELL_OPERATORS:
+                commands.append(command)
+                command = []
+            else:
+                command.append(token)
+        for command in commands:
+            while command and ASSIGNMENT.match(command[0]):
+                command = command[1:]
+            if command[:3] in (["python", "-m", "tactile_manip"], ["python3", "-m", "tactile_manip"]):
+                command = ["tactile-manip", *command[3:]]
+            if not command or command[0] != "tactile-manip":
+                continue
+            command = command[:next((i for i, tok in enumerate(command) if REDIRECT.match(tok)), len(command))]
+            if not concrete(" ".join(command), command):
+                continue
+            out.append((f"{block.page}:{n}", command))
+    return out
+
+
+def exact_options(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
+    """``parser`` with its subcommands' parsers refusing abbreviated options: a page that writes `--seconds`
+    for `--seconds-s` works today only until another option starts the same way."""
+    parser.allow_abbrev = False
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for sub in action.choices.values():
+                exact_options(sub)
+    return parser
+
+
+def parse_error(cmd: str | list[str], *, partial: bool = True) -> str | None:
+    """The parser's complaint about ``cmd`` (a command line, or its argv): None when it parses. With
+    ``partial`` a mention missing required options is fine (prose); a block's command must be whole."""
     from tactile_manip.cli import build_parser
 
+    argv = shlex.split(cmd) if isinstance(cmd, str) else cmd
     err = io.StringIO()
     try:
         with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
-            build_parser().parse_args(shlex.split(cmd)[1:])
+            exact_options(build_parser()).parse_args(argv[1:])
     except SystemExit as e:
         message = err.getvalue().strip().splitlines()[-1] if err.getvalue().strip() else ""
-        if e.code in (0, None) or PARTIAL.search(message):
+        if e.code in (0, None) or partial and PARTIAL.search(message):
             return None
-        return message
+        return message or f"exit status {e.code}"
     return None
 
 
@@ -230,3 +293,59 @@ def test_inline_check_catches_a_wrong_option():
     assert parse_error("tactile-manip trials --resume") is None  # a partial mention
     assert inline_commands("p.md", "run `tactile-manip score RUN_DIR` or `tactile-manip params --markdown`") == [
         ("p.md:1", "tactile-manip params --markdown")]
+
+
+# --- the commands of bash blocks, skipped ones included ---------------------------------------------------------
+@pytest.mark.parametrize("page", PAGES)
+def test_block_commands_parse(page):
+    """Every concrete `tactile-manip` command of every bash block parses, whole: in a block that is skipped
+    (data, hardware, minutes of CPU) this is the only check, so a renamed option fails here."""
+    bad = [f"{where}: `{shlex.join(argv)}`: {error}"
+           for block in blocks(page, (ROOT / page).read_text()) if block.lang == "bash"
+           for where, argv in block_commands(block) if (error := parse_error(argv, partial=False))]
+    assert not bad, "commands in bash blocks that the parser refuses:\n" + "\n".join(bad)
+
+
+def test_block_commands_are_found_and_checked():
+    code = ("<!-- doc-test: skip (needs a robot) -->\n```bash\n"
+            'pip install -e ".[serial]"   # tactile-manip is installed\n'
+            "tactile-manip params | head -5\n"
+            "cd run && TACTILE_MANIP_POSE_KERNEL=numpy tactile-manip trials --config s.toml --trails 3 > log.txt\n"
+            "tactile-manip import --readings R.npy --images I.npy [--split S.npy | --groups G.npy] --out D.npz\n"
+            "tactile-manip trials --config ... --out DIR --resume\n"
+            "python -m tactile_manip score run \\\n    --tolerance-deg 2.5  # at another tolerance\n"
+            "tactile-manip collect run (--sim | --port P) --out d.npz\n```\n")
+    block = blocks("p.md", code)[0]
+    assert block.skip == "needs a robot"
+    assert block_commands(block) == [
+        ("p.md:4", ["tactile-manip", "params"]),
+        ("p.md:5", ["tactile-manip", "trials", "--config", "s.toml", "--trails", "3"]),
+        ("p.md:8", ["tactile-manip", "score", "run", "--tolerance-deg", "2.5"])]
+    errors = [parse_error(argv, partial=False) for _, argv in block_commands(block)]
+    assert errors[0] is None and errors[2] is None
+    assert "unrecognized arguments: --trails 3" in errors[1]
+    assert parse_error(["tactile-manip", "score", "--tolerance-deg", "2.5"], partial=False) is not None  # no RUN_DIR
+    assert parse_error(["tactile-manip", "score", "--tolerance-deg", "2.5"]) is None  # a mention in prose
+    assert "unrecognized arguments: --tolerance 2.5" in parse_error("tactile-manip score run --tolerance 2.5")
+
+
+# --- quoted missing-extra messages -----------------------------------------------------------------------------
+# (page, argv, the optional module hidden): the page quotes, in a plain fenced block, the line the command prints
+QUOTED_ERRORS = [
+    ("README.md", ["record", "--port", "/dev/ttyUSB0", "--out", "{tmp}/x.tmrec"], "serial"),
+    ("docs/sensors.md", ["view", "--port", "/dev/ttyUSB0"], "serial"),
+]
+
+
+@pytest.mark.parametrize(("page", "argv", "module"), QUOTED_ERRORS, ids=[q[0] for q in QUOTED_ERRORS])
+def test_quoted_missing_extra_lines_are_what_the_command_prints(page, argv, module, tmp_path, monkeypatch, capsys):
+    from tactile_manip.cli import main
+
+    for name in [m for m in sys.modules if m == module or m.startswith(module + ".")]:
+        monkeypatch.delitem(sys.modules, name)
+    monkeypatch.setitem(sys.modules, module, None)  # `import serial` raises ImportError, as when not installed
+    assert main([a.format(tmp=tmp_path) for a in argv]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1, err
+    quoted = {b.code.strip() for b in blocks(page, (ROOT / page).read_text()) if b.lang == ""}
+    assert err in quoted, f"{page} quotes no plain block with the line the command prints:\n{err}"

@@ -133,3 +133,19 @@ def test_evaluate_refuses_to_replace_an_earlier_report_without_force(tiny_data, 
     assert (out / "results.json").read_text() == "{}"
     assert main(["evaluate", "--data", str(tiny_data), "--out", str(out), "--force"]) == 0
     assert (out / "results.json").read_text() != "{}"
+
+
+def test_train_refuses_fewer_training_samples_than_one_batch(tiny_data, tmp_path, capsys):
+    """An epoch takes whole batches only: 6 training samples at batch size 8 would train nothing."""
+    data = load_dataset(tiny_data)
+    train = np.flatnonzero(data.split == "train")
+    split = data.split.copy()
+    split[train[6:]] = "val"  # 6 training samples left
+    save_dataset(tmp_path / "few.npz", dataclasses.replace(data, split=split))
+    (tmp_path / "tiny.toml").write_text(TINY)
+    capsys.readouterr()
+    assert main(["train", "--config", str(tmp_path / "tiny.toml"), "--data", str(tmp_path / "few.npz"),
+                 "--out", str(tmp_path / "run")]) == 2
+    err = _one_line(capsys, "train")
+    assert "6 samples" in err and "batch_size = 8" in err and "at most 6" in err
+    assert not (tmp_path / "run").exists()  # refused before anything was written

@@ -1,4 +1,4 @@
-"""Board layouts: chip order, positions and rotations onto reading cells (DESIGN.md section 4)."""
+"""Board layouts: chip order, positions and rotations onto reading cells (docs/design.md, Conventions)."""
 
 from __future__ import annotations
 

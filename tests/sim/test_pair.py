@@ -26,8 +26,8 @@ def _peak(sample):
 def test_paper_objects_at_10n_match_published_magnitudes(pair, name):
     s = pair.press(make_indenter(name), IndenterPose(0.5, -0.5, 0.3), 10.0, np.random.default_rng(0))
     assert s.contact and s.force_n == 10.0
-    assert 0.4 <= float(s.depth_mm.max()) <= 1.9                # DESIGN.md 5: 0.75-1.7 mm at 10 N
-    assert 50.0 <= _peak(s) <= 500.0                           # DESIGN.md 5: ~80-300 uT
+    assert 0.4 <= float(s.depth_mm.max()) <= 1.9                # docs/design.md, Physics sources: 0.75-1.7 mm at 10 N
+    assert 50.0 <= _peak(s) <= 500.0                           # docs/design.md, Physics sources: ~80-300 uT
     assert not s.saturated.any()
     assert s.field_ut.dtype == np.float32 and s.field_ut.shape == (4, 4, 3)
     assert s.depth_mm.dtype == np.float32 and s.depth_mm.shape == (200, 200)
@@ -89,7 +89,7 @@ def test_half_millimetre_shift_of_the_r_changes_readings_by_tens_of_microtesla(p
 
 
 def test_rotating_moments_matters(pair):
-    """A translation-only skin model gives a qualitatively different field (DESIGN.md 5)."""
+    """A translation-only skin model gives a qualitatively different field (docs/design.md, Physics sources)."""
     rod = make_indenter("cylinder", size_mm=4.0)
     full = pair.press(rod, CENTRE, 10.0, np.random.default_rng(0)).field_change_ut
     skin = pair.skin
