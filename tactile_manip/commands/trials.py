@@ -1,8 +1,9 @@
 """``tactile-manip trials``: run a reorientation trial scene (every presentation once per method) and report.
 
 Writes ``OUT/trials.jsonl`` (one fsynced line per trial, so a killed run loses no completed trial; continue it
-with ``--resume``), then the summary (success rates with Wilson 95 % intervals, angle errors, the paired
-comparison) and plots. ``tactile-manip score OUT --tolerance-deg X`` re-scores it later.
+with ``--resume``) and each trial's per-frame streams to ``OUT/frames/`` (``tactile-manip export OUT`` turns
+them into a LeRobot dataset; ``--no-frames`` skips them), then the summary (success rates with Wilson 95 %
+intervals, angle errors, the paired comparison) and plots. ``tactile-manip score OUT --tolerance-deg X`` re-scores it later.
 """
 
 from __future__ import annotations
@@ -18,6 +19,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--methods", default=None, help="comma-separated subset of the scene's methods")
     p.add_argument("--resume", action="store_true", help="continue a killed run in --out (same scene)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--no-frames", dest="frames", action="store_false",
+                   help="do not record each trial's per-frame streams to OUT/frames/ (what `export` turns into "
+                        "episodes; about 0.5 kB per frame)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -39,7 +43,8 @@ def run(args: argparse.Namespace) -> int:
             raise ValueError(f"--methods: {unknown} not in the scene's methods {sorted(known)}")
         scene = dataclasses.replace(scene, methods=[known[m] for m in wanted])
     out = check_output_dir(run_folder(scene.name, args.out, resume=args.resume))
-    summary = run_trials(scene, out, scene_path=args.config, resume=args.resume, progress=not args.quiet)
+    summary = run_trials(scene, out, scene_path=args.config, resume=args.resume, progress=not args.quiet,
+                         frames=args.frames)
     md = out / "summary.md"
     if md.exists():
         print(md.read_text(), end="")
