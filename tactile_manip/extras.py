@@ -23,6 +23,8 @@ EXTRAS: dict[str, tuple[str, str]] = {
     "trimesh": ("trimesh", "mesh"),
     "cv2": ("opencv-python-headless", "camera"),
     "franky": ("franky-control", "franky"),
+    "pyarrow": ("pyarrow", "lerobot"),
+    "pandas": ("pandas", "lerobot"),
 }
 
 
