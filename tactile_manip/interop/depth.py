@@ -47,6 +47,7 @@ def add_depth(episodes: list[Episode], model: str) -> dict[str, Any]:
 
 
 def _recording_baseline(e: Episode, fields: np.ndarray) -> np.ndarray:
+    from tactile_manip.errors import CalibrationError
     from tactile_manip.sensors.baseline import baseline_from_frames, noise_thresholds_ut
     from tactile_manip.sensors.config import BaselineConfig
     from tactile_manip.sim.params import ChipParams
@@ -56,6 +57,11 @@ def _recording_baseline(e: Episode, fields: np.ndarray) -> np.ndarray:
              if k in chip}
     first = fields[:BASELINE_FRAMES]
     thresholds = noise_thresholds_ut(BaselineConfig(), ChipParams(**known))
-    baseline = baseline_from_frames(first, np.zeros(first.shape, bool), thresholds, source=str(e.meta.get("file")))
+    try:
+        baseline = baseline_from_frames(first, np.zeros(first.shape, bool), thresholds, source=str(e.meta.get("file")))
+    except CalibrationError as err:
+        raise CalibrationError(f"--depth needs a baseline, and the recording's first second is not quiet: "
+                               f"{str(err).split('. Is something')[0]}; record a second with nothing on the pad "
+                               "first") from None
     e.meta["baseline_for_depth"] = f"mean of the first {len(first)} frames"
     return baseline.offset_ut
