@@ -165,3 +165,18 @@ def test_lerobot_itself_loads_the_dataset_and_reads_every_frame(trial_run, tmp_p
         item = ds[i]
         assert tuple(item["observation.tactile.field"].shape) == (48,)
         assert np.array_equal(item["observation.tactile.field"].numpy(), frames[i].field_ut.reshape(48))
+
+
+def test_frames_roll_over_to_new_files_past_the_size_limit(trial_run, tmp_path, monkeypatch) -> None:
+    from tactile_manip.interop import lerobot
+
+    monkeypatch.setattr(lerobot, "DATA_FILES_SIZE_IN_MB", 0)  # every episode past the first opens a new file
+    source = read_source(trial_run)
+    write_lerobot(source.episodes, tmp_path / "ds")
+    files = sorted((tmp_path / "ds" / "data" / "chunk-000").glob("*.parquet"))
+    assert [f.name for f in files] == [f"file-{i:03d}.parquet" for i in range(9)]
+    episodes = pq.read_table(tmp_path / "ds" / "meta" / "episodes" / "chunk-000" / "file-000.parquet").to_pandas()
+    assert episodes["data/file_index"].tolist() == list(range(9))
+    for row, f in zip(episodes.itertuples(), files):
+        table = pq.read_table(f)
+        assert table.column("index").to_pylist() == list(range(row.dataset_from_index, row.dataset_to_index))

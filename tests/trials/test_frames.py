@@ -115,3 +115,11 @@ def test_trial_runs_record_one_frames_file_per_trial_and_method_unless_told_not_
         assert np.isfinite(frames.rows["joints_rad"]).all() and np.isfinite(frames.rows["gripper_width_m"]).all()
     run_trials(scene, tmp_path / "bare", progress=False, frames=False)
     assert not (tmp_path / "bare" / "frames").exists()
+
+
+def test_the_trials_command_records_frames_unless_no_frames_is_given() -> None:
+    from tactile_manip.cli import build_parser
+
+    parser = build_parser()
+    assert parser.parse_args(["trials", "--config", "s.toml"]).frames is True
+    assert parser.parse_args(["trials", "--config", "s.toml", "--no-frames"]).frames is False
