@@ -32,7 +32,6 @@ from __future__ import annotations
 import io
 import json
 import math
-import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -40,6 +39,7 @@ from typing import Any
 import numpy as np
 
 from tactile_manip.interop.frames import PHASES, Episode
+from tactile_manip.interop.lerobot_stats import feature_stats
 
 CODEBASE_VERSION = "v3.0"
 CHUNKS_SIZE = 1000
@@ -47,7 +47,6 @@ DATA_FILES_SIZE_IN_MB = 100
 VIDEO_FILES_SIZE_IN_MB = 200
 DATA_PATH = "data/chunk-{chunk_index:03d}/file-{file_index:03d}.parquet"
 EPISODES_PATH = "meta/episodes/chunk-{chunk_index:03d}/file-{file_index:03d}.parquet"
-QUANTILES = (0.01, 0.10, 0.50, 0.90, 0.99)
 DEPTH_LEVEL_MM = 0.01  # one PNG level; 255 levels reach 2.55 mm (deeper pixels are clipped)
 JOINT_NAMES = tuple(f"joint_{i}_rad" for i in range(1, 8))
 DEFAULT_FEATURES = {
@@ -106,8 +105,8 @@ def write_lerobot(episodes: list[Episode], out: str | Path, *, ros2: bool = Fals
     columns = [_episode_columns(i, e, tasks.index(e.task), streams, offset)
                for i, e, offset in _with_offsets(episodes)]
     data_files = _write_data(out, columns, features)
-    episode_stats = [_stats(c, features) for c in columns]
-    stats = _stats(_concat(columns, features), features)
+    episode_stats = [feature_stats(c, features) for c in columns]
+    stats = feature_stats(_concat(columns, features), features)
     _write_episodes(out, episodes, tasks, data_files, episode_stats)
     _write_tasks(out, tasks)
     total = sum(len(e.frames) for e in episodes)
@@ -345,11 +344,9 @@ def _write_episodes(out: Path, episodes: list[Episode], tasks: list[str], where:
                            ("data/file_index", file), ("dataset_from_index", start), ("dataset_to_index", start + n)):
             rows[key].append(value)
         start += n
-    for key, stats in _flatten({"stats": episode_stats[0]}).items():
-        rows[key] = []
-    for stats in episode_stats:
+    for stats in episode_stats:  # every episode has the same features, so the same stats columns
         for key, value in _flatten({"stats": stats}).items():
-            rows[key].append(np.asarray(value).tolist())
+            rows.setdefault(key, []).append(np.asarray(value).tolist())
     rows["meta/episodes/chunk_index"] = [0] * len(episodes)
     rows["meta/episodes/file_index"] = [0] * len(episodes)
     path = out / EPISODES_PATH.format(chunk_index=0, file_index=0)
@@ -367,53 +364,6 @@ def _write_tasks(out: Path, tasks: list[str]) -> None:
 def _write_json(path: Path, obj: Any) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(obj, indent=4, allow_nan=False) + "\n", encoding="utf-8")
-
-
-# ---------------------------------------------------------------------------------------------- stats
-
-def _stats(cols: dict[str, Any], features: dict[str, dict]) -> dict[str, dict[str, np.ndarray]]:
-    """LeRobot's per-feature statistics (NaN values are left out; images per channel in [0, 1])."""
-    out = {}
-    for key, ft in features.items():
-        if ft["dtype"] == "image":
-            values = _image_sample(cols[key])
-        else:
-            values = np.asarray(cols[key], np.float64).reshape(len(cols[key]), -1)
-        out[key] = _feature_stats(values, image=ft["dtype"] == "image")
-    return out
-
-
-def _image_sample(pngs: list[bytes | None], most: int = 100, stride: int = 4) -> np.ndarray:
-    """(N, 3) pixel values in [0, 1] of up to ``most`` evenly spaced images, every ``stride``-th pixel each way
-    (lerobot samples images and shrinks them too)."""
-    from PIL import Image
-
-    present = [b for b in pngs if b is not None]
-    if not present:
-        return np.full((1, 3), np.nan)
-    picks = np.unique(np.linspace(0, len(present) - 1, min(most, len(present))).round().astype(int))
-    pixels = [np.asarray(Image.open(io.BytesIO(present[i])).convert("RGB"))[::stride, ::stride].reshape(-1, 3) / 255.0
-              for i in picks]
-    return np.concatenate(pixels)
-
-
-def _feature_stats(values: np.ndarray, *, image: bool) -> dict[str, np.ndarray]:
-    """min, max, mean, std, count and quantiles over axis 0; NaN values are left out (an all-NaN column gives 0)."""
-    finite = np.isfinite(values)
-    v = values if finite.all() else np.where(finite, values, np.nan)
-    plain = finite.all()  # the nan-aware functions are several times slower: only where needed
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN columns
-        stats = {"min": (np.min if plain else np.nanmin)(v, axis=0), "max": (np.max if plain else np.nanmax)(v, axis=0),
-                 "mean": (np.mean if plain else np.nanmean)(v, axis=0), "std": (np.std if plain else np.nanstd)(v, axis=0)}
-        quantiles = (np.quantile if plain else np.nanquantile)(v, QUANTILES, axis=0)
-        for q, value in zip(QUANTILES, quantiles):
-            stats[f"q{int(round(q * 100)):02d}"] = value
-    stats = {k: np.nan_to_num(x, nan=0.0) for k, x in stats.items()}
-    stats["count"] = np.array([len(values)])
-    if image:  # per channel, shaped (3, 1, 1) as lerobot's image stats
-        stats = {k: x if k == "count" else x.reshape(3, 1, 1) for k, x in stats.items()}
-    return stats
 
 
 def _flatten(d: dict, prefix: str = "") -> dict[str, Any]:
