@@ -73,7 +73,8 @@ class TrialFrameStream:
         path: file to create (an existing one is replaced).
         sensor: the trial's connected :class:`~tactile_manip.sensors.base.TactileSensor`.
         arm, gripper: read at each announcement (None: NaN joints / width).
-        header: JSON-serialisable facts of the trial (trial, method, seed, object, ...), stored in the file.
+        header: JSON-serialisable facts of the trial (trial, method, seed, object, ...), stored in the file;
+            give ``code_version`` (computed once per run) or each file runs git for it.
         target_angle_rad: the commanded in-hand angle of the trial.
     """
 
@@ -97,7 +98,10 @@ class TrialFrameStream:
                 "rate_hz": float(self._sensor.chip.rate_hz), "grid": list(grid), "layout": self._sensor.layout.name,
                 "target_angle_rad": self._target, "phases": list(PHASES),
                 "host_clock": "time.monotonic() of the trial host, s"}
-        self._writer = FramedWriter(self.path, MAGIC, head, RECORD, sync_every_s=self._sync_every_s)
+        # the header is not synced on its own: a trial's frames matter once the trial is logged, and the close
+        # syncs them before the runner appends its record (a killed trial is run again on resume)
+        self._writer = FramedWriter(self.path, MAGIC, head, RECORD, sync_every_s=self._sync_every_s,
+                                    sync_header=False)
         try:
             self._sub = self._sensor.subscribe(max_frames=1 << 14)
         except BaseException:

@@ -302,6 +302,7 @@ def run_scene(scene: TrialScene, write: Callable[[TrialRecord], None], *, estima
     from tqdm.auto import tqdm
 
     cell = cell if cell is not None else make_cell(scene)
+    code = _code_version() if frames_dir is not None else None
     todo = [(i, m) for i in range(scene.trials) for m in estimators if (i, m) not in skip]
     faults = scene.faults
     target = math.radians(scene.target_deg)
@@ -312,7 +313,7 @@ def run_scene(scene: TrialScene, write: Callable[[TrialRecord], None], *, estima
             p = draw_presentation(scene, i)
             t0 = time.perf_counter()
             try:
-                with _frame_stream(cell, frames_dir, p, method, scene) as observer:
+                with _frame_stream(cell, frames_dir, p, method, scene, code) as observer:
                     kwargs = {} if observer is None else {"observer": observer}
                     result = cell.run_one(p, estimators[method], arm_fault=i in faults.arm_fault_trials,
                                           sensor_stall=i in faults.sensor_stall_trials, **kwargs)
@@ -325,13 +326,20 @@ def run_scene(scene: TrialScene, write: Callable[[TrialRecord], None], *, estima
     return count
 
 
-def _frame_stream(cell, frames_dir: str | Path | None, p: Presentation, method: str, scene: TrialScene):
+def _code_version() -> str:
+    from tactile_manip.version import code_version
+
+    return code_version()
+
+
+def _frame_stream(cell, frames_dir: str | Path | None, p: Presentation, method: str, scene: TrialScene,
+                  code_version: str | None):
     """The trial's frame recorder (a context manager yielding the behaviour's observer), or a null one."""
     if frames_dir is None:
         return contextlib.nullcontext()
     from tactile_manip.trials.frames import TrialFrameStream
 
-    header = {"trial": p.trial, "method": method, "seed": p.seed, "object": p.obj.display_name, "scene": scene.name,
+    header = {"code_version": code_version, "trial": p.trial, "method": method, "seed": p.seed, "object": p.obj.display_name, "scene": scene.name,
               "true_angle_rad": p.angle_rad, "offset_mm": list(p.offset_mm), "force_n": p.force_n}
     return TrialFrameStream(Path(frames_dir) / f"{method}-{p.trial:04d}.tmframes", sensor=cell.sensor, arm=cell.arm,
                             gripper=cell.gripper, header=header,
