@@ -31,6 +31,12 @@ def write_recording(path: Path, *, seconds: float = 10.0, seed: int = 0) -> Path
     return path
 
 
+@pytest.fixture
+def make_recording():
+    """``make_recording(path, seconds=10.0, seed=0)``: a recording at 125 Hz (see :func:`write_recording`)."""
+    return write_recording
+
+
 @pytest.fixture(scope="session")
 def recording(tmp_path_factory) -> Path:
     """A 10 s recording (1250 frames)."""

@@ -14,7 +14,7 @@ from tactile_manip.sensors.recording import read_recording
 from tactile_manip.trials.frames import frames_path, read_trial_frames
 from tactile_manip.trials.log import read_trials
 
-from conftest import RATE_HZ, write_recording
+RATE_HZ = 125.0
 
 
 def test_a_recording_is_one_episode_of_every_frame_with_its_exact_fields_and_host_times(recording) -> None:
@@ -81,8 +81,8 @@ def test_a_damaged_trial_run_gives_what_is_intact_and_names_each_loss(trial_run,
     assert "trials.jsonl:2: a damaged line" in text and "no frames file" in text and "torn tail" in text
 
 
-def test_a_recording_with_a_torn_tail_keeps_every_intact_frame(tmp_path) -> None:
-    path = write_recording(tmp_path / "r.tmrec", seconds=1.0)
+def test_a_recording_with_a_torn_tail_keeps_every_intact_frame(tmp_path, make_recording) -> None:
+    path = make_recording(tmp_path / "r.tmrec", seconds=1.0)
     path.write_bytes(path.read_bytes()[:-10])
     source = read_source(path)
     assert len(source.episodes[0].frames) == 124
