@@ -13,13 +13,13 @@ field). The writer fsyncs at least every 0.5 s and when the trial ends; the read
 and reports a torn tail or damage in the middle (as recordings do). A resumed run writes a re-run trial's
 file anew.
 
-What the streams hold: the tactile frames are every frame the sensor published between the start of the
-grasp and a short while after the release (:data:`RELEASE_S`), at the sensor rate. The behaviour announces
-each phase (grasp, estimate, turn, release) and each estimate; the frames that arrived before an
-announcement are stamped with the state that held until it: the arm's joints and the gripper's width are
-read at each announcement and once more when the trial ends (a twin moves in one step; a real arm's joints
-are held between announcements).
-The estimate of a frame is the latest one of the trial so far (NaN before the first).
+What the streams hold: every frame the sensor published from the start of the grasp until one frame after
+the gripper opened (at most :data:`RELEASE_S` after the release began), at the sensor rate. The behaviour
+announces each phase (grasp, estimate, turn; the cell announces release) and each estimate; the frames that
+arrived before an announcement are stamped with the state that held until it: the arm's joints and the
+gripper's width are read at each announcement and once more when the trial ends (a twin moves in one step;
+a real arm's joints are held between announcements). The estimate of a frame is the latest one of the trial
+so far (NaN before the first).
 """
 
 from __future__ import annotations
