@@ -5,7 +5,7 @@ takes ``(episodes, out, *, ros2=False)`` and returns a dict of what it wrote; on
 ``source_info`` gets the source's facts (calibration, run config, depth model) for its own metadata.
 
 The output appears whole or not at all: the writer fills a temporary sibling of ``OUT`` (a hidden
-``.OUT.tmp-*`` folder or file) that is renamed to ``OUT`` at the end; on any failure the temporary is
+``.NAME.tmp-*`` folder, or ``.NAME.tmp-*.rrd`` file) that is renamed to ``OUT`` at the end; on any failure the temporary is
 removed and ``OUT`` is as it was. An existing ``OUT`` is refused unless ``force`` (then it is replaced only
 after the new output is complete).
 """
@@ -105,7 +105,7 @@ def write_atomically(out: Path, write: Callable[[Path], Any]) -> Any:
     """
     out = Path(out)
     tag = f"{os.getpid()}-{uuid.uuid4().hex[:8]}"
-    tmp = out.with_name(f".{out.name}.tmp-{tag}")
+    tmp = out.with_name(f".{out.stem}.tmp-{tag}{out.suffix}")  # the suffix stays: a writer may look at it
     try:
         result = write(tmp)
         if not (tmp.exists() or tmp.is_symlink()):
