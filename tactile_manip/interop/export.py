@@ -22,7 +22,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from tactile_manip.interop.frames import Episode
 from tactile_manip.interop.sources import Source, read_source
 from tactile_manip.outputs import OutputPathError, check_writable_parent
 
@@ -156,7 +155,3 @@ def _fsync_dir(path: Path) -> None:
     finally:
         os.close(fd)
 
-
-def episodes_of(source: str | Path) -> list[Episode]:
-    """The episodes of a source path (what every writer takes); see :func:`~tactile_manip.interop.sources.read_source`."""
-    return read_source(source).episodes
