@@ -111,3 +111,14 @@ def test_mixed_up_options_are_refused_with_one_line(argv, message, recording, tm
     assert main(["export", *argv]) == 2
     assert message in _error_line(capsys)
     assert list(tmp_path.iterdir()) == []
+
+
+def test_the_interop_modules_import_pyarrow_and_pandas_only_when_writing() -> None:
+    import subprocess
+    import sys
+
+    code = ("import sys, tactile_manip.interop.export, tactile_manip.interop.lerobot, tactile_manip.interop.sources, "
+            "tactile_manip.trials.frames, tactile_manip.commands.export; "
+            "print(sorted(m for m in ('pyarrow', 'pandas', 'torch', 'onnxruntime', 'PIL') if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "[]"
