@@ -27,6 +27,8 @@ EXTRAS: dict[str, tuple[str, str]] = {
     "ray": ("ray", "ray"),
     "rerun": ("rerun-sdk", "viz"),
     "mcap": ("mcap", "mcap"),
+    "pyarrow": ("pyarrow", "lerobot"),
+    "pandas": ("pandas", "lerobot"),
 }
 
 

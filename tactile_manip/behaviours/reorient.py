@@ -74,6 +74,25 @@ class ReorientConfig:
             raise ValueError(f"max_regrasps must be a non-negative integer, got {self.max_regrasps!r}")
 
 
+class PhaseObserver(Protocol):
+    """Told what the behaviour is doing, as it does it (a trial's frame recorder,
+    :class:`~tactile_manip.trials.frames.TrialFrameStream`); it must not move anything."""
+
+    def phase(self, name: str) -> None:
+        """The behaviour enters ``name``: "grasp", "estimate", "turn" (the caller announces "release")."""
+
+    def estimate(self, est: AngleEstimate) -> None:
+        """An estimate was made (each read, re-grasps included)."""
+
+
+class _Silent:
+    def phase(self, name: str) -> None:
+        pass
+
+    def estimate(self, est: AngleEstimate) -> None:
+        pass
+
+
 class GroundTruth(Protocol):
     """Where the object really is (for scoring only; the behaviour never uses it to act)."""
 
@@ -107,7 +126,8 @@ class _Abort(Exception):
 
 def grasp_estimate_reorient(arm: Arm, gripper: Gripper, sensor: TactileSensor, estimator: TactilePoseEstimator,
                             *, object_width_m: float, target_angle_rad: float, config: ReorientConfig | None = None,
-                            truth: GroundTruth | None = None, pad_T: np.ndarray | None = None) -> ReorientResult:
+                            truth: GroundTruth | None = None, pad_T: np.ndarray | None = None,
+                            observer: PhaseObserver | None = None) -> ReorientResult:
     """Run the behaviour once on the object between the fingers (see the module docstring).
 
     Args:
@@ -116,21 +136,25 @@ def grasp_estimate_reorient(arm: Arm, gripper: Gripper, sensor: TactileSensor, e
         truth: scores the final angle when given (``final_angle_rad`` and ``error_rad`` stay None otherwise).
         pad_T: hand_T_pad of the sensor (default: the pad on the +y finger at the grasp width,
             :func:`~tactile_manip.robot.frames.hand_T_finger_pad`).
+        observer: told each phase and estimate as they happen (see :class:`PhaseObserver`).
 
     The gripper is left closed on the object (the caller releases it); the arm stays where the correction
     left it, or where a fault stopped it.
     """
     cfg = config or ReorientConfig()
+    observer = observer or _Silent()
     target = float(wrap_axial(check_finite_scalar("target_angle_rad", target_angle_rad)))
     result = ReorientResult(outcome="error")
     timings = result.timings_s
     t_start = time.perf_counter()
     try:
+        observer.phase("grasp")
         base_T_hand, result.grasp_width_m = _grasp(arm, gripper, object_width_m, cfg)
         base_T_pad = base_T_hand @ (hand_T_finger_pad(result.grasp_width_m) if pad_T is None else pad_T)
         timings["grasp"] = time.perf_counter() - t_start
         t0 = time.perf_counter()
-        est = _estimate_with_policy(gripper, sensor, estimator, object_width_m, cfg, result)
+        observer.phase("estimate")
+        est = _estimate_with_policy(gripper, sensor, estimator, object_width_m, cfg, result, observer)
         result.estimate = est
         timings["estimate"] = time.perf_counter() - t0
         if result.action == "abstain":
@@ -138,6 +162,7 @@ def grasp_estimate_reorient(arm: Arm, gripper: Gripper, sensor: TactileSensor, e
                                       f"{est.reason or f'confidence {est.confidence:.2f}'}")
         result.correction_rad = float(wrap_axial(target - (est.angle_rad if est.defined else 0.0)))
         t0 = time.perf_counter()
+        observer.phase("turn")
         result.correction_rad = _turn_about_pad_normal(arm, base_T_pad, est, result.correction_rad, cfg)
         timings["reorient"] = time.perf_counter() - t0
         result.outcome = "done"
@@ -175,13 +200,17 @@ def _grasp(arm: Arm, gripper: Gripper, width_m: float, cfg: ReorientConfig) -> t
         raise _Abort("arm_fault", f"arm state unavailable after the grasp: {exc}") from None
 
 
-def _read(sensor: TactileSensor, estimator: TactilePoseEstimator, cfg: ReorientConfig) -> AngleEstimate:
+def _read(sensor: TactileSensor, estimator: TactilePoseEstimator, cfg: ReorientConfig,
+          observer: PhaseObserver | None = None) -> AngleEstimate:
     if cfg.settle_s > 0:
         time.sleep(cfg.settle_s)
     try:
-        return estimator.read(sensor, frames=cfg.frames, timeout_s=cfg.sensor_timeout_s)
+        est = estimator.read(sensor, frames=cfg.frames, timeout_s=cfg.sensor_timeout_s)
     except SensorError as exc:
         raise _Abort("sensor_stale", f"tactile sensor: {exc}") from None
+    if observer is not None:
+        observer.estimate(est)
+    return est
 
 
 def _confident(est: AngleEstimate, cfg: ReorientConfig) -> bool:
@@ -189,8 +218,8 @@ def _confident(est: AngleEstimate, cfg: ReorientConfig) -> bool:
 
 
 def _estimate_with_policy(gripper: Gripper, sensor: TactileSensor, estimator: TactilePoseEstimator, width_m: float,
-                          cfg: ReorientConfig, result: ReorientResult) -> AngleEstimate:
-    est = _read(sensor, estimator, cfg)
+                          cfg: ReorientConfig, result: ReorientResult, observer: PhaseObserver) -> AngleEstimate:
+    est = _read(sensor, estimator, cfg, observer)
     if _confident(est, cfg) or cfg.low_confidence == "act":
         return est
     if cfg.low_confidence == "abstain":
@@ -200,12 +229,14 @@ def _estimate_with_policy(gripper: Gripper, sensor: TactileSensor, estimator: Ta
     while result.regrasps < cfg.max_regrasps and not _confident(best, cfg):
         result.regrasps += 1
         result.action = "regrasp"
+        observer.phase("grasp")
         try:
             gripper.open(width_m + 0.01)
         except GripperError as exc:
             raise _Abort("grasp_failed", f"gripper error while re-grasping: {exc}") from None
         _close_on(gripper, width_m, cfg, "re-grasp")
-        est = _read(sensor, estimator, cfg)
+        observer.phase("estimate")
+        est = _read(sensor, estimator, cfg, observer)
         if est.defined and (not best.defined or est.confidence > best.confidence):
             best = est
     return best

@@ -1,7 +1,12 @@
-"""``tactile-manip export``: write a trained checkpoint as ONNX (prior + decoder) with its metadata.
+"""``tactile-manip export``: convert a source to another tool's format, or a trained checkpoint to ONNX.
 
-The parity check runs the ONNX file on onnxruntime against torch on the same inputs (real readings from
-``--data`` when given) and refuses to keep a file that disagrees.
+``tactile-manip export SOURCE --format lerobot|rrd|mcap --out OUT [--force]`` converts a trial run folder, a
+recording or a pair log (:mod:`tactile_manip.interop.export`: the output appears whole or not at all; a
+damaged source gives what is intact and the command lists what it skipped).
+
+``tactile-manip export --checkpoint RUN/best.pt --out m.onnx`` writes a checkpoint as ONNX (prior + decoder)
+with its metadata. The parity check runs the ONNX file on onnxruntime against torch on the same inputs (real
+readings from ``--data`` when given) and refuses to keep a file that disagrees.
 """
 
 from __future__ import annotations
@@ -10,9 +15,23 @@ import argparse
 import json
 
 
+CHECKPOINT_ONLY = ("data", "metrics", "pixel_mm", "card", "history", "table", "latency")
+
+
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--checkpoint", required=True, help="training checkpoint (RUN/best.pt)")
-    p.add_argument("--out", required=True, help="output .onnx")
+    from tactile_manip.interop.export import WRITERS
+
+    p.add_argument("source", nargs="?", default=None,
+                   help="trial run folder, recording (.tmrec) or pair log to convert (with --format)")
+    p.add_argument("--format", choices=sorted(WRITERS), default=None,
+                   help="with SOURCE: lerobot (a LeRobotDataset v3.0 folder), rrd (Rerun) or mcap")
+    p.add_argument("--ros2", action="store_true", help="with --format mcap: a rosbag2-compatible profile")
+    p.add_argument("--depth", nargs="?", const="models/supermag_fast.onnx", default=None, metavar="MODEL",
+                   help="with SOURCE: include each frame's reconstructed depth from MODEL (default "
+                        "models/supermag_fast.onnx; or bilinear, bicubic)")
+    p.add_argument("--checkpoint", default=None, help="training checkpoint (RUN/best.pt) to write as ONNX")
+    p.add_argument("--out", required=True,
+                   help="output: the dataset folder (lerobot), the .rrd / .mcap file, or the .onnx file")
     p.add_argument("--force", action="store_true", help="replace an existing --out (and --card)")
     p.add_argument("--data", default=None, nargs="+", action="extend",
                    help="the training dataset(s), as given to train: real readings for the parity check, pixel size "
@@ -26,6 +45,43 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.source is not None:
+        return _export_source(args)
+    if args.checkpoint is None:
+        raise ValueError("give SOURCE with --format (lerobot, rrd, mcap), or --checkpoint to write a model as ONNX")
+    for name in ("format", "depth", "ros2"):
+        if getattr(args, name) not in (None, False):
+            raise ValueError(f"--{name} converts a SOURCE (a trial run, recording or pair log); with --checkpoint "
+                             "leave it out")
+    return _export_checkpoint(args)
+
+
+def _export_source(args: argparse.Namespace) -> int:
+    import sys
+
+    from tactile_manip.interop.export import export_source
+
+    if args.checkpoint is not None:
+        raise ValueError("give either SOURCE (a trial run, recording or pair log) or --checkpoint, not both")
+    if args.format is None:
+        raise ValueError("SOURCE needs --format: lerobot, rrd or mcap")
+    given = [f"--{n.replace('_', '-')}" for n in CHECKPOINT_ONLY if getattr(args, n) is not None]
+    if given:
+        raise ValueError(f"{', '.join(given)}: only for --checkpoint (model export), not for SOURCE")
+    if args.ros2 and args.format != "mcap":
+        raise ValueError("--ros2 is an option of --format mcap")
+    result = export_source(args.source, args.out, fmt=args.format, force=args.force, ros2=args.ros2,
+                           depth_model=args.depth, progress=lambda line: print(f"export: {line}", file=sys.stderr))
+    for line in result.source.skipped:
+        print(f"export: skipped: {line}", file=sys.stderr)
+    src = result.source
+    print(f"wrote {result.out} ({args.format}): {len(src.episodes)} episodes, {src.frames} frames from {src.kind} "
+          f"{src.path}" + (f"; {len(src.skipped)} damaged or missing parts skipped (listed above)" if src.skipped
+                            else ""))
+    return 0
+
+
+def _export_checkpoint(args: argparse.Namespace) -> int:
     from tactile_manip.learning.import_check import require_torch
 
     require_torch()

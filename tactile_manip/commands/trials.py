@@ -1,10 +1,11 @@
 """``tactile-manip trials``: run a reorientation trial scene (every presentation once per method) and report.
 
 Writes ``OUT/trials.jsonl`` (one fsynced line per trial, so a killed run loses no completed trial; continue it
-with ``--resume``), then the summary (success rates with Wilson 95 % intervals, angle errors, the paired
-comparison) and plots. ``tactile-manip score OUT --tolerance-deg X`` re-scores it later. ``--rerun`` lets you
-watch the run in Rerun (every sensor frame, the arm, each estimate and outcome): in a viewer, a .rrd file or a
-gRPC server on this machine.
+with ``--resume``) and each trial's per-frame streams to ``OUT/frames/`` (``tactile-manip export OUT`` turns
+them into a LeRobot dataset; ``--no-frames`` skips them), then the summary (success rates with Wilson 95 %
+intervals, angle errors, the paired comparison) and plots. ``tactile-manip score OUT --tolerance-deg X`` re-scores
+it later. ``--rerun`` lets you watch the run in Rerun (every sensor frame, the arm, each estimate and outcome): in
+a viewer, a .rrd file or a gRPC server on this machine.
 """
 
 from __future__ import annotations
@@ -24,6 +25,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--force", action="store_true", help="with --rerun --save: overwrite an existing .rrd file")
     add_rerun_options(p, what="the run (every sensor frame, the arm, each estimate and outcome)")
+    p.add_argument("--no-frames", dest="frames", action="store_false",
+                   help="do not record each trial's per-frame streams to OUT/frames/ (what `export` turns into "
+                        "episodes; about 0.5 kB per frame)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -50,7 +54,7 @@ def run(args: argparse.Namespace) -> int:
     observer = _rerun_observer(args, scene.name) if args.rerun else None
     try:
         summary = run_trials(scene, out, scene_path=args.config, resume=args.resume, progress=not args.quiet,
-                             trial_observer=observer)
+                             trial_observer=observer, frames=args.frames)
     except BaseException:
         if observer is not None:
             observer.close()

@@ -42,6 +42,8 @@ class Frame:
         phase: one of PHASES ("" outside a trial).
         depth_mm: (H, W) reconstructed depth, mm, or None.
         vbts_depth_mm: (H, W) depth measured by the vision-based sensor (pair logs), mm, or None.
+        field_raw_ut: (R, C, 3) float32 field before the baseline was subtracted, uT, or None where the source
+            does not keep it apart (a recording holds raw fields only: its ``field_ut`` is raw).
     """
 
     t_s: float
@@ -55,6 +57,7 @@ class Frame:
     phase: str = ""
     depth_mm: np.ndarray | None = None
     vbts_depth_mm: np.ndarray | None = None
+    field_raw_ut: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         if self.field_ut.ndim != 3 or self.field_ut.shape[-1] != 3:

@@ -52,21 +52,26 @@ class FramedWriter:
         record: struct of the record head ``(tag, payload length, t_host_s)``.
         sync_every_s: flush and fsync at least this often when records keep coming, s (in (0, 1]).
         sync_on_write: check the sync interval after every record (otherwise call :meth:`maybe_sync`).
+        sync_header: fsync the header at once (off: the first sync is the first interval's or the close's).
+
+    A ``code_version`` in ``header`` is kept (a writer of many files computes it once: it runs git).
     """
 
     def __init__(self, path: str | Path, magic: bytes, header: dict[str, Any], record: struct.Struct, *,
-                 sync_every_s: float = 0.5, sync_on_write: bool = True) -> None:
+                 sync_every_s: float = 0.5, sync_on_write: bool = True, sync_header: bool = True) -> None:
         if not 0 < sync_every_s <= 1.0:
             raise ValueError(f"sync_every_s must be in (0, 1], got {sync_every_s}")
         self.path = Path(path)
         self.sync_every_s = sync_every_s
         self._record, self._sync_on_write = record, sync_on_write
-        head = {"code_version": code_version(), "created_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
-                **header}
+        head = {"code_version": header["code_version"] if "code_version" in header else code_version(),
+                "created_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()), **header}
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._file = open(self.path, "wb")  # noqa: SIM115 - closed in close()
         self._file.write(magic + json.dumps(head, default=json_default).encode() + b"\n")
-        self.sync()
+        self._last_sync = time.monotonic()
+        if sync_header:
+            self.sync()
 
     def write_event(self, t_host_s: float, event: dict[str, Any]) -> None:
         """A JSON event record (tag ``EV``)."""

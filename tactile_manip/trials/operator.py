@@ -128,12 +128,16 @@ class OperatorCell:
             self._ask("take the object out of the hand, then press Enter ")
 
     def run_one(self, p, estimator: TactilePoseEstimator, *, arm_fault: bool = False,
-                sensor_stall: bool = False) -> ReorientResult:
-        """Present ``p``, run the reorientation behaviour, ask for the measured final angle."""
+                sensor_stall: bool = False, observer=None) -> ReorientResult:
+        """Present ``p``, run the reorientation behaviour, ask for the measured final angle (``observer``: see
+        :meth:`~tactile_manip.trials.runner.SimulatedCell.run_one`)."""
         if arm_fault or sensor_stall:
             raise ConfigError("injected faults exist only in simulation")
         with self.presented(p) as (obj, truth):
-            return grasp_estimate_reorient(self.arm, self.gripper, self.sensor, estimator,
-                                           object_width_m=obj.width_m,
-                                           target_angle_rad=math.radians(self.scene.target_deg),
-                                           config=self.scene.behaviour, truth=truth)
+            result = grasp_estimate_reorient(self.arm, self.gripper, self.sensor, estimator,
+                                             object_width_m=obj.width_m,
+                                             target_angle_rad=math.radians(self.scene.target_deg),
+                                             config=self.scene.behaviour, truth=truth, observer=observer)
+            if observer is not None:
+                observer.phase("release")
+            return result

@@ -214,13 +214,20 @@ class SimulatedCell:
         self._sensor_key = key
 
     def run_one(self, p: Presentation, estimator: TactilePoseEstimator, *, arm_fault: bool = False,
-                sensor_stall: bool = False) -> ReorientResult:
-        """Present ``p``, run the reorientation behaviour with ``estimator``, release, reset."""
+                sensor_stall: bool = False, observer=None) -> ReorientResult:
+        """Present ``p``, run the reorientation behaviour with ``estimator``, release, reset.
+
+        ``observer`` (a :class:`~tactile_manip.behaviours.reorient.PhaseObserver`) is told each phase, the
+        release included.
+        """
         with self.presented(p, arm_fault=arm_fault, sensor_stall=sensor_stall) as (obj, truth):
-            return grasp_estimate_reorient(self.arm, self.gripper, self.sensor, estimator,
-                                           object_width_m=obj.width_m,
-                                           target_angle_rad=math.radians(self.scene.target_deg),
-                                           config=self.scene.behaviour, truth=truth)
+            result = grasp_estimate_reorient(self.arm, self.gripper, self.sensor, estimator,
+                                             object_width_m=obj.width_m,
+                                             target_angle_rad=math.radians(self.scene.target_deg),
+                                             config=self.scene.behaviour, truth=truth, observer=observer)
+            if observer is not None:
+                observer.phase("release")
+            return result
 
     def _ready_for_trial(self) -> None:
         """Trial boundary: clear any fault (and an armed but unused fault injection), open, go home."""
@@ -281,7 +288,7 @@ def make_cell(scene: TrialScene):
 
 def run_scene(scene: TrialScene, write: Callable[[TrialRecord], None], *, estimators: dict[str, TactilePoseEstimator],
               skip: set[tuple[int, str]] = frozenset(), progress: bool = True, cell=None,
-              trial_observer=None) -> int:
+              trial_observer=None, frames_dir: str | Path | None = None) -> int:
     """Run every (trial, method) of ``scene`` not in ``skip``; ``write`` each record.
 
     ``cell`` (default: built from ``scene.robot.backend``: :class:`SimulatedCell` for the twin,
@@ -289,6 +296,8 @@ def run_scene(scene: TrialScene, write: Callable[[TrialRecord], None], *, estima
     ``trial_observer`` (e.g. :class:`~tactile_manip.interop.rerun_trials.RerunTrialObserver`), when given, is told
     ``trial_started(presentation, method, cell)`` before each trial and ``trial_finished(record)`` after it
     was written; it watches, it changes nothing.
+    With ``frames_dir``, each trial's per-frame streams go to ``frames_dir/<method>-<trial>.tmframes``
+    (:mod:`tactile_manip.trials.frames`; the cell also needs ``sensor``, ``arm`` and ``gripper``).
 
     Returns the number of trials run. Outcomes other than "done" are recorded, never raised; only an
     interrupt (Ctrl-C) or a failure to build the cell stops the run.
@@ -296,6 +305,7 @@ def run_scene(scene: TrialScene, write: Callable[[TrialRecord], None], *, estima
     from tqdm.auto import tqdm
 
     cell = cell if cell is not None else make_cell(scene)
+    code = _code_version() if frames_dir is not None else None
     todo = [(i, m) for i in range(scene.trials) for m in estimators if (i, m) not in skip]
     faults = scene.faults
     target = math.radians(scene.target_deg)
@@ -308,8 +318,10 @@ def run_scene(scene: TrialScene, write: Callable[[TrialRecord], None], *, estima
                 trial_observer.trial_started(p, method, cell)
             t0 = time.perf_counter()
             try:
-                result = cell.run_one(p, estimators[method], arm_fault=i in faults.arm_fault_trials,
-                                      sensor_stall=i in faults.sensor_stall_trials)
+                with _frame_stream(cell, frames_dir, p, method, scene, code) as observer:
+                    kwargs = {} if observer is None else {"observer": observer}
+                    result = cell.run_one(p, estimators[method], arm_fault=i in faults.arm_fault_trials,
+                                          sensor_stall=i in faults.sensor_stall_trials, **kwargs)
             except Exception as exc:  # noqa: BLE001 - a broken trial is recorded, the run goes on
                 result = ReorientResult(outcome="error", detail=f"{type(exc).__name__}: {exc}")
             result.timings_s.setdefault("trial", time.perf_counter() - t0)
@@ -322,12 +334,33 @@ def run_scene(scene: TrialScene, write: Callable[[TrialRecord], None], *, estima
     return count
 
 
+def _code_version() -> str:
+    from tactile_manip.version import code_version
+
+    return code_version()
+
+
+def _frame_stream(cell, frames_dir: str | Path | None, p: Presentation, method: str, scene: TrialScene,
+                  code_version: str | None):
+    """The trial's frame recorder (a context manager yielding the behaviour's observer), or a null one."""
+    if frames_dir is None:
+        return contextlib.nullcontext()
+    from tactile_manip.trials.frames import TrialFrameStream
+
+    header = {"code_version": code_version, "trial": p.trial, "method": method, "seed": p.seed, "object": p.obj.display_name, "scene": scene.name,
+              "true_angle_rad": p.angle_rad, "offset_mm": list(p.offset_mm), "force_n": p.force_n}
+    return TrialFrameStream(Path(frames_dir) / f"{method}-{p.trial:04d}.tmframes", sensor=cell.sensor, arm=cell.arm,
+                            gripper=cell.gripper, header=header,
+                            target_angle_rad=float(wrap_axial(math.radians(scene.target_deg))))
+
+
 def run_trials(scene: TrialScene, out_dir: str | Path, *, scene_path: str | Path | None = None,
                resume: bool = False, progress: bool = True, tolerance_deg: float | None = None,
-               trial_observer=None):
+               trial_observer=None, frames: bool = True):
     """Run ``scene`` into ``out_dir`` (trials.jsonl fsynced per trial, then the report) and return the summary.
 
-    ``trial_observer``: see :func:`run_scene`.
+    ``trial_observer``: see :func:`run_scene`. With ``frames`` (the default) each trial's per-frame streams go to
+    ``out_dir/frames/`` (:mod:`tactile_manip.trials.frames`): what ``tactile-manip export`` turns into episodes.
 
     With ``resume=True`` the (trial, method) pairs already in ``out_dir/trials.jsonl`` are skipped (the scene
     must be the same: the log refuses a different one).
@@ -343,7 +376,7 @@ def run_trials(scene: TrialScene, out_dir: str | Path, *, scene_path: str | Path
     skip = completed_keys(out / "trials.jsonl") if resume and (out / "trials.jsonl").exists() else set()
     with TrialLog(out, config=to_dict(scene), resume=resume) as log:
         run_scene(scene, log.append, estimators=estimators, skip=skip, progress=progress, cell=cell,
-                  trial_observer=trial_observer)
+                  trial_observer=trial_observer, frames_dir=out / "frames" if frames else None)
     tolerance = math.radians(scene.tolerance_deg if tolerance_deg is None else tolerance_deg)
     return write_report(out, read_trials(out / "trials.jsonl"), tolerance, title=f"Reorientation trials: {scene.name}",
                         run_info=read_run_info(out))
