@@ -146,6 +146,6 @@ def test_train_refuses_fewer_training_samples_than_one_batch(tiny_data, tmp_path
     capsys.readouterr()
     assert main(["train", "--config", str(tmp_path / "tiny.toml"), "--data", str(tmp_path / "few.npz"),
                  "--out", str(tmp_path / "run")]) == 2
-    err = _one_line(capsys, "train")
-    assert "6 samples" in err and "batch_size = 8" in err and "at most 6" in err
+    assert_one_line_error(capsys.readouterr().err, "train", "6 samples", "batch_size = 8", "at most 6",
+                          after_progress=True)
     assert not (tmp_path / "run").exists()  # refused before anything was written
