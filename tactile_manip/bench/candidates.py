@@ -54,6 +54,14 @@ SHIPPED_RECIPE = "models/supermag_fast.train.toml"  # the training config copied
 FAST_CONFIGS = "configs/train/fast*.toml"  # the fast decoder on the full recipe: measured when trained, else skipped
 
 
+def _recipe(path: Path) -> dict:
+    """A training config's values (its comments may differ from the copy shipped beside the model)."""
+    from tactile_manip.config import tomllib
+
+    with path.open("rb") as f:
+        return tomllib.load(f)
+
+
 def default_models(root: str | Path = ".") -> list[ModelEntry]:
     """The shipped model (``fast``), the one shipped before it (``compact``, the accuracy reference) and the
     robust-trained one (``robust``, on one thread: the fast model's graph), the
@@ -66,9 +74,9 @@ def default_models(root: str | Path = ".") -> list[ModelEntry]:
     candidates = [ModelEntry(c.stem, r / "runs" / c.stem / "model.onnx", r / "runs" / c.stem / "best.pt",
                              untrained_preset=str(c), runtimes=("ort-1",)) for c in sorted(r.glob(DECODER_CANDIDATES))]
     shipped_recipe = r / SHIPPED_RECIPE
-    shipped_text = shipped_recipe.read_text() if shipped_recipe.is_file() else None
+    shipped = _recipe(shipped_recipe) if shipped_recipe.is_file() else None
     fast = [ModelEntry(f"{c.stem}_full", r / "runs" / c.stem / "model.onnx", r / "runs" / c.stem / "best.pt",
-                       runtimes=("ort-1",)) for c in sorted(r.glob(FAST_CONFIGS)) if c.read_text() != shipped_text]
+                       runtimes=("ort-1",)) for c in sorted(r.glob(FAST_CONFIGS)) if _recipe(c) != shipped]
     return [ModelEntry("fast", r / SHIPPED_MODEL, r / "runs/fast_b48/best.pt", symmetrized=True),
             ModelEntry("compact", r / "models/supermag_compact.onnx", r / "runs/compact/best.pt", symmetrized=True),
             ModelEntry("robust", r / "models/supermag_robust.onnx", r / "runs/robust_b48/best.pt", runtimes=("ort-1",)),
