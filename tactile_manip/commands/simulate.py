@@ -34,7 +34,7 @@ def run(args: argparse.Namespace) -> int:
 
     if args.shard_size is not None and args.shard_size < 1:
         raise ValueError(f"--shard-size must be >= 1, got {args.shard_size}")
-    out = (check_output_file(args.out, force=args.force) if args.shard_size else  # checked before the work
+    out = (_check_shard_folder(args.out, force=args.force) if args.shard_size else  # checked before the work
            check_output_file(dataset_path(args.out), force=args.force))
     if args.workers < 0:
         raise ValueError(f"--workers must be >= 0, got {args.workers}")
@@ -60,6 +60,19 @@ def run(args: argparse.Namespace) -> int:
     for note in _physics_notes(data, thickness_mm=cfg.sim.layer.thickness_mm):
         print(f"note: {note}")
     return 0
+
+
+def _check_shard_folder(path: str, *, force: bool):
+    """The shard folder to write, after checking nothing is there (unless ``force``) and its parent is writable."""
+    from pathlib import Path
+
+    from tactile_manip.outputs import OutputPathError, check_writable_parent
+
+    out = Path(path)
+    if (out.exists() or out.is_symlink()) and not force:
+        raise OutputPathError(f"{out} exists; pass --force to replace it (once the new dataset is complete)")
+    check_writable_parent(out)
+    return out
 
 
 def _simulate_shards(args: argparse.Namespace, cfg, out) -> int:

@@ -133,8 +133,8 @@ def load_dataset(path: str | Path) -> PairedDataset:
 
 
 def load_datasets(paths: list[str | Path] | tuple[str | Path, ...]) -> PairedDataset:
-    """One dataset (file or shard folder), or several concatenated (:func:`~tactile_manip.data.dataset.concatenate`; each part's
-    provenance then records its path).
+    """One dataset (file or shard folder), or several concatenated
+    (:func:`~tactile_manip.data.dataset.concatenate`; each part's provenance then records its path).
 
     Raises:
         DatasetError: no path, or the same file given twice (its samples would count twice).

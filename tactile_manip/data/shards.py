@@ -104,7 +104,10 @@ class ShardWriter:
         if self.path.exists():  # force: the old dataset goes only once the new one is complete
             self.path.rename(old)
         self.tmp.rename(self.path)
-        shutil.rmtree(old, ignore_errors=True)
+        if old.is_dir() and not old.is_symlink():
+            shutil.rmtree(old, ignore_errors=True)
+        elif old.exists() or old.is_symlink():
+            old.unlink()
         return self.path
 
 

@@ -280,7 +280,8 @@ def _assemble(cfg: DatasetConfig, tasks: list[_Task], results: list[dict[str, An
         extras["sensor_params"] = np.array([list(r["sensor_params"].values()) for r in results], np.float32)
     return PairedDataset(
         readings=stack("field_ut", np.float32), images=stack("depth_q", np.uint8) if cfg.images else None,
-        split=_splits(cfg)[[t.index for t in tasks]], image=depth_image_spec(cfg.sim.vbts.pixel_mm), targets=stack("targets", np.float32),
+        split=_splits(cfg)[[t.index for t in tasks]], image=depth_image_spec(cfg.sim.vbts.pixel_mm),
+        targets=stack("targets", np.float32),
         target_names=SIM_TARGETS,
         object_index=np.array([unique.index(names[t.spec]) for t in tasks], dtype=np.int16),
         object_names=np.array(unique), extras=extras, provenance=provenance)
