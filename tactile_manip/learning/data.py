@@ -314,8 +314,8 @@ class StreamedPairs:
     """One split of :class:`StreamedData` for training: readings and images drawn from a few parts at a time.
 
     Each epoch visits the parts in a random order and shuffles within a buffer of ``buffer_parts`` parts, so at
-    most ``buffer_parts`` times the largest part's samples are held (``peak_samples`` records it, ``loads``
-    counts the parts loaded). The selection (split, objects, bottomed-out presses) is made per part as it is
+    most ``buffer_parts`` times the largest part's selected samples are held (plus, with ``buffer_parts = 1``,
+    fewer than one batch carried over; ``peak_samples`` records it, ``loads`` counts the parts loaded). The selection (split, objects, bottomed-out presses) is made per part as it is
     loaded; the same interface as :class:`TensorPairs` (``batches``, ``chunks``, ``images_from``).
     """
 
@@ -395,8 +395,9 @@ class StreamedPairs:
             field = f if field is None else torch.cat([field, f])
             stored = s if stored is None else torch.cat([stored, s])
             self._hold(len(field))
-            keep = 0 if step == len(order) - 1 else min(keep_at_most, len(field))
-            n = (len(field) - keep) // batch_size * batch_size
+            # emit enough full batches to bring the buffer back to keep_at_most; the last part empties it
+            keep = 0 if step == len(order) - 1 else keep_at_most
+            n = min(len(field) // batch_size, -(-max(len(field) - keep, 0) // batch_size)) * batch_size
             perm = torch.randperm(len(field), generator=gen)
             for b in range(0, n, batch_size):
                 batch = perm[b:b + batch_size][rank * per_rank:(rank + 1) * per_rank]
