@@ -92,9 +92,11 @@ class TrainConfig:
     threads: int = 0                     # torch CPU threads per process (0: torch's default)
     device: str = "auto"                 # "auto" (a GPU when torch sees one), "cpu", "cuda" or "cuda:N"
     max_minutes: float = 0.0             # stop after this wall time (0: no limit)
+    shard_buffer: int = 2                # shard folders: shards shuffled together (memory grows with it)
 
     def __post_init__(self) -> None:
-        positive = {"epochs": self.epochs, "batch_size": self.batch_size, "patience": self.patience}
+        positive = {"epochs": self.epochs, "batch_size": self.batch_size, "patience": self.patience,
+                    "shard_buffer": self.shard_buffer}
         for name, value in positive.items():
             if value < 1:
                 raise ValueError(f"{name} must be >= 1, got {value}")
@@ -283,7 +285,8 @@ def _pairs(data: PairedDataset | StreamedData, cfg: TrainConfig, device: torch.d
     """The training and validation splits (in memory on ``device``, or streamed from shards) and the input spec."""
     objects, drop = tuple(cfg.objects), cfg.drop_bottomed_out
     if isinstance(data, StreamedData):
-        train_set = StreamedPairs(data, "train", objects, drop_bottomed_out=drop).to(device)
+        train_set = StreamedPairs(data, "train", objects, drop_bottomed_out=drop, buffer_parts=cfg.shard_buffer
+                                  ).to(device)
         spec = InputSpec.for_stream(train_set, clamp_ut=cfg.clamp_ut, axes=cfg.axes, clamp_std=cfg.clamp_std)
         return train_set, StreamedPairs(data, "val", objects, drop_bottomed_out=drop).to(device), spec
     train_index = select(data, "train", objects, drop_bottomed_out=drop)

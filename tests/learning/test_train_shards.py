@@ -124,3 +124,20 @@ def load_shards(path):
     from tactile_manip.data import ShardedDataset
 
     return ShardedDataset(path)
+
+
+def test_shard_buffer_is_validated_and_used(sharded, tmp_path, monkeypatch):
+    with pytest.raises(ValueError, match="shard_buffer must be >= 1, got 0"):
+        TrainConfig(shard_buffer=0)
+    _, path = sharded
+    made = []
+    real = StreamedPairs.__init__
+
+    def spy(self, *args, **kwargs):
+        real(self, *args, **kwargs)
+        made.append(self)
+
+    monkeypatch.setattr(StreamedPairs, "__init__", spy)
+    train(TrainConfig(**{**TINY, "epochs": 1, "shard_buffer": 3}), path, tmp_path / "run")
+    assert made[0].split == "train" and made[0].buffer_parts == 3
+    assert made[0].peak_samples <= 3 * max(made[0].counts)
