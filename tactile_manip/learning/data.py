@@ -15,6 +15,7 @@ the simulator test proves it).
 
 from __future__ import annotations
 
+import ctypes
 import hashlib
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -242,7 +243,26 @@ def open_training_data(paths: list[Path]) -> PairedDataset | StreamedData:
     twice = sorted({str(p) for p in paths if resolved.count(Path(p).resolve()) > 1})
     if twice:
         raise DatasetError(f"the same dataset is given more than once: {', '.join(twice)}")
+    _map_large_blocks()
     return StreamedData([ShardedDataset(p) if is_shard_folder(p) else load_dataset(p) for p in paths])
+
+
+M_MMAP_THRESHOLD = -3          # glibc mallopt parameter
+LARGE_BLOCK_BYTES = 4 << 20    # blocks from this size are mapped on their own and unmapped when freed
+
+
+def _map_large_blocks() -> None:
+    """Have glibc's malloc map every block of ``LARGE_BLOCK_BYTES`` or more on its own (no-op elsewhere).
+
+    Streaming loads shard after shard of arrays of a few large sizes. By default glibc raises its mmap threshold
+    each time such a block is freed, so the next ones come from the heap, which then fragments: resident memory
+    grew with the number of shards read (by about 450 MB over one pass of 143 shards of 512 presses). A fixed
+    threshold returns each block to the system when it is freed, and memory stays flat.
+    """
+    try:
+        ctypes.CDLL(None).mallopt(M_MMAP_THRESHOLD, LARGE_BLOCK_BYTES)
+    except (OSError, AttributeError):  # not glibc: its allocator does not raise a threshold like this
+        pass
 
 
 class StreamedData:
