@@ -62,6 +62,23 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+def _physics_notes(data, *, thickness_mm: float) -> list[str]:
+    """Samples the config made outside the model's range: empty presses, and presses that bottom out."""
+    import numpy as np
+
+    notes = []
+    empty = int(np.count_nonzero(~data.extra("contact")))
+    if empty:
+        notes.append(f"{empty} of {len(data)} presses do not touch the pad (empty: noise and drift only)")
+    deepest = np.maximum(data.extra("approach_mm"), data.extra("skin_approach_mm"))
+    bottomed = int(np.count_nonzero(deepest >= thickness_mm))
+    if bottomed:
+        notes.append(f"{bottomed} of {len(data)} presses bottom out (approach >= the {thickness_mm:g} mm layer, "
+                     f"up to {deepest.max():.3g} mm): the elastic layer model does not hold there; lower "
+                     "poses.force_n or use blunter objects")
+    return notes
+
+
 def _check_shard_folder(path: str, *, force: bool):
     """The shard folder to write, after checking nothing is there (unless ``force``) and its parent is writable."""
     from pathlib import Path
@@ -96,21 +113,3 @@ def _simulate_shards(args: argparse.Namespace, cfg, out) -> int:
     for note in _physics_notes(data, thickness_mm=cfg.sim.layer.thickness_mm):
         print(f"note: {note}")
     return 0
-
-
-def _physics_notes(data, *, thickness_mm: float) -> list[str]:
-    """Samples the config made outside the model's range: empty presses, and presses that bottom out."""
-    import numpy as np
-
-    notes = []
-    empty = int(np.count_nonzero(~data.extra("contact")))
-    if empty:
-        notes.append(f"{empty} of {len(data)} presses do not touch the pad (empty: noise and drift only)")
-    deepest = np.maximum(data.extra("approach_mm"), data.extra("skin_approach_mm"))
-    bottomed = int(np.count_nonzero(deepest >= thickness_mm))
-    if bottomed:
-        notes.append(f"{bottomed} of {len(data)} presses bottom out (approach >= the {thickness_mm:g} mm layer, "
-                     f"up to {deepest.max():.3g} mm): the elastic layer model does not hold there; lower "
-                     "poses.force_n or use blunter objects")
-    return notes
-
