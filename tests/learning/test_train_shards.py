@@ -3,6 +3,7 @@ data description and fingerprint as the one-file form."""
 
 import dataclasses
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -18,6 +19,7 @@ from tactile_manip.learning.model import SuperMagCVAE, preset
 
 from conftest import synthetic_dataset
 
+ROOT = Path(__file__).resolve().parents[2]
 TINY = dict(preset="small", batch_size=8, lr=3e-3, epochs=2, patience=50, threads=1, seed=0)
 
 
@@ -141,3 +143,17 @@ def test_shard_buffer_is_validated_and_used(sharded, tmp_path, monkeypatch):
     train(TrainConfig(**{**TINY, "epochs": 1, "shard_buffer": 3}), path, tmp_path / "run")
     assert made[0].split == "train" and made[0].buffer_parts == 3
     assert made[0].peak_samples <= 3 * max(made[0].counts)
+
+
+def test_train_refuses_a_shard_folder_with_a_missing_shard_in_one_line(sharded, tmp_path):
+    import subprocess
+    import sys
+
+    _, path = sharded
+    (path / "shard-00004.npz").unlink()
+    done = subprocess.run([sys.executable, "-m", "tactile_manip", "train", "--config", str(ROOT / "configs/train/fast.toml"),
+                           "--data", str(path), "--out", str(tmp_path / "run")], capture_output=True, text=True,
+                          timeout=120)
+    assert done.returncode == 2 and done.stderr.strip().count("\n") == 0
+    assert "shard-00004.npz named in manifest.json is missing" in done.stderr
+    assert not (tmp_path / "run" / "checkpoint.pt").exists()
