@@ -287,12 +287,23 @@ def _pairs(data: PairedDataset | StreamedData, cfg: TrainConfig, device: torch.d
     if isinstance(data, StreamedData):
         train_set = StreamedPairs(data, "train", objects, drop_bottomed_out=drop, buffer_parts=cfg.shard_buffer
                                   ).to(device)
+        _check_one_batch(len(train_set), cfg)
         spec = InputSpec.for_stream(train_set, clamp_ut=cfg.clamp_ut, axes=cfg.axes, clamp_std=cfg.clamp_std)
         return train_set, StreamedPairs(data, "val", objects, drop_bottomed_out=drop).to(device), spec
     train_index = select(data, "train", objects, drop_bottomed_out=drop)
+    _check_one_batch(len(train_index), cfg)
     spec = InputSpec.for_data(data, train_index, clamp_ut=cfg.clamp_ut, axes=cfg.axes, clamp_std=cfg.clamp_std)
     train_set = TensorPairs(data, train_index).to(device)
     return train_set, TensorPairs(data, select(data, "val", objects, drop_bottomed_out=drop)).to(device), spec
+
+
+def _check_one_batch(samples: int, cfg: TrainConfig) -> None:
+    """An epoch takes whole batches only: a training split smaller than one batch would take no step at all."""
+    if samples < cfg.batch_size:
+        chosen = " (of the config's objects)" if cfg.objects else ""
+        raise TrainingError(f"the training split has {samples} samples{chosen}, fewer than one batch "
+                            f"(batch_size = {cfg.batch_size}): collect more data, or set batch_size to at most "
+                            f"{samples} in the training config")
 
 
 def _schedule(cfg: TrainConfig) -> Callable[[int], float]:
