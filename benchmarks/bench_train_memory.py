@@ -90,6 +90,12 @@ def train_peak(data: Path, config: Path, out: Path, minutes: float, threads: int
             "fingerprint": history["data_fingerprint"]}
 
 
+def _shown(path: Path) -> str:
+    """``path`` relative to the repository when it is inside it (the report does not name this checkout)."""
+    path = path.resolve()
+    return str(path.relative_to(ROOT)) if path.is_relative_to(ROOT) else str(path)
+
+
 def markdown(report: dict[str, Any]) -> str:
     m, s = report["machine"], report["settings"]
     lines = [f"Machine: {m['cpu_model']}, {m['usable_cores']}/{m['cpu_count']} cores, Python {m['python']}, "
@@ -142,8 +148,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{name} {form}: peak {result['peak_rss_mb']:.0f} MB, {result['steps']} steps", flush=True)
     report = {"machine": machine_info(),
               "settings": {"samples": args.samples, "factor": args.factor, "base_scale": args.base_scale,
-                           "base_samples": len(base), "config": str(args.config),
-                           "train_config": str(args.train_config), "shard_size": args.shard_size,
+                           "base_samples": len(base), "config": _shown(args.config),
+                           "train_config": _shown(args.train_config), "shard_size": args.shard_size,
                            "minutes": args.minutes, "threads": args.threads},
               "runs": runs, "ratio_10x_1x": runs[1]["peak_rss_mb"] / runs[0]["peak_rss_mb"]}
     publish(report, args.out, markdown)
