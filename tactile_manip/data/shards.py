@@ -63,6 +63,7 @@ class ShardWriter:
         self.force = force
         self.tmp = self.path.with_name(f".{self.path.name}.partial-{os.getpid()}")
         self.entries: list[dict[str, Any]] = []
+        self.schema: tuple = ()
 
     def __enter__(self) -> ShardWriter:
         if (self.path.exists() or self.path.is_symlink()) and not self.force:
@@ -80,6 +81,11 @@ class ShardWriter:
 
         if not 0 < len(data) <= self.shard_size:
             raise ValueError(f"a shard holds 1 to {self.shard_size} samples, got {len(data)}")
+        if not self.entries:
+            self.schema = _schema(data)
+        elif _schema(data) != self.schema:  # the shards are joined as they are: they must mean the same
+            raise DatasetError(f"shard {len(self.entries)} differs from shard 0 in its channels, image spec, "
+                               f"shapes, targets, object names or extras: {_schema(data)} != {self.schema}")
         name = _SHARD_NAME.format(len(self.entries))
         save_dataset(self.tmp / name, data)
         self.entries.append({"file": name, "samples": len(data), "splits": split_counts(data),
@@ -101,7 +107,7 @@ class ShardWriter:
                     "fingerprint": streamed_fingerprint(files), "shards": self.entries, "provenance": provenance}
         (self.tmp / MANIFEST).write_text(json.dumps(manifest, indent=1))
         old = self.path.with_name(f".{self.path.name}.replaced-{os.getpid()}")
-        if self.path.exists():  # force: the old dataset goes only once the new one is complete
+        if self.path.exists() or self.path.is_symlink():  # force: the old dataset goes only once the new one is complete
             self.path.rename(old)
         self.tmp.rename(self.path)
         if old.is_dir() and not old.is_symlink():
@@ -109,6 +115,14 @@ class ShardWriter:
         elif old.exists() or old.is_symlink():
             old.unlink()
         return self.path
+
+
+def _schema(data: PairedDataset) -> tuple:
+    """What every shard of one dataset shares: specs, per-sample shapes, targets, object names, extras."""
+    names = None if data.object_names is None else tuple(data.object_names.tolist())
+    return (data.channels, data.image if data.has_images else None, data.readings.shape[1:],
+            None if data.images is None else data.images.shape[1:], data.target_names, names,
+            data.groups is not None, tuple(sorted((k, v.shape[1:]) for k, v in data.extras.items())))
 
 
 def save_sharded(path: str | Path, data: PairedDataset, *, shard_size: int, force: bool = False) -> Path:

@@ -127,3 +127,17 @@ def test_simulate_shard_size_equals_the_one_file_run_and_readers_take_the_folder
                            "--out", str(tmp_path / "s.png")], capture_output=True, text=True, timeout=120)
     assert show.returncode == 2 and show.stderr.strip().count("\n") == 0
     assert "shard-00003.npz" in show.stderr
+
+
+def test_shards_that_mean_different_things_are_refused(tmp_path):
+    data = _dataset()
+    other_names = PairedDataset(readings=data.readings[:3], images=data.images[:3], split=data.split[:3],
+                                image=data.image, object_index=data.object_index[:3],
+                                object_names=np.array(["x", "y", "z"]), groups=data.groups[:3],
+                                targets=data.targets[:3], target_names=data.target_names,
+                                extras={"pose": data.extra("pose")[:3]})
+    with pytest.raises(DatasetError, match="shard 1 differs from shard 0"):
+        with ShardWriter(tmp_path / "D", shard_size=5) as writer:
+            writer.write(data.subset(np.arange(5)))
+            writer.write(other_names)
+    assert not (tmp_path / "D").exists()
