@@ -107,7 +107,8 @@ class ShardWriter:
                     "fingerprint": streamed_fingerprint(files), "shards": self.entries, "provenance": provenance}
         (self.tmp / MANIFEST).write_text(json.dumps(manifest, indent=1))
         old = self.path.with_name(f".{self.path.name}.replaced-{os.getpid()}")
-        if self.path.exists() or self.path.is_symlink():  # force: the old dataset goes only once the new one is complete
+        # force: the old dataset goes only once the new one is complete
+        if self.path.exists() or self.path.is_symlink():
             self.path.rename(old)
         self.tmp.rename(self.path)
         if old.is_dir() and not old.is_symlink():

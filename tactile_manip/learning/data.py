@@ -330,8 +330,9 @@ class StreamedPairs:
 
     Each epoch visits the parts in a random order and shuffles within a buffer of ``buffer_parts`` parts, so at
     most ``buffer_parts`` times the largest part's selected samples are held (plus, with ``buffer_parts = 1``,
-    fewer than one batch carried over; ``peak_samples`` records it, ``loads`` counts the parts loaded). The selection (split, objects, bottomed-out presses) is made per part as it is
-    loaded; the same interface as :class:`TensorPairs` (``batches``, ``chunks``, ``images_from``).
+    fewer than one batch carried over; ``peak_samples`` records it, ``loads`` counts the parts loaded). The
+    selection (split, objects, bottomed-out presses) is made per part as it is loaded. The same interface as
+    :class:`TensorPairs` (``batches``, ``chunks``, ``images_from``, ``batch_count``).
     """
 
     def __init__(self, data: StreamedData, split: str, objects: tuple[str, ...] = (), *,

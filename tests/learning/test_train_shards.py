@@ -151,9 +151,9 @@ def test_train_refuses_a_shard_folder_with_a_missing_shard_in_one_line(sharded, 
 
     _, path = sharded
     (path / "shard-00004.npz").unlink()
-    done = subprocess.run([sys.executable, "-m", "tactile_manip", "train", "--config", str(ROOT / "configs/train/fast.toml"),
-                           "--data", str(path), "--out", str(tmp_path / "run")], capture_output=True, text=True,
-                          timeout=120)
+    config = ROOT / "configs" / "train" / "fast.toml"
+    done = subprocess.run([sys.executable, "-m", "tactile_manip", "train", "--config", str(config), "--data",
+                           str(path), "--out", str(tmp_path / "run")], capture_output=True, text=True, timeout=120)
     assert done.returncode == 2 and done.stderr.strip().count("\n") == 0
     assert "shard-00004.npz named in manifest.json is missing" in done.stderr
     assert not (tmp_path / "run" / "checkpoint.pt").exists()
