@@ -1,8 +1,8 @@
 """The dataset layer: readings with named channels and units, images with unit, range and pixel size and/or
 per-sample targets with units (labelled presses), splits and groups, per-sample extras, provenance; files
-(format 3, formats 1 and 2 still read) and import from plain arrays and probe logs. numpy only: the
-simulator, the collection pipeline and the importers produce datasets, training, evaluation and the commands
-consume them.
+(format 3, formats 1 and 2 still read), shard folders of such files with a manifest, and import from plain
+arrays and probe logs. numpy only: the simulator, the collection pipeline and the importers produce datasets,
+training, evaluation and the commands consume them.
 
 This folder also holds shipped data files (the measured DTact lookup tables and the interpolation fit).
 """
