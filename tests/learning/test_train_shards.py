@@ -17,22 +17,21 @@ from tactile_manip.learning.data import (InputSpec, StreamedData, StreamedPairs,
 from tactile_manip.learning.train import TrainConfig, evaluate_split, train
 from tactile_manip.learning.model import SuperMagCVAE, preset
 
-from conftest import synthetic_dataset
 
 ROOT = Path(__file__).resolve().parents[2]
 TINY = dict(preset="small", batch_size=8, lr=3e-3, epochs=2, patience=50, threads=1, seed=0)
 
 
-def _numbered(n_per_object: int = 24):
+def _numbered(make_synthetic, n_per_object: int = 24):
     """The synthetic dataset with each sample's index in its first reading value (to follow samples around)."""
-    data = synthetic_dataset(n_per_object)
+    data = make_synthetic(n_per_object)
     data.readings[:, 0, 0, 0] = np.arange(len(data))
     return data
 
 
 @pytest.fixture
-def sharded(tmp_path):
-    data = _numbered()
+def sharded(tmp_path, make_synthetic):
+    data = _numbered(make_synthetic)
     return data, save_sharded(tmp_path / "D", data, shard_size=10)
 
 
@@ -79,8 +78,8 @@ def test_validation_chunks_and_images_match_the_in_memory_split(sharded):
     assert streamed["psnr"] == pytest.approx(held["psnr"], rel=1e-5)
 
 
-def test_streamed_normalisation_matches_the_in_memory_one(tmp_path):
-    data = dataclasses.replace(synthetic_dataset(), channels=ChannelSpec(kind="scalar", names=("p", "q", "r"),
+def test_streamed_normalisation_matches_the_in_memory_one(tmp_path, make_synthetic):
+    data = dataclasses.replace(make_synthetic(), channels=ChannelSpec(kind="scalar", names=("p", "q", "r"),
                                                                          unit="kPa"))
     path = save_sharded(tmp_path / "D", data, shard_size=7)
     streamed = InputSpec.for_stream(StreamedPairs(StreamedData([load_shards(path)]), "train"), clamp_ut=500,
