@@ -11,7 +11,11 @@ DEFAULT_CONFIG = "configs/dataset/supermag.toml"
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--config", default=DEFAULT_CONFIG, help=f"dataset TOML (default: {DEFAULT_CONFIG})")
-    p.add_argument("--out", required=True, help="output .npz file (.npz is appended when missing)")
+    p.add_argument("--out", required=True,
+                   help="output .npz file (.npz is appended when missing); with --shard-size, a folder")
+    p.add_argument("--shard-size", type=int, default=None, metavar="N",
+                   help="write OUT as a folder of shards of at most N samples plus manifest.json, each shard "
+                        "written as it completes (docs/data.md, Sharded datasets)")
     p.add_argument("--workers", type=int, default=0, help="worker processes (0 = all cores)")
     p.add_argument("--scale", type=float, default=1.0,
                    help="multiply every object count (e.g. 0.05 for a quick small dataset)")
@@ -35,7 +39,10 @@ def run(args: argparse.Namespace) -> int:
     from tactile_manip.sim.dataset import generate, load_dataset_config
     from tactile_manip.data import SPLITS, dataset_path, save_dataset
 
-    out = check_output_file(dataset_path(args.out), force=args.force)  # the file written, checked before the work
+    if args.shard_size is not None and args.shard_size < 1:
+        raise ValueError(f"--shard-size must be >= 1, got {args.shard_size}")
+    out = (_check_shard_folder(args.out, force=args.force) if args.shard_size else  # checked before the work
+           check_output_file(dataset_path(args.out), force=args.force))
     if args.workers < 0:
         raise ValueError(f"--workers must be >= 0, got {args.workers}")
     if not 0 < args.scale <= 100:
@@ -45,6 +52,8 @@ def run(args: argparse.Namespace) -> int:
         cfg = cfg.scaled(args.scale)
     if args.seed is not None:
         cfg = dataclasses.replace(cfg, seed=args.seed)
+    if args.shard_size:
+        return _simulate_shards(args, cfg, out)
     total = sum(o.count for o in cfg.objects)
     if args.ray is not None:
         data = _generate_on_ray(args, cfg, out, total)
@@ -104,3 +113,38 @@ def _physics_notes(data, *, thickness_mm: float) -> list[str]:
                      "poses.force_n or use blunter objects")
     return notes
 
+
+def _check_shard_folder(path: str, *, force: bool):
+    """The shard folder to write, after checking nothing is there (unless ``force``) and its parent is writable."""
+    from pathlib import Path
+
+    from tactile_manip.outputs import OutputPathError, check_writable_parent
+
+    out = Path(path)
+    if (out.exists() or out.is_symlink()) and not force:
+        raise OutputPathError(f"{out} exists; pass --force to replace it (once the new dataset is complete)")
+    check_writable_parent(out)
+    return out
+
+
+def _simulate_shards(args: argparse.Namespace, cfg, out) -> int:
+    """Simulate into a shard folder, each shard written as its samples finish (the dataset is never whole in
+    memory)."""
+    from tqdm import tqdm
+
+    from tactile_manip.data import ShardedDataset
+    from tactile_manip.sim.dataset import generate_shards
+
+    workers = args.workers or os.cpu_count() or 1
+    with tqdm(total=sum(o.count for o in cfg.objects), unit="pair", desc=f"simulating ({workers} workers)") as bar:
+        path = generate_shards(cfg, out, shard_size=args.shard_size, workers=workers, progress=bar.update,
+                               force=args.force)
+    data = ShardedDataset(path)
+    counts = ", ".join(f"{s} {n}" for s, n in data.splits.items())
+    seconds = data.provenance["generation_seconds"]
+    size_mb = sum(f.stat().st_size for f in path.iterdir()) / 1e6
+    print(f"wrote {path}/ ({data.shard_count} shards, {size_mb:.1f} MB): {len(data)} presses ({counts}) in "
+          f"{seconds:.1f} s, {len(data) / seconds:.1f} presses/s; fingerprint {data.fingerprint()}")
+    for note in _physics_notes(data, thickness_mm=cfg.sim.layer.thickness_mm):
+        print(f"note: {note}")
+    return 0

@@ -11,8 +11,8 @@ import argparse
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--config", required=True, help="training TOML (e.g. configs/train/compact.toml)")
     p.add_argument("--data", required=True, nargs="+", action="extend",
-                   help="paired dataset .npz (tactile-manip simulate / collect / import); several are trained on as "
-                        "one, each keeping its splits")
+                   help="paired dataset .npz or shard folder (tactile-manip simulate / collect / import); several "
+                        "are trained on as one, each keeping its splits; shard folders are streamed")
     p.add_argument("--out", required=True, help="run folder for checkpoints, history and plots")
     again = p.add_mutually_exclusive_group()
     again.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.pt")

@@ -34,6 +34,19 @@ from tactile_manip.data.targets import check_target_names, check_targets, target
 from tactile_manip.errors import DatasetError
 
 SPLITS = ("train", "val", "test")
+# the per-sample arrays the fingerprint hashes, in this order (each whole, then the next); then the target names
+FINGERPRINT_ARRAYS = ("readings", "images", "split", "object_index", "groups", "targets")
+
+
+def fingerprint_bytes(name: str, value: np.ndarray | tuple[str, ...]) -> bytes:
+    """The bytes :meth:`PairedDataset.fingerprint` hashes for the array ``name`` (one of
+    :data:`FINGERPRINT_ARRAYS`, or ``"target_names"``); the hash of a dataset stored in shards feeds the same
+    bytes, array by array and shard by shard."""
+    if name == "target_names":
+        return np.array(",".join(value)).tobytes()
+    if name == "split":
+        value = value.astype("U5")
+    return np.ascontiguousarray(value).tobytes()
 
 
 @dataclass(frozen=True, eq=False)
@@ -203,12 +216,11 @@ class PairedDataset:
         fingerprint; targets and their names are hashed after them.
         """
         h = hashlib.sha256()
-        parts = [a for a in (self.readings, self.images) if a is not None] + [self.split.astype("U5")]
-        parts += [a for a in (self.object_index, self.groups) if a is not None]
+        for name in FINGERPRINT_ARRAYS:
+            if getattr(self, name) is not None:
+                h.update(fingerprint_bytes(name, getattr(self, name)))
         if self.targets is not None:
-            parts += [self.targets, np.array(",".join(self.target_names))]
-        for a in parts:
-            h.update(np.ascontiguousarray(a).tobytes())
+            h.update(fingerprint_bytes("target_names", self.target_names))
         return h.hexdigest()[:16]
 
     def describe(self) -> dict[str, Any]:

@@ -27,6 +27,7 @@ import numpy as np
 
 from tactile_manip.checks import npz_read_problem
 from tactile_manip.data.dataset import PairedDataset, concatenate
+from tactile_manip.data.shards import MANIFEST, ShardedDataset, is_shard_folder
 from tactile_manip.data.spec import ChannelSpec, ImageSpec
 from tactile_manip.errors import DatasetError
 
@@ -77,10 +78,15 @@ def save_dataset(path: str | Path, data: PairedDataset) -> Path:
 
 
 def check_dataset_file(path: str | Path) -> Path:
-    """``path`` after checking it is an existing file (DatasetError otherwise), before any long work."""
+    """``path`` after checking it is an existing dataset file or shard folder (DatasetError otherwise), before
+    any long work; a shard folder's manifest is checked against the shard files there."""
     path = Path(path)
+    if is_shard_folder(path):
+        ShardedDataset(path)
+        return path
     if path.is_dir():
-        raise DatasetError(f"{path} is a directory, not a dataset file (.npz)")
+        raise DatasetError(f"{path} is a directory without {MANIFEST}: neither a dataset file (.npz) nor a "
+                           "sharded dataset (`tactile-manip simulate --shard-size N`)")
     if not path.is_file():
         raise DatasetError(f"dataset not found: {path} (make one with `tactile-manip simulate --out {path}` "
                            f"or `tactile-manip import ... --out {path}`)")
@@ -88,12 +94,16 @@ def check_dataset_file(path: str | Path) -> Path:
 
 
 def load_dataset(path: str | Path) -> PairedDataset:
-    """Read a dataset written by :func:`save_dataset` (format 3) or by earlier versions (formats 1 and 2).
+    """Read a dataset written by :func:`save_dataset` (format 3) or by earlier versions (formats 1 and 2), or
+    every shard of a shard folder (:mod:`tactile_manip.data.shards`) joined into one dataset in memory.
 
     Raises:
         DatasetError: missing file, not a numpy file, not a dataset of ours, missing arrays, inconsistent
-            lengths, or a newer format.
+            lengths, or a newer format; for a shard folder, a missing or unlisted shard or a fingerprint that
+            does not match the manifest's.
     """
+    if is_shard_folder(path):
+        return ShardedDataset(path).load()
     path = check_dataset_file(path)
     if numpy_file_kind(path) == "other":  # np.load would call any other file a pickle
         raise DatasetError(f"{path} is not a tactile_manip dataset: it is not a numpy file (.npz); "
@@ -123,8 +133,8 @@ def load_dataset(path: str | Path) -> PairedDataset:
 
 
 def load_datasets(paths: list[str | Path] | tuple[str | Path, ...]) -> PairedDataset:
-    """One dataset file, or several concatenated (:func:`~tactile_manip.data.dataset.concatenate`; each part's
-    provenance then records its path).
+    """One dataset (file or shard folder), or several concatenated
+    (:func:`~tactile_manip.data.dataset.concatenate`; each part's provenance then records its path).
 
     Raises:
         DatasetError: no path, or the same file given twice (its samples would count twice).

@@ -30,10 +30,11 @@ import torch
 from tactile_manip.config import config_differences, load_config, to_dict
 from tactile_manip.errors import TactileManipError
 from tactile_manip.learning.checkpoint import read_checkpoint
-from tactile_manip.learning.data import InputSpec, OutputSpec, TensorPairs, augment_batch, select
+from tactile_manip.learning.data import (InputSpec, OutputSpec, StreamedData, StreamedPairs, TensorPairs, augment_batch,
+                                         open_training_data, select)
 from tactile_manip.learning.model import (CVAEConfig, SuperMagCVAE, count_parameters, gaussian_nll, negative_elbo,
                                           preset)
-from tactile_manip.data import PairedDataset, load_datasets
+from tactile_manip.data import PairedDataset
 
 
 class TrainingError(TactileManipError, RuntimeError):
@@ -91,9 +92,11 @@ class TrainConfig:
     threads: int = 0                     # torch CPU threads per process (0: torch's default)
     device: str = "auto"                 # "auto" (a GPU when torch sees one), "cpu", "cuda" or "cuda:N"
     max_minutes: float = 0.0             # stop after this wall time (0: no limit)
+    shard_buffer: int = 2                # shard folders: shards shuffled together (memory grows with it)
 
     def __post_init__(self) -> None:
-        positive = {"epochs": self.epochs, "batch_size": self.batch_size, "patience": self.patience}
+        positive = {"epochs": self.epochs, "batch_size": self.batch_size, "patience": self.patience,
+                    "shard_buffer": self.shard_buffer}
         for name, value in positive.items():
             if value < 1:
                 raise ValueError(f"{name} must be >= 1, got {value}")
@@ -118,7 +121,7 @@ def load_train_config(path: str | Path) -> TrainConfig:
     return load_config(path, TrainConfig)
 
 
-def model_config(cfg: TrainConfig, data: PairedDataset) -> CVAEConfig:
+def model_config(cfg: TrainConfig, data: PairedDataset | StreamedData) -> CVAEConfig:
     """Architecture from the preset, with the taxel grid and image size read from the dataset."""
     rows, cols = data.grid
     h, w = data.image_shape
@@ -208,24 +211,15 @@ def _train(cfg: TrainConfig, data_paths: list[Path], out: Path, resume: bool, pr
     if device.type == "cuda":
         torch.backends.cuda.matmul.allow_tf32 = True
         torch.backends.cudnn.allow_tf32 = True
-    data = load_datasets(data_paths)
+    data = open_training_data(data_paths)  # in memory, or a view of shard folders streamed each epoch
     data.require_images("training the image model")
     if cfg.drop_bottomed_out and not data.has("bottomed_out") and dist.main:
         dropped = data.provenance.get("dropped_extras", [])
         why = " (only some of the datasets record it)" if "bottomed_out" in dropped else ""
         print(f"note: drop_bottomed_out = true, but the data flags no press as bottomed out{why}: "
               "every press is trained on", flush=True)
-    train_index = select(data, "train", tuple(cfg.objects), drop_bottomed_out=cfg.drop_bottomed_out)
-    if len(train_index) < cfg.batch_size:  # an epoch takes whole batches only: it would take no step at all
-        chosen = " (of the config's objects)" if cfg.objects else ""
-        raise TrainingError(f"the training split has {len(train_index)} samples{chosen}, fewer than one batch "
-                            f"(batch_size = {cfg.batch_size}): collect more data, or set batch_size to at most "
-                            f"{len(train_index)} in the training config")
-    spec = InputSpec.for_data(data, train_index, clamp_ut=cfg.clamp_ut, axes=cfg.axes, clamp_std=cfg.clamp_std)
+    train_set, val_set, spec = _pairs(data, cfg, device)
     mcfg = model_config(cfg, data)
-    train_set = TensorPairs(data, train_index).to(device)
-    val_set = TensorPairs(data, select(data, "val", tuple(cfg.objects), drop_bottomed_out=cfg.drop_bottomed_out)
-                          ).to(device)
     model = SuperMagCVAE(mcfg)
     state = {"epoch": 0, "history": [], "best_psnr": -math.inf, "best_epoch": 0, "seconds": 0.0}
     if init is not None:
@@ -286,6 +280,32 @@ def _train(cfg: TrainConfig, data_paths: list[Path], out: Path, resume: bool, pr
     return json.loads((out / "history.json").read_text()) if dist.main else {}
 
 
+def _pairs(data: PairedDataset | StreamedData, cfg: TrainConfig, device: torch.device
+           ) -> tuple[TensorPairs | StreamedPairs, TensorPairs | StreamedPairs, InputSpec]:
+    """The training and validation splits (in memory on ``device``, or streamed from shards) and the input spec."""
+    objects, drop = tuple(cfg.objects), cfg.drop_bottomed_out
+    if isinstance(data, StreamedData):
+        train_set = StreamedPairs(data, "train", objects, drop_bottomed_out=drop, buffer_parts=cfg.shard_buffer
+                                  ).to(device)
+        _check_one_batch(len(train_set), cfg)
+        spec = InputSpec.for_stream(train_set, clamp_ut=cfg.clamp_ut, axes=cfg.axes, clamp_std=cfg.clamp_std)
+        return train_set, StreamedPairs(data, "val", objects, drop_bottomed_out=drop).to(device), spec
+    train_index = select(data, "train", objects, drop_bottomed_out=drop)
+    _check_one_batch(len(train_index), cfg)
+    spec = InputSpec.for_data(data, train_index, clamp_ut=cfg.clamp_ut, axes=cfg.axes, clamp_std=cfg.clamp_std)
+    train_set = TensorPairs(data, train_index).to(device)
+    return train_set, TensorPairs(data, select(data, "val", objects, drop_bottomed_out=drop)).to(device), spec
+
+
+def _check_one_batch(samples: int, cfg: TrainConfig) -> None:
+    """An epoch takes whole batches only: a training split smaller than one batch would take no step at all."""
+    if samples < cfg.batch_size:
+        chosen = " (of the config's objects)" if cfg.objects else ""
+        raise TrainingError(f"the training split has {samples} samples{chosen}, fewer than one batch "
+                            f"(batch_size = {cfg.batch_size}): collect more data, or set batch_size to at most "
+                            f"{samples} in the training config")
+
+
 def _schedule(cfg: TrainConfig) -> Callable[[int], float]:
     """Learning rate of each epoch (1-based)."""
     if cfg.lr_schedule == "constant":
@@ -294,22 +314,17 @@ def _schedule(cfg: TrainConfig) -> Callable[[int], float]:
     return lambda epoch: cfg.lr_min + 0.5 * (cfg.lr - cfg.lr_min) * (1 + math.cos(math.pi * (epoch - 1) / span))
 
 
-def _train_epoch(net, opt, train_set: TensorPairs, cfg: TrainConfig, spec: InputSpec, dist: _Dist,
+def _train_epoch(net, opt, train_set: TensorPairs | StreamedPairs, cfg: TrainConfig, spec: InputSpec, dist: _Dist,
                  gen: torch.Generator, deadline: float = math.inf, *, epoch: int = 0) -> dict[str, float]:
     """One pass over the training set; stops early (a partial epoch) when ``deadline`` (perf_counter) passes."""
     net.train()
     net_cfg = (net.module if hasattr(net, "module") else net).cfg
-    order = torch.randperm(len(train_set), generator=gen)
     per_rank = cfg.batch_size // dist.world
     sums: dict[str, float] = {}
     n_batches = 0
-    starts = range(0, len(order) - cfg.batch_size + 1, cfg.batch_size)
-    for b in starts:
+    for field_ut, image in train_set.batches(cfg.batch_size, gen, rank=dist.rank, world=dist.world):
         if n_batches and time.perf_counter() > deadline:  # at least one step, so every epoch has statistics
             break
-        batch = order[b:b + cfg.batch_size][dist.rank * per_rank:(dist.rank + 1) * per_rank]
-        field_ut = train_set.field[batch]
-        image = train_set.images(batch)
         if cfg.augment:
             field_ut, image = augment_batch(field_ut, image, gen, vector=train_set.vector)
         noise = torch.randn(cfg.batch_size, net_cfg.latent, generator=gen)[dist.rank * per_rank:][:per_rank]
@@ -335,19 +350,17 @@ def _train_epoch(net, opt, train_set: TensorPairs, cfg: TrainConfig, spec: Input
         n_batches += 1
     stats = {k: v / max(n_batches, 1) for k, v in sums.items()}
     stats["batches"] = n_batches
-    stats["epoch_fraction"] = n_batches / max(len(starts), 1)
+    stats["epoch_fraction"] = n_batches / max(train_set.batch_count(cfg.batch_size), 1)
     return stats
 
 
 @torch.no_grad()
-def evaluate_split(model: SuperMagCVAE, pairs: TensorPairs, spec: InputSpec, *, batch: int = 128
+def evaluate_split(model: SuperMagCVAE, pairs: TensorPairs | StreamedPairs, spec: InputSpec, *, batch: int = 128
                    ) -> dict[str, float]:
     """Prior-mean reconstruction of a split: MSE (target units squared) and mean PSNR (dB, the images' range)."""
     model.eval()
     se, psnrs = [], []
-    for b in range(0, len(pairs), batch):
-        field_ut = pairs.field[b:b + batch]
-        image = pairs.images(slice(b, b + batch))
+    for field_ut, image in pairs.chunks(batch):
         eps = torch.zeros(len(field_ut), 1, model.cfg.latent, device=field_ut.device)
         mean, _ = model.generate(spec.scale(field_ut), eps)
         mse = ((mean - image) ** 2).flatten(1).mean(1)
@@ -357,7 +370,7 @@ def evaluate_split(model: SuperMagCVAE, pairs: TensorPairs, spec: InputSpec, *, 
 
 
 def _save_checkpoint(path: Path, model, opt, mcfg: CVAEConfig, cfg: TrainConfig, spec: InputSpec,
-                     data: PairedDataset, state: dict) -> None:
+                     data: PairedDataset | StreamedData, state: dict) -> None:
     payload = {"model": model.state_dict(), "optimizer": opt.state_dict(), "model_config": to_dict(mcfg),
                "train_config": to_dict(cfg), "input": to_dict(spec), "output": to_dict(OutputSpec.for_data(data)),
                "data": data.describe(), "data_fingerprint": data.fingerprint(),
@@ -367,7 +380,8 @@ def _save_checkpoint(path: Path, model, opt, mcfg: CVAEConfig, cfg: TrainConfig,
     tmp.replace(path)
 
 
-def _load_checkpoint(path: Path, model, opt, mcfg: CVAEConfig, data: PairedDataset, cfg: TrainConfig) -> dict:
+def _load_checkpoint(path: Path, model, opt, mcfg: CVAEConfig, data: PairedDataset | StreamedData,
+                     cfg: TrainConfig) -> dict:
     if not path.is_file():
         raise TrainingError(f"--resume: no checkpoint at {path}")
     payload = read_checkpoint(path)
@@ -392,7 +406,7 @@ def _load_checkpoint(path: Path, model, opt, mcfg: CVAEConfig, data: PairedDatas
 
 
 def _init_from(path: Path, model, mcfg: CVAEConfig, cfg: TrainConfig,
-               data: PairedDataset) -> tuple[InputSpec, dict[str, Any]]:
+               data: PairedDataset | StreamedData) -> tuple[InputSpec, dict[str, Any]]:
     """Load ``path``'s weights into ``model`` for fine-tuning; its input normalisation, and what to record."""
     payload = read_checkpoint(path)
     differences = config_differences(payload["model_config"], to_dict(mcfg))
@@ -413,8 +427,8 @@ def _init_from(path: Path, model, mcfg: CVAEConfig, cfg: TrainConfig,
                   "epochs": state.get("epoch"), "best_val_psnr": state.get("best_psnr")}
 
 
-def _write_history(out: Path, cfg: TrainConfig, mcfg: CVAEConfig, model, data: PairedDataset, state: dict,
-                   dist: _Dist) -> None:
+def _write_history(out: Path, cfg: TrainConfig, mcfg: CVAEConfig, model, data: PairedDataset | StreamedData,
+                   state: dict, dist: _Dist) -> None:
     summary = {"train_config": to_dict(cfg), "model_config": to_dict(mcfg),
                "parameters": count_parameters(model),
                "inference_parameters": count_parameters(model, inference_only=True),

@@ -19,7 +19,7 @@ import math
 import multiprocessing
 import os
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -28,7 +28,7 @@ from typing import Any, Literal
 import numpy as np
 
 from tactile_manip.config import load_config, to_dict
-from tactile_manip.data import PairedDataset, depth_image_spec, quantise_depth
+from tactile_manip.data import PairedDataset, ShardWriter, depth_image_spec, quantise_depth
 from tactile_manip.sim.objects import Indenter, IndenterPose
 from tactile_manip.sim.shapes import SHAPES, check_shape_arguments, make_indenter
 from tactile_manip.sim.pair import PairedSample, SensorPair
@@ -222,21 +222,26 @@ def generate(cfg: DatasetConfig, *, workers: int = 0,
     tasks = _tasks(cfg)
     workers = workers or os.cpu_count() or 1
     start = time.perf_counter()
-    results: list[dict[str, Any]] = []
-    chunk = max(1, min(16, len(tasks) // (4 * workers) or 1))
+    results = list(_results(cfg, tasks, workers, progress))
+    return _assemble(cfg, tasks, results, seconds=time.perf_counter() - start, workers=workers)
+
+
+def _results(cfg: DatasetConfig, tasks: list[_Task], workers: int,
+             progress: Callable[[int], None] | None) -> Iterator[dict[str, Any]]:
+    """Each task's result in task order, as the workers finish them."""
     if workers == 1:
         _init_worker(cfg)
         for t in tasks:
-            results.append(_simulate(t))
+            yield _simulate(t)
             progress and progress(1)
-    else:
-        ctx = multiprocessing.get_context("spawn")
-        with _single_threaded_children(), ProcessPoolExecutor(
-                workers, mp_context=ctx, initializer=_init_worker, initargs=(cfg,)) as pool:
-            for r in pool.map(_simulate, tasks, chunksize=chunk):
-                results.append(r)
-                progress and progress(1)
-    return _assemble(cfg, tasks, results, seconds=time.perf_counter() - start, workers=workers)
+        return
+    chunk = max(1, min(16, len(tasks) // (4 * workers) or 1))
+    ctx = multiprocessing.get_context("spawn")
+    with _single_threaded_children(), ProcessPoolExecutor(
+            workers, mp_context=ctx, initializer=_init_worker, initargs=(cfg,)) as pool:
+        for r in pool.map(_simulate, tasks, chunksize=chunk):
+            yield r
+            progress and progress(1)
 
 
 def sample_count(cfg: DatasetConfig) -> int:
@@ -299,7 +304,33 @@ def _assemble(cfg: DatasetConfig, tasks: list[_Task], results: list[dict[str, An
         extras["sensor_params"] = np.array([list(r["sensor_params"].values()) for r in results], np.float32)
     return PairedDataset(
         readings=stack("field_ut", np.float32), images=stack("depth_q", np.uint8) if cfg.images else None,
-        split=_splits(cfg), image=depth_image_spec(cfg.sim.vbts.pixel_mm), targets=stack("targets", np.float32),
+        split=_splits(cfg)[[t.index for t in tasks]], image=depth_image_spec(cfg.sim.vbts.pixel_mm),
+        targets=stack("targets", np.float32),
         target_names=SIM_TARGETS,
         object_index=np.array([unique.index(names[t.spec]) for t in tasks], dtype=np.int16),
         object_names=np.array(unique), extras=extras, provenance=provenance)
+
+
+def generate_shards(cfg: DatasetConfig, path: str | Path, *, shard_size: int, workers: int = 0,
+                    progress: Callable[[int], None] | None = None, force: bool = False) -> Path:
+    """Simulate every sample of ``cfg`` into the shard folder ``path`` (:mod:`tactile_manip.data.shards`).
+
+    Shards are written in sample order as their samples finish, so at most one shard's results are held here
+    (plus what the workers finished ahead of it); the samples, and the fingerprint, equal :func:`generate`'s.
+    The folder appears under ``path`` only when complete (``force`` replaces one that is there).
+    """
+    tasks = _tasks(cfg)
+    workers = workers or os.cpu_count() or 1
+    start = time.perf_counter()
+    with ShardWriter(path, shard_size=shard_size, force=force) as writer:
+        block: list[dict[str, Any]] = []
+        provenance: dict[str, Any] = {}
+        for r in _results(cfg, tasks, workers, progress):
+            block.append(r)
+            if len(block) == shard_size or len(writer.entries) * shard_size + len(block) == len(tasks):
+                first = len(writer.entries) * shard_size
+                shard = _assemble(cfg, tasks[first:first + len(block)], block,
+                                  seconds=time.perf_counter() - start, workers=workers)
+                writer.write(shard)
+                block, provenance = [], shard.provenance
+        return writer.finish(dict(provenance, generation_seconds=round(time.perf_counter() - start, 2)))

@@ -42,3 +42,9 @@ def other_grid_data(tmp_path_factory):
     """Another sensor: a 5x6 taxel grid and 24x40 images (say a Xela-like pad and a small GelSight crop)."""
     return save_dataset(tmp_path_factory.mktemp("data") / "other.npz",
                         synthetic_dataset(grid=(5, 6), image=(24, 40), seed=1))
+
+
+@pytest.fixture(scope="session")
+def make_synthetic():
+    """:func:`synthetic_dataset` itself, for tests that build variants of it."""
+    return synthetic_dataset
