@@ -52,11 +52,13 @@ def run(args: argparse.Namespace) -> int:
         cfg = cfg.scaled(args.scale)
     if args.seed is not None:
         cfg = dataclasses.replace(cfg, seed=args.seed)
-    if args.shard_size:
+    if args.shard_size and args.ray is None:
         return _simulate_shards(args, cfg, out)
     total = sum(o.count for o in cfg.objects)
     if args.ray is not None:
         data = _generate_on_ray(args, cfg, out, total)
+        if args.shard_size:  # the blocks come back to this machine; the dataset is written as shards
+            return _save_ray_shards(args, cfg, out, data)
     else:
         if args.block_size is not None:
             raise ValueError("--block-size applies to --ray runs only")
@@ -127,6 +129,15 @@ def _check_shard_folder(path: str, *, force: bool):
     return out
 
 
+def _save_ray_shards(args: argparse.Namespace, cfg, out, data) -> int:
+    from tactile_manip.cluster.blocks import remove_blocks
+    from tactile_manip.data import ShardedDataset, save_sharded
+
+    path = save_sharded(out, data, shard_size=args.shard_size, force=args.force)
+    remove_blocks(out)
+    return _report_shards(ShardedDataset(path), path, cfg)
+
+
 def _simulate_shards(args: argparse.Namespace, cfg, out) -> int:
     """Simulate into a shard folder, each shard written as its samples finish (the dataset is never whole in
     memory)."""
@@ -139,7 +150,10 @@ def _simulate_shards(args: argparse.Namespace, cfg, out) -> int:
     with tqdm(total=sum(o.count for o in cfg.objects), unit="pair", desc=f"simulating ({workers} workers)") as bar:
         path = generate_shards(cfg, out, shard_size=args.shard_size, workers=workers, progress=bar.update,
                                force=args.force)
-    data = ShardedDataset(path)
+    return _report_shards(ShardedDataset(path), path, cfg)
+
+
+def _report_shards(data, path, cfg) -> int:
     counts = ", ".join(f"{s} {n}" for s, n in data.splits.items())
     seconds = data.provenance["generation_seconds"]
     size_mb = sum(f.stat().st_size for f in path.iterdir()) / 1e6

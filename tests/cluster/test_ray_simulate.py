@@ -133,3 +133,15 @@ def test_cli_bad_ray_options(tmp_path, capsys, argv, message):
     assert main(["simulate", "--scale", "0.005", "--out", str(out), *argv]) == 2
     assert_one_line_error(capsys.readouterr().err, "simulate", message)
     assert not out.exists()
+
+
+def test_cli_ray_run_written_as_shards_has_the_local_fingerprint(local, tmp_path):
+    from tactile_manip.data import ShardedDataset
+
+    out = tmp_path / "D"
+    assert main(["simulate", "--scale", "0.005", "--ray", "--workers", "2", "--shard-size", "16",
+                 "--out", str(out)]) == 0
+    sharded = ShardedDataset(out)
+    assert sharded.shard_count == -(-len(local) // 16)
+    assert sharded.fingerprint() == local.fingerprint()
+    assert not blocks_folder(out).exists()
