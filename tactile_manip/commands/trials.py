@@ -28,6 +28,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-frames", dest="frames", action="store_false",
                    help="do not record each trial's per-frame streams to OUT/frames/ (what `export` turns into "
                         "episodes; about 0.5 kB per frame)")
+    p.add_argument("--ray", nargs="?", const="local", default=None, metavar="ADDRESS",
+                   help="run the trials as Ray tasks: 'local' (the default without ADDRESS: a private instance on "
+                        "this machine with --workers CPUs), 'auto' or HOST:PORT; the same log as a local run, in "
+                        "trial order (extra 'ray')")
+    p.add_argument("--workers", type=int, default=0, help="with --ray local: CPUs of the private instance (0 = all)")
+    p.add_argument("--block-trials", type=int, default=None,
+                   help="presentations per Ray task, every method of each (default 4); only with --ray")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -50,7 +57,10 @@ def run(args: argparse.Namespace) -> int:
             raise ValueError(f"--methods: {unknown} not in the scene's methods {sorted(known)}")
         scene = dataclasses.replace(scene, methods=[known[m] for m in wanted])
     check_rerun_options(args)
+    _check_ray_options(args)
     out = check_output_dir(run_folder(scene.name, args.out, resume=args.resume))
+    if args.ray is not None:
+        return _report(out, _run_on_ray(args, scene, out))
     observer = _rerun_observer(args, scene.name) if args.rerun else None
     try:
         summary = run_trials(scene, out, scene_path=args.config, resume=args.resume, progress=not args.quiet,
@@ -63,11 +73,44 @@ def run(args: argparse.Namespace) -> int:
         raise
     if observer is not None:
         observer.close()
+    return _report(out, summary)
+
+
+def _report(out, summary) -> int:
     md = out / "summary.md"
     if md.exists():
         print(md.read_text(), end="")
     print(f"wrote {out}/trials.jsonl, summary.md, summary.json and plots")
     return 0 if summary is not None else 1
+
+
+def _check_ray_options(args: argparse.Namespace) -> None:
+    if args.ray is None:
+        if args.block_trials is not None or args.workers:
+            raise ValueError("--block-trials and --workers apply to --ray runs only")
+        return
+    from tactile_manip.cluster.connect import check_address, preflight
+
+    if args.rerun:
+        raise ValueError("--rerun watches trials in this process; it cannot watch Ray workers (drop --ray, or "
+                         "export the run afterwards: tactile-manip export RUN --format rrd)")
+    if args.workers < 0:
+        raise ValueError(f"--workers must be >= 0, got {args.workers}")
+    if args.block_trials is not None and args.block_trials < 1:
+        raise ValueError(f"--block-trials must be >= 1, got {args.block_trials}")
+    address = check_address(args.ray)
+    if address is not None and args.workers:
+        raise ValueError("--workers sets the CPUs of a private local Ray instance; a cluster uses all of its own")
+    preflight(address)  # an unreachable cluster fails here, before the run folder
+
+
+def _run_on_ray(args: argparse.Namespace, scene, out):
+    from tactile_manip.cluster.connect import check_address
+    from tactile_manip.cluster.trials import DEFAULT_BLOCK_TRIALS, run_trials_on_ray
+
+    return run_trials_on_ray(scene, out, scene_path=args.config, resume=args.resume, progress=not args.quiet,
+                             frames=args.frames, address=check_address(args.ray), num_cpus=args.workers or None,
+                             block_trials=args.block_trials or DEFAULT_BLOCK_TRIALS)
 
 
 def _rerun_observer(args: argparse.Namespace, name: str):
