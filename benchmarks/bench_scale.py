@@ -66,13 +66,17 @@ def _row(kind: str, workers: int, presses: int, seconds: float, start_s: float, 
 
 def _two_node(cfg, tmp: Path, block_size: int) -> dict:
     env = dict(os.environ, RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER="0")
+    # the joining node: the cluster mode (the launcher keeps its loopback address) and the head's token
+    node_env = dict(os.environ, RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER="1", RAY_AUTH_MODE="token")
     ray_cli = [sys.executable, "-m", "ray.scripts.scripts"]
     common = ["--node-ip-address=127.0.0.1", "--num-cpus=1", "--disable-usage-stats"]
     subprocess.run([*ray_cli, "start", "--head", f"--port={PORT}", "--include-dashboard=false", *common],
                    env=env, check=True, capture_output=True)
     try:
-        subprocess.run([sys.executable, "-c", _LOOPBACK_NODE, "start", f"--address=127.0.0.1:{PORT}", *common],
-                       check=True, capture_output=True)
+        joined = subprocess.run([sys.executable, "-c", _LOOPBACK_NODE, "start", f"--address=127.0.0.1:{PORT}",
+                                 *common], env=node_env, capture_output=True, text=True)
+        if joined.returncode:
+            raise SystemExit(f"the second node did not start: {joined.stderr.strip().splitlines()[-1:]}")
         data, seconds = _timed(lambda: generate_on_ray(cfg, tmp / "two_node.npz", address=f"127.0.0.1:{PORT}",
                                                        block_size=block_size))
         return _row("ray, 2 nodes x 1 CPU", 2, len(data), seconds, 0.0, data.fingerprint())
