@@ -154,9 +154,8 @@ class ContactEstimator:
         if t_s is None:
             t_s = reading.t_host_s if isinstance(reading, TactileReading) else time.monotonic()
         window = self._history.push(field_ut, float(t_s))
-        used = 1 + sum(1 for k in range(1, len(window)) if window[k] is not field_ut)
         mean, sigma = self.session.run(None, {"field_ut": window[None]})
-        return self._state(mean[0], sigma[0], field_ut, used, time.perf_counter() - t0)
+        return self._state(mean[0], sigma[0], field_ut, self._history.frames_used, time.perf_counter() - t0)
 
     def stream(self, sensor: TactileSensor, *, timeout_s: float = 0.1, max_estimates: int | None = None,
                stats: StreamStats | None = None) -> Iterator[ContactState]:

@@ -41,7 +41,8 @@ def context_windows(readings: np.ndarray, *, frames: int, max_gap_s: float, time
 class ContextBuffer:
     """The last frames of a stream, as :func:`context_windows` builds them for a dataset.
 
-    ``push(reading, t_s)`` adds the newest reading and returns its window (T, R, C, A).
+    ``push(reading, t_s)`` adds the newest reading and returns its window (T, R, C, A); ``frames_used`` is then
+    the number of real frames in it (1: the reading alone).
     """
 
     def __init__(self, frames: int, max_gap_s: float) -> None:
@@ -51,6 +52,7 @@ class ContextBuffer:
         self.max_gap_s = float(max_gap_s)
         self._readings: list[np.ndarray] = []
         self._times: list[float] = []
+        self.frames_used = 0
 
     def clear(self) -> None:
         """Forget the history (the next reading has no context)."""
@@ -65,8 +67,10 @@ class ContextBuffer:
         self._times.append(float(t_s))
         del self._readings[:-self.frames], self._times[:-self.frames]
         window = [reading]
+        self.frames_used = 1
         for k in range(1, self.frames):
             i = len(self._readings) - 1 - k
             usable = i >= 0 and t_s - self._times[i] <= self.max_gap_s
             window.append(self._readings[i] if usable else reading)
+            self.frames_used += usable
         return np.stack(window).astype(np.float32, copy=False)
