@@ -23,6 +23,7 @@ EXTRAS: dict[str, tuple[str, str]] = {
     "trimesh": ("trimesh", "mesh"),
     "cv2": ("opencv-python-headless", "camera"),
     "franky": ("franky-control", "franky"),
+    "sklearn": ("scikit-learn", "baselines"),
 }
 
 

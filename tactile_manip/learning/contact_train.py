@@ -7,7 +7,11 @@ standardised with the training samples' statistics, stored with the weights. Eac
 with its own seed on the beta-NLL of a Gaussian per target (Seitzer et al. 2022: the NLL weighted by the
 predicted variance to the power beta, so that badly fitted samples are not simply given a large variance),
 AdamW and a one-cycle learning rate, and keeps the weights of its best validation epoch (RMSE of the
-standardised targets); it stops after ``patience`` epochs without improvement.
+standardised targets); once the learning rate has begun to fall, it stops after ``patience`` epochs without
+improvement (while the rate still rises the validation error may stall without the run being done). Last, the
+mixture's sigma is scaled per target so that 68.3 % of the validation errors fall within one sigma
+(``calibrate_sigma``): the members' variance heads and their disagreement are otherwise too wide or too narrow
+by a factor that depends on the data.
 
 ``RUN/best.pt`` holds the mixture of the members with everything the export needs; ``RUN/history.json`` each
 member's curve and the validation RMSE per target of the mixture.
@@ -33,7 +37,8 @@ from tactile_manip.learning.contact_model import ContactModel, ContactModelConfi
 from tactile_manip.perception.contact_context import context_windows
 
 KIND = "contact"
-CONTACT_FLAG = "in_contact"
+WARMUP_FRACTION = 0.3  # share of the one-cycle schedule over which the learning rate rises
+ONE_SIGMA = 0.6827     # share of a Gaussian within one standard deviation
 
 
 @dataclass(frozen=True)
@@ -55,7 +60,9 @@ class ContactTrainConfig:
     weight_decay: float = 1e-4    # AdamW
     nll_beta: float = 0.5         # beta-NLL exponent (0: plain Gaussian NLL)
     val_fraction: float = 0.1     # validation tail of each run's training samples when the data has no val split
-    patience: int = 60            # epochs without a better validation RMSE before a member stops
+    patience: int = 60            # epochs without a better validation RMSE before a member stops (counted once
+                                  # the learning rate falls)
+    calibrate_sigma: bool = True  # scale sigma so that 68.3 % of validation errors are within one sigma
     seed: int = 0
     threads: int = 0              # torch CPU threads (0: torch's default)
 
@@ -160,10 +167,13 @@ def train_contact(cfg: ContactTrainConfig, data_paths: list[str | Path], out: st
         model.members[m].load_state_dict(member.state_dict())
         curves.append(curve)
     model.eval()
+    if cfg.calibrate_sigma:
+        fit_sigma_scale(model, windows[val_idx], targets[val_idx])
     val_rmse = _rmse_per_target(model, windows[val_idx], targets[val_idx], names)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     summary = {"kind": KIND, "train_config": to_dict(cfg), "model_config": to_dict(mcfg), "targets": names,
+               "sigma_scale": model.sigma_scale.tolist(),
                "parameters": count_parameters(model), "train_samples": int(len(train_idx)),
                "val_samples": int(len(val_idx)), "val_rmse": val_rmse,
                "best_epochs": [c["best_epoch"] for c in curves], "train_seconds": round(time.perf_counter() - start, 1),
@@ -203,7 +213,9 @@ def _train_member(cfg: ContactTrainConfig, mcfg: ContactModelConfig, z: torch.Te
     xt, yt = z[train_idx], y[train_idx]
     xv, yv = z[val_idx], y[val_idx]
     steps_per_epoch = math.ceil(len(xt) / cfg.batch_size)
-    sched = torch.optim.lr_scheduler.OneCycleLR(opt, cfg.lr, total_steps=cfg.epochs * steps_per_epoch)
+    sched = torch.optim.lr_scheduler.OneCycleLR(opt, cfg.lr, total_steps=cfg.epochs * steps_per_epoch,
+                                                pct_start=WARMUP_FRACTION)
+    peak_epoch = math.ceil(WARMUP_FRACTION * cfg.epochs)
     best = {"val_rmse": math.inf, "best_epoch": 0, "state": None}
     history = []
     for epoch in range(1, cfg.epochs + 1):
@@ -231,7 +243,7 @@ def _train_member(cfg: ContactTrainConfig, mcfg: ContactModelConfig, z: torch.Te
             progress(row)
         if val < best["val_rmse"]:
             best = {"val_rmse": val, "best_epoch": epoch, "state": {k: v.clone() for k, v in net.state_dict().items()}}
-        elif epoch - best["best_epoch"] >= cfg.patience:
+        elif epoch - max(best["best_epoch"], peak_epoch) >= cfg.patience:
             break
     net.load_state_dict(best["state"])
     return net, {"seed": seed, "best_epoch": best["best_epoch"], "epochs_run": len(history),
@@ -244,6 +256,18 @@ def beta_nll(mean: torch.Tensor, log_var: torch.Tensor, target: torch.Tensor, be
     if beta:
         nll = nll * log_var.exp().detach() ** beta
     return nll.mean()
+
+
+@torch.no_grad()
+def fit_sigma_scale(model: ContactModel, windows: torch.Tensor, targets: torch.Tensor) -> torch.Tensor:
+    """Set ``model.sigma_scale`` (K,) so that a share :data:`ONE_SIGMA` of the errors on ``windows`` (N, T, R,
+    C, A) against ``targets`` (N, K) fall within one sigma, per target; returns it."""
+    model.sigma_scale.fill_(1.0)
+    mean, sigma = model(windows)
+    z = (mean - targets).abs() / sigma.clamp_min(1e-12)         # (N, K)
+    scale = torch.quantile(z, ONE_SIGMA, dim=0).clamp_min(1e-6)
+    model.sigma_scale.copy_(scale)
+    return scale
 
 
 @torch.no_grad()

@@ -100,3 +100,17 @@ def test_unknown_targets_and_image_only_data_are_refused(tmp_path, labelled_pres
     save_dataset(tmp_path / "images.npz", images_only)
     with pytest.raises(DatasetError, match="images only"):
         train_contact(ContactTrainConfig(epochs=1), [tmp_path / "images.npz"], tmp_path / "run2")
+
+
+def test_sigma_is_scaled_so_that_68_percent_of_validation_errors_are_within_one_sigma(contact_model_files,
+                                                                                       labelled_presses) -> None:
+    _, run, _ = contact_model_files
+    model, payload = load_contact_checkpoint(run / "best.pt")
+    data = labelled_presses()
+    _, val = split_indices(data, 0.1)
+    windows = torch.from_numpy(dataset_windows(data, payload["input"]["context"])[val])
+    with torch.no_grad():
+        mean, sigma = model(windows)
+    inside = ((mean - torch.from_numpy(data.targets[val])).abs() <= sigma).float().mean(0)
+    np.testing.assert_allclose(inside.numpy(), 0.683, atol=0.03)
+    assert (model.sigma_scale > 0).all() and not torch.equal(model.sigma_scale, torch.ones(3))
