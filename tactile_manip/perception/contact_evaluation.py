@@ -165,23 +165,28 @@ def write_contact_report(out: str | Path, report: dict[str, Any], info: dict[str
 
 
 def plot_predictions(path: Path, report: dict[str, Any]) -> None:
-    """Predicted against true per target (one panel each; position as x and y panels), every method."""
+    """Predicted against true per target (one panel each; position as x and y panels): the models and the MLP
+    baseline (the other baselines are in the table only; their clouds would hide the models')."""
     from tactile_manip.plots import _pyplot
 
     plt = _pyplot()
     names = report["targets"]
-    fig, axes = plt.subplots(1, len(names), figsize=(4.2 * len(names), 4.0), constrained_layout=True, squeeze=False)
+    shown = [k for k in report["predictions"] if k not in ("Linear", "kNN")]
+    fig, axes = plt.subplots(1, len(names), figsize=(4.4 * len(names), 4.2), constrained_layout=True, squeeze=False)
     true = report["true"]
     for k, (ax, name) in enumerate(zip(axes[0], names)):
         lo, hi = float(true[:, k].min()), float(true[:, k].max())
-        ax.plot([lo, hi], [lo, hi], color="0.6", lw=1)
-        for i, (label, p) in enumerate(report["predictions"].items()):
+        ax.plot([lo, hi], [lo, hi], color="0.3", lw=0.8, zorder=5)
+        for label in reversed(shown):  # the first model on top
+            p = report["predictions"][label]
             if name in p["targets"]:
+                i = list(report["predictions"]).index(label)
                 rmse = report["methods"][label]["rmse"][name]
-                ax.scatter(true[:, k], p["mean"][:, p["targets"].index(name)], s=4, alpha=0.5 if i else 0.7,
-                           color=f"C{i}", label=f"{label} (RMSE {rmse:.3g})", zorder=3 - 0.1 * i)
+                ax.scatter(true[:, k], p["mean"][:, p["targets"].index(name)], s=5, alpha=0.35 if label == "MLP" else 0.6,
+                           color="0.55" if label == "MLP" else f"C{i}", label=f"{label} (RMSE {rmse:.3g})", lw=0)
         ax.set_xlabel(f"true {name}")
         ax.set_ylabel(f"predicted {name}")
-        ax.legend(fontsize=7, markerscale=3)
+        handles, labels = ax.get_legend_handles_labels()
+        ax.legend(handles[::-1], labels[::-1], fontsize=8, markerscale=3, loc="upper left")
     fig.savefig(path, dpi=110)
     plt.close(fig)
