@@ -136,3 +136,32 @@ def test_stream_yields_one_state_per_frame_and_refuses_another_board(contact_mod
     assert [s.context_frames for s in states] == [1, 2, 3, 3, 3]
     with pytest.raises(ValueError, match="anyskin-5"):
         next(est.stream(_Frames(np.zeros((2, 4, 4, 3), np.float32), layout="supermag-4x4")))
+
+
+def test_one_reading_gives_angle_and_contact_with_the_pose_estimator(tmp_path, contact_model_files) -> None:
+    pytest.importorskip("torch", reason="training the 4 x 4 contact model needs torch")
+    from tactile_manip.data import PairedDataset, save_dataset
+    from tactile_manip.learning.contact_export import export_contact_onnx
+    from tactile_manip.learning.contact_train import ContactTrainConfig, train_contact
+    from tactile_manip.perception import TactilePoseEstimator, load_reconstructor
+    from tactile_manip.perception.contact_pose import TactileEstimate, TactileEstimator
+    from tactile_manip.types import AngleEstimate
+
+    rng = np.random.default_rng(0)
+    readings = rng.normal(0, 50, (80, 4, 4, 3)).astype(np.float32)
+    force = np.abs(readings[..., 2]).mean((1, 2)) / 10
+    data = PairedDataset(readings=readings, images=None, split=np.array(["train"] * 64 + ["test"] * 16),
+                         targets=force[:, None].astype(np.float32), target_names=("force_n",),
+                         groups=np.zeros(80, np.int64), provenance={"layout": "supermag-4x4"})
+    save_dataset(tmp_path / "board.npz", data)
+    train_contact(ContactTrainConfig(hidden=8, members=1, epochs=3, threads=1), [tmp_path / "board.npz"],
+                  tmp_path / "run")
+    export_contact_onnx(tmp_path / "run" / "best.pt", tmp_path / "board.onnx")
+    pose = TactilePoseEstimator(load_reconstructor("bilinear"))
+    both = TactileEstimator(pose, ContactEstimator(tmp_path / "board.onnx"))
+    est = both.estimate(readings[3])
+    assert isinstance(est, TactileEstimate) and isinstance(est.angle, AngleEstimate)
+    alone = ContactEstimator(tmp_path / "board.onnx").estimate(readings[3])
+    assert est.contact.force_n == pytest.approx(alone.force_n, rel=1e-6) and est.contact.force_sigma_n > 0
+    with pytest.raises(ValueError, match="one board"):
+        TactileEstimator(pose, ContactEstimator(contact_model_files[2]))
