@@ -48,12 +48,15 @@ def run(args: argparse.Namespace) -> int:
     from tactile_manip.data import load_dataset
     from tactile_manip.errors import DatasetError
 
+    from tactile_manip.outputs import check_output_dir
+
+    if args.model or args.symmetrized or args.inception_onnx:
+        require("onnxruntime", "evaluating exported models")
+    check_output_dir(args.out)  # before reading the data; which report files it will hold depends on them
     data = load_dataset(args.data)
     if not data.has_images and data.has_targets:
         return _run_contact(args, data)
     check_report_folder(args.out, REPORT_FILES, force=args.force)
-    if args.model or args.symmetrized or args.inception_onnx:
-        require("onnxruntime", "evaluating exported models")
     data.require_images(f"evaluate's image metrics (PSNR, SSIM, angle) on {args.data}")
     if not len(data.indices(args.split)):
         raise DatasetError(f"{args.data} has no {args.split} split to evaluate (its splits: "
@@ -138,8 +141,6 @@ def _run_contact(args: argparse.Namespace, data) -> int:
         raise DatasetError(f"{args.data} has no {args.split} split to evaluate (its splits: "
                            f"{', '.join(sorted(set(data.split.tolist())))}); choose one with --split")
     models = {}
-    if args.model:
-        require("onnxruntime", "evaluating exported models")
     for spec in args.model:
         label, sep, path = spec.partition("=")
         if not sep or not label or not path:
