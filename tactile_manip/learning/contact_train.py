@@ -58,7 +58,7 @@ class ContactTrainConfig:
     batch_size: int = 128
     lr: float = 2e-3              # peak of the one-cycle schedule
     weight_decay: float = 1e-4    # AdamW
-    nll_beta: float = 0.5         # beta-NLL exponent (0: plain Gaussian NLL)
+    nll_beta: float = 0.0         # beta-NLL exponent (0: plain Gaussian NLL)
     val_fraction: float = 0.1     # validation tail of each run's training samples when the data has no val split
     patience: int = 60            # epochs without a better validation RMSE before a member stops (counted once
                                   # the learning rate falls)
