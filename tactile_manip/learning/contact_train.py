@@ -4,9 +4,8 @@ Run through ``tactile-manip train --config configs/train/contact.toml --data D.n
 the dataset's ``train`` split train; its ``val`` split validates, or, when it has none, the last
 ``val_fraction`` of each run's training samples in time order (never the test split). Inputs and targets are
 standardised with the training samples' statistics, stored with the weights. Each ensemble member trains
-with its own seed on the beta-NLL of a Gaussian per target (Seitzer et al. 2022: the NLL weighted by the
-predicted variance to the power beta, so that badly fitted samples are not simply given a large variance),
-AdamW and a one-cycle learning rate, and keeps the weights of its best validation epoch (RMSE of the
+with its own seed on the Gaussian NLL per target (with ``nll_beta`` > 0 the beta-NLL of Seitzer et al. 2022:
+the NLL weighted by the predicted variance to the power beta), AdamW and a one-cycle learning rate, and keeps the weights of its best validation epoch (RMSE of the
 standardised targets); once the learning rate has begun to fall, it stops after ``patience`` epochs without
 improvement (while the rate still rises the validation error may stall without the run being done). Last, the
 mixture's sigma is scaled per target so that 68.3 % of the validation errors fall within one sigma
