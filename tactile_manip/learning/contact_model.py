@@ -40,8 +40,8 @@ class ContactModelConfig:
     targets: int = 1                          # K, outputs per sample
     context_frames: int = 3                   # T: the newest reading and T - 1 before it
     features: Literal["field", "field_direction"] = "field_direction"
-    hidden: int = 256                         # units per hidden layer
-    layers: int = 2                           # hidden layers
+    hidden: int = 128                         # units per hidden layer
+    layers: int = 3                           # hidden layers
     act: Literal["gelu", "relu", "silu"] = "gelu"
     members: int = 5                          # ensemble members
 
@@ -141,25 +141,27 @@ class ContactModel(nn.Module):
 
 class FusedContactModel(nn.Module):
     """The same function as a trained :class:`ContactModel`, with the members' layers stacked into batched
-    matrix products (one node per layer instead of one per member and layer: what the exported graph runs)."""
+    matrix products (one node per layer instead of one per member and layer) and the feature standardisation
+    folded into the first layer's weights: what the exported graph runs."""
 
     def __init__(self, model: ContactModel) -> None:
         super().__init__()
         self.cfg = model.cfg
         linears = [[m for m in member.body if isinstance(m, nn.Linear)] + [member.head] for member in model.members]
-        self.weights = nn.ParameterList(
-            nn.Parameter(torch.stack([ms[i].weight.detach().T for ms in linears]), requires_grad=False)
-            for i in range(len(linears[0])))                 # each (M, in, out)
-        self.biases = nn.ParameterList(
-            nn.Parameter(torch.stack([ms[i].bias.detach()[None] for ms in linears]), requires_grad=False)
-            for i in range(len(linears[0])))                 # each (M, 1, out)
+        weights = [torch.stack([ms[i].weight.detach().T for ms in linears]) for i in range(len(linears[0]))]
+        biases = [torch.stack([ms[i].bias.detach()[None] for ms in linears]) for i in range(len(linears[0]))]
+        # ((f - offset) / scale) @ W + b  ==  f @ (W / scale) + (b - (offset / scale) @ W)
+        scale, offset = model.feature_scale.detach(), model.feature_offset.detach()
+        biases[0] = biases[0] - ((offset / scale) @ weights[0])[:, None, :]   # (M, 1, H)
+        weights[0] = weights[0] / scale[None, :, None]                  # (M, F, H)
+        self.weights = nn.ParameterList(nn.Parameter(w, requires_grad=False) for w in weights)   # (M, in, out)
+        self.biases = nn.ParameterList(nn.Parameter(b, requires_grad=False) for b in biases)     # (M, 1, out)
         self.act = ACTIVATIONS[self.cfg.act]()
-        for name in ("feature_offset", "feature_scale", "target_offset", "target_scale", "sigma_scale"):
+        for name in ("target_offset", "target_scale", "sigma_scale"):
             self.register_buffer(name, getattr(model, name).detach().clone())
 
     def forward(self, field_ut: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        z = (frame_features(field_ut, self.cfg) - self.feature_offset) / self.feature_scale   # (B, F)
-        h = z.unsqueeze(0)                                   # (1, B, F), broadcast over the M members
+        h = frame_features(field_ut, self.cfg).unsqueeze(0)  # (1, B, F), broadcast over the M members
         for i, (w, b) in enumerate(zip(self.weights, self.biases)):
             h = torch.matmul(h, w) + b                       # (M, B, out)
             if i < len(self.weights) - 1:

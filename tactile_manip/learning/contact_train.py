@@ -49,8 +49,8 @@ class ContactTrainConfig:
     context_frames: int = 3       # frames per input: the reading and the ones before it
     context_max_gap_s: float = 1.0  # an older frame further back than this is no context (s)
     features: Literal["field", "field_direction"] = "field_direction"
-    hidden: int = 256             # units per hidden layer
-    layers: int = 2               # hidden layers
+    hidden: int = 128             # units per hidden layer
+    layers: int = 3               # hidden layers
     act: Literal["gelu", "relu", "silu"] = "gelu"
     members: int = 5              # ensemble members (independent seeds)
     epochs: int = 300             # per member

@@ -126,6 +126,7 @@ class ContactEstimator:
         except Exception as e:  # noqa: BLE001 - onnxruntime raises its own Fail/InvalidGraph classes
             raise ModelFileError(f"{self.path}: onnxruntime cannot load it: {' '.join(str(e).split())[:200]}") from e
         self._history = ContextBuffer(self.context_frames, self.max_gap_s)
+        self._state_fields = [(n, STATE_FIELDS[n]) for n in self.target_names if n in STATE_FIELDS]
 
     def __repr__(self) -> str:
         return (f"ContactEstimator({str(self.path)!r}, targets={list(self.target_names)}, "
@@ -186,12 +187,11 @@ class ContactEstimator:
 
     def _state(self, mean: np.ndarray, sigma: np.ndarray, field_ut: np.ndarray, used: int,
                latency_s: float) -> ContactState:
-        values = {n: float(v) for n, v in zip(self.target_names, mean)}
-        sigmas = {n: float(s) for n, s in zip(self.target_names, sigma)}
+        values = dict(zip(self.target_names, mean.tolist()))
+        sigmas = dict(zip(self.target_names, sigma.tolist()))
         kwargs: dict[str, Any] = {}
-        for name, sigma_field in STATE_FIELDS.items():
-            if name in values:
-                kwargs[name], kwargs[sigma_field] = values[name], sigmas[name]
+        for name, sigma_field in self._state_fields:
+            kwargs[name], kwargs[sigma_field] = values[name], sigmas[name]
         if CONTACT_FLAG in values:
             probability = float(np.clip(values[CONTACT_FLAG], 0.0, 1.0))
             kwargs["in_contact_probability"] = probability

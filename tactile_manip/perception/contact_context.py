@@ -41,8 +41,8 @@ def context_windows(readings: np.ndarray, *, frames: int, max_gap_s: float, time
 class ContextBuffer:
     """The last frames of a stream, as :func:`context_windows` builds them for a dataset.
 
-    ``push(reading, t_s)`` adds the newest reading and returns its window (T, R, C, A); ``frames_used`` is then
-    the number of real frames in it (1: the reading alone).
+    ``push(reading, t_s)`` adds the newest reading and returns its window (T, R, C, A) float32 (valid until the
+    next push); ``frames_used`` is then the number of real frames in it (1: the reading alone).
     """
 
     def __init__(self, frames: int, max_gap_s: float) -> None:
@@ -50,27 +50,29 @@ class ContextBuffer:
             raise ValueError(f"frames must be >= 1, got {frames}")
         self.frames = frames
         self.max_gap_s = float(max_gap_s)
-        self._readings: list[np.ndarray] = []
-        self._times: list[float] = []
+        self._window: np.ndarray | None = None      # (T, R, C, A), frame 0 the newest
+        self._times = np.full(frames, -np.inf)      # (T,) s, -inf where no frame yet
         self.frames_used = 0
 
     def clear(self) -> None:
         """Forget the history (the next reading has no context)."""
-        self._readings.clear()
-        self._times.clear()
+        self._times[:] = -np.inf
 
     def push(self, reading: np.ndarray, t_s: float) -> np.ndarray:
         """The window (T, R, C, A) float32 of ``reading`` taken at ``t_s`` (s, any monotonic clock)."""
-        if self._times and t_s < self._times[-1]:  # a clock that went back: a new stream
+        if self._window is None or self._window.shape[1:] != reading.shape:
+            self._window = np.empty((self.frames, *reading.shape), np.float32)
             self.clear()
-        self._readings.append(reading)
-        self._times.append(float(t_s))
-        del self._readings[:-self.frames], self._times[:-self.frames]
-        window = [reading]
-        self.frames_used = 1
-        for k in range(1, self.frames):
-            i = len(self._readings) - 1 - k
-            usable = i >= 0 and t_s - self._times[i] <= self.max_gap_s
-            window.append(self._readings[i] if usable else reading)
-            self.frames_used += usable
-        return np.stack(window).astype(np.float32, copy=False)
+        if t_s < self._times[0]:  # a clock that went back: a new stream
+            self.clear()
+        self._window[1:] = self._window[:-1]
+        self._times[1:] = self._times[:-1]
+        self._window[0] = reading
+        self._times[0] = t_s
+        usable = t_s - self._times <= self.max_gap_s            # (T,); False for the frames never filled
+        self.frames_used = int(usable.sum())
+        if self.frames_used == self.frames:
+            return self._window
+        out = self._window.copy()
+        out[~usable] = reading
+        return out
