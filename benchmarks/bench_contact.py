@@ -76,7 +76,8 @@ def markdown(report: dict[str, Any]) -> str:
     m = report["machine"]
     lines = [f"ContactEstimator.estimate, one reading, one thread; {m.get('cpu_model', '')}, "
              f"{m.get('usable_cores')} usable cores, load average {m.get('load_average')}", "",
-             "| case | p50 ms | p99 ms | max ms | p99 of per-reading min ms | session.run p50 ms | error | within 1 sigma |",
+             "| case | p50 ms | p99 ms | max ms | p99 of per-reading min ms | session.run p50 ms | error "
+             "| within 1 sigma |",
              "|---|---|---|---|---|---|---|---|"]
     for label, c in report["cases"].items():
         err = ", ".join([*([f"2-D {c['position_rmse_mm']:.3f} mm"] if "position_rmse_mm" in c else []),

@@ -5,10 +5,10 @@ the dataset's ``train`` split train; its ``val`` split validates, or, when it ha
 ``val_fraction`` of each run's training samples in time order (never the test split). Inputs and targets are
 standardised with the training samples' statistics, stored with the weights. Each ensemble member trains
 with its own seed on the Gaussian NLL per target (with ``nll_beta`` > 0 the beta-NLL of Seitzer et al. 2022:
-the NLL weighted by the predicted variance to the power beta), AdamW and a one-cycle learning rate, and keeps the weights of its best validation epoch (RMSE of the
-standardised targets); once the learning rate has begun to fall, it stops after ``patience`` epochs without
-improvement (while the rate still rises the validation error may stall without the run being done). Last, the
-mixture's sigma is scaled per target so that 68.3 % of the validation errors fall within one sigma
+the NLL weighted by the predicted variance to the power beta), AdamW and a one-cycle learning rate, and keeps
+the weights of its best validation epoch (RMSE of the standardised targets); once the learning rate has
+begun to fall, it stops after ``patience`` epochs without improvement (while the rate still rises the
+validation error may stall without the run being done). Last, the mixture's sigma is scaled per target so that 68.3 % of the validation errors fall within one sigma
 (``calibrate_sigma``): the members' variance heads and their disagreement are otherwise too wide or too narrow
 by a factor that depends on the data.
 
@@ -32,7 +32,9 @@ import torch
 from tactile_manip.config import to_dict
 from tactile_manip.data import PairedDataset, load_datasets
 from tactile_manip.errors import ConfigError, DatasetError
-from tactile_manip.learning.contact_model import ContactModel, ContactModelConfig, GaussianMLP, count_parameters
+from tactile_manip.learning.contact_model import (ContactModel, ContactModelConfig, GaussianMLP, count_parameters,
+                                                  frame_features)
+from tactile_manip.learning.train import TrainingError
 from tactile_manip.perception.contact_context import context_windows
 
 KIND = "contact"
@@ -151,8 +153,6 @@ def train_contact(cfg: ContactTrainConfig, data_paths: list[str | Path], out: st
     torch.manual_seed(cfg.seed)
     model = ContactModel(mcfg)
     with torch.no_grad():
-        from tactile_manip.learning.contact_model import frame_features
-
         model.set_normalisation(frame_features(windows[train_idx], mcfg), targets[train_idx])
         z = model.standardised_features(windows)
         y = (targets - model.target_offset) / model.target_scale
@@ -226,7 +226,7 @@ def _train_member(cfg: ContactTrainConfig, mcfg: ContactModelConfig, z: torch.Te
             mean, log_var = net(xt[i])
             loss = beta_nll(mean, log_var, yt[i], cfg.nll_beta)
             if not torch.isfinite(loss):
-                raise RuntimeError(f"training diverged: the loss became {float(loss)} in epoch {epoch} "
+                raise TrainingError(f"training diverged: the loss became {float(loss)} in epoch {epoch} "
                                    f"(lr {sched.get_last_lr()[0]:g}); lower lr or check the targets")
             opt.zero_grad(set_to_none=True)
             loss.backward()

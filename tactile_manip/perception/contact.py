@@ -201,7 +201,3 @@ class ContactEstimator:
         return ContactState(in_contact=in_contact, values=values, sigmas=sigmas, context_frames=used,
                             latency_s=latency_s, **kwargs)
 
-
-def load_contact_estimator(path: str | Path, **options: Any) -> ContactEstimator:
-    """:class:`ContactEstimator` of ``path`` (ModelFileError naming the path when it is missing or foreign)."""
-    return ContactEstimator(path, **options)

@@ -182,8 +182,9 @@ def plot_predictions(path: Path, report: dict[str, Any]) -> None:
             if name in p["targets"]:
                 i = list(report["predictions"]).index(label)
                 rmse = report["methods"][label]["rmse"][name]
-                ax.scatter(true[:, k], p["mean"][:, p["targets"].index(name)], s=5, alpha=0.35 if label == "MLP" else 0.6,
-                           color="0.55" if label == "MLP" else f"C{i}", label=f"{label} (RMSE {rmse:.3g})", lw=0)
+                ax.scatter(true[:, k], p["mean"][:, p["targets"].index(name)], s=5,
+                           alpha=0.35 if label == "MLP" else 0.6, color="0.55" if label == "MLP" else f"C{i}",
+                           label=f"{label} (RMSE {rmse:.3g})", lw=0)
         ax.set_xlabel(f"true {name}")
         ax.set_ylabel(f"predicted {name}")
         handles, labels = ax.get_legend_handles_labels()

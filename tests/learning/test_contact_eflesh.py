@@ -30,7 +30,8 @@ def _run(run_dir, tmp_path, name: str, import_args: list[str]) -> dict:
                  "--out", str(tmp_path / f"run_{name}")]) == 0
     model = tmp_path / f"{name}.onnx"
     assert main(["export", "--checkpoint", str(tmp_path / f"run_{name}" / "best.pt"), "--out", str(model)]) == 0
-    assert main(["evaluate", "--data", str(data), "--model", f"ours={model}", "--out", str(tmp_path / f"ev_{name}")]) == 0
+    assert main(["evaluate", "--data", str(data), "--model", f"ours={model}",
+                 "--out", str(tmp_path / f"ev_{name}")]) == 0
     return json.loads((tmp_path / f"ev_{name}" / "results.json").read_text())["methods"]
 
 
