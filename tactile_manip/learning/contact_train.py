@@ -8,9 +8,9 @@ with its own seed on the Gaussian NLL per target (with ``nll_beta`` > 0 the beta
 the NLL weighted by the predicted variance to the power beta), AdamW and a one-cycle learning rate, and keeps
 the weights of its best validation epoch (RMSE of the standardised targets); once the learning rate has
 begun to fall, it stops after ``patience`` epochs without improvement (while the rate still rises the
-validation error may stall without the run being done). Last, the mixture's sigma is scaled per target so that 68.3 % of the validation errors fall within one sigma
-(``calibrate_sigma``): the members' variance heads and their disagreement are otherwise too wide or too narrow
-by a factor that depends on the data.
+validation error may stall without the run being done). Last, the mixture's sigma is scaled per target so
+that 68.3 % of the validation errors fall within one sigma (``calibrate_sigma``): the members' variance heads
+and their disagreement are otherwise too wide or too narrow by a factor that depends on the data.
 
 ``RUN/best.pt`` holds the mixture of the members with everything the export needs; ``RUN/history.json`` each
 member's curve and the validation RMSE per target of the mixture.
