@@ -167,11 +167,13 @@ class ContactEstimator:
         """
         self.check_layout(sensor.layout.name)
         stats = StreamStats() if stats is None else stats
-        while max_estimates is None or stats.estimates < max_estimates:
+        count = 0
+        while max_estimates is None or count < max_estimates:
             reading = sensor.wait_new(timeout_s)
             stats.count(reading.seq)
             state = self.estimate(reading)
             stats.estimates += 1
+            count += 1
             yield state
 
     def _check(self, reading: TactileReading | np.ndarray) -> np.ndarray:

@@ -73,9 +73,11 @@ class TactileEstimator:
         self.pose.reconstructor.check_layout(sensor.layout.name)
         self.contact.check_layout(sensor.layout.name)
         stats = StreamStats() if stats is None else stats
-        while max_estimates is None or stats.estimates < max_estimates:
+        count = 0
+        while max_estimates is None or count < max_estimates:
             reading = sensor.wait_new(timeout_s)
             stats.count(reading.seq)
             est = self.estimate(reading)
             stats.estimates += 1
+            count += 1
             yield est
