@@ -90,3 +90,52 @@ def graph_with_shipped_metadata(tmp_path: Path) -> Callable[[str], Path]:
         return path
 
     return make
+
+
+def _labelled_presses(n: int = 600, *, seed: int = 0):
+    """A small synthetic labelled-press dataset on a 3 x 3 board (corners unused), one run sampled at 20 Hz:
+    the field of each used cell falls off with the distance to the contact and scales with the force."""
+    from tactile_manip.data import PairedDataset
+
+    rng = np.random.default_rng(seed)
+    x, y = rng.uniform(-5, 5, n), rng.uniform(-5, 5, n)
+    force = rng.uniform(0, 10, n)
+    cells = [(0, 1), (1, 0), (1, 1), (1, 2), (2, 1)]
+    readings = np.zeros((n, 3, 3, 3), np.float32)
+    for r, c in cells:
+        cx, cy = (c - 1) * 6.0, (1 - r) * 6.0
+        dx, dy = x - cx, y - cy
+        fall = force * np.exp(-(dx ** 2 + dy ** 2) / 50.0)
+        readings[:, r, c] = np.stack([20 * fall * dx / 5, 20 * fall * dy / 5, 60 * fall], axis=1)
+    readings += rng.normal(0, 1.0, readings.shape).astype(np.float32)
+    for r, c in [(0, 0), (0, 2), (2, 0), (2, 2)]:
+        readings[:, r, c] = 0
+    split = np.where(np.arange(n) < int(0.8 * n), "train", "test")
+    return PairedDataset(readings=readings, images=None, split=split, groups=np.zeros(n, np.int64),
+                         targets=np.stack([x, y, force], 1).astype(np.float32),
+                         target_names=("x_mm", "y_mm", "force_n"),
+                         extras={"time_s": np.arange(n) * 0.05}, provenance={"layout": "anyskin-5"})
+
+
+@pytest.fixture(scope="session")
+def labelled_presses():
+    """Factory ``labelled_presses(n=600, seed=0)`` of a synthetic labelled-press dataset (one run, 20 Hz, 3 x 3
+    board with its corners unused; targets x_mm, y_mm, force_n; chronological 80/20 split)."""
+    return _labelled_presses
+
+
+@pytest.fixture(scope="session")
+def contact_model_files(tmp_path_factory):
+    """(dataset .npz, run folder, exported .onnx) of a tiny contact model trained on :func:`labelled_presses`."""
+    pytest.importorskip("torch", reason="training the contact model needs torch")
+    pytest.importorskip("onnxruntime", reason="exporting the contact model checks it on onnxruntime")
+    from tactile_manip.data import save_dataset
+    from tactile_manip.learning.contact_export import export_contact_onnx
+    from tactile_manip.learning.contact_train import ContactTrainConfig, train_contact
+
+    root = tmp_path_factory.mktemp("contact")
+    save_dataset(root / "presses.npz", _labelled_presses())
+    cfg = ContactTrainConfig(hidden=32, members=2, epochs=40, patience=40, batch_size=64, lr=5e-3, threads=1)
+    train_contact(cfg, [root / "presses.npz"], root / "run")
+    export_contact_onnx(root / "run" / "best.pt", root / "contact.onnx")
+    return root / "presses.npz", root / "run", root / "contact.onnx"

@@ -1,5 +1,9 @@
 """``tactile-manip evaluate``: SuperMag's Table I on our unseen test objects, with a gallery figure.
 
+On a dataset of labelled presses (targets, no images) it evaluates contact models instead: RMSE and MAE per
+target, sigma calibration, per run and force band, against linear, kNN and MLP baselines fitted on the same
+split (:mod:`tactile_manip.perception.contact_evaluation`); it writes table.md, results.json and contact.png.
+
 The interpolation baselines are fitted on the dataset's training split (``--baseline-objects`` narrows it to
 some objects: our Table I fits them on the paper's two training objects, as the shipped fit is); models are
 exported ``.onnx`` files given as ``--model LABEL=PATH`` (in table order).
@@ -29,7 +33,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--inception-onnx", default=None,
                    help="Inception-v3 pool features as ONNX ((N,3,299,299) -> (N,2048)) to report a real FID")
     p.add_argument("--threads", type=int, default=1, help="onnxruntime threads per model (default 1)")
-    p.add_argument("--no-baselines", action="store_true", help="skip the bilinear and bicubic baselines")
+    p.add_argument("--no-baselines", action="store_true",
+                   help="skip the baselines (bilinear and bicubic; on labelled presses: linear, kNN, MLP)")
     p.add_argument("--baseline-channel", default=None, metavar="NAME",
                    help="channel the baselines upsample (default: z of a magnetic reading, else the first)")
     p.add_argument("--baseline-objects", default="", metavar="NAME,NAME",
@@ -43,10 +48,15 @@ def run(args: argparse.Namespace) -> int:
     from tactile_manip.data import load_dataset
     from tactile_manip.errors import DatasetError
 
-    check_report_folder(args.out, REPORT_FILES, force=args.force)
+    from tactile_manip.outputs import check_output_dir
+
     if args.model or args.symmetrized or args.inception_onnx:
         require("onnxruntime", "evaluating exported models")
+    check_output_dir(args.out)  # before reading the data; which report files it will hold depends on them
     data = load_dataset(args.data)
+    if not data.has_images and data.has_targets:
+        return _run_contact(args, data)
+    check_report_folder(args.out, REPORT_FILES, force=args.force)
     data.require_images(f"evaluate's image metrics (PSNR, SSIM, angle) on {args.data}")
     if not len(data.indices(args.split)):
         raise DatasetError(f"{args.data} has no {args.split} split to evaluate (its splits: "
@@ -110,3 +120,35 @@ def _gallery_rows(data, split: str, seen_split: str) -> list[tuple[str, int]]:
             rows.append((s, int(idx[pos])))
     return rows
 
+
+
+CONTACT_REPORT_FILES = ("table.md", "results.json", "contact.png")
+
+
+def _run_contact(args: argparse.Namespace, data) -> int:
+    """Contact models and baselines on a dataset of labelled presses (see the module docstring)."""
+    from tactile_manip.errors import DatasetError
+    from tactile_manip.perception.contact import ContactEstimator
+    from tactile_manip.perception.contact_evaluation import evaluate_contact, markdown_table, write_contact_report
+
+    unused = [f for f, v in (("--symmetrized", args.symmetrized), ("--inception-onnx", args.inception_onnx),
+                             ("--baseline-channel", args.baseline_channel),
+                             ("--baseline-objects", args.baseline_objects)) if v]
+    if unused:
+        raise ValueError(f"{', '.join(unused)}: for image datasets; {args.data} holds labelled presses")
+    check_report_folder(args.out, CONTACT_REPORT_FILES, force=args.force)
+    if not len(data.indices(args.split)):
+        raise DatasetError(f"{args.data} has no {args.split} split to evaluate (its splits: "
+                           f"{', '.join(sorted(set(data.split.tolist())))}); choose one with --split")
+    models = {}
+    for spec in args.model:
+        label, sep, path = spec.partition("=")
+        if not sep or not label or not path:
+            raise ValueError(f"--model must be LABEL=PATH, got {spec!r}")
+        models[label] = ContactEstimator(path, threads=args.threads)
+    report = evaluate_contact(data, models, split=args.split, baselines=not args.no_baselines)
+    write_contact_report(args.out, report, {"data": str(args.data), "data_fingerprint": data.fingerprint(),
+                                            "models": {k: str(m.path) for k, m in models.items()}})
+    print(markdown_table(report), end="")
+    print(f"wrote {args.out}/table.md, results.json, contact.png")
+    return 0

@@ -93,6 +93,8 @@ def _export_checkpoint(args: argparse.Namespace) -> int:
     require("onnx", "export")
     require("onnxruntime", "export's parity check")
     check_output_file(args.out, force=args.force)
+    if _checkpoint_kind(args.checkpoint) == "contact":
+        return _export_contact(args)
     if args.card:
         check_output_file(args.card, force=args.force)
     readings, pixel_mm, extra = None, args.pixel_mm or 0.1, {}
@@ -148,3 +150,33 @@ def _commands(args: argparse.Namespace) -> list[str]:
     return [*(f"tactile-manip simulate --config configs/dataset/{d.stem}.toml --out {d}" for d in data),
             f"tactile-manip train --config configs/train/{run.name}.toml --data {files} --out {run}",
             f"tactile-manip export --checkpoint {args.checkpoint} --out {args.out} --data {files} --force"]
+
+
+def _checkpoint_kind(path: str) -> str:
+    """"contact" for a contact-model checkpoint, else "cvae" (read_checkpoint names a bad file)."""
+    from tactile_manip.learning.checkpoint import read_checkpoint
+
+    return str(read_checkpoint(path).get("kind", "cvae"))
+
+
+def _export_contact(args: argparse.Namespace) -> int:
+    """Export a contact model (tactile_manip.learning.contact_export); --data gives real windows to check."""
+    from tactile_manip.learning.contact_export import export_contact_onnx, load_contact_checkpoint
+    from tactile_manip.learning.contact_train import dataset_windows
+    from tactile_manip.data import load_datasets
+
+    if args.card or args.pixel_mm is not None:
+        raise ValueError("--card and --pixel-mm are for image models; a contact model keeps its validation "
+                         "figures in its metadata")
+    windows = None
+    if args.data:
+        _, payload = load_contact_checkpoint(args.checkpoint)
+        data = load_datasets(args.data)
+        windows = dataset_windows(data, payload["input"]["context"])[data.indices("test")]
+    metrics = json.loads(open(args.metrics).read()) if args.metrics else {}
+    meta = export_contact_onnx(args.checkpoint, args.out, metrics=metrics, check_windows=windows)
+    targets = ", ".join(f"{n} [{u}]" for n, u in zip(meta["targets"]["names"], meta["targets"]["units"]))
+    print(f"wrote {args.out}: contact model, {meta['parameters']:,} parameters, targets {targets}, "
+          f"{meta['context']['frames']} frame(s) of context, ONNX vs torch max |diff| "
+          f"{meta['parity_max_abs']:.2e} target spreads")
+    return 0

@@ -1,5 +1,8 @@
 """``tactile-manip train``: train a SuperMag CVAE on a paired dataset (torch; `pip install -e ".[train]"`).
 
+A config with ``kind = "contact"`` (configs/train/contact.toml) trains the contact network on labelled
+presses instead (:mod:`tactile_manip.learning.contact_train`).
+
 Start it with ``torchrun --nproc_per_node N -m tactile_manip train ...`` to train data-parallel.
 """
 
@@ -34,6 +37,8 @@ def run(args: argparse.Namespace) -> int:
     from tactile_manip.learning.import_check import require_torch
 
     require_torch()
+    if _config_kind(args.config) == "contact":
+        return _run_contact(args)
     from tqdm import tqdm
 
     from tactile_manip.learning.train import load_train_config, resolve_device, train, with_overrides
@@ -76,3 +81,56 @@ def _check_run_folder(args: argparse.Namespace) -> None:
 
     check_report_folder(args.out, ("checkpoint.pt", "best.pt"), force=args.resume or args.force,
                         hint="pass --resume to continue it, --force to start over (replacing it), or give a new --out")
+
+
+def _config_kind(path: str) -> str:
+    """The config's ``kind`` ("contact", or "cvae" when absent); an unreadable file is left to the loader."""
+    import tomllib
+    from pathlib import Path
+
+    try:
+        return str(tomllib.loads(Path(path).read_text()).get("kind", "cvae"))
+    except (OSError, ValueError):
+        return "cvae"
+
+
+def _run_contact(args: argparse.Namespace) -> int:
+    """Train the contact network (targets from labelled presses); the CVAE-only flags are refused."""
+    import dataclasses
+
+    from tqdm import tqdm
+
+    from tactile_manip.data import check_dataset_file
+    from tactile_manip.errors import ConfigError
+    from tactile_manip.learning.contact_train import load_contact_config, train_contact
+
+    given = [f for f, v in (("--resume", args.resume), ("--init", args.init), ("--device", args.device),
+                            ("--max-minutes", args.max_minutes)) if v]
+    if given:
+        raise ConfigError(f"{', '.join(given)}: not for a contact model (kind = \"contact\"), which trains in "
+                          "minutes on the CPU")
+    _check_run_folder(args)
+    for path in args.data:
+        check_dataset_file(path)
+    cfg = load_contact_config(args.config)
+    changes = {k: v for k, v in (("epochs", args.epochs), ("seed", args.seed), ("threads", args.threads))
+               if v is not None}
+    cfg = dataclasses.replace(cfg, **changes)
+    bars = []
+
+    def start(total: int) -> None:
+        bars.append(tqdm(total=total, unit="epoch", desc=f"training contact x{cfg.members}"))
+
+    def progress(row: dict) -> None:
+        bars[0].update(1)
+        bars[0].set_postfix(member=row["member"], loss=f"{row['loss']:.3f}", val_rmse=f"{row['val_rmse']:.3f}")
+
+    try:
+        summary = train_contact(cfg, args.data, args.out, progress=progress, on_start=start)
+    finally:
+        for bar in bars:
+            bar.close()
+    rmse = ", ".join(f"{k} {v:.3g}" for k, v in summary["val_rmse"].items())
+    print(f"validation RMSE {rmse} ({summary['val_samples']} samples; {summary['train_seconds'] / 60:.1f} min); "
+          f"wrote {args.out}/best.pt, history.json")
+    return 0

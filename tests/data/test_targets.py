@@ -160,7 +160,6 @@ def test_a_file_that_is_not_numpy_is_called_that(tmp_path):
 
 @pytest.mark.parametrize("command", [
     ["show", "--index", "0", "--out", "{tmp}/s.png"],
-    ["evaluate", "--out", "{tmp}/ev", "--no-baselines"],
     ["train", "--config", "configs/train/fast.toml", "--out", "{tmp}/run"],
 ])
 def test_image_commands_refuse_a_targets_only_dataset_in_one_line(command, tmp_path, capsys):

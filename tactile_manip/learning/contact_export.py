@@ -1,0 +1,136 @@
+"""Export a trained contact network to ONNX with everything inference needs inside the file.
+
+The graph (the members' layers stacked into batched products, :class:`~.contact_model.FusedContactModel`)
+takes ``field_ut`` (B, T, R, C, A) float32, a window of T readings (frame 0 the newest; microtesla,
+baseline-subtracted) and returns ``mean`` (B, K) and ``sigma`` (B, K) in the targets' units. Features and
+standardisation run inside the graph. The JSON under the metadata key ``tactile_manip`` holds the kind
+(``"contact"``), the target names and units, the input's shape, layout and units, the board layout, the
+temporal context (frames, largest gap, the training stream's frame period), the normalisation, the training
+and model configs, the data fingerprint and the validation RMSE. Export re-runs the file with onnxruntime on
+real and random windows and refuses to keep one that disagrees with torch.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from tactile_manip.config import to_dict
+from tactile_manip.data.targets import target_unit
+from tactile_manip.learning.checkpoint import CheckpointError, read_checkpoint
+from tactile_manip.learning.contact_model import (ContactModel, ContactModelConfig, FusedContactModel,
+                                                  count_parameters)
+from tactile_manip.learning.export import ExportError
+from tactile_manip.perception.reconstruct import METADATA_KEY
+from tactile_manip.version import __version__
+
+FORMAT_VERSION = 1
+KIND = "contact"
+PARITY_TOLERANCE = 1e-4   # relative to each target's training spread
+
+
+def load_contact_checkpoint(path: str | Path) -> tuple[ContactModel, dict[str, Any]]:
+    """The contact model (eval mode) and the checkpoint payload."""
+    payload = read_checkpoint(path)
+    if payload.get("kind") != KIND:
+        raise CheckpointError(f"{path} is not a contact model checkpoint (kind {payload.get('kind', 'cvae')!r})")
+    try:
+        mcfg = ContactModelConfig(**{k: tuple(v) if isinstance(v, list) else v
+                                     for k, v in payload["model_config"].items()})
+        model = ContactModel(mcfg)
+        model.load_state_dict(payload["model"])
+    except (TypeError, ValueError, RuntimeError) as e:
+        raise CheckpointError(f"{path}: the checkpoint does not fit this code's contact model "
+                              f"({type(e).__name__}: {' '.join(str(e).split())[:160]})") from e
+    return model.eval(), payload
+
+
+def export_contact_onnx(checkpoint: str | Path, out: str | Path, *, metrics: dict | None = None,
+                        check_windows: np.ndarray | None = None) -> dict[str, Any]:
+    """Write ``out`` (.onnx) from ``checkpoint`` and return its metadata (with ``parity_max_abs``).
+
+    ``check_windows`` (N, T, R, C, A): real input windows for the parity check (random ones are added).
+    """
+    import onnx
+
+    model, payload = load_contact_checkpoint(checkpoint)
+    cfg = model.cfg
+    example = torch.zeros(2, cfg.context_frames, *cfg.cells)
+    final = Path(out)
+    tmp = final.with_name(final.name + ".partial")
+    final.parent.mkdir(parents=True, exist_ok=True)
+    fused = FusedContactModel(model).eval()  # one batched product per layer: fewer nodes, same function
+    torch.onnx.export(fused, (example,), str(tmp), dynamo=False, opset_version=17, input_names=["field_ut"],
+                      output_names=["mean", "sigma"],
+                      dynamic_axes={"field_ut": {0: "batch"}, "mean": {0: "batch"}, "sigma": {0: "batch"}})
+    meta = contact_metadata(model, payload, metrics or {})
+    proto = onnx.load(str(tmp))
+    entry = proto.metadata_props.add()
+    entry.key, entry.value = METADATA_KEY, json.dumps(meta)
+    proto.producer_name = "tactile_manip"
+    onnx.save(proto, str(tmp))
+    meta["parity_max_abs"] = check_contact_parity(model, tmp, check_windows)
+    tmp.replace(final)
+    return meta
+
+
+def contact_metadata(model: ContactModel, payload: dict[str, Any], metrics: dict) -> dict[str, Any]:
+    """The JSON stored in the file (see the module docstring)."""
+    cfg = model.cfg
+    names = list(payload["targets"])
+    inp = payload["input"]
+    return {
+        "format_version": FORMAT_VERSION, "kind": KIND, "package_version": __version__,
+        "input": {"name": "field_ut", "shape": ["batch", cfg.context_frames, *cfg.cells],
+                  "units": "microtesla, baseline-subtracted (raw minus the no-contact field)",
+                  "layout": "[frame, row, col, channel]; frame 0 the newest reading, frame k the reading k frames "
+                            "before it", "channels": inp["channels"]},
+        "board_layout": inp["layout"],
+        "context": inp["context"],
+        "targets": {"names": names, "units": [target_unit(n) for n in names]},
+        "output": {"names": ["mean", "sigma"], "shape": ["batch", len(names)],
+                   "what": "Gaussian mean and standard deviation per target, in the target's unit: the mixture of "
+                           f"{cfg.members} ensemble members"},
+        "normalisation": {"features": cfg.features,
+                          "feature_offset": model.feature_offset.tolist(),
+                          "feature_scale": model.feature_scale.tolist(),
+                          "target_offset": model.target_offset.tolist(),
+                          "target_scale": model.target_scale.tolist(),
+                          "sigma_scale": model.sigma_scale.tolist(),
+                          "what": "features standardised with the training split's mean and spread (inside the "
+                                  "graph); outputs mapped back to target units; sigma times sigma_scale, fitted on "
+                                  "the validation samples (68.3 % of their errors within one sigma)"},
+        "model_config": to_dict(cfg), "train_config": payload["train_config"],
+        "training_data": payload.get("data", {}), "parameters": count_parameters(model), "metrics": metrics,
+    }
+
+
+def check_contact_parity(model: ContactModel, path: Path, windows: np.ndarray | None = None) -> float:
+    """Max |ONNX - torch| over real and random windows, relative to the target spreads; raises above tolerance
+    (and removes ``path``)."""
+    import onnxruntime as ort
+
+    cfg = model.cfg
+    rng = np.random.default_rng(0)
+    batches = [rng.normal(0, 200, (8, cfg.context_frames, *cfg.cells)).astype(np.float32)]
+    if windows is not None and len(windows):
+        batches.append(np.asarray(windows[:64], dtype=np.float32))
+    session = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
+    scale = model.target_scale.numpy()
+    worst = 0.0
+    for w in batches:
+        with torch.no_grad():
+            ref = [t.numpy() for t in model(torch.from_numpy(w))]
+        got = session.run(None, {"field_ut": w})
+        got_one = [np.concatenate(o) for o in zip(*(session.run(None, {"field_ut": w[i:i + 1]}) for i in range(3)))]
+        worst = max(worst, *(float(np.max(np.abs(a - b) / scale)) for a, b in zip(ref, got)),
+                    *(float(np.max(np.abs(a[:3] - b) / scale)) for a, b in zip(ref, got_one)))
+    if not worst <= PARITY_TOLERANCE:
+        path.unlink(missing_ok=True)
+        raise ExportError(f"ONNX output differs from torch by {worst:.3g} target spreads (> {PARITY_TOLERANCE}); "
+                          f"{path} was not kept")
+    return worst

@@ -1,0 +1,276 @@
+"""Training of the contact network (:mod:`.contact_model`) on labelled presses, seeded, with early stopping.
+
+Run through ``tactile-manip train --config configs/train/contact.toml --data D.npz --out RUN``. The samples of
+the dataset's ``train`` split train; its ``val`` split validates, or, when it has none, the last
+``val_fraction`` of each run's training samples in time order (never the test split). Inputs and targets are
+standardised with the training samples' statistics, stored with the weights. Each ensemble member trains
+with its own seed on the Gaussian NLL per target (with ``nll_beta`` > 0 the beta-NLL of Seitzer et al. 2022:
+the NLL weighted by the predicted variance to the power beta), AdamW and a one-cycle learning rate, and keeps
+the weights of its best validation epoch (RMSE of the standardised targets); once the learning rate has
+begun to fall, it stops after ``patience`` epochs without improvement (while the rate still rises the
+validation error may stall without the run being done). Last, the mixture's sigma is scaled per target so
+that 68.3 % of the validation errors fall within one sigma (``calibrate_sigma``): the members' variance heads
+and their disagreement are otherwise too wide or too narrow by a factor that depends on the data.
+
+``RUN/best.pt`` holds the mixture of the members with everything the export needs; ``RUN/history.json`` each
+member's curve and the validation RMSE per target of the mixture.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+import torch
+
+from tactile_manip.config import to_dict
+from tactile_manip.data import PairedDataset, load_datasets
+from tactile_manip.errors import ConfigError, DatasetError
+from tactile_manip.learning.contact_model import (ContactModel, ContactModelConfig, GaussianMLP, count_parameters,
+                                                  frame_features)
+from tactile_manip.learning.train import TrainingError
+from tactile_manip.perception.contact_context import context_windows
+
+KIND = "contact"
+WARMUP_FRACTION = 0.3  # share of the one-cycle schedule over which the learning rate rises
+ONE_SIGMA = 0.6827     # share of a Gaussian within one standard deviation
+
+
+@dataclass(frozen=True)
+class ContactTrainConfig:
+    """Mirrors ``configs/train/contact.toml``."""
+
+    kind: Literal["contact"] = "contact"
+    targets: list[str] = field(default_factory=list)  # targets learnt ([]: all of the dataset's)
+    context_frames: int = 3       # frames per input: the reading and the ones before it
+    context_max_gap_s: float = 1.0  # an older frame further back than this is no context (s)
+    features: Literal["field", "field_direction"] = "field_direction"
+    hidden: int = 128             # units per hidden layer
+    layers: int = 3               # hidden layers
+    act: Literal["gelu", "relu", "silu"] = "gelu"
+    members: int = 5              # ensemble members (independent seeds)
+    epochs: int = 300             # per member
+    batch_size: int = 128
+    lr: float = 2e-3              # peak of the one-cycle schedule
+    weight_decay: float = 1e-4    # AdamW
+    nll_beta: float = 0.0         # beta-NLL exponent (0: plain Gaussian NLL)
+    val_fraction: float = 0.1     # validation tail of each run's training samples when the data has no val split
+    patience: int = 60            # epochs without a better validation RMSE before a member stops (counted once
+                                  # the learning rate falls)
+    calibrate_sigma: bool = True  # scale sigma so that 68.3 % of validation errors are within one sigma
+    seed: int = 0
+    threads: int = 0              # torch CPU threads (0: torch's default)
+
+    def __post_init__(self) -> None:
+        for name in ("epochs", "batch_size", "patience"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
+        if not (math.isfinite(self.lr) and 0 < self.lr < 1):
+            raise ValueError(f"lr must be in (0, 1), got {self.lr}")
+        if not (math.isfinite(self.weight_decay) and self.weight_decay >= 0):
+            raise ValueError(f"weight_decay must be >= 0, got {self.weight_decay}")
+        if not 0 <= self.nll_beta <= 1:
+            raise ValueError(f"nll_beta must be in [0, 1], got {self.nll_beta}")
+        if not 0 < self.val_fraction < 1:
+            raise ValueError(f"val_fraction must be in (0, 1), got {self.val_fraction}")
+        if not (math.isfinite(self.context_max_gap_s) and self.context_max_gap_s >= 0):
+            raise ValueError(f"context_max_gap_s must be >= 0, got {self.context_max_gap_s}")
+        self.model_config((3, 3, 3), 1)  # the architecture fields, checked by ContactModelConfig
+
+    def model_config(self, cells: tuple[int, int, int], targets: int) -> ContactModelConfig:
+        return ContactModelConfig(cells=tuple(cells), targets=targets, context_frames=self.context_frames,
+                                  features=self.features, hidden=self.hidden, layers=self.layers, act=self.act,
+                                  members=self.members)
+
+
+def load_contact_config(path: str | Path) -> ContactTrainConfig:
+    from tactile_manip.config import load_config
+
+    return load_config(path, ContactTrainConfig)
+
+
+def dataset_windows(data: PairedDataset, cfg: ContactTrainConfig | dict) -> np.ndarray:
+    """Input windows (N, T, R, C, A) of every sample, with the context settings of ``cfg`` (a config or the
+    ``context`` record of a checkpoint)."""
+    frames = cfg["frames"] if isinstance(cfg, dict) else cfg.context_frames
+    gap = cfg["max_gap_s"] if isinstance(cfg, dict) else cfg.context_max_gap_s
+    time_s = data.extra("time_s") if data.has("time_s") else None
+    return context_windows(data.readings, frames=frames, max_gap_s=gap, time_s=time_s, groups=data.groups)
+
+
+def split_indices(data: PairedDataset, val_fraction: float) -> tuple[np.ndarray, np.ndarray]:
+    """Training and validation sample indices: the val split, or each run's last training samples in time."""
+    train, val = data.indices("train"), data.indices("val")
+    if len(val):
+        return train, val
+    groups = np.zeros(len(data), np.int64) if data.groups is None else data.groups
+    t = data.extra("time_s") if data.has("time_s") else np.arange(len(data), dtype=np.float64)
+    keep, hold = [], []
+    for g in np.unique(groups[train]):
+        rows = train[groups[train] == g]
+        rows = rows[np.argsort(t[rows], kind="stable")]
+        n_val = max(1, int(round(val_fraction * len(rows))))
+        keep.append(rows[:-n_val])
+        hold.append(rows[-n_val:])
+    return np.sort(np.concatenate(keep)), np.sort(np.concatenate(hold))
+
+
+def chosen_targets(data: PairedDataset, cfg: ContactTrainConfig) -> list[str]:
+    if not data.has_targets:
+        raise DatasetError("the contact model learns per-sample targets; this dataset holds images only: import "
+                           "labelled presses (`tactile-manip import --labels-csv ...`) or simulate with targets")
+    names = cfg.targets or list(data.target_names)
+    unknown = [n for n in names if n not in data.target_names]
+    if unknown:
+        raise ConfigError(f"targets {unknown} are not in the dataset; it has {list(data.target_names)}")
+    return names
+
+
+def train_contact(cfg: ContactTrainConfig, data_paths: list[str | Path], out: str | Path, *,
+                  progress: Callable[[dict[str, Any]], None] | None = None,
+                  on_start: Callable[[int], None] | None = None) -> dict[str, Any]:
+    """Train, write ``out/best.pt`` and ``out/history.json``, and return the summary.
+
+    ``on_start(total_epochs)`` is called once the data are loaded and checked; ``progress(row)`` after every
+    epoch of every member (``row``: member, epoch, loss, val_rmse).
+    """
+    if cfg.threads:
+        torch.set_num_threads(cfg.threads)
+    data = load_datasets([Path(p) for p in data_paths])
+    names = chosen_targets(data, cfg)
+    train_idx, val_idx = split_indices(data, cfg.val_fraction)
+    if len(train_idx) < 2:
+        raise DatasetError(f"{len(train_idx)} training sample(s): too few to train on")
+    windows = torch.from_numpy(dataset_windows(data, cfg))
+    targets = torch.from_numpy(np.stack([data.target(n) for n in names], axis=1).astype(np.float32))
+    mcfg = cfg.model_config(tuple(data.readings.shape[1:]), len(names))
+    torch.manual_seed(cfg.seed)
+    model = ContactModel(mcfg)
+    with torch.no_grad():
+        model.set_normalisation(frame_features(windows[train_idx], mcfg), targets[train_idx])
+        z = model.standardised_features(windows)
+        y = (targets - model.target_offset) / model.target_scale
+    if on_start:
+        on_start(cfg.members * cfg.epochs)
+    start = time.perf_counter()
+    curves = []
+    for m in range(cfg.members):
+        member, curve = _train_member(cfg, mcfg, z, y, train_idx, val_idx, seed=cfg.seed * 1000 + m,
+                                      progress=(lambda row, m=m: progress({"member": m, **row})) if progress else None)
+        model.members[m].load_state_dict(member.state_dict())
+        curves.append(curve)
+    model.eval()
+    if cfg.calibrate_sigma:
+        fit_sigma_scale(model, windows[val_idx], targets[val_idx])
+    val_rmse = _rmse_per_target(model, windows[val_idx], targets[val_idx], names)
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    summary = {"kind": KIND, "train_config": to_dict(cfg), "model_config": to_dict(mcfg), "targets": names,
+               "sigma_scale": model.sigma_scale.tolist(),
+               "parameters": count_parameters(model), "train_samples": int(len(train_idx)),
+               "val_samples": int(len(val_idx)), "val_rmse": val_rmse,
+               "best_epochs": [c["best_epoch"] for c in curves], "train_seconds": round(time.perf_counter() - start, 1),
+               "data_fingerprint": data.fingerprint(), "members": curves}
+    payload = {"kind": KIND, "model": model.state_dict(), "model_config": to_dict(mcfg), "train_config": to_dict(cfg),
+               "input": _input_record(data, cfg), "targets": names,
+               "data": {"fingerprint": data.fingerprint(), "samples": len(data), "provenance_source":
+                        data.provenance.get("source"), "val_rmse": val_rmse}}
+    tmp = out / "best.pt.partial"
+    torch.save(payload, tmp)
+    tmp.replace(out / "best.pt")
+    (out / "history.json").write_text(json.dumps(summary, indent=1))
+    return summary
+
+
+def _input_record(data: PairedDataset, cfg: ContactTrainConfig) -> dict[str, Any]:
+    """What the model reads: shape, channels, board layout, and the stream's frame period for the context."""
+    period = None
+    if data.has("time_s") and len(data) > 1:
+        steps = np.diff(np.sort(data.extra("time_s")))
+        period = float(np.median(steps[steps > 0])) if (steps > 0).any() else None
+    return {"cells": list(data.readings.shape[1:]), "channels": to_dict(data.channels),
+            "layout": data.provenance.get("layout", "supermag-4x4" if data.grid == (4, 4) else
+                                          f"grid-{data.grid[0]}x{data.grid[1]}"),
+            "context": {"frames": cfg.context_frames, "max_gap_s": cfg.context_max_gap_s,
+                        "frame_period_s": period}}
+
+
+def _train_member(cfg: ContactTrainConfig, mcfg: ContactModelConfig, z: torch.Tensor, y: torch.Tensor,
+                  train_idx: np.ndarray, val_idx: np.ndarray, *, seed: int,
+                  progress: Callable[[dict[str, Any]], None] | None) -> tuple[GaussianMLP, dict[str, Any]]:
+    """One member, trained on standardised features ``z`` (N, F) and targets ``y`` (N, K); its best weights."""
+    torch.manual_seed(seed)
+    gen = torch.Generator().manual_seed(seed)
+    net = GaussianMLP(mcfg)
+    opt = torch.optim.AdamW(net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
+    xt, yt = z[train_idx], y[train_idx]
+    xv, yv = z[val_idx], y[val_idx]
+    steps_per_epoch = math.ceil(len(xt) / cfg.batch_size)
+    sched = torch.optim.lr_scheduler.OneCycleLR(opt, cfg.lr, total_steps=cfg.epochs * steps_per_epoch,
+                                                pct_start=WARMUP_FRACTION)
+    peak_epoch = math.ceil(WARMUP_FRACTION * cfg.epochs)
+    best = {"val_rmse": math.inf, "best_epoch": 0, "state": None}
+    history = []
+    for epoch in range(1, cfg.epochs + 1):
+        net.train()
+        order = torch.randperm(len(xt), generator=gen)
+        total = 0.0
+        for b in range(0, len(xt), cfg.batch_size):
+            i = order[b:b + cfg.batch_size]
+            mean, log_var = net(xt[i])
+            loss = beta_nll(mean, log_var, yt[i], cfg.nll_beta)
+            if not torch.isfinite(loss):
+                raise TrainingError(f"training diverged: the loss became {float(loss)} in epoch {epoch} "
+                                   f"(lr {sched.get_last_lr()[0]:g}); lower lr or check the targets")
+            opt.zero_grad(set_to_none=True)
+            loss.backward()
+            opt.step()
+            sched.step()
+            total += float(loss.detach()) * len(i)
+        net.eval()
+        with torch.no_grad():
+            val = float(((net(xv)[0] - yv) ** 2).sum(1).mean().sqrt())
+        row = {"epoch": epoch, "loss": total / len(xt), "val_rmse": val}
+        history.append(row)
+        if progress:
+            progress(row)
+        if val < best["val_rmse"]:
+            best = {"val_rmse": val, "best_epoch": epoch, "state": {k: v.clone() for k, v in net.state_dict().items()}}
+        elif epoch - max(best["best_epoch"], peak_epoch) >= cfg.patience:
+            break
+    net.load_state_dict(best["state"])
+    return net, {"seed": seed, "best_epoch": best["best_epoch"], "epochs_run": len(history),
+                 "best_val_rmse_std": best["val_rmse"], "history": history}
+
+
+def beta_nll(mean: torch.Tensor, log_var: torch.Tensor, target: torch.Tensor, beta: float) -> torch.Tensor:
+    """Mean beta-NLL of Gaussians (mean, log variance) at ``target``, all (B, K)."""
+    nll = 0.5 * (log_var + (mean - target) ** 2 / log_var.exp())
+    if beta:
+        nll = nll * log_var.exp().detach() ** beta
+    return nll.mean()
+
+
+@torch.no_grad()
+def fit_sigma_scale(model: ContactModel, windows: torch.Tensor, targets: torch.Tensor) -> torch.Tensor:
+    """Set ``model.sigma_scale`` (K,) so that a share :data:`ONE_SIGMA` of the errors on ``windows`` (N, T, R,
+    C, A) against ``targets`` (N, K) fall within one sigma, per target; returns it."""
+    model.sigma_scale.fill_(1.0)
+    mean, sigma = model(windows)
+    z = (mean - targets).abs() / sigma.clamp_min(1e-12)         # (N, K)
+    scale = torch.quantile(z, ONE_SIGMA, dim=0).clamp_min(1e-6)
+    model.sigma_scale.copy_(scale)
+    return scale
+
+
+@torch.no_grad()
+def _rmse_per_target(model: ContactModel, windows: torch.Tensor, targets: torch.Tensor,
+                     names: list[str]) -> dict[str, float]:
+    mean, _ = model(windows)
+    return {n: float(((mean[:, k] - targets[:, k]) ** 2).mean().sqrt()) for k, n in enumerate(names)}
