@@ -29,6 +29,7 @@ EXTRAS: dict[str, tuple[str, str]] = {
     "mcap": ("mcap", "mcap"),
     "pyarrow": ("pyarrow", "lerobot"),
     "pandas": ("pandas", "lerobot"),
+    "sklearn": ("scikit-learn", "calibration"),
 }
 
 

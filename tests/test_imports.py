@@ -12,7 +12,7 @@ import sys
 
 import pytest
 
-HEAVY = ("torch", "onnxruntime", "roboticstoolbox", "franky", "serial", "trimesh", "matplotlib", "cv2")
+HEAVY = ("torch", "onnxruntime", "roboticstoolbox", "franky", "serial", "trimesh", "matplotlib", "cv2", "sklearn")
 
 
 def _heavy_modules_after(code: str) -> list[str]:
@@ -33,6 +33,9 @@ def _heavy_modules_after(code: str) -> list[str]:
     "tactile_manip.collection.vbts_calibration, tactile_manip.collection.collect, tactile_manip.collection.collect_sim",
     "import tactile_manip.perception.reconstruct, tactile_manip.perception.pose, tactile_manip.perception.metrics",
     "import tactile_manip.perception",
+    # applying a fitted confidence calibration is numpy only (fitting one imports scikit-learn)
+    "from tactile_manip.perception.confidence import ConfidenceCalibration; "
+    "ConfidenceCalibration((0.1, 0.9), (0.2, 0.8))(0.5)",
     "import tactile_manip.robot, tactile_manip.robot.twin, tactile_manip.robot.safety, tactile_manip.robot.conformance",
     "import tactile_manip.behaviours.reorient, tactile_manip.behaviours.place",
     "import tactile_manip.trials.scene, tactile_manip.trials.runner, tactile_manip.trials.stats",
