@@ -154,6 +154,10 @@ def test_a_closed_stdout_exits_quietly():
      'pip install torch==2.13.0 && pip install -e ".[train]"'),
     ("onnxruntime", ["evaluate", "--data", "d.npz", "--model", "M=m.onnx", "--out", "eval"],
      'pip install -e ".[onnx]"'),
+    ("sklearn", ["calibrate", "--model", "bilinear", "--fit", "d.npz", "--report", "d.npz", "--out", "c.json"],
+     'pip install -e ".[sklearn]"'),
+    ("sklearn", ["collect", "calibrate", "--sim", "--ball-radius-mm", "4", "--out", "c.npz"],
+     'pip install -e ".[sklearn]"'),
 ])
 def test_a_missing_extra_names_its_install_line_before_any_work(module, argv, install, tmp_path, monkeypatch,
                                                                  capsys):
@@ -161,6 +165,8 @@ def test_a_missing_extra_names_its_install_line_before_any_work(module, argv, in
     monkeypatch.setitem(sys.modules, module, None)  # `import module` now raises ImportError
     if module == "serial":
         monkeypatch.setitem(sys.modules, "serial.tools.list_ports", None)
+    if module == "sklearn":
+        monkeypatch.setitem(sys.modules, "sklearn.isotonic", None)
     assert main(argv) == 2
     assert_one_line_error(capsys.readouterr().err, argv[0], install)
     assert list(tmp_path.iterdir()) == []  # nothing written before the check

@@ -35,6 +35,9 @@ def _heavy_modules_after(code: str) -> list[str]:
     "import tactile_manip.perception",
     "import tactile_manip.perception.contact, tactile_manip.perception.contact_pose, "
     "tactile_manip.perception.contact_evaluation",
+    # applying a fitted confidence calibration is numpy only (fitting one imports scikit-learn)
+    "from tactile_manip.perception.confidence import ConfidenceCalibration; "
+    "ConfidenceCalibration((0.1, 0.9), (0.2, 0.8))(0.5)",
     "import tactile_manip.robot, tactile_manip.robot.twin, tactile_manip.robot.safety, tactile_manip.robot.conformance",
     "import tactile_manip.behaviours.reorient, tactile_manip.behaviours.place",
     "import tactile_manip.trials.scene, tactile_manip.trials.runner, tactile_manip.trials.stats",

@@ -11,8 +11,9 @@ radius ``a = sqrt(R^2 - c^2)``. From the averaged grey difference of the press:
    known (e.g. from the robot). An error in ``a`` moves the press depth by ``a / c`` times as much, so keep
    the press shallower than about half the radius (a / c < 2);
 4. every contact pixel then has a known depth; the table at grey level k is the median depth of the pixels
-   whose difference rounds to k, made non-decreasing (weighted pool-adjacent-violators), 0 at level 0,
-   and flat past the deepest level seen (a plateau of the camera's response is detected and cut).
+   whose difference rounds to k, made non-decreasing (weighted isotonic regression: fitting needs
+   scikit-learn, the ``calibration`` extra), 0 at level 0, and flat past the deepest level seen (a plateau of
+   the camera's response is detected and cut).
 
 Press deep enough to cover the depths you will measure (1.2-1.8 mm; the table saturates beyond the press).
 :class:`VbtsCalibration` holds the alignment, the processing parameters, the table and the reference, and
@@ -34,6 +35,7 @@ from scipy import ndimage
 
 from tactile_manip.checks import check_finite_scalar, npz_read_problem
 from tactile_manip.errors import CalibrationError
+from tactile_manip.extras import require
 from tactile_manip.collection.vbts import DepthParams, DepthPipeline, PadAlignment, Reference, to_grey
 from tactile_manip.version import code_version
 
@@ -153,16 +155,11 @@ def cap_depth_mm(shape: tuple[int, int], fit: BallFit, pixel_mm: float) -> np.nd
 
 
 def _isotonic(y: np.ndarray, w: np.ndarray) -> np.ndarray:
-    """Weighted least-squares non-decreasing fit (pool adjacent violators)."""
-    values, weights, counts = [], [], []
-    for yi, wi in zip(y, w):
-        values.append(float(yi)), weights.append(float(wi)), counts.append(1)
-        while len(values) > 1 and values[-2] > values[-1]:
-            wsum = weights[-2] + weights[-1]
-            values[-2] = (values[-2] * weights[-2] + values[-1] * weights[-1]) / wsum
-            weights[-2], counts[-2] = wsum, counts[-2] + counts[-1]
-            del values[-1], weights[-1], counts[-1]
-    return np.repeat(values, counts)
+    """Weighted least-squares non-decreasing fit of ``y`` in its order (scikit-learn's IsotonicRegression)."""
+    isotonic = require("sklearn.isotonic", "fitting a calibration")
+    y = np.asarray(y, np.float64)
+    return isotonic.IsotonicRegression().fit_transform(np.arange(y.size, dtype=np.float64), y,
+                                                       sample_weight=np.asarray(w, np.float64))
 
 
 def table_from_samples(diff_levels: np.ndarray, depth_mm: np.ndarray, *, min_count: int = 5

@@ -45,6 +45,7 @@ def run(args: argparse.Namespace) -> int:
 
     from tactile_manip.data import check_dataset_file, load_dataset
     from tactile_manip.errors import ConfigError
+    from tactile_manip.extras import require
     from tactile_manip.outputs import check_output_file
     from tactile_manip.perception import TactilePoseEstimator, load_reconstructor
     from tactile_manip.perception.confidence import (ConfidenceCalibration, calibration_path, reliability_figure,
@@ -57,6 +58,7 @@ def run(args: argparse.Namespace) -> int:
     baseline = args.model in ("bilinear", "bicubic")
     if args.samples < 1 or (baseline and args.samples != 1):
         raise ConfigError(f"--samples must be >= 1, and 1 for a baseline; got {args.samples} for {args.model}")
+    require("sklearn.isotonic", "fitting a calibration")   # before any inference or file
     out = Path(args.out) if args.out else calibration_path(args.model)
     stem = out.with_suffix("")
     report_files = [out] + [Path(f"{stem}.reliability.{ext}") for ext in ("md", "json", "png")]

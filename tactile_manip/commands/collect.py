@@ -107,6 +107,8 @@ def run(args: argparse.Namespace) -> int:
         require("cv2", "a real VBTS camera")
         if args.action == "run":
             require("serial", "a real MBTS board")
+    if args.action == "calibrate":
+        require("sklearn.isotonic", "fitting a calibration")
     return {"calibrate": _calibrate, "run": _record, "finalize": _finalize}[args.action](args)
 
 

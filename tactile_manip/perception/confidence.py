@@ -4,8 +4,9 @@ The raw confidence of an :class:`~tactile_manip.types.AngleEstimate` (``1 - lamb
 contact's moments, times the agreement of prior samples when the model draws several, times the fraction of
 unsaturated chips) orders estimates by how elongated and consistent the contact looks; it is not a
 probability. :class:`ConfidenceCalibration` maps it monotonically onto the probability that the angle error is
-within ``tolerance_deg``, fitted by isotonic regression (pool adjacent violators) on held-out presses, so a
-behaviour's ``min_confidence = 0.9`` means "act when 9 in 10 such estimates were within tolerance".
+within ``tolerance_deg``, fitted by isotonic regression (scikit-learn's, the ``calibration`` extra) on held-out
+presses, so a behaviour's ``min_confidence = 0.9`` means "act when 9 in 10 such estimates were within
+tolerance". Applying a fitted calibration needs numpy only.
 
 :func:`reliability_table` bins estimates by confidence (deciles by default) and reports, per bin, the mean
 predicted probability, the observed share within tolerance and the median / p95 error: the reliability
@@ -24,6 +25,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from tactile_manip.extras import require
 
 
 @dataclass(frozen=True)
@@ -79,7 +82,7 @@ class ConfidenceCalibration:
                              f"{raw.shape} and {err.shape}")
         order = np.argsort(raw, kind="stable")
         x, y = raw[order], (err[order] <= tolerance_deg).astype(float)
-        blocks = _pool_adjacent_violators(x, y, min_per_knot)
+        blocks = _isotonic_blocks(x, y, min_per_knot)
         knots = [b[0] for b in blocks]
         values = [b[1] for b in blocks]
         knots, values = _strictly_increasing(knots, values)
@@ -122,20 +125,35 @@ def load_calibration_beside(model_path: str | Path) -> ConfidenceCalibration | N
     return ConfidenceCalibration.load(path) if path.is_file() else None
 
 
-def _pool_adjacent_violators(x: np.ndarray, y: np.ndarray, min_count: int) -> list[tuple[float, float]]:
-    """Blocks (mean x, mean y) of the isotonic regression of y on sorted x, each of >= min_count points."""
-    seeds = [[float(x[i:i + min_count].sum()), float(y[i:i + min_count].sum()), len(x[i:i + min_count])]
-             for i in range(0, len(x), min_count)]
-    if len(seeds) > 1 and seeds[-1][2] < min_count:   # a short tail joins its neighbour
-        tail = seeds.pop()
-        seeds[-1] = [a + b for a, b in zip(seeds[-1], tail)]
-    blocks: list[list[float]] = []                     # [sum_x, sum_y, count]
-    for block in seeds:
-        blocks.append(block)
-        while len(blocks) > 1 and blocks[-2][1] / blocks[-2][2] > blocks[-1][1] / blocks[-1][2]:
-            last = blocks.pop()
-            blocks[-1] = [a + b for a, b in zip(blocks[-1], last)]
-    return [(sx / n, sy / n) for sx, sy, n in blocks]
+def _isotonic_blocks(x: np.ndarray, y: np.ndarray, min_count: int) -> list[tuple[float, float]]:
+    """Blocks (mean x, mean y) of the isotonic regression of 0/1 y on sorted x, each of >= min_count points.
+
+    The sorted points are first grouped into runs of ``min_count`` (a short tail joins the last run); scikit-learn's
+    IsotonicRegression fits the runs' mean y in their order (by rank, so runs of tied raw confidence stay
+    separate points), weighted by their sizes. A stretch of runs it gives one value is then cut wherever its
+    running mean returns to that value: adjacent blocks of equal mean keep a knot each, so the interpolated curve
+    stays flat across a plateau instead of one knot at its middle.
+    """
+    isotonic = require("sklearn.isotonic", "fitting a calibration")
+    starts = np.arange(0, x.size, min_count)
+    if starts.size > 1 and x.size - starts[-1] < min_count:   # a short tail joins its neighbour
+        starts = starts[:-1]
+    counts = np.diff(np.append(starts, x.size)).astype(np.float64)
+    sum_x, sum_y = np.add.reduceat(x, starts), np.add.reduceat(y, starts)
+    fitted = isotonic.IsotonicRegression().fit_transform(np.arange(starts.size, dtype=np.float64), sum_y / counts,
+                                                         sample_weight=counts)
+    new_value = np.r_[True, fitted[1:] != fitted[:-1]]
+    first, stretch = np.flatnonzero(new_value), np.cumsum(new_value) - 1
+    total_y, total_n = np.add.reduceat(sum_y, first)[stretch], np.add.reduceat(counts, first)[stretch]
+    cum_y, cum_n = np.cumsum(sum_y), np.cumsum(counts)
+    run_y = cum_y - np.r_[0.0, cum_y][first][stretch]          # sums from the stretch's first run on
+    run_n = cum_n - np.r_[0.0, cum_n][first][stretch]
+    ends = np.isclose(run_y * total_n, total_y * run_n, rtol=0.0, atol=1e-6)   # y sums are counts: exact
+    ends[np.r_[first[1:] - 1, starts.size - 1]] = True
+    cut = np.r_[0, np.flatnonzero(ends)[:-1] + 1]
+    n = np.add.reduceat(counts, cut)
+    return [(float(bx / bn), float(by / bn))
+            for bx, by, bn in zip(np.add.reduceat(sum_x, cut), np.add.reduceat(sum_y, cut), n)]
 
 
 def _strictly_increasing(knots: list[float], values: list[float]) -> tuple[list[float], list[float]]:

@@ -5,10 +5,13 @@ Figures printed with `pytest tests/collection/test_ball_calibration.py -s`.
 
 from __future__ import annotations
 
+import sys
+
 import numpy as np
 import pytest
 
 from tactile_manip.errors import CalibrationError
+from tactile_manip.extras import MissingExtraError
 from tactile_manip.collection.camera_sim import SimulatedCamera, SimulatedCameraConfig, ball_indenter
 from tactile_manip.collection.vbts_calibration import (
     VbtsCalibration,
@@ -123,6 +126,7 @@ def test_calibration_file_round_trip_and_bad_files(calibration, tmp_path, refere
 
 
 def test_table_fit_is_monotone_and_starts_at_zero():
+    pytest.importorskip("sklearn", reason="fitting a calibration needs scikit-learn (extra 'sklearn')")
     rng = np.random.default_rng(0)
     depth = rng.uniform(0, 1.5, 5000)
     levels = depth / 0.03 + rng.normal(0, 0.8, depth.size)
@@ -130,3 +134,14 @@ def test_table_fit_is_monotone_and_starts_at_zero():
     assert table[0] == 0 and np.all(np.diff(table) >= 0) and not saturated
     assert np.abs(table[5:40] - lv[5:40] * 0.03).max() < 0.03
     assert np.all(np.diff(_isotonic(np.array([3.0, 1.0, 2.0, 5.0]), np.ones(4))) >= 0)
+
+
+def test_the_table_fit_is_weighted_least_squares_and_names_its_extra(monkeypatch):
+    pytest.importorskip("sklearn", reason="fitting a calibration needs scikit-learn (extra 'sklearn')")
+    # 3 then 1 violate the order: pooled to their weighted mean (3 * 1 + 1 * 3) / 4 = 1.5
+    np.testing.assert_allclose(_isotonic(np.array([3.0, 1.0, 2.0]), np.array([1.0, 3.0, 1.0])), [1.5, 1.5, 2.0])
+    np.testing.assert_allclose(_isotonic(np.array([3.0, 1.0, 2.0, 5.0]), np.ones(4)), [2.0, 2.0, 2.0, 5.0])
+    monkeypatch.setitem(sys.modules, "sklearn", None)     # `import sklearn` now raises ImportError
+    monkeypatch.setitem(sys.modules, "sklearn.isotonic", None)
+    with pytest.raises(MissingExtraError, match=r"needs scikit-learn.*extra 'sklearn'"):
+        table_from_samples(np.arange(1, 40, dtype=float).repeat(5), np.linspace(0, 1, 195))

@@ -2,10 +2,15 @@
 
 from __future__ import annotations
 
+import sys
+
 import numpy as np
 import pytest
 
+from tactile_manip.extras import MissingExtraError
 from tactile_manip.perception.confidence import ConfidenceCalibration, reliability_figure, reliability_table
+
+NEEDS_SKLEARN = "fitting a calibration needs scikit-learn (extra 'sklearn')"
 
 
 def _synthetic(n: int, rng) -> tuple[np.ndarray, np.ndarray]:
@@ -17,6 +22,7 @@ def _synthetic(n: int, rng) -> tuple[np.ndarray, np.ndarray]:
 
 
 def test_fit_recovers_the_success_curve_and_is_monotone():
+    pytest.importorskip("sklearn", reason=NEEDS_SKLEARN)
     raw, errors = _synthetic(20000, np.random.default_rng(0))
     cal = ConfidenceCalibration.fit(raw, errors, tolerance_deg=5.0)
     grid = np.linspace(0.05, 0.95, 19)
@@ -33,6 +39,7 @@ def test_fit_recovers_the_success_curve_and_is_monotone():
 
 
 def test_blocks_hold_at_least_min_per_knot_and_errors_are_clear(tmp_path):
+    pytest.importorskip("sklearn", reason=NEEDS_SKLEARN)
     rng = np.random.default_rng(2)
     raw, errors = _synthetic(95, rng)
     cal = ConfidenceCalibration.fit(raw, errors, min_per_knot=20)
@@ -49,6 +56,7 @@ def test_blocks_hold_at_least_min_per_knot_and_errors_are_clear(tmp_path):
 
 
 def test_undefined_estimates_count_as_misses_and_the_figure_draws(tmp_path):
+    pytest.importorskip("sklearn", reason=NEEDS_SKLEARN)
     raw = np.r_[np.full(50, np.nan), np.full(50, 0.9)]
     errors = np.r_[np.full(50, np.nan), np.full(50, 1.0)]
     cal = ConfidenceCalibration.fit(raw, errors, min_per_knot=10)
@@ -60,6 +68,7 @@ def test_undefined_estimates_count_as_misses_and_the_figure_draws(tmp_path):
 def test_a_calibration_records_the_pose_aperture_it_was_fitted_with(tmp_path):
     import json
 
+    pytest.importorskip("sklearn", reason=NEEDS_SKLEARN)
     raw, errors = _synthetic(200, np.random.default_rng(4))
     cal = ConfidenceCalibration.fit(raw, errors, aperture="none")
     back = ConfidenceCalibration.load(cal.save(tmp_path / "c.json"))
@@ -70,3 +79,29 @@ def test_a_calibration_records_the_pose_aperture_it_was_fitted_with(tmp_path):
     old = {k: v for k, v in ConfidenceCalibration.fit(raw, errors).to_dict().items() if k != "aperture"}
     (tmp_path / "old.json").write_text(json.dumps(old))
     assert ConfidenceCalibration.load(tmp_path / "old.json").aperture == "none"
+
+
+def test_blocks_are_the_pooled_runs_and_equal_neighbours_keep_a_knot_each():
+    """Runs of min_per_knot sorted presses, pooled where they violate the order; two adjacent blocks of one
+    mean stay two knots, so the curve is flat between them."""
+    pytest.importorskip("sklearn", reason=NEEDS_SKLEARN)
+    raw = np.arange(1, 81) / 100.0                        # four runs of 20: raw means 0.105, 0.305, 0.505, 0.705
+    hits = np.r_[np.zeros(10), np.ones(10),               # run 1: 1/2
+                 np.ones(15), np.zeros(5),                # run 2: 3/4
+                 np.ones(5), np.zeros(15),                # run 3: 1/4 -> pooled with run 2: 1/2
+                 np.ones(20)]                             # run 4: 1
+    cal = ConfidenceCalibration.fit(raw, np.where(hits == 1, 1.0, 30.0), min_per_knot=20)
+    np.testing.assert_allclose(cal.knots, [0.105, 0.405, 0.705])
+    np.testing.assert_allclose(cal.values, [0.5, 0.5, 1.0])
+    assert cal(0.3) == pytest.approx(0.5) and cal(0.555) == pytest.approx(0.75)
+
+
+def test_applying_a_calibration_needs_no_sklearn_and_fitting_names_the_extra(tmp_path, monkeypatch):
+    cal = ConfidenceCalibration((0.1, 0.9), (0.2, 0.8))
+    path = cal.save(tmp_path / "c.json")
+    monkeypatch.setitem(sys.modules, "sklearn", None)     # `import sklearn` now raises ImportError
+    monkeypatch.setitem(sys.modules, "sklearn.isotonic", None)
+    assert ConfidenceCalibration.load(path)(0.5) == pytest.approx(0.5)
+    raw, errors = _synthetic(200, np.random.default_rng(5))
+    with pytest.raises(MissingExtraError, match=r"fitting a calibration needs scikit-learn.*extra 'sklearn'"):
+        ConfidenceCalibration.fit(raw, errors)
