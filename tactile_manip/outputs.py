@@ -80,3 +80,20 @@ def unique_folder(path: str | Path) -> Path:
         n += 1
         candidate = path.with_name(f"{path.name}-{n}")
     return candidate
+
+
+def fsync_dir(path: str | Path) -> None:
+    """Make a new or renamed entry of the directory ``path`` durable (a no-op where directories cannot be
+    opened, e.g. Windows)."""
+    import os
+
+    try:
+        fd = os.open(path, os.O_RDONLY)
+    except OSError:  # pragma: no cover - not POSIX
+        return
+    try:
+        os.fsync(fd)
+    except OSError:  # pragma: no cover
+        pass
+    finally:
+        os.close(fd)

@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from tactile_manip.interop.sources import Source, read_source
-from tactile_manip.outputs import OutputPathError, check_writable_parent
+from tactile_manip.outputs import OutputPathError, check_writable_parent, fsync_dir
 
 # format -> writer "module:function" (OUT is a folder for lerobot, a file for the others)
 WRITERS: dict[str, str] = {
@@ -113,7 +113,7 @@ def write_atomically(out: Path, write: Callable[[Path], Any]) -> Any:
     except BaseException:
         _remove(tmp)
         raise
-    _fsync_dir(out.parent)
+    fsync_dir(out.parent)
     return result
 
 
@@ -141,17 +141,3 @@ def _remove(path: Path) -> None:
         shutil.rmtree(path, ignore_errors=True)
     elif path.exists() or path.is_symlink():
         path.unlink(missing_ok=True)
-
-
-def _fsync_dir(path: Path) -> None:
-    try:
-        fd = os.open(path, os.O_RDONLY)
-    except OSError:  # pragma: no cover - not POSIX
-        return
-    try:
-        os.fsync(fd)
-    except OSError:  # pragma: no cover
-        pass
-    finally:
-        os.close(fd)
-

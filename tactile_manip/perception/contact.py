@@ -40,7 +40,7 @@ import numpy as np
 
 from tactile_manip.extras import require
 from tactile_manip.perception.contact_context import ContextBuffer
-from tactile_manip.perception.estimator import StreamStats
+from tactile_manip.perception.estimator import StreamStats, stream_estimates
 from tactile_manip.perception.onnx_session import session_options
 from tactile_manip.perception.reconstruct import ModelFileError, read_metadata
 from tactile_manip.types import TactileReading
@@ -166,15 +166,8 @@ class ContactEstimator:
         Raises SensorTimeoutError when the sensor stalls, ValueError when its board layout is not the model's.
         """
         self.check_layout(sensor.layout.name)
-        stats = StreamStats() if stats is None else stats
-        count = 0
-        while max_estimates is None or count < max_estimates:
-            reading = sensor.wait_new(timeout_s)
-            stats.count(reading.seq)
-            state = self.estimate(reading)
-            stats.estimates += 1
-            count += 1
-            yield state
+        return stream_estimates(sensor, self.estimate, timeout_s=timeout_s, max_estimates=max_estimates,
+                                stats=stats)
 
     def _check(self, reading: TactileReading | np.ndarray) -> np.ndarray:
         field_ut = reading.field_ut if isinstance(reading, TactileReading) else reading

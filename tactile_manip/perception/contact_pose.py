@@ -27,7 +27,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from tactile_manip.perception.contact import ContactEstimator, ContactState
-from tactile_manip.perception.estimator import StreamStats, TactilePoseEstimator
+from tactile_manip.perception.estimator import StreamStats, TactilePoseEstimator, stream_estimates
 from tactile_manip.types import AngleEstimate, TactileReading
 
 if TYPE_CHECKING:
@@ -72,12 +72,5 @@ class TactileEstimator:
         """One estimate per new frame of ``sensor``, from the newest frame (as the pose estimator's stream)."""
         self.pose.reconstructor.check_layout(sensor.layout.name)
         self.contact.check_layout(sensor.layout.name)
-        stats = StreamStats() if stats is None else stats
-        count = 0
-        while max_estimates is None or count < max_estimates:
-            reading = sensor.wait_new(timeout_s)
-            stats.count(reading.seq)
-            est = self.estimate(reading)
-            stats.estimates += 1
-            count += 1
-            yield est
+        return stream_estimates(sensor, self.estimate, timeout_s=timeout_s, max_estimates=max_estimates,
+                                stats=stats)

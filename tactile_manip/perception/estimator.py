@@ -45,9 +45,9 @@ undefined (confidence 0) escalates too.
 from __future__ import annotations
 
 import time
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, TypeVar
 
 import numpy as np
 
@@ -55,6 +55,8 @@ from tactile_manip.perception.confidence import ConfidenceCalibration
 from tactile_manip.perception.pose import PoseParams, angle_from_image
 from tactile_manip.perception.reconstruct import Reconstruction, Reconstructor, out_of_range
 from tactile_manip.types import AngleEstimate, TactileReading
+
+T = TypeVar("T")
 
 if TYPE_CHECKING:  # the sensors layer is only needed for type hints here
     from tactile_manip.sensors.base import TactileSensor
@@ -252,15 +254,23 @@ class TactilePoseEstimator:
         ValueError (naming both) when the sensor's board layout is not the reconstructor's.
         """
         self.reconstructor.check_layout(sensor.layout.name)
-        stats = StreamStats() if stats is None else stats
-        count = 0
-        while max_estimates is None or count < max_estimates:
-            reading = sensor.wait_new(timeout_s)  # the newest frame not returned before
-            stats.count(reading.seq)
-            est = self.estimate(reading)
-            stats.estimates += 1
-            count += 1
-            yield est
+        return stream_estimates(sensor, self.estimate, timeout_s=timeout_s, max_estimates=max_estimates,
+                                stats=stats)
+
+
+def stream_estimates(sensor: TactileSensor, estimate: Callable[[TactileReading], T], *, timeout_s: float = 0.1,
+                     max_estimates: int | None = None, stats: StreamStats | None = None) -> Iterator[T]:
+    """``estimate`` of each new frame of ``sensor``, always the newest one (frames that arrive meanwhile are
+    skipped, not queued); the loop behind every estimator's ``stream``. Raises SensorTimeoutError on a stall."""
+    stats = StreamStats() if stats is None else stats
+    count = 0
+    while max_estimates is None or count < max_estimates:
+        reading = sensor.wait_new(timeout_s)  # the newest frame not returned before
+        stats.count(reading.seq)
+        est = estimate(reading)
+        stats.estimates += 1
+        count += 1
+        yield est
 
 
 def _field(reading: TactileReading | np.ndarray) -> np.ndarray:

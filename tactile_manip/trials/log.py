@@ -35,7 +35,7 @@ from typing import Any
 
 from tactile_manip.config import config_differences
 from tactile_manip.errors import TactileManipError
-from tactile_manip.outputs import unique_folder
+from tactile_manip.outputs import fsync_dir, unique_folder
 from tactile_manip.trials.record import RECORD_VERSION, TrialRecord
 
 TRIALS_FILE = "trials.jsonl"
@@ -332,7 +332,7 @@ def _open_locked(path: Path):
         f.close()
         raise TrialLogError(f"{path} is being written by another process; wait for it or use a new run "
                             f"directory") from e
-    _fsync_dir(path.parent)
+    fsync_dir(path.parent)
     return f
 
 
@@ -344,21 +344,7 @@ def _write_json_atomic(path: Path, obj: Any) -> None:
         f.flush()
         os.fsync(f.fileno())
     os.replace(tmp, path)
-    _fsync_dir(path.parent)
-
-
-def _fsync_dir(path: Path) -> None:
-    """Make a new or renamed directory entry durable (a no-op where directories cannot be opened)."""
-    try:
-        fd = os.open(path, os.O_RDONLY)
-    except OSError:  # pragma: no cover - e.g. Windows
-        return
-    try:
-        os.fsync(fd)
-    except OSError:  # pragma: no cover
-        pass
-    finally:
-        os.close(fd)
+    fsync_dir(path.parent)
 
 
 def _code_version() -> str:
