@@ -1,0 +1,51 @@
+"""The shipped contact model of the SuperMag board: its file, its card's figures, and simulated presses."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("onnxruntime", reason="the contact estimator runs onnxruntime")
+
+from tactile_manip.perception.contact import ContactEstimator  # noqa: E402
+
+MODELS = Path(__file__).resolve().parents[2] / "models"
+MODEL = MODELS / "contact_supermag.onnx"
+
+
+def test_the_shipped_file_is_small_and_reads_one_frame_of_the_4x4_board() -> None:
+    assert MODEL.stat().st_size < 1_000_000
+    est = ContactEstimator(MODEL)
+    assert tuple(est.input_shape[-3:]) == (4, 4, 3)
+    assert est.context_frames == 1
+    assert list(est.target_names) == ["x_mm", "y_mm", "depth_mm", "force_n", "in_contact"]
+
+
+def test_the_card_quotes_the_metrics_file() -> None:
+    metrics = json.loads((MODELS / "contact_supermag.metrics.json").read_text())
+    card = (MODELS / "contact_supermag.md").read_text()
+    ours = metrics["contact_unseen"]["methods"]["ours"]["rmse"]
+    mlp = metrics["contact_unseen"]["methods"]["MLP"]["rmse"]
+    for value in (ours["force_n"], mlp["force_n"]):
+        assert f"{value:.3f}" in card
+
+
+def test_simulated_cylinder_presses_give_forces_that_rise_with_the_press() -> None:
+    from tactile_manip.sim.objects import IndenterPose
+    from tactile_manip.sim.pair import SensorPair
+    from tactile_manip.sim.shapes import make_indenter
+
+    rng = np.random.default_rng(0)
+    pair = SensorPair()
+    rod = make_indenter("cylinder", size_mm=6.0)
+    est = ContactEstimator(MODEL)
+    forces = []
+    for force_n in (3.0, 8.0, 14.0):
+        sample = pair.press(rod, IndenterPose(x_mm=1.0, y_mm=-1.0), force_n, rng)
+        state = est.estimate(sample.field_ut.astype(np.float32))
+        assert state.force_sigma_n > 0 and np.isfinite(state.force_n)
+        forces.append(state.force_n)
+    assert forces[0] < forces[1] < forces[2]
