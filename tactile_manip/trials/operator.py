@@ -134,10 +134,16 @@ class OperatorCell:
         if arm_fault or sensor_stall:
             raise ConfigError("injected faults exist only in simulation")
         with self.presented(p) as (obj, truth):
-            result = grasp_estimate_reorient(self.arm, self.gripper, self.sensor, estimator,
-                                             object_width_m=obj.width_m,
-                                             target_angle_rad=math.radians(self.scene.target_deg),
-                                             config=self.scene.behaviour, truth=truth, observer=observer)
-            if observer is not None:
-                observer.phase("release")
-            return result
+            return run_reorientation(self, estimator, obj.width_m, truth, observer)
+
+
+def run_reorientation(cell, estimator: TactilePoseEstimator, object_width_m: float, truth,
+                      observer=None) -> ReorientResult:
+    """The scene's reorientation behaviour in ``cell`` (its arm, gripper, sensor and scene) on the held object;
+    ``observer`` is told each phase, the release included (the cell opens the gripper when the trial ends)."""
+    result = grasp_estimate_reorient(cell.arm, cell.gripper, cell.sensor, estimator, object_width_m=object_width_m,
+                                     target_angle_rad=math.radians(cell.scene.target_deg),
+                                     config=cell.scene.behaviour, truth=truth, observer=observer)
+    if observer is not None:
+        observer.phase("release")
+    return result

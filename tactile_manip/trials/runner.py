@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from tactile_manip.behaviours.reorient import ReorientResult, grasp_estimate_reorient
+from tactile_manip.behaviours.reorient import ReorientResult
 from tactile_manip.errors import ConfigError
 from tactile_manip.extras import require
 from tactile_manip.perception.estimator import TactilePoseEstimator
@@ -220,14 +220,10 @@ class SimulatedCell:
         ``observer`` (a :class:`~tactile_manip.behaviours.reorient.PhaseObserver`) is told each phase, the
         release included.
         """
+        from tactile_manip.trials.operator import run_reorientation
+
         with self.presented(p, arm_fault=arm_fault, sensor_stall=sensor_stall) as (obj, truth):
-            result = grasp_estimate_reorient(self.arm, self.gripper, self.sensor, estimator,
-                                             object_width_m=obj.width_m,
-                                             target_angle_rad=math.radians(self.scene.target_deg),
-                                             config=self.scene.behaviour, truth=truth, observer=observer)
-            if observer is not None:
-                observer.phase("release")
-            return result
+            return run_reorientation(self, estimator, obj.width_m, truth, observer)
 
     def _ready_for_trial(self) -> None:
         """Trial boundary: clear any fault (and an armed but unused fault injection), open, go home."""
