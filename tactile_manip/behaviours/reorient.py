@@ -4,7 +4,8 @@ The object is between the open fingers. The gripper closes to the force threshol
 read, the estimator gives the in-hand angle and its confidence, and the arm turns the hand (and with it the
 object) about the pad normal through the contact by ``target - estimate``, so the object ends at the target
 angle in the pad frame the grasp started in. Low confidence follows a policy: act anyway, re-grasp and read
-again, or abstain.
+again, or abstain. Given a contact model of the sensor's board, the estimate step also reads the grip force
+from the newest frame of the final grasp.
 
 The behaviour receives its hardware (any :class:`~tactile_manip.robot.base.Arm`,
 :class:`~tactile_manip.robot.base.Gripper`, :class:`~tactile_manip.sensors.base.TactileSensor`) and a
@@ -18,7 +19,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
-from typing import Literal, Protocol
+from typing import TYPE_CHECKING, Literal, Protocol
 
 import numpy as np
 
@@ -30,6 +31,9 @@ from tactile_manip.robot.base import Arm, Gripper
 from tactile_manip.robot.frames import angle_in_plane, hand_T_finger_pad, rotate_pose_about
 from tactile_manip.sensors.base import TactileSensor
 from tactile_manip.types import AngleEstimate
+
+if TYPE_CHECKING:
+    from tactile_manip.perception.contact import ContactEstimator, ContactState
 
 POLICIES = ("act", "regrasp", "abstain")
 
@@ -84,12 +88,18 @@ class PhaseObserver(Protocol):
     def estimate(self, est: AngleEstimate) -> None:
         """An estimate was made (each read, re-grasps included)."""
 
+    def contact(self, state: ContactState) -> None:
+        """The contact model's state of the final grasp (its grip force); only with a contact model."""
+
 
 class _Silent:
     def phase(self, name: str) -> None:
         pass
 
     def estimate(self, est: AngleEstimate) -> None:
+        pass
+
+    def contact(self, state: ContactState) -> None:
         pass
 
 
@@ -113,6 +123,7 @@ class ReorientResult:
     final_angle_rad: float | None = None
     error_rad: float | None = None
     grasp_width_m: float | None = None
+    contact: ContactState | None = None  # the contact model's state at the estimate step (the grip force)
     timings_s: dict[str, float] = field(default_factory=dict)
 
 
@@ -127,7 +138,8 @@ class _Abort(Exception):
 def grasp_estimate_reorient(arm: Arm, gripper: Gripper, sensor: TactileSensor, estimator: TactilePoseEstimator,
                             *, object_width_m: float, target_angle_rad: float, config: ReorientConfig | None = None,
                             truth: GroundTruth | None = None, pad_T: np.ndarray | None = None,
-                            observer: PhaseObserver | None = None) -> ReorientResult:
+                            observer: PhaseObserver | None = None,
+                            contact: ContactEstimator | None = None) -> ReorientResult:
     """Run the behaviour once on the object between the fingers (see the module docstring).
 
     Args:
@@ -137,12 +149,17 @@ def grasp_estimate_reorient(arm: Arm, gripper: Gripper, sensor: TactileSensor, e
         pad_T: hand_T_pad of the sensor (default: the pad on the +y finger at the grasp width,
             :func:`~tactile_manip.robot.frames.hand_T_finger_pad`).
         observer: told each phase and estimate as they happen (see :class:`PhaseObserver`).
+        contact: a contact model of the sensor's board: after the angle estimate, the newest frame of the
+            final grasp gives ``result.contact`` (the grip force and its sigma; None when no frame is fresh).
+            A model of another board layout than the sensor's raises ValueError before anything moves.
 
     The gripper is left closed on the object (the caller releases it); the arm stays where the correction
     left it, or where a fault stopped it.
     """
     cfg = config or ReorientConfig()
     observer = observer or _Silent()
+    if contact is not None:
+        contact.check_layout(sensor.layout.name)
     target = float(wrap_axial(check_finite_scalar("target_angle_rad", target_angle_rad)))
     result = ReorientResult(outcome="error")
     timings = result.timings_s
@@ -157,6 +174,10 @@ def grasp_estimate_reorient(arm: Arm, gripper: Gripper, sensor: TactileSensor, e
         est = _estimate_with_policy(gripper, sensor, estimator, object_width_m, cfg, result, observer)
         result.estimate = est
         timings["estimate"] = time.perf_counter() - t0
+        if contact is not None:
+            t0 = time.perf_counter()
+            result.contact = _grip_contact(sensor, contact, cfg, observer)
+            timings["grip_force"] = time.perf_counter() - t0
         if result.action == "abstain":
             raise _Abort("abstained", f"estimate below confidence {cfg.min_confidence:.2f}: "
                                       f"{est.reason or f'confidence {est.confidence:.2f}'}")
@@ -211,6 +232,20 @@ def _read(sensor: TactileSensor, estimator: TactilePoseEstimator, cfg: ReorientC
     if observer is not None:
         observer.estimate(est)
     return est
+
+
+def _grip_contact(sensor: TactileSensor, contact: ContactEstimator, cfg: ReorientConfig,
+                  observer: PhaseObserver) -> ContactState | None:
+    """The contact model's state of the newest frame (the last one the angle estimate read: the object is
+    held at the final grasp), or None when the sensor has no frame within ``sensor_timeout_s``."""
+    try:
+        reading = sensor.read_latest(max_age_s=cfg.sensor_timeout_s)
+    except SensorError:
+        return None
+    contact.reset()  # one grasp, one estimate: no context from an earlier grasp
+    state = contact.estimate(reading)
+    observer.contact(state)
+    return state
 
 
 def _confident(est: AngleEstimate, cfg: ReorientConfig) -> bool:

@@ -20,6 +20,10 @@ arrived before an announcement are stamped with the state that held until it: th
 gripper's width are read at each announcement and once more when the trial ends (a twin moves in one step;
 a real arm's joints are held between announcements). The estimate of a frame is the latest one of the trial
 so far (NaN before the first).
+
+Events (tag ``EV``, a JSON object each, read back in ``TrialFrames.events``): with a scene's contact model,
+one ``{"event": "grip_force", "force_n", "force_sigma_n", "in_contact"}`` when the model read the grip force
+at the estimate step, written after the frames that came before it.
 """
 
 from __future__ import annotations
@@ -144,6 +148,13 @@ class TrialFrameStream:
         if self._phase is not None:
             self._row = self._state_row()
 
+    def contact(self, state) -> None:
+        """The contact model's grip force (a :class:`~tactile_manip.perception.contact.ContactState`): an event."""
+        self._drain()
+        self._writer.write_event(time.monotonic(), {"event": "grip_force", "force_n": state.force_n,
+                                                    "force_sigma_n": state.force_sigma_n,
+                                                    "in_contact": bool(state.in_contact)})
+
     # ------------------------------------------------------------------ internals
 
     def _wait_for_frame_after(self, t_end: float) -> None:
@@ -209,6 +220,7 @@ class TrialFrames:
         t_host_s: (N,) host monotonic time of each frame, s.
         rows: (N,) structured array of :func:`frame_dtype` (seq, t_device_s, phase, angle_rad, confidence,
             joints_rad, gripper_width_m, target_angle_rad, field_ut, field_raw_ut).
+        events: the file's events in order, each with its ``t_host_s`` (see the module docstring).
         truncated_bytes, skipped_bytes, damaged_records: what was lost (see ``framed_file.Scan``).
     """
 

@@ -19,6 +19,7 @@ import contextlib
 import math
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -31,6 +32,9 @@ from tactile_manip.robot.frames import hand_T_pad
 from tactile_manip.sensors.base import TactileSensor
 from tactile_manip.sensors.config import SerialSensorConfig
 from tactile_manip.trials.scene import TrialScene
+
+if TYPE_CHECKING:
+    from tactile_manip.perception.contact import ContactEstimator
 
 
 @dataclass(frozen=True)
@@ -128,22 +132,23 @@ class OperatorCell:
             self._ask("take the object out of the hand, then press Enter ")
 
     def run_one(self, p, estimator: TactilePoseEstimator, *, arm_fault: bool = False,
-                sensor_stall: bool = False, observer=None) -> ReorientResult:
-        """Present ``p``, run the reorientation behaviour, ask for the measured final angle (``observer``: see
-        :meth:`~tactile_manip.trials.runner.SimulatedCell.run_one`)."""
+                sensor_stall: bool = False, observer=None, contact: ContactEstimator | None = None) -> ReorientResult:
+        """Present ``p``, run the reorientation behaviour, ask for the measured final angle (``observer`` and
+        ``contact``: see :meth:`~tactile_manip.trials.runner.SimulatedCell.run_one`)."""
         if arm_fault or sensor_stall:
             raise ConfigError("injected faults exist only in simulation")
         with self.presented(p) as (obj, truth):
-            return run_reorientation(self, estimator, obj.width_m, truth, observer)
+            return run_reorientation(self, estimator, obj.width_m, truth, observer, contact)
 
 
 def run_reorientation(cell, estimator: TactilePoseEstimator, object_width_m: float, truth,
-                      observer=None) -> ReorientResult:
+                      observer=None, contact: ContactEstimator | None = None) -> ReorientResult:
     """The scene's reorientation behaviour in ``cell`` (its arm, gripper, sensor and scene) on the held object;
-    ``observer`` is told each phase, the release included (the cell opens the gripper when the trial ends)."""
+    ``observer`` is told each phase, the release included (the cell opens the gripper when the trial ends);
+    ``contact``, the scene's contact model, estimates the grip force at the estimate step."""
     result = grasp_estimate_reorient(cell.arm, cell.gripper, cell.sensor, estimator, object_width_m=object_width_m,
                                      target_angle_rad=math.radians(cell.scene.target_deg),
-                                     config=cell.scene.behaviour, truth=truth, observer=observer)
+                                     config=cell.scene.behaviour, truth=truth, observer=observer, contact=contact)
     if observer is not None:
         observer.phase("release")
     return result

@@ -27,6 +27,7 @@ from typing import Any
 OUTCOMES = ("done", "abstained", "grasp_failed", "sensor_stale", "ik_failed", "arm_fault", "safety_refused",
             "unmeasured", "error")
 RECORD_VERSION = 1
+OPTIONAL_FIELDS = ("estimated_grip_force_n", "estimated_grip_force_sigma_n")  # left out of a line when None
 
 
 @dataclass
@@ -50,6 +51,10 @@ class TrialRecord:
         error_rad: signed axial error final - target (None when not executed).
         outcome: one of OUTCOMES.
         detail: human-readable reason for a non-"done" outcome.
+        estimated_grip_force_n: the normal force on the pad that the scene's contact model read at the estimate
+            step, N (None without a contact model, or when the trial ended before it; the line then leaves it
+            out). The behaviour's commanded force is ``extra["commanded_force_n"]``.
+        estimated_grip_force_sigma_n: its sigma (one standard deviation of the model's estimate), N.
         timings_s: named durations of the trial's phases, s.
         extra: backend- or task-specific values (JSON-serialisable).
     """
@@ -70,6 +75,8 @@ class TrialRecord:
     error_rad: float | None = None
     outcome: str = "error"
     detail: str = ""
+    estimated_grip_force_n: float | None = None
+    estimated_grip_force_sigma_n: float | None = None
     timings_s: dict[str, float] = field(default_factory=dict)
     extra: dict[str, Any] = field(default_factory=dict)
     version: int = RECORD_VERSION
@@ -79,15 +86,21 @@ class TrialRecord:
             raise ValueError(f"outcome must be one of {OUTCOMES}, got {self.outcome!r}")
         if self.outcome == "done" and (self.error_rad is None or not math.isfinite(self.error_rad)):
             raise ValueError("a 'done' trial needs a finite error_rad")
+        if (self.estimated_grip_force_n is None) != (self.estimated_grip_force_sigma_n is None):
+            raise ValueError("estimated_grip_force_n and estimated_grip_force_sigma_n come together (both or neither)")
 
     def succeeded(self, tolerance_rad: float) -> bool:
         """Whether the trial is a success at ``tolerance_rad`` (done, and |error| <= tolerance)."""
         return self.outcome == "done" and abs(float(self.error_rad)) <= tolerance_rad
 
     def to_dict(self) -> dict[str, Any]:
-        """Plain dict for JSON (tuples become lists)."""
+        """Plain dict for JSON (tuples become lists; the grip force is left out when there is none, so such a
+        line reads as it did before trials logged it)."""
         d = dataclasses.asdict(self)
         d["offset_mm"] = list(self.offset_mm)
+        for key in OPTIONAL_FIELDS:
+            if d[key] is None:
+                del d[key]
         return d
 
     @classmethod

@@ -5,6 +5,8 @@ gripper closes on it, the simulated tactile sensor is told the contact (the obje
 angle and offset in the pad frame, the grasp force) and renders the magnetic field of that contact at
 125 Hz with fresh chip noise per frame; when the gripper opens, the pad is empty again. The estimator only
 ever sees the sensor's frames. The trial is scored from the twin's true object pose after the correction.
+With a scene's ``contact_model``, each trial also logs the grip force that model reads from the sensor at the
+estimate step.
 
 Each (trial, method) is appended to ``trials.jsonl`` and fsynced as soon as it completes; ``resume=True``
 skips the pairs already there, so a killed run loses no completed trial and can be continued.
@@ -18,6 +20,7 @@ import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -33,6 +36,9 @@ from tactile_manip.robot.frames import hand_T_finger_pad, rotation_about, transf
 from tactile_manip.sensors.config import SimulatedSensorConfig
 from tactile_manip.trials.record import TrialRecord
 from tactile_manip.trials.scene import MethodSpec, TrialObject, TrialScene
+
+if TYPE_CHECKING:
+    from tactile_manip.perception.contact import ContactEstimator
 
 # A drawn sensor's baseline: 25 frames (0.2 s) average the chip noise (<= 15 uT per frame) to <= 3 uT, well
 # under the 20 uT no-contact threshold, at a fraction of the 1 s a session's first baseline takes.
@@ -82,14 +88,41 @@ def resolve_model_path(spec: MethodSpec, scene_path: Path | None) -> str:
     """The reconstructor argument for ``spec``: a baseline name, or an existing model path."""
     if spec.reconstructor in ("bilinear", "bicubic"):
         return spec.reconstructor
-    path = Path(spec.reconstructor)
+    return resolve_scene_path(spec.reconstructor, scene_path)
+
+
+def resolve_scene_path(name: str, scene_path: Path | None) -> str:
+    """A file a scene names: ``name`` if absolute, else the first that exists of the working directory's and
+    each folder above the scene file's; ``name`` itself when none does (the loader then names it missing)."""
+    path = Path(name)
     candidates = [path] if path.is_absolute() else [Path.cwd() / path]
     if scene_path is not None and not path.is_absolute():
         candidates += [parent / path for parent in Path(scene_path).resolve().parents]
     for candidate in candidates:
         if candidate.exists():
             return str(candidate)
-    return str(path)  # load_reconstructor raises the clear "missing model" error
+    return str(path)  # the loader raises the clear "missing model" error
+
+
+def build_contact_estimator(scene: TrialScene, scene_path: Path | None = None, *,
+                            layout: str | None = None) -> ContactEstimator | None:
+    """The scene's contact model on onnxruntime (None when the scene names none), found as the methods' models.
+
+    Raises:
+        ModelFileError: the file is missing, or not a contact model.
+        ValueError: ``layout`` (the sensor's board layout) is given and is not the model's.
+    """
+    if not scene.contact_model:
+        return None
+    from tactile_manip.perception.contact import ContactEstimator
+
+    contact = ContactEstimator(resolve_scene_path(scene.contact_model, scene_path))
+    if layout is not None:
+        try:
+            contact.check_layout(layout)
+        except ValueError as e:
+            raise ValueError(f"contact_model: {e}") from None
+    return contact
 
 
 def build_estimators(scene: TrialScene, scene_path: Path | None = None) -> dict[str, TactilePoseEstimator]:
@@ -214,16 +247,17 @@ class SimulatedCell:
         self._sensor_key = key
 
     def run_one(self, p: Presentation, estimator: TactilePoseEstimator, *, arm_fault: bool = False,
-                sensor_stall: bool = False, observer=None) -> ReorientResult:
+                sensor_stall: bool = False, observer=None, contact: ContactEstimator | None = None) -> ReorientResult:
         """Present ``p``, run the reorientation behaviour with ``estimator``, release, reset.
 
         ``observer`` (a :class:`~tactile_manip.behaviours.reorient.PhaseObserver`) is told each phase, the
-        release included.
+        release included. ``contact`` (a :class:`~tactile_manip.perception.contact.ContactEstimator` of the
+        sensor's board) estimates the grip force at the estimate step.
         """
         from tactile_manip.trials.operator import run_reorientation
 
         with self.presented(p, arm_fault=arm_fault, sensor_stall=sensor_stall) as (obj, truth):
-            return run_reorientation(self, estimator, obj.width_m, truth, observer)
+            return run_reorientation(self, estimator, obj.width_m, truth, observer, contact)
 
     def _ready_for_trial(self) -> None:
         """Trial boundary: clear any fault (and an armed but unused fault injection), open, go home."""
@@ -245,9 +279,15 @@ class WorldTruth:
         return self.object_pose_base()[:3, 0]
 
 
-def make_record(p: Presentation, method: str, target_rad: float, result: ReorientResult) -> TrialRecord:
-    """The log line of one trial (a correction without a measured final angle is "unmeasured")."""
+def make_record(p: Presentation, method: str, target_rad: float, result: ReorientResult, *,
+                commanded_force_n: float | None = None) -> TrialRecord:
+    """The log line of one trial (a correction without a measured final angle is "unmeasured").
+
+    ``commanded_force_n``: the behaviour's grasp force, logged as ``extra["commanded_force_n"]`` beside the
+    grip force a contact model estimated (``result.contact``).
+    """
     est = result.estimate
+    grip = result.contact
     outcome, detail = result.outcome, result.detail
     if outcome == "done" and result.error_rad is None:
         outcome, detail = "unmeasured", "the final angle was not measured"
@@ -261,7 +301,14 @@ def make_record(p: Presentation, method: str, target_rad: float, result: Reorien
         timings_s={k: round(v, 6) for k, v in result.timings_s.items()},
         extra={"force_n": round(p.force_n, 4), "grasp_width_m": result.grasp_width_m, **_sensor_extra(p),
                "correction_rad": result.correction_rad, "escalated": bool(est is not None and est.escalated),
-               "estimate_timings_s": dict(est.timings_s) if est is not None else {}})
+               "estimate_timings_s": dict(est.timings_s) if est is not None else {},
+               **({} if commanded_force_n is None else {"commanded_force_n": float(commanded_force_n)})},
+        estimated_grip_force_n=_rounded(None if grip is None else grip.force_n),
+        estimated_grip_force_sigma_n=_rounded(None if grip is None else grip.force_sigma_n))
+
+
+def _rounded(value: float | None) -> float | None:
+    return None if value is None else round(float(value), 4)
 
 
 def _sensor_extra(p: Presentation) -> dict:
@@ -284,7 +331,8 @@ def make_cell(scene: TrialScene):
 
 def run_scene(scene: TrialScene, write: Callable[[TrialRecord], None], *, estimators: dict[str, TactilePoseEstimator],
               skip: set[tuple[int, str]] = frozenset(), progress: bool = True, cell=None,
-              trial_observer=None, frames_dir: str | Path | None = None) -> int:
+              trial_observer=None, frames_dir: str | Path | None = None,
+              contact: ContactEstimator | None = None) -> int:
     """Run every (trial, method) of ``scene`` not in ``skip``; ``write`` each record.
 
     ``cell`` (default: built from ``scene.robot.backend``: :class:`SimulatedCell` for the twin,
@@ -294,6 +342,8 @@ def run_scene(scene: TrialScene, write: Callable[[TrialRecord], None], *, estima
     was written; it watches, it changes nothing.
     With ``frames_dir``, each trial's per-frame streams go to ``frames_dir/<method>-<trial>.tmframes``
     (:mod:`tactile_manip.trials.frames`; the cell also needs ``sensor``, ``arm`` and ``gripper``).
+    With ``contact`` (the scene's contact model, :func:`build_contact_estimator`), each record carries the grip
+    force it estimated at the estimate step.
 
     Returns the number of trials run. Outcomes other than "done" are recorded, never raised; only an
     interrupt (Ctrl-C) or a failure to build the cell stops the run.
@@ -316,12 +366,14 @@ def run_scene(scene: TrialScene, write: Callable[[TrialRecord], None], *, estima
             try:
                 with _frame_stream(cell, frames_dir, p, method, scene, code) as observer:
                     kwargs = {} if observer is None else {"observer": observer}
+                    if contact is not None:
+                        kwargs["contact"] = contact
                     result = cell.run_one(p, estimators[method], arm_fault=i in faults.arm_fault_trials,
                                           sensor_stall=i in faults.sensor_stall_trials, **kwargs)
             except Exception as exc:  # noqa: BLE001 - a broken trial is recorded, the run goes on
                 result = ReorientResult(outcome="error", detail=f"{type(exc).__name__}: {exc}")
             result.timings_s.setdefault("trial", time.perf_counter() - t0)
-            record = make_record(p, method, target, result)
+            record = make_record(p, method, target, result, commanded_force_n=scene.behaviour.force_n)
             write(record)
             if trial_observer is not None:
                 trial_observer.trial_finished(record)
@@ -369,10 +421,12 @@ def run_trials(scene: TrialScene, out_dir: str | Path, *, scene_path: str | Path
     # every part the scene names is built before the run folder is made, so a bad scene leaves no folder behind
     estimators = build_estimators(scene, Path(scene_path) if scene_path is not None else None)
     cell = make_cell(scene)
+    contact = build_contact_estimator(scene, Path(scene_path) if scene_path is not None else None,
+                                      layout=cell.sensor.layout.name)
     skip = completed_keys(out / "trials.jsonl") if resume and (out / "trials.jsonl").exists() else set()
     with TrialLog(out, config=to_dict(scene), resume=resume) as log:
         run_scene(scene, log.append, estimators=estimators, skip=skip, progress=progress, cell=cell,
-                  trial_observer=trial_observer, frames_dir=out / "frames" if frames else None)
+                  trial_observer=trial_observer, frames_dir=out / "frames" if frames else None, contact=contact)
     tolerance = math.radians(scene.tolerance_deg if tolerance_deg is None else tolerance_deg)
     return write_report(out, read_trials(out / "trials.jsonl"), tolerance, title=f"Reorientation trials: {scene.name}",
                         run_info=read_run_info(out))

@@ -196,6 +196,10 @@ class TrialScene:
             sensor's symmetries, and the paper's 16x16 bilinear baseline).
         presentation, robot, behaviour, faults: see their classes.
         sensor: the simulated sensor's settings (twin), or the board's serial settings (``port = ...``, real FR3).
+        contact_model: a contact model of the sensor's board (an exported ``.onnx``, found as the methods'
+            models are, e.g. ``models/contact_supermag.onnx``): each trial then logs the grip force the model
+            estimates at the estimate step (``estimated_grip_force_n``); "" for none. A model of another
+            board layout than the sensor's is refused before the first trial.
     """
 
     name: str = "reorient"
@@ -212,6 +216,7 @@ class TrialScene:
     sensor: SimulatedSensorConfig | SerialSensorConfig = field(default_factory=SimulatedSensorConfig)
     behaviour: ReorientConfig = field(default_factory=ReorientConfig)
     faults: FaultPlan = field(default_factory=FaultPlan)
+    contact_model: str = ""
 
     def __post_init__(self) -> None:
         if isinstance(self.trials, bool) or self.trials < 1:
@@ -225,6 +230,9 @@ class TrialScene:
             raise ValueError(f"methods: names must be unique, got {names}")
         if not self.presentation.objects:
             raise ValueError("presentation.objects: name at least one object")
+        if self.contact_model and not self.contact_model.endswith(".onnx"):
+            raise ValueError(f"contact_model must be an exported .onnx contact model or \"\" (none), got "
+                             f"{self.contact_model!r}")
 
 
 def load_scene(path: str | Path) -> TrialScene:
