@@ -17,6 +17,7 @@ import pytest
 from checks import TORCH_MISSING
 
 SHIPPED_MODEL = Path(__file__).resolve().parents[1] / "models" / "supermag_fast.onnx"
+SHIPPED_CONTACT_MODEL = Path(__file__).resolve().parents[1] / "models" / "contact_supermag.onnx"
 EFLESH_ENV = "TACTILE_MANIP_EFLESH_DIR"  # folder of the eFlesh characterisation runs (spatial_*/, normal_*/)
 
 
@@ -139,3 +140,24 @@ def contact_model_files(tmp_path_factory):
     train_contact(cfg, [root / "presses.npz"], root / "run")
     export_contact_onnx(root / "run" / "best.pt", root / "contact.onnx")
     return root / "presses.npz", root / "run", root / "contact.onnx"
+
+
+@pytest.fixture
+def contact_model_of_layout(tmp_path: Path) -> Callable[[str], Path]:
+    """Factory: the shipped SuperMag contact model with ``board_layout`` in its metadata set to ``layout``
+    (e.g. "anyskin-5": a model that claims another board)."""
+    onnx = pytest.importorskip("onnx", reason="rewriting a model's metadata needs onnx (pip install -e '.[train]')")
+    import json
+
+    from tactile_manip.perception.reconstruct import METADATA_KEY
+
+    def make(layout: str) -> Path:
+        proto = onnx.load(str(SHIPPED_CONTACT_MODEL))
+        for prop in proto.metadata_props:
+            if prop.key == METADATA_KEY:
+                prop.value = json.dumps({**json.loads(prop.value), "board_layout": layout})
+        path = tmp_path / f"contact_{layout}.onnx"
+        onnx.save(proto, str(path))
+        return path
+
+    return make

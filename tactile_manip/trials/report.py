@@ -3,7 +3,9 @@
 Files, written to the given folder (``TAG`` is empty for the run's own report and ``_<tol>deg``, e.g.
 ``_5deg``, when ``tactile-manip score`` re-scores a run, so reports at several tolerances sit side by side)::
 
-    summary{TAG}.json                run info, tolerance, per-method results, paired comparisons, per object
+    summary{TAG}.json                run info, tolerance, per-method results, paired comparisons, per object,
+                                     and with a contact model the estimated grip force per method ("grip_force",
+                                     :mod:`tactile_manip.trials.grip_force`)
     summary{TAG}.md                  the same as markdown tables
     errors{TAG}.png                  histogram of |error| (deg) per method over executed trials, tolerance line:
                                      a 0-10 deg zoom and the whole range on a log count axis
@@ -17,11 +19,13 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Mapping, Sequence
+from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from tactile_manip.trials.grip_force import GripForceSummary, grip_force_summary, markdown_lines
 from tactile_manip.trials.record import OUTCOMES, TrialRecord
 from tactile_manip.trials.stats import RunSummary, success_vs_tolerance, summarise, wilson_interval
 
@@ -48,7 +52,8 @@ def write_report(run_dir: str | Path, records: Sequence[TrialRecord], tolerance_
         tolerance_rad: success tolerance on |final - target|, rad.
         title: heading of the markdown summary and the figures.
         tag: appended to every file stem (see :func:`tolerance_tag`); empty for the run's own report.
-        run_info: the run's ``run.json`` (id, config hash, code version), copied into the summary.
+        run_info: the run's ``run.json`` (id, config hash, code version), copied into the summary; its config
+            also says whether the cell was simulated (then the grip force is scored against the applied force).
 
     Returns:
         The RunSummary the files show.
@@ -57,17 +62,30 @@ def write_report(run_dir: str | Path, records: Sequence[TrialRecord], tolerance_
     out = Path(run_dir)
     out.mkdir(parents=True, exist_ok=True)
     run = {k: run_info[k] for k in RUN_KEYS if k in run_info} if run_info else {}
+    grip = grip_force_summary(records, applied=_simulated(run_info))
     doc = {"title": title, "run": run, "tolerance_rad": tolerance_rad, **summary.to_dict()}
+    if grip:
+        doc["grip_force"] = {m: asdict(s) for m, s in grip.items()}
     (out / f"summary{tag}.json").write_text(json.dumps(doc, indent=2) + "\n", encoding="utf-8")
-    (out / f"summary{tag}.md").write_text(markdown_summary(summary, title=title, run_info=run), encoding="utf-8")
+    (out / f"summary{tag}.md").write_text(markdown_summary(summary, title=title, run_info=run, grip_force=grip),
+                                          encoding="utf-8")
     plot_errors(out / f"errors{tag}.png", records, tolerance_rad, title=title)
     plot_success_vs_tolerance(out / f"success_vs_tolerance{tag}.png", records, tolerance_rad, title=title)
     return summary
 
 
+def _simulated(run_info: Mapping[str, Any] | None) -> bool:
+    """Whether ``run_info``'s config ran on the simulated cell (False when unknown)."""
+    config = (run_info or {}).get("config")
+    robot = config.get("robot") if isinstance(config, Mapping) else None
+    return isinstance(robot, Mapping) and robot.get("backend") == "twin"
+
+
 def markdown_summary(summary: RunSummary, *, title: str = "Reorientation trials",
-                     run_info: Mapping[str, Any] | None = None) -> str:
-    """The summary as markdown: results per method, paired comparisons, outcomes and per-object counts."""
+                     run_info: Mapping[str, Any] | None = None,
+                     grip_force: Mapping[str, GripForceSummary] | None = None) -> str:
+    """The summary as markdown: results per method, paired comparisons, outcomes and per-object counts, and
+    the estimated grip force where the run had a contact model."""
     tol = summary.tolerance_deg
     lines = [f"# {title}", ""]
     if run_info:
@@ -92,6 +110,7 @@ def markdown_summary(summary: RunSummary, *, title: str = "Reorientation trials"
     lines += _table(["object", *summary.methods],
                     [[obj, *(f"{by[m].successes}/{by[m].n}" if m in by else "-" for m in summary.methods)]
                      for obj, by in summary.per_object.items()])
+    lines += markdown_lines(dict(grip_force or {}))
     return "\n".join(lines) + "\n"
 
 
