@@ -169,6 +169,9 @@ def _trial_episode(index: int, r, frames, tolerance_rad: float, phases: tuple[st
             "tolerance_rad": tolerance_rad, "layout": header.get("layout"), "grid": header.get("grid"),
             "frames_file": str(frames.path.relative_to(run)),
             "frames_lost_on_disk": int(frames.damaged_records), "seq_gaps": _gaps(rows["seq"])}
+    if r.estimated_grip_force_n is not None:  # the scene had a contact model
+        meta.update(estimated_grip_force_n=r.estimated_grip_force_n,
+                    estimated_grip_force_sigma_n=r.estimated_grip_force_sigma_n)
     return Episode(index=index, task=f"reorient {r.object} to {target_deg:g} deg", fps=fps, frames=out,
                    success=r.succeeded(tolerance_rad), meta=meta)
 

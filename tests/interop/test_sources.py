@@ -41,6 +41,8 @@ def test_a_trial_run_gives_one_episode_per_trial_and_method_with_task_and_succes
     for e, r in zip(source.episodes, records):
         frames = read_trial_frames(frames_path(trial_run, r.trial, r.method))
         assert (e.meta["trial"], e.meta["method"]) == (r.trial, r.method)
+        assert r.estimated_grip_force_n is not None  # the shipped scene names a contact model
+        assert e.meta["estimated_grip_force_n"] == r.estimated_grip_force_n
         assert e.task == f"reorient {r.object} to 0 deg" and e.fps == 125.0
         assert e.success == r.succeeded(tolerance)
         assert len(e.frames) == len(frames)
