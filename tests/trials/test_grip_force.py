@@ -117,6 +117,16 @@ def test_a_missing_contact_model_is_refused_before_the_run_starts(tmp_path, caps
     assert not out.exists()
 
 
+@pytest.mark.parametrize("scene_file", ["configs/scenes/reorient_sim.toml", "configs/scenes/reorient_robust.toml",
+                                        "configs/scenes/reorient_fr3.toml", "tasks/paper_experiment.toml",
+                                        "tasks/reorient_study.toml"])
+def test_the_shipped_scenes_of_the_supermag_board_log_the_grip_force(scene_file) -> None:
+    from tactile_manip.trials.scene import load_scene
+
+    assert load_scene(REPO / scene_file).contact_model == "models/contact_supermag.onnx"
+    assert (REPO / "models" / "contact_supermag.onnx").is_file()
+
+
 def test_a_scene_names_an_onnx_contact_model_or_none() -> None:
     assert _scene().contact_model == ""
     with pytest.raises(ValueError, match="contact_model must be an exported .onnx"):
