@@ -144,19 +144,20 @@ def contact_model_files(tmp_path_factory):
 
 @pytest.fixture
 def contact_model_of_layout(tmp_path: Path) -> Callable[[str], Path]:
-    """Factory: the shipped SuperMag contact model with ``board_layout`` in its metadata set to ``layout``
-    (e.g. "anyskin-5": a model that claims another board)."""
+    """Factory ``make(layout, **metadata)``: the shipped SuperMag contact model with ``board_layout`` in its
+    metadata set to ``layout`` (e.g. "anyskin-5": a model that claims another board) and the other top-level
+    metadata entries given replaced (e.g. ``targets=...``)."""
     onnx = pytest.importorskip("onnx", reason="rewriting a model's metadata needs onnx (pip install -e '.[train]')")
     import json
 
     from tactile_manip.perception.reconstruct import METADATA_KEY
 
-    def make(layout: str) -> Path:
+    def make(layout: str, **metadata) -> Path:
         proto = onnx.load(str(SHIPPED_CONTACT_MODEL))
         for prop in proto.metadata_props:
             if prop.key == METADATA_KEY:
-                prop.value = json.dumps({**json.loads(prop.value), "board_layout": layout})
-        path = tmp_path / f"contact_{layout}.onnx"
+                prop.value = json.dumps({**json.loads(prop.value), "board_layout": layout, **metadata})
+        path = tmp_path / f"contact_{layout}_{len(list(tmp_path.glob('contact_*.onnx')))}.onnx"
         onnx.save(proto, str(path))
         return path
 

@@ -237,13 +237,17 @@ def _read(sensor: TactileSensor, estimator: TactilePoseEstimator, cfg: ReorientC
 def _grip_contact(sensor: TactileSensor, contact: ContactEstimator, cfg: ReorientConfig,
                   observer: PhaseObserver) -> ContactState | None:
     """The contact model's state of the newest frame (the last one the angle estimate read: the object is
-    held at the final grasp), or None when the sensor has no frame within ``sensor_timeout_s``."""
+    held at the final grasp), or None when the sensor has no frame within ``sensor_timeout_s`` or the model
+    refuses the frame (NaN values): the grip force is logged, never acted on, so it never ends a trial."""
     try:
         reading = sensor.read_latest(max_age_s=cfg.sensor_timeout_s)
     except SensorError:
         return None
     contact.reset()  # one grasp, one estimate: no context from an earlier grasp
-    state = contact.estimate(reading)
+    try:
+        state = contact.estimate(reading)
+    except ValueError:
+        return None
     observer.contact(state)
     return state
 

@@ -110,13 +110,17 @@ def build_contact_estimator(scene: TrialScene, scene_path: Path | None = None, *
 
     Raises:
         ModelFileError: the file is missing, or not a contact model.
-        ValueError: ``layout`` (the sensor's board layout) is given and is not the model's.
+        ValueError: the model estimates no normal force (``force_n``), or ``layout`` (the sensor's board
+            layout) is given and is not the model's.
     """
     if not scene.contact_model:
         return None
     from tactile_manip.perception.contact import ContactEstimator
 
     contact = ContactEstimator(resolve_scene_path(scene.contact_model, scene_path))
+    if "force_n" not in contact.target_names:
+        raise ValueError(f"contact_model: {contact.path.name} estimates no grip force (its targets: "
+                         f"{', '.join(contact.target_names)}); name a model trained on force_n")
     if layout is not None:
         try:
             contact.check_layout(layout)

@@ -106,6 +106,19 @@ def test_a_contact_model_of_another_board_layout_is_refused_before_the_run_start
     assert not out.exists()
 
 
+def test_a_contact_model_without_a_force_target_is_refused_before_the_run_starts(tmp_path,
+                                                                                 contact_model_of_layout) -> None:
+    pytest.importorskip("roboticstoolbox", reason="simulated trials need roboticstoolbox-python (extra 'robot')")
+    from tactile_manip.trials.runner import run_trials
+
+    positions = contact_model_of_layout("supermag-4x4", targets={"names": ["x_mm", "y_mm", "depth_mm", "z_mm",
+                                                                           "in_contact"],
+                                                                 "units": ["mm", "mm", "mm", "mm", "1"]})
+    with pytest.raises(ValueError, match="estimates no grip force .*x_mm, y_mm, depth_mm, z_mm, in_contact"):
+        run_trials(_scene(contact_model=str(positions)), tmp_path / "run", progress=False)
+    assert not (tmp_path / "run").exists()
+
+
 def test_a_missing_contact_model_is_refused_before_the_run_starts(tmp_path, capsys) -> None:
     pytest.importorskip("roboticstoolbox", reason="simulated trials need roboticstoolbox-python (extra 'robot')")
     from tactile_manip.cli import main
