@@ -46,7 +46,7 @@ import numpy as np
 from benchmarks._common import machine_info, publish
 from tactile_manip.data import load_dataset
 
-RODS = ("cylinder", "hex_bar", "square_bar")
+RODS = ("cylinder", "hex_bar", "square_bar", "flat_bar")
 STEPS = {"angle_rad": math.radians(1.0), "x_mm": 0.1, "y_mm": 0.1, "force_rel": 0.02, "tilt_rad": math.radians(0.5),
          "sensor_rel": 0.02}
 POSE_NUISANCES = ("x_mm", "y_mm", "force_n", "tilt_x_rad", "tilt_y_rad")

@@ -56,6 +56,8 @@ class AngleEstimate:
             not measured.
         escalated: the first pass was below the estimator's ``escalate_below`` and this estimate comes from its
             ``escalation`` reconstructor (extra inference: prior samples, symmetry averaging).
+        source: where the angle comes from: "image" (the principal axis of the reconstructed image) or "head"
+            (the model's angle head, read straight from the reading, where it was the more likely).
     """
 
     angle_rad: float
@@ -67,3 +69,4 @@ class AngleEstimate:
     saturated_chips: int = 0
     timings_s: dict[str, float] = field(default_factory=dict, compare=False)
     escalated: bool = False
+    source: str = "image"

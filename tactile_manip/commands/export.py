@@ -5,7 +5,8 @@ recording or a pair log (:mod:`tactile_manip.interop.export`: the output appears
 damaged source gives what is intact and the command lists what it skipped).
 
 ``tactile-manip export --checkpoint RUN/best.pt --out m.onnx`` writes a checkpoint as ONNX (prior + decoder)
-with its metadata. The parity check runs the ONNX file on onnxruntime against torch on the same inputs (real
+with its metadata; for an angle head (``kind = "angle_head"``), ``--attach-to MODEL.onnx`` writes a copy of that
+pose model with the head inside (:mod:`tactile_manip.learning.angle_export`). The parity check runs the ONNX file on onnxruntime against torch on the same inputs (real
 readings from ``--data`` when given) and refuses to keep a file that disagrees.
 """
 
@@ -15,7 +16,7 @@ import argparse
 import json
 
 
-CHECKPOINT_ONLY = ("data", "metrics", "pixel_mm", "card", "history", "table", "latency")
+CHECKPOINT_ONLY = ("data", "metrics", "pixel_mm", "card", "history", "table", "latency", "attach_to")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -30,6 +31,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="with SOURCE: include each frame's reconstructed depth from MODEL (default "
                         "models/supermag_fast.onnx; or bilinear, bicubic)")
     p.add_argument("--checkpoint", default=None, help="training checkpoint (RUN/best.pt) to write as ONNX")
+    p.add_argument("--attach-to", default=None, metavar="MODEL",
+                   help="with an angle head's checkpoint: the pose model (.onnx) to copy to --out with the head inside")
     p.add_argument("--out", required=True,
                    help="output: the dataset folder (lerobot), the .rrd / .mcap file, or the .onnx file")
     p.add_argument("--force", action="store_true", help="replace an existing --out (and --card)")
@@ -93,7 +96,12 @@ def _export_checkpoint(args: argparse.Namespace) -> int:
     require("onnx", "export")
     require("onnxruntime", "export's parity check")
     check_output_file(args.out, force=args.force)
-    if _checkpoint_kind(args.checkpoint) == "contact":
+    kind = _checkpoint_kind(args.checkpoint)
+    if kind == "angle_head":
+        return _attach_angle_head(args)
+    if args.attach_to is not None:
+        raise ValueError(f"--attach-to is for an angle head's checkpoint; {args.checkpoint} is a {kind} checkpoint")
+    if kind == "contact":
         return _export_contact(args)
     if args.card:
         check_output_file(args.card, force=args.force)
@@ -157,6 +165,31 @@ def _checkpoint_kind(path: str) -> str:
     from tactile_manip.learning.checkpoint import read_checkpoint
 
     return str(read_checkpoint(path).get("kind", "cvae"))
+
+
+def _attach_angle_head(args: argparse.Namespace) -> int:
+    """Copy --attach-to to --out with the angle head inside; --data gives real readings to check it on."""
+    import numpy as np
+
+    from tactile_manip.learning.angle_export import attach_angle_head
+    from tactile_manip.data import load_dataset
+
+    if args.attach_to is None:
+        raise ValueError(f"{args.checkpoint} is an angle head: give the pose model to attach it to with --attach-to "
+                         "MODEL.onnx (e.g. models/supermag_robust.onnx)")
+    given = [f"--{n.replace('_', '-')}" for n in ("metrics", "pixel_mm", "card", "history", "table", "latency")
+             if getattr(args, n) is not None]
+    if given:
+        raise ValueError(f"{', '.join(given)}: not for an angle head, whose validation figures travel in its record")
+    readings = None
+    if args.data:  # datasets with and without images: each is read alone
+        readings = np.concatenate([d.readings[d.indices("val")][:64] for d in map(load_dataset, args.data)])
+    record = attach_angle_head(args.checkpoint, args.attach_to, args.out, check_readings=readings)
+    val = record["validation"]
+    print(f"wrote {args.out}: {args.attach_to} with an angle head of {record['parameters']:,} parameters "
+          f"(validation {val.get('val_within_5', float('nan')):.1%} within 5 deg), ONNX vs torch max |diff| "
+          f"{record['parity_max_abs']:.2e}")
+    return 0
 
 
 def _export_contact(args: argparse.Namespace) -> int:

@@ -1,7 +1,8 @@
 """``tactile-manip train``: train a SuperMag CVAE on a paired dataset (torch; `pip install -e ".[train]"`).
 
 A config with ``kind = "contact"`` (configs/train/contact.toml) trains the contact network on labelled
-presses instead (:mod:`tactile_manip.learning.contact_train`).
+presses instead (:mod:`tactile_manip.learning.contact_train`), and ``kind = "angle_head"``
+(configs/train/angle_head.toml) the pose model's angle head (:mod:`tactile_manip.learning.angle_train`).
 
 Start it with ``torchrun --nproc_per_node N -m tactile_manip train ...`` to train data-parallel.
 """
@@ -37,8 +38,11 @@ def run(args: argparse.Namespace) -> int:
     from tactile_manip.learning.import_check import require_torch
 
     require_torch()
-    if _config_kind(args.config) == "contact":
+    kind = _config_kind(args.config)
+    if kind == "contact":
         return _run_contact(args)
+    if kind == "angle_head":
+        return _run_angle_head(args)
     from tqdm import tqdm
 
     from tactile_manip.learning.train import load_train_config, resolve_device, train, with_overrides
@@ -94,6 +98,54 @@ def _config_kind(path: str) -> str:
         return "cvae"
 
 
+def _refuse_cvae_flags(args: argparse.Namespace, what: str) -> None:
+    from tactile_manip.errors import ConfigError
+
+    given = [f for f, v in (("--resume", args.resume), ("--init", args.init), ("--device", args.device),
+                            ("--max-minutes", args.max_minutes)) if v]
+    if given:
+        raise ConfigError(f"{', '.join(given)}: not for {what}, which trains in minutes on the CPU")
+
+
+def _run_angle_head(args: argparse.Namespace) -> int:
+    """Train the pose model's angle head on simulated presses; the CVAE-only flags are refused."""
+    import dataclasses
+
+    from tqdm import tqdm
+
+    from tactile_manip.data import check_dataset_file
+    from tactile_manip.learning.angle_train import load_angle_config, train_angle_head
+
+    _refuse_cvae_flags(args, 'an angle head (kind = "angle_head")')
+    _check_run_folder(args)
+    for path in args.data:
+        check_dataset_file(path)
+    cfg = load_angle_config(args.config)
+    cfg = dataclasses.replace(cfg, **{k: v for k, v in (("epochs", args.epochs), ("seed", args.seed),
+                                                         ("threads", args.threads)) if v is not None})
+    bars = []
+
+    def start(total: int) -> None:
+        bars.append(tqdm(total=total, unit="epoch", desc="training angle head"))
+
+    def progress(row: dict) -> None:
+        bars[0].update(1)
+        bars[0].set_postfix(loss=f"{row['loss']:.3f}", val_nll=f"{row['val_nll']:.3f}",
+                            within_5=f"{row['val_within_5']:.1%}")
+
+    try:
+        summary = train_angle_head(cfg, args.data, args.out, progress=progress, on_start=start)
+    finally:
+        for bar in bars:
+            bar.close()
+    val = summary["val"]
+    print(f"validation: {val['val_within_5']:.1%} within 5 deg, {val['val_within_2']:.1%} within 2 deg, median "
+          f"{val['val_median_deg']:.2f} deg on the axial presses, NLL {val['val_nll']:.3f} "
+          f"({summary['val_presses']} presses; best epoch {summary['best_epoch']}; "
+          f"{summary['train_seconds'] / 60:.1f} min); wrote {args.out}/best.pt, history.json")
+    return 0
+
+
 def _run_contact(args: argparse.Namespace) -> int:
     """Train the contact network (targets from labelled presses); the CVAE-only flags are refused."""
     import dataclasses
@@ -101,14 +153,9 @@ def _run_contact(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
     from tactile_manip.data import check_dataset_file
-    from tactile_manip.errors import ConfigError
     from tactile_manip.learning.contact_train import load_contact_config, train_contact
 
-    given = [f for f, v in (("--resume", args.resume), ("--init", args.init), ("--device", args.device),
-                            ("--max-minutes", args.max_minutes)) if v]
-    if given:
-        raise ConfigError(f"{', '.join(given)}: not for a contact model (kind = \"contact\"), which trains in "
-                          "minutes on the CPU")
+    _refuse_cvae_flags(args, 'a contact model (kind = "contact")')
     _check_run_folder(args)
     for path in args.data:
         check_dataset_file(path)

@@ -44,6 +44,7 @@ undefined (confidence 0) escalates too.
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, replace
@@ -52,7 +53,8 @@ from typing import TYPE_CHECKING, TypeVar
 import numpy as np
 
 from tactile_manip.perception.confidence import ConfidenceCalibration
-from tactile_manip.perception.pose import PoseParams, angle_from_image
+from tactile_manip.perception.angle_head import within_probability
+from tactile_manip.perception.pose import PoseParams, angle_from_image, wrap_axial
 from tactile_manip.perception.reconstruct import Reconstruction, Reconstructor, out_of_range
 from tactile_manip.types import AngleEstimate, TactileReading
 
@@ -99,11 +101,15 @@ class TactilePoseEstimator:
         calibration: maps the raw confidence of a defined estimate onto the probability that its angle is
             within the calibration's tolerance, fitted on held-out presses
             (:class:`~tactile_manip.perception.confidence.ConfidenceCalibration`); None keeps the raw one.
+        use_angle_head: weigh the model's angle head (when its file has one) against the image: the estimate
+            is whichever of the two is the more likely within tolerance (``source`` says which); False reads
+            the angle from the image alone.
     """
 
     def __init__(self, reconstructor: Reconstructor, params: PoseParams | None = None, *,
                  min_field_ut: float = 20.0, calibration: ConfidenceCalibration | None = None,
-                 escalation: Reconstructor | None = None, escalate_below: float = 0.0) -> None:
+                 escalation: Reconstructor | None = None, escalate_below: float = 0.0,
+                 use_angle_head: bool = True) -> None:
         if not isinstance(reconstructor, Reconstructor):
             raise TypeError(f"reconstructor must be a Reconstructor, got {type(reconstructor).__name__}")
         if not (np.isfinite(min_field_ut) and min_field_ut >= 0):
@@ -128,6 +134,11 @@ class TactilePoseEstimator:
                                  "must match")
         self.escalation = escalation
         self.escalate_below = float(escalate_below)
+        if not isinstance(use_angle_head, bool):
+            raise TypeError(f"use_angle_head must be True or False, got {use_angle_head!r}")
+        #: the model's angle head, weighed against the image (None: the image alone; see :meth:`_with_head`)
+        self.angle_head = getattr(reconstructor, "angle_head", None) if use_angle_head else None
+        self._tolerance_rad = math.radians(calibration.tolerance_deg if calibration is not None else 5.0)
 
     @property
     def name(self) -> str:
@@ -182,12 +193,12 @@ class TactilePoseEstimator:
         if saturated is not None:
             flags |= np.asarray(saturated, dtype=bool)
         contact = bool(np.max(np.abs(field)) >= self.min_field_ut)  # the reconstructor has refused NaN already
-        est = self._angle(rec, flags, contact)
+        est = self._angle(rec, flags, contact, field)
         t2 = time.perf_counter()
         timings = {"reconstruct": t1 - t0, "pose": t2 - t1, "total": t2 - t0}
         if self.escalation is not None and contact and est.confidence < self.escalate_below:
             rec = self.escalation.reconstruct(field)
-            est = replace(self._angle(rec, flags, contact), escalated=True)
+            est = replace(self._angle(rec, flags, contact, field), escalated=True)
             timings["escalate"] = time.perf_counter() - t2
             timings["total"] = time.perf_counter() - t0
         if reading is not None:
@@ -195,22 +206,43 @@ class TactilePoseEstimator:
         est = replace(est, saturated_chips=int(flags.any(axis=-1).sum()), timings_s=timings)
         return (est, rec) if image else est
 
-    def _angle(self, rec: Reconstruction, flags: np.ndarray, contact: bool) -> AngleEstimate:
+    def _angle(self, rec: Reconstruction, flags: np.ndarray, contact: bool,
+               field: np.ndarray | None = None) -> AngleEstimate:
         """The angle of ``rec`` and its confidence: PCA, times the prior samples' agreement and the unsaturated
-        fraction of chips (``flags`` (R, C, 3)), calibrated when the estimator has a calibration."""
+        fraction of chips (``flags`` (R, C, A)), calibrated when the estimator has a calibration; then weighed
+        against the angle head's reading of ``field`` when the model has one (:meth:`_with_head`)."""
         if not contact:
             return AngleEstimate(0.0, 0.0, False, reason="no contact field")
         est = angle_from_image(rec.depth_mm, pixel_mm=self.reconstructor.pixel_mm, params=self.params)
-        if not est.defined:
-            return est
-        confidence = est.confidence
-        if rec.spread_mm is not None:
-            confidence *= _sample_agreement(rec, self.params.threshold_mm)
+        if est.defined:
+            confidence = est.confidence
+            if rec.spread_mm is not None:
+                confidence *= _sample_agreement(rec, self.params.threshold_mm)
+            if flags.any():
+                confidence *= _unsaturated_fraction(flags)
+            if self.calibration is not None:
+                confidence = float(self.calibration(confidence))
+            est = replace(est, confidence=confidence)
+        if self.angle_head is not None and field is not None:
+            est = self._with_head(est, field, flags)
+        return est
+
+    def _with_head(self, est: AngleEstimate, field: np.ndarray, flags: np.ndarray) -> AngleEstimate:
+        """The image's estimate or the angle head's, whichever is the more likely within the tolerance.
+
+        The head's probability comes from its von Mises concentration (times the unsaturated fraction of chips);
+        the image's is its confidence (a probability when the estimator has a calibration). The head's angle
+        keeps the image's centroid and area and is defined even where the image is not (a short or faint
+        contact whose reading still carries the axis).
+        """
+        angle, kappa = self.angle_head.axis(self.reconstructor.checked(field))
+        p_head = within_probability(kappa, self._tolerance_rad)
         if flags.any():
-            confidence *= _unsaturated_fraction(flags)
-        if self.calibration is not None:
-            confidence = float(self.calibration(confidence))
-        return replace(est, confidence=confidence)
+            p_head *= _unsaturated_fraction(flags)
+        if est.defined and est.confidence >= p_head:
+            return est
+        return replace(est, angle_rad=float(wrap_axial(angle)), confidence=float(p_head), defined=True, reason="",
+                       source="head")
 
     def estimate_frames(self, readings: Sequence[TactileReading | np.ndarray]) -> AngleEstimate:
         """Angle from the mean of several consecutive readings of one static contact (less chip noise)."""

@@ -25,7 +25,7 @@ from tactile_manip.perception.pose import angle_from_image, wrap_axial
 from tactile_manip.perception.reconstruct import ModelFileError, Reconstructor
 from tactile_manip.data import PairedDataset
 
-ELONGATED = ("cylinder", "hex_bar", "square_bar")
+ELONGATED = ("cylinder", "hex_bar", "square_bar", "flat_bar")
 FORCE_BANDS_N = (2.0, 5.0, 8.0, 11.0, 15.0)   # edges of the force bands reported when a test split spans them
 
 

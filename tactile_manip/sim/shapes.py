@@ -164,6 +164,49 @@ def rod(kind: str, *, size_mm: float = 4.0, length_mm: float = 30.0) -> Indenter
     return _indenter(height, origin, _ROD_NAMES[kind])
 
 
+def flat_bar(*, width_mm: float = 12.0, thickness_mm: float = 3.0, fillet_mm: float = 0.5,
+             length_mm: float = 40.0) -> Indenter:
+    """A flat bar (a strip of rectangular section) lying on its wide face, along local x, edges rounded by
+    ``fillet_mm``; reference point at the centre of the face. Heights measured from the bar's mid-plane.
+
+    Up to 20 mm wide, as wide as the pad: a small tilt about its axis or its length leaves only one edge or one
+    end in contact, the case a short footprint cannot resolve.
+    """
+    width = check_finite_scalar("width_mm", width_mm, low=2.0, high=20.0)
+    thick = check_finite_scalar("thickness_mm", thickness_mm, low=0.5, high=10.0)
+    fillet = check_finite_scalar("fillet_mm", fillet_mm, low=0.0, high=min(width, thick) / 2)
+    length = check_finite_scalar("length_mm", length_mm, low=width, high=150.0)
+    px = DEFAULT_PIXEL_MM
+    x, y, origin = _grid((-length / 2 - px, length / 2 + px), (-width / 2 - px, width / 2 + px), px)
+    inside = np.minimum(width / 2 - np.abs(y), length / 2 - np.abs(x))
+    face = _extrude(np.where(np.abs(x) <= length / 2 + 1e-9, width / 2 - np.abs(y), -1.0), thick / 2, fillet)
+    return _indenter(np.where(inside >= -1e-9, face, np.nan), origin, "flat_bar")
+
+
+def procedural_bar(seed: int, *, length_mm: float = 40.0) -> Indenter:
+    """A seeded family of long straight bars for learning a contact's axis: a cross-section drawn per seed,
+    lying along local x, reference point on its axis.
+
+    The section's upper outline is a superellipse ``(|y| / a)^p + (z / b)^p = 1`` with ``p`` in 1.5-8 (from
+    lens-like to nearly rectangular), half width ``a`` 1-10 mm and half height ``b`` 0.5-4 mm; about a third of
+    the seeds cut its top flat at 40-90 % of ``b`` (a flat face with rounded shoulders). The family contains no
+    section of the built-in rods exactly, so those stay unseen shapes; the same seed always gives the same
+    array.
+    """
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
+    length = check_finite_scalar("length_mm", length_mm, low=10.0, high=150.0)
+    rng = np.random.default_rng(int(seed))
+    power, half_w, half_h = rng.uniform(1.5, 8.0), rng.uniform(1.0, 10.0), rng.uniform(0.5, 4.0)
+    cut = rng.uniform(0.4, 0.9) * half_h if rng.random() < 1 / 3 else half_h
+    px = DEFAULT_PIXEL_MM
+    x, y, origin = _grid((-length / 2 - px, length / 2 + px), (-half_w - px, half_w + px), px)
+    q = 1.0 - np.abs(y / half_w) ** power
+    profile = np.minimum(half_h * np.clip(q, 0.0, None) ** (1.0 / power), cut)
+    h = np.where((q >= 0) & (np.abs(x) <= length / 2 + 1e-9), profile, np.nan)
+    return _indenter(h, origin, f"procedural_bar_{int(seed)}")
+
+
 def ridge(*, angle_deg: float = 60.0, tip_radius_mm: float = 0.1, height_mm: float = 3.0,
           length_mm: float = 30.0) -> Indenter:
     """A knife-edge: a straight wedge bar along local x with apex angle ``angle_deg`` and a tip rounded to
@@ -299,6 +342,8 @@ SHAPES: dict[str, Callable[..., Indenter]] = {
     "procedural": procedural,
     "ridge": ridge,
     "procedural_sharp": procedural_sharp,
+    "flat_bar": flat_bar,
+    "procedural_bar": procedural_bar,
 }
 
 

@@ -1,0 +1,129 @@
+"""The angle head at run time: its probability table, and how the pose estimator weighs it against the image."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from tactile_manip.perception import TactilePoseEstimator
+from tactile_manip.perception.angle_head import within_probability
+from tactile_manip.perception.reconstruct import Reconstructor
+from tactile_manip.perception.symmetry import SymmetrizedReconstructor
+
+TOLERANCE = math.radians(5.0)
+
+
+class FakeHead:
+    """An angle head that reads every reading as the same axis with the same concentration."""
+
+    def __init__(self, angle_rad: float, kappa: float) -> None:
+        self.angle_rad, self.kappa, self.calls = angle_rad, kappa, 0
+
+    def axis(self, field_ut: np.ndarray) -> tuple[float, float]:
+        assert field_ut.dtype == np.float32 and field_ut.shape == (4, 4, 3)
+        self.calls += 1
+        return self.angle_rad, self.kappa
+
+    def axes(self, fields_ut: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return np.full(len(fields_ut), self.angle_rad), np.full(len(fields_ut), self.kappa)
+
+
+class Stripe(Reconstructor):
+    """A contact stripe along ``angle_rad`` (or a round blob with ``round_=True``), whatever the reading."""
+
+    name = "stripe"
+    output_shape = (60, 60)
+    pixel_mm = 0.33
+
+    def __init__(self, angle_rad: float = 0.0, *, round_: bool = False, head: FakeHead | None = None) -> None:
+        self.angle_rad, self.round_, self.angle_head = angle_rad, round_, head
+
+    def _run(self, fields_ut: np.ndarray) -> tuple[np.ndarray, None]:
+        ys, xs = np.mgrid[0:60, 0:60] - 29.5
+        if self.round_:
+            img = np.where(np.hypot(xs, ys) < 12, 1.0, 0.0)
+        else:
+            u = xs * math.cos(self.angle_rad) - ys * math.sin(self.angle_rad)
+            v = xs * math.sin(self.angle_rad) + ys * math.cos(self.angle_rad)
+            img = np.where((np.abs(v) < 3) & (np.abs(u) < 25), 1.0, 0.0)
+        return np.repeat(img[None].astype(np.float32), len(fields_ut), axis=0), None
+
+
+def _reading(value: float = 80.0) -> np.ndarray:
+    return np.full((4, 4, 3), value)
+
+
+@pytest.mark.parametrize("kappa", [1e-3, 0.5, 3.0, 20.0, 150.0, 2000.0])
+def test_the_probability_within_tolerance_is_the_von_mises_mass_of_the_doubled_angle(kappa) -> None:
+    want = stats.vonmises.cdf(2 * TOLERANCE, kappa) - stats.vonmises.cdf(-2 * TOLERANCE, kappa)
+    assert within_probability(kappa, TOLERANCE) == pytest.approx(want, abs=2e-3)
+
+
+def test_the_probability_rises_with_the_concentration_from_chance_to_certainty() -> None:
+    kappa = np.geomspace(1e-4, 1e6, 200)
+    p = within_probability(kappa, TOLERANCE)
+    assert np.all(np.diff(p) >= 0)
+    assert p[0] == pytest.approx(10.0 / 180.0, abs=1e-3) and p[-1] == pytest.approx(1.0)
+    assert within_probability(0.0, TOLERANCE) == pytest.approx(10.0 / 180.0, abs=1e-3)  # log(0) is clipped
+
+
+def test_a_sure_head_replaces_an_unsure_image() -> None:
+    head = FakeHead(math.radians(40.0), 5000.0)
+    est = TactilePoseEstimator(Stripe(0.0, round_=False, head=head)).estimate(_reading())
+    assert est.source == "head" and est.defined and head.calls == 1
+    assert est.angle_rad == pytest.approx(math.radians(40.0))
+    assert est.confidence == pytest.approx(within_probability(5000.0, TOLERANCE))
+
+
+def test_an_unsure_head_leaves_the_image_estimate_as_it_is() -> None:
+    image_only = TactilePoseEstimator(Stripe(0.3)).estimate(_reading())
+    est = TactilePoseEstimator(Stripe(0.3, head=FakeHead(-1.0, 1e-3))).estimate(_reading())
+    assert est.source == "image"
+    assert (est.angle_rad, est.confidence, est.defined) == (image_only.angle_rad, image_only.confidence, True)
+    assert est.angle_rad == pytest.approx(0.3, abs=0.02)
+
+
+def test_the_head_defines_an_angle_the_image_cannot() -> None:
+    assert not TactilePoseEstimator(Stripe(round_=True)).estimate(_reading()).defined
+    est = TactilePoseEstimator(Stripe(round_=True, head=FakeHead(1.2, 80.0))).estimate(_reading())
+    assert est.defined and est.source == "head" and est.reason == ""
+    assert est.angle_rad == pytest.approx(1.2) and 0 < est.confidence < 1
+
+
+def test_no_contact_field_stays_no_contact_whatever_the_head_says() -> None:
+    head = FakeHead(0.5, 1e4)
+    est = TactilePoseEstimator(Stripe(head=head)).estimate(_reading(1.0))
+    assert not est.defined and est.reason == "no contact field" and head.calls == 0
+
+
+def test_saturated_chips_lower_the_heads_probability_too() -> None:
+    head = FakeHead(0.5, 1e4)
+    reading = _reading()
+    reading[0, 0, 2] = 1e5   # beyond the chip's range: clamped and flagged
+    est = TactilePoseEstimator(Stripe(round_=True, head=head)).estimate(reading)
+    assert est.saturated_chips == 1
+    assert est.confidence == pytest.approx(within_probability(1e4, TOLERANCE) * 15 / 16)
+
+
+def test_the_head_can_be_left_out_and_bad_readings_are_still_refused() -> None:
+    rec = Stripe(round_=True, head=FakeHead(0.5, 1e4))
+    assert not TactilePoseEstimator(rec, use_angle_head=False).estimate(_reading()).defined
+    with pytest.raises(TypeError, match="use_angle_head"):
+        TactilePoseEstimator(rec, use_angle_head="yes")
+    bad = _reading()
+    bad[1, 2, 0] = np.nan
+    with pytest.raises(ValueError, match="NaN"):
+        TactilePoseEstimator(rec).estimate(bad)
+
+
+def test_estimate_many_and_the_symmetrised_model_use_the_head_alike() -> None:
+    head = FakeHead(-0.7, 3000.0)
+    rec = Stripe(round_=True, head=head)
+    many = TactilePoseEstimator(rec).estimate_many([_reading(), _reading(90.0)])
+    assert [e.source for e in many] == ["head", "head"]
+    sym = SymmetrizedReconstructor(rec)
+    assert sym.angle_head is head
+    assert TactilePoseEstimator(sym).estimate(_reading()).angle_rad == pytest.approx(-0.7)
