@@ -51,7 +51,7 @@ class ContextBuffer:
     times: the history and the window are the same array, and a push copies one reading and nothing else.
     """
 
-    def __init__(self, frames: int, max_gap_s: float, shape: tuple[int, ...] | None = None) -> None:
+    def __init__(self, frames: int, max_gap_s: float, *, shape: tuple[int, ...] | None = None) -> None:
         if frames < 1:
             raise ValueError(f"frames must be >= 1, got {frames}")
         self.frames = frames

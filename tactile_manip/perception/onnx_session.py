@@ -10,7 +10,7 @@ keeps the plain ``session.run``. What did pay, measured later with 4000 interlea
 sample dimensions together with no mean/spread tail, the one-reading graph of :mod:`.one_reading` (-11 %).
 
 A contact model is another matter: its whole graph runs in about 0.055 ms, so the 0.01 ms that ``session.run``
-spends around it (a dict in, new output arrays out) is a sixth of the call, and
+spends around it (a dict in, new output arrays out) is a sixth of what ``session.run`` takes, and
 :class:`~tactile_manip.perception.contact.ContactEstimator` binds its input and outputs once
 (``python -m benchmarks.bench_contact`` measures the graph both ways, interleaved).
 """
