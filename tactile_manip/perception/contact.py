@@ -26,10 +26,16 @@ at about that rate. :meth:`ContactEstimator.reset` forgets the history.
 Bad input raises ValueError naming the problem (wrong shape, NaN or infinite values: nothing is estimated and
 the history is unchanged); a missing or foreign model file raises
 :class:`~tactile_manip.perception.reconstruct.ModelFileError` naming the path.
+
+Speed: a call is built for a control loop on one thread (``python -m benchmarks.bench_contact`` measures it).
+The model's input and outputs are arrays allocated once and bound to the onnxruntime session, so a call copies
+the reading into the context window, runs the graph and reads two small arrays back; nothing else is
+allocated but the returned state. An estimator keeps its history and these arrays: give each thread its own.
 """
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
@@ -125,8 +131,36 @@ class ContactEstimator:
                                                 providers=["CPUExecutionProvider"])
         except Exception as e:  # noqa: BLE001 - onnxruntime raises its own Fail/InvalidGraph classes
             raise ModelFileError(f"{self.path}: onnxruntime cannot load it: {' '.join(str(e).split())[:200]}") from e
-        self._history = ContextBuffer(self.context_frames, self.max_gap_s)
-        self._state_fields = [(n, STATE_FIELDS[n]) for n in self.target_names if n in STATE_FIELDS]
+        self._history = ContextBuffer(self.context_frames, self.max_gap_s, shape=self.input_shape)
+        self._abs = np.empty(self.input_shape, np.float32)  # |reading|, allocated once
+        self._state_fields = [(k, n, STATE_FIELDS[n]) for k, n in enumerate(self.target_names) if n in STATE_FIELDS]
+        self._flag = self.target_names.index(CONTACT_FLAG) if CONTACT_FLAG in self.target_names else None
+        self._blank = dict(vars(ContactState(in_contact=False)))  # every field of a state at its default
+        self._binding, self._mean, self._sigma = self._bind(ort)
+
+    def _bind(self, ort: Any) -> tuple[Any, np.ndarray, np.ndarray]:
+        """Bind the context window and two preallocated (1, K) output arrays to the session, and run it once
+        (the first run allocates onnxruntime's buffers; a model whose inputs or outputs are not those of
+        ``tactile-manip export`` is refused here)."""
+        inputs = [(i.name, i.type) for i in self.session.get_inputs()]
+        outputs = [(o.name, o.type) for o in self.session.get_outputs()]
+        expected = [("mean", "tensor(float)"), ("sigma", "tensor(float)")]
+        if inputs != [("field_ut", "tensor(float)")] or outputs != expected:
+            raise ModelFileError(f"{self.path}: a contact model takes float32 'field_ut' and gives float32 'mean' "
+                                 f"and 'sigma'; this graph takes {inputs} and gives {outputs}")
+        mean = np.zeros((1, len(self.target_names)), np.float32)
+        sigma = np.zeros_like(mean)
+        binding = self.session.io_binding()
+        binding.bind_ortvalue_input("field_ut", ort.OrtValue.ortvalue_from_numpy(self._history.window[None]))
+        binding.bind_ortvalue_output("mean", ort.OrtValue.ortvalue_from_numpy(mean))
+        binding.bind_ortvalue_output("sigma", ort.OrtValue.ortvalue_from_numpy(sigma))
+        try:
+            self.session.run_with_iobinding(binding)
+        except Exception as e:  # noqa: BLE001 - onnxruntime raises its own classes
+            raise ModelFileError(f"{self.path}: the model does not run on one ({self.context_frames}, "
+                                 f"{', '.join(map(str, self.input_shape))}) window with {len(self.target_names)} "
+                                 f"targets: {' '.join(str(e).split())[:200]}") from e
+        return binding, mean, sigma
 
     def __repr__(self) -> str:
         return (f"ContactEstimator({str(self.path)!r}, targets={list(self.target_names)}, "
@@ -151,12 +185,15 @@ class ContactEstimator:
             ValueError: wrong shape, or NaN / infinite values (nothing is estimated, the history is unchanged).
         """
         t0 = time.perf_counter()
-        field_ut = self._check(reading)
-        if t_s is None:
-            t_s = reading.t_host_s if isinstance(reading, TactileReading) else time.monotonic()
-        window = self._history.push(field_ut, float(t_s))
-        mean, sigma = self.session.run(None, {"field_ut": window[None]})
-        return self._state(mean[0], sigma[0], field_ut, self._history.frames_used, time.perf_counter() - t0)
+        if isinstance(reading, TactileReading):
+            field_ut, peak_ut = self._check(reading.field_ut)
+            if t_s is None:
+                t_s = reading.t_host_s
+        else:
+            field_ut, peak_ut = self._check(reading)
+        self._history.push(field_ut, time.monotonic() if t_s is None else float(t_s))  # the bound input
+        self.session.run_with_iobinding(self._binding)                                # into _mean, _sigma
+        return self._state(peak_ut, time.perf_counter() - t0)
 
     def stream(self, sensor: TactileSensor, *, timeout_s: float = 0.1, max_estimates: int | None = None,
                stats: StreamStats | None = None) -> Iterator[ContactState]:
@@ -169,30 +206,38 @@ class ContactEstimator:
         return stream_estimates(sensor, self.estimate, timeout_s=timeout_s, max_estimates=max_estimates,
                                 stats=stats)
 
-    def _check(self, reading: TactileReading | np.ndarray) -> np.ndarray:
-        field_ut = reading.field_ut if isinstance(reading, TactileReading) else reading
+    def _check(self, field_ut: np.ndarray) -> tuple[np.ndarray, float]:
+        """The reading as float32 (R, C, A) and its largest |value| (uT); ValueError for a wrong shape or a NaN
+        or infinite value (one reduction finds both: NaN and inf carry through the maximum)."""
         arr = np.asarray(field_ut, dtype=np.float32)
         if arr.shape != self.input_shape:
             raise ValueError(f"expected a reading of shape {self.input_shape} (rows, cols, axes) for "
                              f"{self.path.name}, got {arr.shape}")
-        if not np.isfinite(arr).all():
-            bad = int((~np.isfinite(arr)).sum())
+        peak_ut = float(np.abs(arr, out=self._abs).max())
+        if not math.isfinite(peak_ut):
+            bad = int(arr.size - np.count_nonzero(np.isfinite(arr)))
             raise ValueError(f"the reading holds {bad} NaN or infinite value(s): nothing estimated")
-        return arr
+        return arr, peak_ut
 
-    def _state(self, mean: np.ndarray, sigma: np.ndarray, field_ut: np.ndarray, used: int,
-               latency_s: float) -> ContactState:
-        values = dict(zip(self.target_names, mean.tolist()))
-        sigmas = dict(zip(self.target_names, sigma.tolist()))
-        kwargs: dict[str, Any] = {}
-        for name, sigma_field in self._state_fields:
-            kwargs[name], kwargs[sigma_field] = values[name], sigmas[name]
-        if CONTACT_FLAG in values:
-            probability = float(np.clip(values[CONTACT_FLAG], 0.0, 1.0))
-            kwargs["in_contact_probability"] = probability
-            in_contact = probability > 0.5
+    def _state(self, peak_ut: float, latency_s: float) -> ContactState:
+        """The state of the outputs the last run left in ``_mean`` and ``_sigma``."""
+        mean, sigma = self._mean[0].tolist(), self._sigma[0].tolist()
+        fields = self._blank.copy()
+        for k, name, sigma_field in self._state_fields:
+            fields[name], fields[sigma_field] = mean[k], sigma[k]
+        if self._flag is not None:
+            probability = min(max(mean[self._flag], 0.0), 1.0)
+            fields["in_contact_probability"] = probability
+            fields["in_contact"] = probability > 0.5
         else:
-            in_contact = bool(np.max(np.abs(field_ut)) >= self.min_field_ut)
-        return ContactState(in_contact=in_contact, values=values, sigmas=sigmas, context_frames=used,
-                            latency_s=latency_s, **kwargs)
+            fields["in_contact"] = peak_ut >= self.min_field_ut
+        fields["values"] = dict(zip(self.target_names, mean))
+        fields["sigmas"] = dict(zip(self.target_names, sigma))
+        fields["context_frames"] = self._history.frames_used
+        fields["latency_s"] = latency_s
+        # the frozen dataclass's __init__ sets each of its 18 fields through object.__setattr__, which costs as
+        # much as the rest of this method; the instance is the same (test_contact_estimator.py compares them)
+        state = object.__new__(ContactState)
+        state.__dict__.update(fields)
+        return state
 

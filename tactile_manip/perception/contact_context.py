@@ -41,38 +41,49 @@ def context_windows(readings: np.ndarray, *, frames: int, max_gap_s: float, time
 class ContextBuffer:
     """The last frames of a stream, as :func:`context_windows` builds them for a dataset.
 
-    ``push(reading, t_s)`` adds the newest reading and returns its window (T, R, C, A) float32 (valid until the
-    next push); ``frames_used`` is then the number of real frames in it (1: the reading alone).
+    ``push(reading, t_s)`` adds the newest reading and returns its window (T, R, C, A) float32; ``frames_used``
+    is then the number of real frames in it (1: the reading alone). The window is one array, rewritten in
+    place by every push (the same object while the readings keep their shape, so a caller may hand it to a
+    model once and keep reading it).
+
+    A frame that is no context now never becomes context again (the readings only get newer, and a clock that
+    goes back starts a new stream), so the buffer overwrites such frames with the reading and forgets their
+    times: the history and the window are the same array, and a push copies one reading and nothing else.
     """
 
-    def __init__(self, frames: int, max_gap_s: float) -> None:
+    def __init__(self, frames: int, max_gap_s: float, *, shape: tuple[int, ...] | None = None) -> None:
         if frames < 1:
             raise ValueError(f"frames must be >= 1, got {frames}")
         self.frames = frames
         self.max_gap_s = float(max_gap_s)
-        self._window: np.ndarray | None = None      # (T, R, C, A), frame 0 the newest
-        self._times = np.full(frames, -np.inf)      # (T,) s, -inf where no frame yet
+        # (T, R, C, A), frame 0 the newest; allocated by the first push unless the reading's shape is given
+        self.window: np.ndarray | None = None if shape is None else np.zeros((frames, *shape), np.float32)
+        self._times = [-np.inf] * frames             # s, -inf where no frame (or no context any more)
         self.frames_used = 0
 
     def clear(self) -> None:
         """Forget the history (the next reading has no context)."""
-        self._times[:] = -np.inf
+        self._times[:] = [-np.inf] * self.frames
 
     def push(self, reading: np.ndarray, t_s: float) -> np.ndarray:
         """The window (T, R, C, A) float32 of ``reading`` taken at ``t_s`` (s, any monotonic clock)."""
-        if self._window is None or self._window.shape[1:] != reading.shape:
-            self._window = np.empty((self.frames, *reading.shape), np.float32)
+        window, times = self.window, self._times
+        if window is None or window.shape[1:] != reading.shape:
+            window = self.window = np.empty((self.frames, *reading.shape), np.float32)
             self.clear()
-        if t_s < self._times[0]:  # a clock that went back: a new stream
+        if t_s < times[0]:  # a clock that went back: a new stream
             self.clear()
-        self._window[1:] = self._window[:-1]
-        self._times[1:] = self._times[:-1]
-        self._window[0] = reading
-        self._times[0] = t_s
-        usable = t_s - self._times <= self.max_gap_s            # (T,); False for the frames never filled
-        self.frames_used = int(usable.sum())
-        if self.frames_used == self.frames:
-            return self._window
-        out = self._window.copy()
-        out[~usable] = reading
-        return out
+        if self.frames > 1:
+            window[1:] = window[:-1]
+            times.pop()
+            times.insert(0, t_s)
+        times[0] = t_s
+        window[0] = reading
+        used = 1   # the times fall with k, so the usable frames are the first ones (as in context_windows)
+        while used < self.frames and t_s - times[used] <= self.max_gap_s:
+            used += 1
+        if used < self.frames:
+            window[used:] = reading
+            times[used:] = [-np.inf] * (self.frames - used)
+        self.frames_used = used
+        return window

@@ -98,6 +98,79 @@ def test_nan_and_wrong_shapes_are_refused_and_leave_the_history_alone(contact_mo
     assert est.estimate(r[1], t_s=0.05).context_frames == 2
 
 
+def test_after_gaps_resets_and_a_clock_going_back_the_stream_still_gives_the_graph_on_the_dataset_windows(
+        contact_model_files, labelled_presses) -> None:
+    est = ContactEstimator(contact_model_files[2])
+    data = labelled_presses(120)
+    rng = np.random.default_rng(0)
+    steps = np.where(rng.random(120) < 0.15, rng.uniform(1.1, 5.0, 120), 0.05)  # some pauses past max_gap_s
+    t = np.cumsum(steps)
+    got = np.array([est.estimate(r, t_s=ti).values["force_n"] for r, ti in zip(data.readings, t)])
+    windows = context_windows(data.readings, frames=3, max_gap_s=1.0, time_s=t)
+    mean, _ = est.session.run(None, {"field_ut": windows})
+    np.testing.assert_allclose(got, mean[:, 2], rtol=1e-5, atol=1e-5)
+    est.estimate(data.readings[0], t_s=t[-1] + 0.05)
+    back = est.estimate(data.readings[1], t_s=0.0)  # a clock that went back: a new stream, no context
+    alone, _ = est.session.run(None, {"field_ut": np.repeat(data.readings[1][None, None], 3, axis=1)})
+    assert back.context_frames == 1
+    np.testing.assert_allclose(back.force_n, alone[0, 2], rtol=1e-5, atol=1e-5)
+
+
+def test_the_buffer_rewrites_one_window_in_place() -> None:
+    rng = np.random.default_rng(0)
+    buf = ContextBuffer(3, 1.0, shape=(3, 3, 3))
+    first = buf.window
+    readings = rng.normal(0, 50, (6, 3, 3, 3)).astype(np.float32)
+    for i, t in enumerate([0.0, 0.1, 0.2, 5.0, 5.1, 5.2]):
+        assert buf.push(readings[i], t) is first
+    np.testing.assert_array_equal(first, readings[[5, 4, 3]])
+    buf.push(readings[0], 5.3)
+    buf.clear()
+    np.testing.assert_array_equal(buf.push(readings[1], 5.4), readings[[1, 1, 1]])
+
+
+def test_a_state_is_the_one_its_dataclass_builds(contact_model_files, labelled_presses) -> None:
+    import dataclasses
+    import pickle
+
+    models = [ContactEstimator(contact_model_files[2]),
+              ContactEstimator(Path(__file__).resolve().parents[2] / "models" / "contact_supermag.onnx")]
+    for est, reading in zip(models, [labelled_presses().readings[10], np.full((4, 4, 3), 40.0, np.float32)]):
+        state = est.estimate(reading)
+        built = ContactState(**{f.name: getattr(state, f.name) for f in dataclasses.fields(ContactState)})
+        assert built == state and repr(built) == repr(state)
+        assert pickle.loads(pickle.dumps(state)) == state
+        assert dataclasses.replace(state, force_n=1.0).force_n == 1.0
+        assert isinstance(state.in_contact, bool) and isinstance(state.context_frames, int)
+        with pytest.raises(dataclasses.FrozenInstanceError):
+            state.in_contact = not state.in_contact
+    assert models[1].estimate(np.zeros((4, 4, 3))).in_contact_probability is not None
+
+
+def test_readings_of_any_float_dtype_or_as_tactile_readings_give_the_same_state(contact_model_files,
+                                                                                labelled_presses) -> None:
+    r = labelled_presses().readings[20]
+    states = []
+    as_reading = TactileReading(r, r, np.zeros(r.shape, bool), t_host_s=3.0, seq=1)
+    for reading in (r, r.astype(np.float64), r.tolist(), as_reading):
+        est = ContactEstimator(contact_model_files[2])
+        states.append(est.estimate(reading, t_s=3.0))
+    for state in states[1:]:
+        assert state.values == states[0].values and state.in_contact == states[0].in_contact
+
+
+def test_a_graph_without_the_exported_inputs_and_outputs_is_refused(tmp_path, contact_model_files) -> None:
+    onnx = pytest.importorskip("onnx", reason="renaming a graph output needs onnx")
+    proto = onnx.load(str(contact_model_files[2]))
+    old = proto.graph.output[1].name
+    for node in proto.graph.node:
+        node.output[:] = ["spread" if o == old else o for o in node.output]
+    proto.graph.output[1].name = "spread"
+    onnx.save(proto, str(tmp_path / "renamed.onnx"))
+    with pytest.raises(ModelFileError, match="renamed.onnx.*'spread'"):
+        ContactEstimator(tmp_path / "renamed.onnx")
+
+
 def test_missing_foreign_and_image_model_files_are_one_clear_error(tmp_path) -> None:
     with pytest.raises(ModelFileError, match="not found: .*nothere.onnx"):
         ContactEstimator(tmp_path / "nothere.onnx")
