@@ -78,7 +78,8 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError(f"--fit {args.fit} has {fit_conf.size} rod presses in split {args.fit_split!r}; "
                           f"calibrating needs >= {MIN_FIT_PRESSES}")
     cal = ConfidenceCalibration.fit(fit_conf, fit_err, tolerance_deg=tol, prior_samples=args.samples,
-                                    symmetrized=args.symmetrized, aperture=estimator.params.aperture)
+                                    symmetrized=args.symmetrized, aperture=estimator.params.aperture,
+                                    route=estimator.angle_source)
     report = load_dataset(args.report)
     report.require_images(f"calibrate --report {args.report}")
     _, raw, err = _rods(report, "--report", args.report, args.report_split, estimator)
@@ -89,7 +90,7 @@ def run(args: argparse.Namespace) -> int:
     before = reliability_table(raw, err, tolerance_deg=tol, bins=REPORT_BINS, order=order)
     after = reliability_table(cal(raw), err, tolerance_deg=tol, bins=REPORT_BINS, order=order)
     cal.save(out)
-    summary = {"model": str(args.model), "tolerance_deg": tol, "samples": args.samples,
+    summary = {"model": str(args.model), "tolerance_deg": tol, "samples": args.samples, "route": estimator.angle_source,
                "symmetrized": args.symmetrized,
                "fit": {"data": str(args.fit), "split": args.fit_split, "presses": int(fit_conf.size),
                        "within_tolerance": float(np.mean(fit_err <= tol))},

@@ -40,6 +40,7 @@ class ConfidenceCalibration:
     prior_samples: int = 1        # prior samples per reading of the estimator it was fitted for
     symmetrized: bool = False     # fitted for the model averaged over the sensor's symmetries
     aperture: str = "disc"        # the pose pipeline's moments aperture it was fitted with (PoseParams.aperture)
+    route: str = "image"          # the estimator's angle route it was fitted for ("image", "head", "likelier")
 
     def __post_init__(self) -> None:
         k, v = np.asarray(self.knots, float), np.asarray(self.values, float)
@@ -60,16 +61,18 @@ class ConfidenceCalibration:
         out = np.interp(r, self.knots, self.values)
         return float(out) if out.ndim == 0 else out
 
-    def fits(self, *, prior_samples: int, symmetrized: bool, aperture: str = "disc") -> bool:
+    def fits(self, *, prior_samples: int, symmetrized: bool, aperture: str = "disc", route: str = "image") -> bool:
         """Whether it was fitted for an estimator with these settings (the raw confidence of another is
-        distributed otherwise, so this map would not give its probability)."""
-        return (self.prior_samples == prior_samples and self.symmetrized == symmetrized
-                and self.aperture == aperture)
+        distributed otherwise, so this map would not give its probability). The angle head's reading does not
+        depend on the image's prior samples or symmetry averaging, so for the "head" route those do not count."""
+        image = route == "head" or (self.prior_samples == prior_samples and self.symmetrized == symmetrized
+                                    and self.aperture == aperture)
+        return self.route == route and image
 
     @classmethod
     def fit(cls, raw: np.ndarray, errors_deg: np.ndarray, *, tolerance_deg: float = 5.0,
             min_per_knot: int = 20, prior_samples: int = 1, symmetrized: bool = False,
-            aperture: str = "disc") -> ConfidenceCalibration:
+            aperture: str = "disc", route: str = "image") -> ConfidenceCalibration:
         """Isotonic fit of "error within tolerance" on raw confidence (held-out estimates only).
 
         Undefined estimates enter with raw confidence 0 and their error (90 deg when unknown). Blocks of fewer
@@ -87,18 +90,20 @@ class ConfidenceCalibration:
         values = [b[1] for b in blocks]
         knots, values = _strictly_increasing(knots, values)
         return cls(tuple(knots), tuple(values), float(tolerance_deg), int(raw.size), int(prior_samples),
-                   bool(symmetrized), str(aperture))
+                   bool(symmetrized), str(aperture), str(route))
 
     def to_dict(self) -> dict[str, Any]:
         return {"knots": list(self.knots), "values": list(self.values), "tolerance_deg": self.tolerance_deg,
                 "samples": self.samples, "prior_samples": self.prior_samples, "symmetrized": self.symmetrized,
-                "aperture": self.aperture}
+                "aperture": self.aperture, "route": self.route}
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> ConfidenceCalibration:
-        # a file without "aperture" predates it: it was fitted with the whole-image moments
+        # a file without "aperture" predates it: it was fitted with the whole-image moments; one without "route"
+        # predates the angle head: fitted on the image's angles
         return cls(tuple(d["knots"]), tuple(d["values"]), float(d["tolerance_deg"]), int(d.get("samples", 0)),
-                   int(d.get("prior_samples", 1)), bool(d.get("symmetrized", False)), str(d.get("aperture", "none")))
+                   int(d.get("prior_samples", 1)), bool(d.get("symmetrized", False)), str(d.get("aperture", "none")),
+                   str(d.get("route", "image")))
 
     def save(self, path: str | Path) -> Path:
         Path(path).parent.mkdir(parents=True, exist_ok=True)

@@ -59,6 +59,7 @@ from tactile_manip.perception.reconstruct import Reconstruction, Reconstructor, 
 from tactile_manip.types import AngleEstimate, TactileReading
 
 T = TypeVar("T")
+ANGLE_SOURCES = ("auto", "image", "head", "likelier")
 
 if TYPE_CHECKING:  # the sensors layer is only needed for type hints here
     from tactile_manip.sensors.base import TactileSensor
@@ -101,15 +102,17 @@ class TactilePoseEstimator:
         calibration: maps the raw confidence of a defined estimate onto the probability that its angle is
             within the calibration's tolerance, fitted on held-out presses
             (:class:`~tactile_manip.perception.confidence.ConfidenceCalibration`); None keeps the raw one.
-        use_angle_head: weigh the model's angle head (when its file has one) against the image: the estimate
-            is whichever of the two is the more likely within tolerance (``source`` says which); False reads
-            the angle from the image alone.
+        angle_source: where the angle comes from (the estimate's ``source`` says which it was): "auto" (the
+            default) reads it with the model's angle head when its file has one, else from the image; "image"
+            the principal axis of the reconstruction; "head" the angle head (refused for a model without one);
+            "likelier" whichever of the two is the more likely within tolerance (the image's probability is its
+            calibrated confidence). See :meth:`_with_head`.
     """
 
     def __init__(self, reconstructor: Reconstructor, params: PoseParams | None = None, *,
                  min_field_ut: float = 20.0, calibration: ConfidenceCalibration | None = None,
                  escalation: Reconstructor | None = None, escalate_below: float = 0.0,
-                 use_angle_head: bool = True) -> None:
+                 angle_source: str = "auto") -> None:
         if not isinstance(reconstructor, Reconstructor):
             raise TypeError(f"reconstructor must be a Reconstructor, got {type(reconstructor).__name__}")
         if not (np.isfinite(min_field_ut) and min_field_ut >= 0):
@@ -134,10 +137,20 @@ class TactilePoseEstimator:
                                  "must match")
         self.escalation = escalation
         self.escalate_below = float(escalate_below)
-        if not isinstance(use_angle_head, bool):
-            raise TypeError(f"use_angle_head must be True or False, got {use_angle_head!r}")
-        #: the model's angle head, weighed against the image (None: the image alone; see :meth:`_with_head`)
-        self.angle_head = getattr(reconstructor, "angle_head", None) if use_angle_head else None
+        if angle_source not in ANGLE_SOURCES:
+            raise ValueError(f"angle_source must be one of {', '.join(ANGLE_SOURCES)}, got {angle_source!r}")
+        head = getattr(reconstructor, "angle_head", None)
+        if angle_source == "head" and head is None:
+            raise ValueError(f"angle_source 'head': {reconstructor.name} has no angle head (attach one with "
+                             "`tactile-manip export --checkpoint RUN/best.pt --attach-to MODEL`)")
+        #: "image", "head" or "likelier": the route this estimator's angles take ("auto" resolved)
+        self.angle_source = ("head" if head is not None else "image") if angle_source == "auto" else angle_source
+        #: the model's angle head when the estimator uses it, else None
+        self.angle_head = head if self.angle_source != "image" else None
+        if calibration is not None and calibration.route != self.angle_source:
+            raise ValueError(f"the calibration was fitted for angles from the {calibration.route!r} route, this "
+                             f"estimator's come from {self.angle_source!r}: fit one for it (`tactile-manip "
+                             "calibrate`) or give angle_source to match")
         self._tolerance_rad = math.radians(calibration.tolerance_deg if calibration is not None else 5.0)
 
     @property
@@ -196,7 +209,9 @@ class TactilePoseEstimator:
         est = self._angle(rec, flags, contact, field)
         t2 = time.perf_counter()
         timings = {"reconstruct": t1 - t0, "pose": t2 - t1, "total": t2 - t0}
-        if self.escalation is not None and contact and est.confidence < self.escalate_below:
+        # the head reads the reading, not the image: another reconstruction of the same reading cannot change it
+        if (self.escalation is not None and contact and est.confidence < self.escalate_below
+                and self.angle_source != "head"):
             rec = self.escalation.reconstruct(field)
             est = replace(self._angle(rec, flags, contact, field), escalated=True)
             timings["escalate"] = time.perf_counter() - t2
@@ -208,9 +223,9 @@ class TactilePoseEstimator:
 
     def _angle(self, rec: Reconstruction, flags: np.ndarray, contact: bool,
                field: np.ndarray | None = None) -> AngleEstimate:
-        """The angle of ``rec`` and its confidence: PCA, times the prior samples' agreement and the unsaturated
-        fraction of chips (``flags`` (R, C, A)), calibrated when the estimator has a calibration; then weighed
-        against the angle head's reading of ``field`` when the model has one (:meth:`_with_head`)."""
+        """The angle and its confidence: the image's PCA, times the prior samples' agreement and the unsaturated
+        fraction of chips (``flags`` (R, C, A)); with an angle head, the head's reading of ``field`` in its place
+        or weighed against it (:meth:`_with_head`); calibrated last when the estimator has a calibration."""
         if not contact:
             return AngleEstimate(0.0, 0.0, False, reason="no contact field")
         est = angle_from_image(rec.depth_mm, pixel_mm=self.reconstructor.pixel_mm, params=self.params)
@@ -220,27 +235,30 @@ class TactilePoseEstimator:
                 confidence *= _sample_agreement(rec, self.params.threshold_mm)
             if flags.any():
                 confidence *= _unsaturated_fraction(flags)
-            if self.calibration is not None:
-                confidence = float(self.calibration(confidence))
             est = replace(est, confidence=confidence)
         if self.angle_head is not None and field is not None:
             est = self._with_head(est, field, flags)
+        if est.defined and self.calibration is not None:
+            est = replace(est, confidence=float(self.calibration(est.confidence)))
         return est
 
     def _with_head(self, est: AngleEstimate, field: np.ndarray, flags: np.ndarray) -> AngleEstimate:
-        """The image's estimate or the angle head's, whichever is the more likely within the tolerance.
+        """The angle head's estimate (route "head"), or the image's or the head's, whichever is the more likely
+        within the tolerance (route "likelier").
 
-        The head's probability comes from its von Mises concentration (times the unsaturated fraction of chips);
-        the image's is its confidence (a probability when the estimator has a calibration). The head's angle
-        keeps the image's centroid and area and is defined even where the image is not (a short or faint
-        contact whose reading still carries the axis).
+        The head's probability comes from its von Mises concentration, times the unsaturated fraction of chips;
+        the image's is its confidence, which only a calibration makes a probability (so "likelier" wants one).
+        The head's estimate keeps the image's centroid and area, and is defined even where the image's is not
+        (a short or faint contact whose reading still carries the axis).
         """
         angle, kappa = self.angle_head.axis(self.reconstructor.checked(field))
         p_head = within_probability(kappa, self._tolerance_rad)
         if flags.any():
             p_head *= _unsaturated_fraction(flags)
-        if est.defined and est.confidence >= p_head:
-            return est
+        if self.angle_source == "likelier" and est.defined:
+            p_image = est.confidence if self.calibration is None else float(self.calibration(est.confidence))
+            if p_image >= p_head:
+                return est
         return replace(est, angle_rad=float(wrap_axial(angle)), confidence=float(p_head), defined=True, reason="",
                        source="head")
 

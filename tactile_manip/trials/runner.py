@@ -143,8 +143,9 @@ def build_estimators(scene: TrialScene, scene_path: Path | None = None) -> dict[
         model = target not in ("bilinear", "bicubic")
         calibration = load_calibration_beside(target) if model and spec.calibrated else None
         params = PoseParams()  # the estimator's pose parameters, which the calibration must have been fitted with
+        route = "head" if base.angle_head is not None else "image"  # the estimator's default ("auto")
         if calibration is not None and not calibration.fits(prior_samples=spec.samples, symmetrized=spec.symmetrize,
-                                                            aperture=params.aperture):
+                                                            aperture=params.aperture, route=route):
             calibration = None  # fitted for another estimator: its map would not give this one's probability
         escalation = None
         if spec.escalate_below > 0 and spec.escalation == "symmetry":

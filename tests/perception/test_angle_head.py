@@ -70,20 +70,35 @@ def test_the_probability_rises_with_the_concentration_from_chance_to_certainty()
     assert within_probability(0.0, TOLERANCE) == pytest.approx(10.0 / 180.0, abs=1e-3)  # log(0) is clipped
 
 
-def test_a_sure_head_replaces_an_unsure_image() -> None:
-    head = FakeHead(math.radians(40.0), 5000.0)
-    est = TactilePoseEstimator(Stripe(0.0, round_=False, head=head)).estimate(_reading())
+def test_with_a_head_the_angle_is_the_heads_by_default() -> None:
+    head = FakeHead(math.radians(40.0), 20.0)
+    estimator = TactilePoseEstimator(Stripe(0.0, head=head))
+    assert estimator.angle_source == "head"
+    est = estimator.estimate(_reading())
     assert est.source == "head" and est.defined and head.calls == 1
     assert est.angle_rad == pytest.approx(math.radians(40.0))
-    assert est.confidence == pytest.approx(within_probability(5000.0, TOLERANCE))
+    assert est.confidence == pytest.approx(within_probability(20.0, TOLERANCE))
+    image = TactilePoseEstimator(Stripe(0.0, head=head), angle_source="image").estimate(_reading())
+    assert image.source == "image" and image.angle_rad == pytest.approx(0.0, abs=0.02)
+    assert (est.centroid_mm, est.area_mm2) == (image.centroid_mm, image.area_mm2)
 
 
-def test_an_unsure_head_leaves_the_image_estimate_as_it_is() -> None:
+def test_likelier_takes_the_head_only_where_it_is_the_more_probable() -> None:
     image_only = TactilePoseEstimator(Stripe(0.3)).estimate(_reading())
-    est = TactilePoseEstimator(Stripe(0.3, head=FakeHead(-1.0, 1e-3))).estimate(_reading())
+    unsure = TactilePoseEstimator(Stripe(0.3, head=FakeHead(-1.0, 1e-3)), angle_source="likelier")
+    est = unsure.estimate(_reading())
     assert est.source == "image"
     assert (est.angle_rad, est.confidence, est.defined) == (image_only.angle_rad, image_only.confidence, True)
-    assert est.angle_rad == pytest.approx(0.3, abs=0.02)
+    sure = TactilePoseEstimator(Stripe(0.3, head=FakeHead(-1.0, 1e5)), angle_source="likelier")
+    assert sure.estimate(_reading()).source == "head"
+
+
+def test_angle_sources_are_checked() -> None:
+    with pytest.raises(ValueError, match="angle_source"):
+        TactilePoseEstimator(Stripe(), angle_source="both")
+    with pytest.raises(ValueError, match="no angle head"):
+        TactilePoseEstimator(Stripe(), angle_source="head")
+    assert TactilePoseEstimator(Stripe()).angle_source == "image"
 
 
 def test_the_head_defines_an_angle_the_image_cannot() -> None:
@@ -110,9 +125,7 @@ def test_saturated_chips_lower_the_heads_probability_too() -> None:
 
 def test_the_head_can_be_left_out_and_bad_readings_are_still_refused() -> None:
     rec = Stripe(round_=True, head=FakeHead(0.5, 1e4))
-    assert not TactilePoseEstimator(rec, use_angle_head=False).estimate(_reading()).defined
-    with pytest.raises(TypeError, match="use_angle_head"):
-        TactilePoseEstimator(rec, use_angle_head="yes")
+    assert not TactilePoseEstimator(rec, angle_source="image").estimate(_reading()).defined
     bad = _reading()
     bad[1, 2, 0] = np.nan
     with pytest.raises(ValueError, match="NaN"):
@@ -127,3 +140,23 @@ def test_estimate_many_and_the_symmetrised_model_use_the_head_alike() -> None:
     sym = SymmetrizedReconstructor(rec)
     assert sym.angle_head is head
     assert TactilePoseEstimator(sym).estimate(_reading()).angle_rad == pytest.approx(-0.7)
+
+
+def test_a_calibration_is_for_the_route_it_was_fitted_on() -> None:
+    from tactile_manip.perception.confidence import ConfidenceCalibration
+
+    rng = np.random.default_rng(0)
+    raw = rng.uniform(0, 1, 400)
+    err = np.where(rng.uniform(0, 1, 400) < raw, 1.0, 30.0)
+    head_cal = ConfidenceCalibration.fit(raw, err, route="head")
+    assert ConfidenceCalibration.from_dict(head_cal.to_dict()).route == "head"
+    assert head_cal.fits(prior_samples=8, symmetrized=True, route="head")   # the head ignores the image's settings
+    assert not head_cal.fits(prior_samples=1, symmetrized=False, route="image")
+    rec = Stripe(round_=True, head=FakeHead(0.5, 30.0))
+    est = TactilePoseEstimator(rec, calibration=head_cal).estimate(_reading())
+    assert est.confidence == pytest.approx(head_cal(within_probability(30.0, TOLERANCE)))
+    image_cal = ConfidenceCalibration.fit(raw, err)
+    assert ConfidenceCalibration.from_dict({k: v for k, v in image_cal.to_dict().items() if k != "route"}).route == "image"
+    with pytest.raises(ValueError, match="fitted for angles from the 'image' route"):
+        TactilePoseEstimator(rec, calibration=image_cal)
+    assert TactilePoseEstimator(rec, calibration=image_cal, angle_source="image").calibration is image_cal

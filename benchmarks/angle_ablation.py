@@ -1,0 +1,155 @@
+"""What each route to a bar's angle buys, per force band and per bar, on single frames of unseen bars.
+
+    python -m benchmarks.angle_ablation --data data/rods_test.npz \\
+        --model fast=models/supermag_fast.onnx --model robust=models/supermag_robust.onnx \\
+        --model default=models/supermag.onnx --bound benchmarks/results/angle_information_rods_test.json
+
+For every ``--model`` the presses of elongated objects in the dataset's test split (rods and flat bars; single
+frames, as recorded) go through :class:`~tactile_manip.perception.TactilePoseEstimator`: the image route alone
+(the principal axis of the reconstruction), and, for a model file with an angle head, the head alone (its axis,
+straight from the reading) and the estimator's default, which takes whichever of the two is the more likely
+within 5 deg. Beside them: the principal axis of the true (simulated) depth image, what the image route would
+get from a perfect reconstruction, and with ``--bound`` (the JSON of ``benchmarks.angle_information`` on the
+same dataset) the share an efficient estimator would reach per band (Cramer-Rao, pose and sensor unknown).
+Reported: share within 5 and 2 deg, median error, within 5 deg per force band and per object; and the head's
+reliability (the probability its concentration gives against the share observed). Prints markdown, writes
+benchmarks/results/angle_ablation.json; asserts nothing.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from typing import Any
+
+import numpy as np
+
+from benchmarks._common import machine_info, publish
+from tactile_manip.data import load_dataset
+from tactile_manip.perception import TactilePoseEstimator, load_reconstructor, wrap_axial
+from tactile_manip.perception.angle_head import within_probability
+from tactile_manip.perception.confidence import load_calibration_beside
+from tactile_manip.perception.evaluation import ELONGATED
+from tactile_manip.perception.pose import angle_from_image
+
+FORCE_BANDS_N = ((2.0, 5.0), (5.0, 8.0), (8.0, 11.0), (11.0, 15.0))
+RELIABILITY_BINS = ((0.0, 0.5), (0.5, 0.8), (0.8, 0.95), (0.95, 1.0001))
+
+
+def errors_deg(angle_rad: np.ndarray, defined: np.ndarray, yaw_rad: np.ndarray) -> np.ndarray:
+    """|axial error| in deg, 90 where undefined."""
+    return np.where(defined, np.degrees(np.abs(wrap_axial(angle_rad - yaw_rad))), 90.0)
+
+
+def summary(err: np.ndarray, force: np.ndarray, names: np.ndarray) -> dict[str, Any]:
+    row = {"presses": int(err.size), "within_5": float(np.mean(err <= 5)), "within_2": float(np.mean(err <= 2)),
+           "median_deg": float(np.median(err)), "by_force": {}, "by_object": {}}
+    for lo, hi in FORCE_BANDS_N:
+        sel = (force >= lo) & (force < hi) if hi < FORCE_BANDS_N[-1][1] else (force >= lo) & (force <= hi)
+        if sel.any():
+            row["by_force"][f"{lo:g}-{hi:g} N"] = float(np.mean(err[sel] <= 5))
+    for name in sorted(set(names.tolist())):
+        row["by_object"][name] = float(np.mean(err[names == name] <= 5))
+    return row
+
+
+def route_estimates(path: str, readings: np.ndarray) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """(angle, defined, probability-or-confidence) per route of one model file on ``readings`` (N, R, C, A)."""
+    model = load_reconstructor(path, threads=2)
+    calibration = load_calibration_beside(path)
+    routes = {"image": TactilePoseEstimator(model, calibration=calibration, use_angle_head=False)}
+    if model.angle_head is not None:
+        routes["image + head"] = TactilePoseEstimator(model, calibration=calibration)
+    out = {}
+    for name, est in routes.items():
+        ests = [e for s in range(0, len(readings), 256)
+                for e in est.estimate_many(list(readings[s:s + 256].astype(np.float64)))]
+        out[name] = (np.array([e.angle_rad for e in ests]), np.array([e.defined for e in ests]),
+                     np.array([e.confidence for e in ests]))
+    if model.angle_head is not None:
+        angle, kappa = model.angle_head.axes(np.stack([model.checked(r) for r in readings]))
+        out["head"] = (angle, np.ones(len(angle), bool), within_probability(kappa, math.radians(5.0)))
+    return out
+
+
+def reliability(prob: np.ndarray, err: np.ndarray) -> list[dict[str, float]]:
+    rows = []
+    for lo, hi in RELIABILITY_BINS:
+        sel = (prob >= lo) & (prob < hi)
+        if sel.any():
+            rows.append({"bin": f"{lo:g}-{min(hi, 1):g}", "presses": int(sel.sum()),
+                         "predicted": float(prob[sel].mean()), "observed": float(np.mean(err[sel] <= 5))})
+    return rows
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--data", default="data/rods_test.npz")
+    parser.add_argument("--model", action="append", default=[], metavar="NAME=PATH", required=True)
+    parser.add_argument("--bound", default=None, help="angle_information JSON of the same dataset")
+    parser.add_argument("--out", default="benchmarks/results/angle_ablation.json")
+    args = parser.parse_args()
+    data = load_dataset(args.data)
+    idx = data.indices("test")
+    idx = idx[[any(str(n).startswith(e) for e in ELONGATED) for n in data.objects(idx)]]
+    yaw, force, names = data.extra("pose")[idx, 2], data.extra("force_n")[idx], data.objects(idx)
+    readings = data.readings[idx]
+    results: dict[str, Any] = {}
+    for spec in args.model:
+        label, _, path = spec.partition("=")
+        for route, (angle, defined, prob) in route_estimates(path, readings).items():
+            err = errors_deg(angle, defined, yaw)
+            results[f"{label}: {route}"] = {**summary(err, force, names), "model": path,
+                                            "reliability": reliability(prob, err) if route != "image" else []}
+    if data.has_images:
+        truth = [angle_from_image(img, pixel_mm=data.image.pixel_mm) for img in data.depth_mm(idx)]
+        err = errors_deg(np.array([t.angle_rad for t in truth]), np.array([t.defined for t in truth]), yaw)
+        results["principal axis of the true image"] = summary(err, force, names)
+    report = {"machine": machine_info(), "data": args.data, "presses": int(idx.size), "results": results}
+    if args.bound:
+        import json
+        from pathlib import Path
+
+        bound = json.loads(Path(args.bound).read_text())
+        report["bound"] = bound_shares(bound)
+    publish(report, args.out, markdown)
+
+
+def bound_shares(info: dict[str, Any]) -> dict[str, Any]:
+    """The efficient estimator's share within 5 deg (pose and sensor unknown, one frame) overall and per band,
+    from the JSON of ``benchmarks.angle_information``."""
+    rows = info["bounds"]["one frame"]
+    pick = {k: v["pose_sensor_within_5"] for k, v in rows.items()}
+    return {"all": pick.get("all"), "by_force": {k: v for k, v in pick.items() if k.endswith(" N")}}
+
+
+def markdown(report: dict[str, Any]) -> str:
+    bands = [f"{lo:g}-{hi:g} N" for lo, hi in FORCE_BANDS_N]
+    lines = [f"Single frames of the {report['presses']} bar presses of {report['data']}'s test split (unseen rods "
+             "and flat bars, 2-15 N, drawn sensors).", "",
+             "| route | within 5 deg | within 2 deg | median deg | " + " | ".join(bands) + " |",
+             "|---" * (4 + len(bands)) + "|"]
+    if "bound" in report:
+        b = report["bound"]
+        lines.append(f"| Cramer-Rao bound (pose and sensor unknown) | {b['all']:.1%} | - | - | "
+                     + " | ".join(f"{b['by_force'].get(k, math.nan):.1%}" for k in bands) + " |")
+    for name, r in report["results"].items():
+        lines.append(f"| {name} | {r['within_5']:.1%} | {r['within_2']:.1%} | {r['median_deg']:.2f} | "
+                     + " | ".join(f"{r['by_force'].get(k, math.nan):.1%}" for k in bands) + " |")
+    objects = sorted({o for r in report["results"].values() for o in r["by_object"]})
+    lines += ["", "Within 5 deg per object:", "", "| route | " + " | ".join(objects) + " |",
+              "|---" * (1 + len(objects)) + "|"]
+    for name, r in report["results"].items():
+        lines.append(f"| {name} | " + " | ".join(f"{r['by_object'].get(o, math.nan):.0%}" for o in objects) + " |")
+    rel = [(n, r["reliability"]) for n, r in report["results"].items() if r.get("reliability")]
+    if rel:
+        lines += ["", "Reliability (probability within 5 deg given by the route, against the share observed):", "",
+                  "| route | bin | presses | predicted | observed |", "|---|---|---|---|---|"]
+        for name, rows in rel:
+            lines += [f"| {name} | {x['bin']} | {x['presses']} | {x['predicted']:.2f} | {x['observed']:.2f} |"
+                      for x in rows]
+    return "\n".join(lines)
+
+
+if __name__ == "__main__":
+    main()
