@@ -139,7 +139,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--data", required=True, help="a simulated known-probe dataset (.npz)")
     parser.add_argument("--config", default="configs/dataset/contact_probe.toml",
                         help="the dataset config whose probe, sensor and pose ranges the bound uses")
-    parser.add_argument("--bound-presses", type=int, default=100, help="poses of the bound (0: skip it)")
+    parser.add_argument("--bound-presses", type=int, default=40, help="poses of the bound (0: skip it)")
     parser.add_argument("--epochs", type=int, default=400, help="epochs of the plain MLP")
     parser.add_argument("--out", default="benchmarks/results/contact_probe_bound.json")
     parser.add_argument("--seed", type=int, default=0)
