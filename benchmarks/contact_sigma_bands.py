@@ -51,7 +51,8 @@ def coverage(err: np.ndarray, sigma: np.ndarray) -> dict[str, float]:
 def markdown(report: dict[str, Any]) -> str:
     lines = [f"# Force sigma per predicted-force band ({report['model']} on {report['data']})", "",
              f"factors per predicted band (edges {report['edges_n']} N): {report['factors']}", "",
-             "| true force band N | test presses | RMSE N | within 1 sigma before / after | within 2 sigma before / after |",
+             "| true force band N | test presses | RMSE N | within 1 sigma before / after "
+             "| within 2 sigma before / after |",
              "|---|---|---|---|---|"]
     for r in report["bands"]:
         b, a = r["before"], r["after"]

@@ -80,7 +80,8 @@ def test_the_patch_centroid_is_stored_beside_the_centre_of_pressure():
     rods = data.objects() == "cylinder"
     pose = data.extra("pose")[rods]
     # both lie on the rod's axis line (a tilt about the axis shifts them by a fraction of the 6 mm rod)
-    across = -(centroid[rods, 0] - pose[:, 0]) * np.sin(pose[:, 2]) + (centroid[rods, 1] - pose[:, 1]) * np.cos(pose[:, 2])
+    dx, dy = centroid[rods, 0] - pose[:, 0], centroid[rods, 1] - pose[:, 1]
+    across = -dx * np.sin(pose[:, 2]) + dy * np.cos(pose[:, 2])
     assert np.abs(across).max() < 1.0
     # a tilt along the rod loads one end more: the pressure's centre leaves the patch's centroid
     cop = np.c_[data.target("x_mm"), data.target("y_mm")][rods]
