@@ -4,7 +4,8 @@ Each press is stored with its magnetic reading, its depth image (unless ``images
 (:data:`SIM_TARGETS`): the centre of pressure of the contact patch on the magnetic skin (``x_mm``, ``y_mm``,
 pad frame; where the pressure acts, not the object's origin), the skin's indentation depth (``depth_mm``,
 the rigid approach into it), the normal force (``force_n``) and ``in_contact``; a press that misses the pad
-has 0 for all of them.
+has 0 for all of them. Extras beside them include the contact area (``contact_area_mm2``) and the centroid of
+the contact patch, unweighted by pressure (``contact_centroid_mm``, (N, 2) mm, pad frame).
 
 Every sample ``i`` draws everything (pose, force, optional parameter randomisation, sensor noise) from
 ``np.random.default_rng([seed, i])``, and results are assembled in index order, so the output does not
