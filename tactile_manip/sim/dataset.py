@@ -4,7 +4,8 @@ Each press is stored with its magnetic reading, its depth image (unless ``images
 (:data:`SIM_TARGETS`): the centre of pressure of the contact patch on the magnetic skin (``x_mm``, ``y_mm``,
 pad frame; where the pressure acts, not the object's origin), the skin's indentation depth (``depth_mm``,
 the rigid approach into it), the normal force (``force_n``) and ``in_contact``; a press that misses the pad
-has 0 for all of them.
+has 0 for all of them. Extras beside them include the contact area (``contact_area_mm2``) and the centroid of
+the contact patch, unweighted by pressure (``contact_centroid_mm``, (N, 2) mm, pad frame).
 
 Every sample ``i`` draws everything (pose, force, optional parameter randomisation, sensor noise) from
 ``np.random.default_rng([seed, i])``, and results are assembled in index order, so the output does not
@@ -196,7 +197,8 @@ def _simulate(task: _Task) -> dict[str, Any]:
             "saturated": s.saturated, "depth_q": None if s.depth_mm is None else quantise_depth(s.depth_mm),
             "pose": [pose.x_mm, pose.y_mm, pose.yaw_rad, pose.tilt_x_rad, pose.tilt_y_rad],
             "force_n": s.force_n, "approach_mm": s.approach_mm, "skin_approach_mm": s.skin_approach_mm,
-            "contact": s.contact, "targets": sample_targets(s), "contact_area_mm2": s.pressure.area_mm2}
+            "contact": s.contact, "targets": sample_targets(s), "contact_area_mm2": s.pressure.area_mm2,
+            "contact_centroid_mm": s.pressure.area_centroid_mm}
 
 
 def sample_targets(s: PairedSample) -> list[float]:
@@ -298,7 +300,8 @@ def _assemble(cfg: DatasetConfig, tasks: list[_Task], results: list[dict[str, An
               "pose": stack("pose", np.float32), "force_n": stack("force_n", np.float32),
               "approach_mm": stack("approach_mm", np.float32),
               "skin_approach_mm": stack("skin_approach_mm", np.float32), "contact": stack("contact", bool),
-              "bottomed_out": stack("bottomed_out", bool), "contact_area_mm2": stack("contact_area_mm2", np.float32)}
+              "bottomed_out": stack("bottomed_out", bool), "contact_area_mm2": stack("contact_area_mm2", np.float32),
+              "contact_centroid_mm": stack("contact_centroid_mm", np.float32)}
     if cfg.randomise_spread > 0:  # each press on its own drawn sensor: record the draw (names in provenance)
         provenance["sensor_param_names"] = list(results[0]["sensor_params"])
         extras["sensor_params"] = np.array([list(r["sensor_params"].values()) for r in results], np.float32)

@@ -33,7 +33,8 @@ class PressureSummary:
     peak_kpa: float = 0.0
     mean_kpa: float = 0.0
     area_mm2: float = 0.0
-    centroid_mm: tuple[float, float] = (0.0, 0.0)
+    centroid_mm: tuple[float, float] = (0.0, 0.0)       # centre of pressure (pressure-weighted), pad frame
+    area_centroid_mm: tuple[float, float] = (0.0, 0.0)  # centroid of the contact patch (unweighted), pad frame
     iterations: int = 0
 
 
@@ -194,10 +195,11 @@ class SensorPair:
     def _summary(self, sol: ContactSolution) -> PressureSummary:
         p = sol.pressure_mpa
         x, y, _ = self._contact_xy
-        total = p.sum()
-        return PressureSummary(peak_kpa=float(p.max() * 1e3), mean_kpa=float(p[p > 0].mean() * 1e3),
+        total, patch = p.sum(), p > 0
+        return PressureSummary(peak_kpa=float(p.max() * 1e3), mean_kpa=float(p[patch].mean() * 1e3),
                                area_mm2=sol.contact_area_mm2,
                                centroid_mm=(float((p * x).sum() / total), float((p * y).sum() / total)),
+                               area_centroid_mm=(float(x[patch].mean()), float(y[patch].mean())),
                                iterations=sol.iterations)
 
 

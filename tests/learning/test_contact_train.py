@@ -88,6 +88,13 @@ def test_the_shipped_config_loads_and_refuses_unknown_keys(tmp_path) -> None:
         load_config(bad, ContactTrainConfig)
 
 
+def test_the_known_probe_config_is_the_supermag_network_with_its_own_epochs() -> None:
+    probe = load_config("configs/train/contact_probe.toml", ContactTrainConfig)
+    supermag = load_config("configs/train/contact_supermag.toml", ContactTrainConfig)
+    assert probe.context_frames == 1 and probe.threads == 1
+    assert dataclasses.replace(probe, epochs=supermag.epochs, patience=supermag.patience) == supermag
+
+
 def test_unknown_targets_and_image_only_data_are_refused(tmp_path, labelled_presses) -> None:
     from tactile_manip.data import save_dataset
 

@@ -71,3 +71,26 @@ def test_the_contact_configs_load_and_generate_targets(name):
     assert data.target_names == SIM_TARGETS and set(data.split) >= {"test"}
     if name == "contact_unseen":
         assert data.has("sensor_params")
+
+
+def test_the_patch_centroid_is_stored_beside_the_centre_of_pressure():
+    data = generate(_rods(tilt_deg=2.0), workers=1)
+    centroid = data.extra("contact_centroid_mm")
+    assert centroid.shape == (len(data), 2) and np.isfinite(centroid).all()
+    rods = data.objects() == "cylinder"
+    pose = data.extra("pose")[rods]
+    # both lie on the rod's axis line (a tilt about the axis shifts them by a fraction of the 6 mm rod)
+    dx, dy = centroid[rods, 0] - pose[:, 0], centroid[rods, 1] - pose[:, 1]
+    across = -dx * np.sin(pose[:, 2]) + dy * np.cos(pose[:, 2])
+    assert np.abs(across).max() < 1.0
+    # a tilt along the rod loads one end more: the pressure's centre leaves the patch's centroid
+    cop = np.c_[data.target("x_mm"), data.target("y_mm")][rods]
+    assert np.hypot(*(cop - centroid[rods]).T).max() > 0.2
+
+
+def test_an_untilted_rod_along_x_has_both_centres_on_its_axis_at_the_pad_middle():
+    pair, rod = SensorPair(), make_indenter("cylinder", size_mm=6.0)
+    s = pair.press(rod, IndenterPose(x_mm=0.0, y_mm=1.5), 8.0, np.random.default_rng(0), render_depth=False)
+    # the patch and its pressure are symmetric about x = 0 and about the axis y = 1.5
+    np.testing.assert_allclose(s.pressure.area_centroid_mm, (0.0, 1.5), atol=0.05)
+    np.testing.assert_allclose(s.pressure.centroid_mm, (0.0, 1.5), atol=0.05)
