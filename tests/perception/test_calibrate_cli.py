@@ -20,7 +20,7 @@ from tactile_manip.sim.dataset import DatasetConfig, ObjectSpec, PoseRanges, gen
 
 pytest.importorskip("onnxruntime")
 
-MODEL = Path(__file__).resolve().parents[2] / "models" / "supermag_fast.onnx"
+MODEL = Path(__file__).resolve().parents[2] / "models" / "supermag.onnx"
 
 
 @pytest.fixture(scope="module")

@@ -27,7 +27,7 @@ from tactile_manip.sim.pair import SensorPair
 from tactile_manip.sim.shapes import make_indenter
 from tactile_manip.types import AngleEstimate
 
-MODEL = Path(__file__).resolve().parents[2] / "models" / "supermag_fast.onnx"
+MODEL = Path(__file__).resolve().parents[2] / "models" / "supermag.onnx"
 F32_MAX = float(np.finfo(np.float32).max)
 DEAD_CHIPS = [(1, 2), (2, 1)]  # middle of the array, under the rod
 ROD_YAWS_DEG = [-60.0, 30.0, 90.0]
