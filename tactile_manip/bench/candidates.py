@@ -50,7 +50,7 @@ class ModelEntry:
 
 DECODER_CANDIDATES = "configs/train/decoder_*.toml"  # faster decoders, timed untrained until trained
 SHIPPED_MODEL = "models/supermag.onnx"  # the default model: the robust image graphs with an angle head inside
-FAST_MODEL = "models/supermag_fast.onnx"  # the reference models, kept for the bench
+FAST_MODEL = "models/supermag_fast.onnx"  # a reference model, kept for the bench
 FAST_RECIPE = "models/supermag_fast.train.toml"  # the training config copied beside it
 FAST_CONFIGS = "configs/train/fast*.toml"  # the fast decoder on the full recipe: measured when trained, else skipped
 
