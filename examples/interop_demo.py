@@ -52,7 +52,7 @@ def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--out-dir", default="out/interop")
     p.add_argument("--seconds", type=float, default=4.0)
-    p.add_argument("--model", default="models/supermag_fast.onnx")
+    p.add_argument("--model", default="models/supermag.onnx")
     p.add_argument("--ros2", action="store_true", help="write the MCAP file with the rosbag2 profile")
     args = p.parse_args()
     out = Path(args.out_dir)

@@ -18,7 +18,7 @@ from tactile_manip.sim.objects import IndenterPose
 from tactile_manip.sim.shapes import make_indenter
 from tactile_manip.types import AngleEstimate
 
-MODEL = Path(__file__).resolve().parents[1] / "models" / "supermag_fast.onnx"  # from any working folder
+MODEL = Path(__file__).resolve().parents[1] / "models" / "supermag.onnx"  # the default model, from any working folder
 
 
 def describe(est: AngleEstimate) -> str:
@@ -26,7 +26,8 @@ def describe(est: AngleEstimate) -> str:
     if not est.defined:
         return f"angle UNDEFINED ({est.reason}): no angle to act on"
     return (f"angle {math.degrees(est.angle_rad):+6.2f} deg  confidence {est.confidence:.2f}  "
-            f"centroid ({est.centroid_mm[0]:+.2f}, {est.centroid_mm[1]:+.2f}) mm  area {est.area_mm2:5.1f} mm^2")
+            f"centroid ({est.centroid_mm[0]:+.2f}, {est.centroid_mm[1]:+.2f}) mm  area {est.area_mm2:5.1f} mm^2  "
+            f"from the {est.source}")  # "image", or "head": the model's angle head, where it was the more likely
 
 
 def main() -> None:

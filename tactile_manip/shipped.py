@@ -1,8 +1,16 @@
 """The models shipped in the source checkout's ``models/`` folder, found from the package, not the working folder.
 
     from tactile_manip.shipped import shipped_model
-    model = load_reconstructor(shipped_model())            # models/supermag_fast.onnx, the default
-    robust = load_reconstructor(shipped_model("robust"))   # the model of the 2-15 N, drawn-sensor scene
+    model = load_reconstructor(shipped_model())            # models/supermag.onnx, the default
+    fast = load_reconstructor(shipped_model("fast"))       # a reference model of the bench
+
+The default, ``supermag`` (``models/supermag.onnx``), is the one model every shipped scene, task, example and
+doc uses: the image graphs of the decoder trained on the paper's protocol and on 2-15 N presses of drawn
+sensors, with an angle head inside (the contact's axis read straight from the reading, weighed against the
+image by :class:`~tactile_manip.perception.estimator.TactilePoseEstimator`). The others are kept only as
+references for ``tactile-manip bench`` and the published results: ``fast`` (the same decoder trained on the
+paper's protocol only), ``robust`` (the default's image graphs without the angle head) and ``compact`` (the
+larger decoder shipped before them, the accuracy reference).
 
 The models live beside the package in a source checkout (``pip install -e .``); a wheel does not carry them.
 """
@@ -13,11 +21,13 @@ from pathlib import Path
 
 # name -> file in models/
 SHIPPED_MODELS: dict[str, str] = {
-    "fast": "supermag_fast.onnx",  # the default: every scene but the robust one, the docs, the examples
-    "robust": "supermag_robust.onnx",  # the same decoder trained on 2-15 N presses of drawn sensors too
-    "compact": "supermag_compact.onnx",  # the previous default, kept as the accuracy reference
+    "supermag": "supermag.onnx",  # the default: every scene, task, example and doc
+    "fast": "supermag_fast.onnx",  # bench reference: the decoder trained on the paper's protocol only
+    "robust": "supermag_robust.onnx",  # bench reference: the default's image graphs, without its angle head
+    "compact": "supermag_compact.onnx",  # bench reference: the larger decoder, the accuracy reference
 }
-DEFAULT_MODEL = "fast"
+DEFAULT_MODEL = "supermag"
+REFERENCE_MODELS: tuple[str, ...] = ("fast", "robust", "compact")  # kept for the bench, not for tasks
 
 
 def models_dir() -> Path:
@@ -26,7 +36,8 @@ def models_dir() -> Path:
 
 
 def shipped_model(name: str = DEFAULT_MODEL) -> Path:
-    """Absolute path of a shipped model file (``"fast"``, ``"robust"`` or ``"compact"``).
+    """Absolute path of a shipped model file: ``"supermag"`` (the default), or a bench reference (``"fast"``,
+    ``"robust"``, ``"compact"``).
 
     Raises:
         ValueError: ``name`` is not a shipped model.

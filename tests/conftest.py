@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 from checks import TORCH_MISSING
 
-SHIPPED_MODEL = Path(__file__).resolve().parents[1] / "models" / "supermag_fast.onnx"
+SHIPPED_MODEL = Path(__file__).resolve().parents[1] / "models" / "supermag.onnx"
 SHIPPED_CONTACT_MODEL = Path(__file__).resolve().parents[1] / "models" / "contact_supermag.onnx"
 EFLESH_ENV = "TACTILE_MANIP_EFLESH_DIR"  # folder of the eFlesh characterisation runs (spatial_*/, normal_*/)
 

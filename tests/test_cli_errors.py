@@ -88,7 +88,7 @@ CASES = {
     "trials": {"missing": lambda p: ["--config", p["missing"], "--quiet"],
                "readonly": lambda p: ["--config", SCENE, "--out", f"{p['ro']}/run", "--quiet"],
                "dir": lambda p: ["--config", p["dir"], "--quiet"]},
-    "calibrate": {"missing": lambda p: ["--model", str(ROOT / "models/supermag_fast.onnx"), "--fit", p["missing"],
+    "calibrate": {"missing": lambda p: ["--model", str(ROOT / "models/supermag.onnx"), "--fit", p["missing"],
                                         "--report", p["missing"], "--out", f"{p['tmp']}/c.json"],
                   "readonly": lambda p: ["--model", "bilinear", "--fit", p["file"], "--report", p["file"],
                                          "--out", f"{p['ro']}/c.json"],

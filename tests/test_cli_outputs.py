@@ -89,7 +89,7 @@ def test_unknown_shape_arguments_are_named_with_the_accepted_ones(tmp_path):
 
 
 @pytest.mark.parametrize("old,new,named", [
-    ('reconstructor = "models/supermag_fast.onnx"', 'reconstructor = "models/missing.onnx"', "missing.onnx"),
+    ('reconstructor = "models/supermag.onnx"', 'reconstructor = "models/missing.onnx"', "missing.onnx"),
     ("seed = 0                      # chip noise", 'port = "/dev/ttyUSB0"\n# chip noise', "simulated sensor"),
 ])
 def test_a_bad_scene_leaves_no_run_folder_behind(old, new, named, tmp_path, monkeypatch, capsys):

@@ -1,8 +1,8 @@
-"""The shipped models are found from the package, whatever the working folder."""
+"""The shipped models are found from the package, whatever the working folder; the default is supermag.onnx."""
 
 import pytest
 
-from tactile_manip.shipped import DEFAULT_MODEL, SHIPPED_MODELS, models_dir, shipped_model
+from tactile_manip.shipped import DEFAULT_MODEL, REFERENCE_MODELS, SHIPPED_MODELS, models_dir, shipped_model
 
 
 @pytest.mark.parametrize("name", sorted(SHIPPED_MODELS))
@@ -13,12 +13,21 @@ def test_shipped_model_resolves_from_any_folder(name, tmp_path, monkeypatch):
     assert path.parent == models_dir() and path.name == SHIPPED_MODELS[name]
 
 
-def test_default_is_the_fast_model():
-    assert shipped_model().name == "supermag_fast.onnx" == SHIPPED_MODELS[DEFAULT_MODEL]
+def test_default_is_the_supermag_model_and_the_others_are_bench_references():
+    assert shipped_model().name == "supermag.onnx" == SHIPPED_MODELS[DEFAULT_MODEL]
+    assert set(REFERENCE_MODELS) == set(SHIPPED_MODELS) - {DEFAULT_MODEL} == {"fast", "robust", "compact"}
+
+
+def test_the_default_model_carries_an_angle_head():
+    pytest.importorskip("onnxruntime", reason="opening the model's graphs needs onnxruntime (extra 'onnx')")
+    from tactile_manip.perception import load_reconstructor
+
+    assert load_reconstructor(shipped_model()).angle_head is not None
+    assert load_reconstructor(shipped_model("robust")).angle_head is None
 
 
 def test_unknown_name_is_refused():
-    with pytest.raises(ValueError, match="unknown shipped model 'tiny': expected one of fast, robust, compact"):
+    with pytest.raises(ValueError, match="unknown shipped model 'tiny': expected one of supermag, fast, robust, compact"):
         shipped_model("tiny")
 
 

@@ -1,7 +1,7 @@
 """``tactile-manip bench``: speed against error of every method on this machine, in one report.
 
-Runs the baselines and every model file it finds (the shipped model, one pass and symmetry-averaged; the
-small, compact and large presets on one 8-epoch recipe; the paper preset) on onnxruntime with 1 thread and
+Runs the baselines and every model file it finds (the default model, one pass and symmetry-averaged; the
+reference models kept for the bench; the small, compact and large presets on one 8-epoch recipe; the paper preset) on onnxruntime with 1 thread and
 all threads, on a dynamically int8-quantised copy, and in torch eager from the checkpoint, through the same
 readings. Writes ``OUT/report.md``, ``report.json`` and ``pareto.png`` and prints the table. Missing model
 files are skipped with a note.

@@ -70,7 +70,8 @@ def run(args: argparse.Namespace) -> int:
     reconstructor = load_reconstructor(args.model, **({} if baseline else {"samples": args.samples}))
     if args.symmetrized:
         reconstructor = SymmetrizedReconstructor(reconstructor)
-    estimator = TactilePoseEstimator(reconstructor)
+    # the image's confidence alone: the estimator maps it before weighing a model's angle head against it
+    estimator = TactilePoseEstimator(reconstructor, use_angle_head=False)
     fit = load_dataset(args.fit)
     fit.require_images(f"calibrate --fit {args.fit}")
     _, fit_conf, fit_err = _rods(fit, "--fit", args.fit, args.fit_split, estimator)

@@ -24,7 +24,7 @@ REPORT_FILES = ("table.md", "results.json", "gallery.png")
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--data", required=True, help="paired dataset .npz (its test split is evaluated)")
     p.add_argument("--model", action="append", default=[], metavar="LABEL=PATH",
-                   help="an exported model, e.g. 'SuperMag=models/supermag_fast.onnx' (repeatable)")
+                   help="an exported model, e.g. 'SuperMag=models/supermag.onnx' (repeatable)")
     p.add_argument("--symmetrized", action="append", default=[], metavar="LABEL=PATH",
                    help="an exported model averaged over the sensor's 8 symmetries (SymmetrizedReconstructor)")
     p.add_argument("--out", required=True, help="folder for table.md, results.json and gallery.png")

@@ -27,9 +27,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--format", choices=sorted(WRITERS), default=None,
                    help="with SOURCE: lerobot (a LeRobotDataset v3.0 folder), rrd (Rerun) or mcap")
     p.add_argument("--ros2", action="store_true", help="with --format mcap: a rosbag2-compatible profile")
-    p.add_argument("--depth", nargs="?", const="models/supermag_fast.onnx", default=None, metavar="MODEL",
+    p.add_argument("--depth", nargs="?", const="models/supermag.onnx", default=None, metavar="MODEL",
                    help="with SOURCE: include each frame's reconstructed depth from MODEL (default "
-                        "models/supermag_fast.onnx; or bilinear, bicubic)")
+                        "models/supermag.onnx; or bilinear, bicubic)")
     p.add_argument("--checkpoint", default=None, help="training checkpoint (RUN/best.pt) to write as ONNX")
     p.add_argument("--attach-to", default=None, metavar="MODEL",
                    help="with an angle head's checkpoint: the pose model (.onnx) to copy to --out with the head inside")

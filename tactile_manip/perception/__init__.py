@@ -3,7 +3,7 @@
 The pose API users plug into their tasks::
 
     from tactile_manip.perception import TactilePoseEstimator, load_reconstructor
-    estimator = TactilePoseEstimator(load_reconstructor("models/supermag_fast.onnx"))
+    estimator = TactilePoseEstimator(load_reconstructor("models/supermag.onnx"))
     estimate = estimator.estimate(field_ut)     # (4, 4, 3) uT -> AngleEstimate
 
 and the contact API (``tactile_manip.perception.contact``; docs/contact_model.md)::

@@ -6,7 +6,7 @@
     from tactile_manip.perception.contact import ContactEstimator
     from tactile_manip.perception.contact_pose import TactileEstimator
 
-    both = TactileEstimator(TactilePoseEstimator(load_reconstructor("models/supermag_fast.onnx")),
+    both = TactileEstimator(TactilePoseEstimator(load_reconstructor("models/supermag.onnx")),
                             ContactEstimator("models/contact_supermag.onnx"))
     est = both.estimate(field_ut)        # -> TactileEstimate
     est.angle.angle_rad, est.contact.position_mm, est.contact.force_n

@@ -10,7 +10,7 @@ batched model run (:meth:`TactilePoseEstimator.estimate_many`), and stream estim
 :class:`~tactile_manip.sensors.base.TactileSensor` at the sensor's rate, always from the newest frame::
 
     from tactile_manip.perception import StreamStats, TactilePoseEstimator, load_reconstructor
-    estimator = TactilePoseEstimator(load_reconstructor("models/supermag_fast.onnx"))
+    estimator = TactilePoseEstimator(load_reconstructor("models/supermag.onnx"))
     stats = StreamStats()
     for est in estimator.stream(sensor, stats=stats):   # one estimate per new frame; stale ones skipped
         if est.defined and est.confidence > 0.5:
@@ -33,8 +33,8 @@ prior samples) and ``escalate_below``, an estimate whose (calibrated) confidence
 again from the same reading by the escalation reconstructor; that estimate replaces the first
 (``escalated=True``, its cost in ``timings_s["escalate"]``)::
 
-    model = load_reconstructor("models/supermag_fast.onnx")
-    estimator = TactilePoseEstimator(model, calibration=load_calibration_beside("models/supermag_fast.onnx"),
+    model = load_reconstructor("models/supermag.onnx")
+    estimator = TactilePoseEstimator(model, calibration=load_calibration_beside("models/supermag.onnx"),
                                      escalation=SymmetrizedReconstructor(model), escalate_below=0.5)
 
 The escalated estimate replaces the first whatever its confidence, which the same calibration maps (it was
@@ -98,7 +98,7 @@ class TactilePoseEstimator:
         min_field_ut: a reading whose largest |field change| is below this is "no contact" whatever the
             reconstruction shows (0: trust the image). Chip noise peaks near 10 uT on the simulated pad and a
             10 N press gives 95 uT and more; a model never trained on empty readings may otherwise draw a
-            faint contact into one (the shipped model draws 0.37 mm into an all-zero reading).
+            faint contact into one (the fast reference model draws 0.40 mm into an all-zero reading).
         calibration: maps the raw confidence of a defined estimate onto the probability that its angle is
             within the calibration's tolerance, fitted on held-out presses
             (:class:`~tactile_manip.perception.confidence.ConfidenceCalibration`); None keeps the raw one.

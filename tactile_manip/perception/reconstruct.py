@@ -288,7 +288,7 @@ def read_metadata(path: str | Path) -> dict[str, Any]:
     path = Path(path)
     if not path.is_file():
         raise ModelFileError(f"model file not found: {path} (export one with `tactile-manip export`, or use "
-                             "the shipped models/supermag_fast.onnx)")
+                             "the shipped models/supermag.onnx)")
     try:
         import onnx
 

@@ -3,7 +3,7 @@
 The chip grid, the magnetised skin and the pad are symmetric under the dihedral group of the square: quarter
 turns about the pad normal and mirrors. A transformed reading is the reading of the transformed contact, so
 a reconstructor ``f`` can be replaced by its group average ``mean_g g^-1 f(g x)``, which is exactly
-equivariant and cancels the part of the model's error that is not (for the shipped model on unseen rods the
+equivariant and cancels the part of the model's error that is not (for the fast reference model on unseen rods the
 orientation bias towards the grid axes mostly cancels; see docs/trials.md). It costs one batch of 8 readings
 per reading (4 for a rectangular grid, whose group is the rectangle's: identity, half turn and two mirrors).
 

@@ -208,8 +208,8 @@ class TrialScene:
     tolerance_deg: float = 5.0
     target_deg: float = 0.0
     methods: list[MethodSpec] = field(default_factory=lambda: [
-        MethodSpec("supermag", "models/supermag_fast.onnx"),
-        MethodSpec("supermag_sym", "models/supermag_fast.onnx", symmetrize=True),
+        MethodSpec("supermag", "models/supermag.onnx"),
+        MethodSpec("supermag_sym", "models/supermag.onnx", symmetrize=True),
         MethodSpec("bilinear", "bilinear", output_px=16)])
     presentation: PresentationConfig = field(default_factory=PresentationConfig)
     robot: RobotConfig = field(default_factory=RobotConfig)

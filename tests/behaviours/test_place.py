@@ -16,7 +16,7 @@ from tactile_manip.trials.scene import MethodSpec, PresentationConfig, TrialObje
 pytest.importorskip("roboticstoolbox")
 pytest.importorskip("onnxruntime")
 
-MODEL = str(Path(__file__).resolve().parents[2] / "models" / "supermag_fast.onnx")
+MODEL = str(Path(__file__).resolve().parents[2] / "models" / "supermag.onnx")
 
 
 @pytest.fixture(scope="module")

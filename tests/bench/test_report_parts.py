@@ -170,6 +170,9 @@ def test_default_models_include_the_decoder_candidates_on_one_thread_only(tiny_m
     assert configs and all(entries[c].runtimes == ("ort-1",) for c in configs)
     assert entries[configs[0]].untrained_preset.endswith(f"{configs[0]}.toml")  # timed untrained until trained
     assert entries["fast"].runtimes is None and entries["compact"].runtimes is None
+    default = entries["supermag"]  # the default model, first; no torch row: its checkpoint has no angle head
+    assert next(iter(entries)) == "supermag" and default.path == root / "models" / "supermag.onnx"
+    assert default.symmetrized and default.checkpoint is None and default.runtimes is None
     assert entries["robust"].runtimes == ("ort-1",)  # the fast model's graph: its latency is the fast row's
     for run in ("fast_full", "fast40_full"):  # full-recipe runs: measured when trained, never exported untrained
         assert entries[run].runtimes == ("ort-1",) and entries[run].untrained_preset is None

@@ -148,7 +148,7 @@ def test_trials_refused_before_a_trial_leaves_no_recording(tmp_path, capsys):
 
     text = (Path(__file__).resolve().parents[2] / "configs" / "scenes" / "reorient_sim.toml").read_text()
     scene = tmp_path / "scene.toml"
-    scene.write_text(text.replace('"models/supermag_fast.onnx"', '"no_such_model.onnx"'))
+    scene.write_text(text.replace('"models/supermag.onnx"', '"no_such_model.onnx"'))
     assert main(["trials", "--config", str(scene), "--methods", "supermag", "--out", str(tmp_path / "R"),
                  "--rerun", "--save", str(tmp_path / "t.rrd")]) == 2
     assert "no_such_model" in capsys.readouterr().err and not (tmp_path / "t.rrd").exists()

@@ -8,6 +8,7 @@ import pytest
 from tactile_manip.learning.card import model_card
 from tactile_manip.perception.reconstruct import read_metadata
 
+# a reference model shipped with its training history (the default model's image graphs are the robust one's)
 SHIPPED_MODEL = Path(__file__).resolve().parents[2] / "models" / "supermag_fast.onnx"
 
 

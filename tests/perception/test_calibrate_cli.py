@@ -12,7 +12,7 @@ import pytest
 from checks import assert_one_line_error
 
 from tactile_manip.cli import main
-from tactile_manip.data import save_dataset
+from tactile_manip.data import load_dataset, save_dataset
 from tactile_manip.perception import TactilePoseEstimator, load_reconstructor
 from tactile_manip.perception.confidence import ConfidenceCalibration, calibration_path, load_calibration_beside
 from tactile_manip.perception.evaluation import rod_estimates
@@ -20,7 +20,7 @@ from tactile_manip.sim.dataset import DatasetConfig, ObjectSpec, PoseRanges, gen
 
 pytest.importorskip("onnxruntime")
 
-MODEL = Path(__file__).resolve().parents[2] / "models" / "supermag_fast.onnx"
+MODEL = Path(__file__).resolve().parents[2] / "models" / "supermag.onnx"
 
 
 @pytest.fixture(scope="module")
@@ -62,6 +62,15 @@ def test_calibrate_writes_a_calibration_beside_the_model_and_its_reliability_rep
     mean_conf = sum(r["mean_confidence"] * r["count"] for r in rows) / 60
     assert mean_conf == pytest.approx(report["report"]["within_tolerance"], abs=0.05)
     assert "expected calibration error" in capsys.readouterr().out
+    # fitted on the image's confidence, which is what the estimator maps before it weighs the angle head
+    image = TactilePoseEstimator(load_reconstructor(model), use_angle_head=False)
+    weighed = TactilePoseEstimator(load_reconstructor(model))
+    assert weighed.angle_head is not None
+    _, conf_image, _ = rod_estimates(load_dataset(rods), load_dataset(rods).indices("test"), image)
+    _, conf_weighed, _ = rod_estimates(load_dataset(rods), load_dataset(rods).indices("test"), weighed)
+    assert not np.allclose(conf_image, conf_weighed)  # the head wins on some of these presses
+    assert sorted(r["mean_confidence"] for r in report["deciles_raw"]) == pytest.approx(
+        sorted(float(np.mean(c)) for c in np.array_split(np.sort(conf_image), 10)), abs=1e-9)
     # a second run refuses to replace it without --force, in one line
     assert main(args) == 2
     assert_one_line_error(capsys.readouterr().err, "calibrate", "exists")

@@ -178,7 +178,7 @@ def test_missing_foreign_and_image_model_files_are_one_clear_error(tmp_path) -> 
     junk.write_bytes(b"not a model")
     with pytest.raises(ModelFileError, match="junk.onnx"):
         ContactEstimator(junk)
-    shipped = Path(__file__).resolve().parents[2] / "models" / "supermag_fast.onnx"
+    shipped = Path(__file__).resolve().parents[2] / "models" / "supermag.onnx"
     with pytest.raises(ModelFileError, match="not a contact model"):
         ContactEstimator(shipped)
 

@@ -17,7 +17,7 @@ from tactile_manip.sim.shapes import make_indenter
 
 pytest.importorskip("onnxruntime")
 
-MODEL = Path(__file__).resolve().parents[2] / "models" / "supermag_fast.onnx"
+MODEL = Path(__file__).resolve().parents[2] / "models" / "supermag.onnx"
 
 
 @pytest.fixture(scope="module")
@@ -105,7 +105,7 @@ def test_pose_params_are_validated() -> None:
     with pytest.raises(ValueError, match="sigma_mm"):
         PoseParams(sigma_mm=float("nan"))
     with pytest.raises(TypeError, match="Reconstructor"):
-        TactilePoseEstimator("models/supermag_fast.onnx")  # type: ignore[arg-type]
+        TactilePoseEstimator("models/supermag.onnx")  # type: ignore[arg-type]
 
 
 # ---------------------------------------------------------------- from a sensor

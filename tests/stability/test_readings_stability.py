@@ -27,7 +27,7 @@ from tactile_manip.sim.pair import SensorPair
 from tactile_manip.sim.shapes import make_indenter
 from tactile_manip.types import AngleEstimate
 
-MODEL = Path(__file__).resolve().parents[2] / "models" / "supermag_fast.onnx"
+MODEL = Path(__file__).resolve().parents[2] / "models" / "supermag.onnx"
 F32_MAX = float(np.finfo(np.float32).max)
 DEAD_CHIPS = [(1, 2), (2, 1)]  # middle of the array, under the rod
 ROD_YAWS_DEG = [-60.0, 30.0, 90.0]
@@ -35,10 +35,13 @@ DEAD_CHIP_TOLERANCE_DEG = 3.0  # a chip stuck at 0 costs the shipped model no mo
 
 
 def _estimator(name: str) -> TactilePoseEstimator:
+    """"supermag": the shipped model as the pose API runs it (its angle head weighed against the image);
+    "supermag-image": the image's angle alone (the model's clamp lives in its image graphs); "-x4": 4 samples."""
     if name.startswith("supermag"):
         pytest.importorskip("onnxruntime", reason="the shipped model needs onnxruntime")
         samples = 4 if name.endswith("x4") else 1
-        return TactilePoseEstimator(load_reconstructor(MODEL, samples=samples, seed=0))
+        return TactilePoseEstimator(load_reconstructor(MODEL, samples=samples, seed=0),
+                                    use_angle_head=name != "supermag-image")
     if name == "bilinear16":
         return TactilePoseEstimator(load_reconstructor("bilinear", output_px=16))
     return TactilePoseEstimator(load_reconstructor(name))
@@ -101,20 +104,22 @@ def _signs() -> np.ndarray:
 @pytest.mark.parametrize("magnitude_ut", [500.0, 501.0, 1e4, 1e30, F32_MAX, 1e300])
 @pytest.mark.parametrize("pattern", ["plus", "minus", "mixed"])
 def test_shipped_model_at_and_beyond_the_500_ut_clamp_equals_the_clamp(estimators, magnitude_ut, pattern):
-    """Expected: exactly the estimate of the reading at the +-500 uT clamp (finite; 1e300 is not 'infinite');
-    with 4 prior samples, a finite estimate whose confidence is in [0, 1]."""
+    """Expected: from the image, exactly the estimate of the reading at the +-500 uT clamp (finite; 1e300 is
+    not 'infinite'); with the angle head (which has no such clamp) or 4 prior samples, a finite estimate whose
+    confidence is in [0, 1]."""
     signs = {"plus": np.ones((4, 4, 3)), "minus": -np.ones((4, 4, 3)), "mixed": _signs()}[pattern]
-    est = estimators("supermag")
+    est = estimators("supermag-image")
     got = est.estimate(signs * magnitude_ut)
     assert_sane_estimate(got)
     _same(got, est.estimate(signs * 500.0))
+    assert_sane_estimate(estimators("supermag").estimate(signs * magnitude_ut))
     assert_sane_estimate(estimators("supermag-x4").estimate(signs * magnitude_ut))  # random samples: no equality
 
 
 def test_shipped_model_on_readings_at_the_int16_rail_equals_the_clamp(estimators, pair):
     """Readings the chip model produces when every channel is on the int16 rail (baseline-subtracted):
-    expected, the estimate of the same signs at the 500 uT clamp."""
-    est = estimators("supermag")
+    expected, from the image, the estimate of the same signs at the 500 uT clamp; with the angle head, a sane one."""
+    est = estimators("supermag-image")
     for sign in (1.0, -1.0):
         m = pair.chips.measure(np.full((4, 4, 3), sign * 1e6), np.random.default_rng(0))
         assert m.saturated.all()
@@ -123,6 +128,7 @@ def test_shipped_model_on_readings_at_the_int16_rail_equals_the_clamp(estimators
         got = est.estimate(reading)
         assert_sane_estimate(got)
         _same(got, est.estimate(np.clip(reading, -500.0, 500.0)))
+        assert_sane_estimate(estimators("supermag").estimate(reading))
 
 
 @pytest.mark.filterwarnings("error::RuntimeWarning")
@@ -187,7 +193,7 @@ def test_a_chip_stuck_at_zero_barely_moves_the_shipped_models_angle(estimators, 
 @pytest.mark.parametrize("name", ["supermag", "supermag-x4", "bilinear", "bilinear16"])
 def test_a_dead_chip_gives_a_finite_estimate(estimators, pair, rod_readings, rail_ut, chip, stuck, name):
     """A chip's three axes stuck at 0 or at the int16 rail (raw), in a real reading. Expected: finite, confidence
-    in [0, 1], defined or a reason; for the shipped model, exactly the estimate with that chip at the clamp,
+    in [0, 1], defined or a reason; for the shipped model's image, exactly the estimate with that chip at the clamp,
     except that an axis whose baseline-subtracted value lies beyond the chip's full scale flags the chip as
     saturated (confidence x 15/16), as the sensor's flag would (a stuck rail is no worse than a saturated
     chip). The angle itself may be off (up to ~30 degrees measured with a railed chip), which is why the
@@ -203,10 +209,30 @@ def test_a_dead_chip_gives_a_finite_estimate(estimators, pair, rod_readings, rai
         assert_sane_estimate(got)
         if name == "supermag" and stuck != "zero":  # (4 random prior samples: no equality)
             assert np.abs(dead[chip]).min() > 500.0
-            clamped = est.estimate(np.clip(dead, -500.0, 500.0))
+            image = estimators("supermag-image")   # the angle head has no 500 uT clamp: see the test below
+            clamped = image.estimate(np.clip(dead, -500.0, 500.0))
             flagged = int((np.abs(dead[chip]) > rail_ut).any())
             assert got.saturated_chips == flagged
-            _same(got, clamped)
+            _same(image.estimate(dead), clamped)
+
+
+@pytest.mark.xfail(strict=True, reason="the angle head reads a chip stuck at the rail confidently wrong (up to "
+                   "86 deg off at P(within 5 deg) 0.89 here); the image's angle alone stays within 13 deg")
+def test_a_railed_chip_does_not_make_the_shipped_model_confidently_wrong(estimators, pair, rod_readings, rail_ut):
+    """A chip's three axes stuck at the int16 rail under the rod: the estimate may lose accuracy, but one that
+    still claims P(within 5 deg) >= 0.8 must be within 15 deg."""
+    est = estimators("supermag")
+    wrong = []
+    for yaw_deg, reading in rod_readings.items():
+        for chip in DEAD_CHIPS:
+            for sign in (1.0, -1.0):
+                dead = reading.astype(np.float64)
+                dead[chip] = sign * rail_ut - pair.baseline_ut[chip]
+                got = est.estimate(dead)
+                error = _axial_error_deg(got.angle_rad, math.radians(yaw_deg))
+                if got.confidence >= 0.8 and error >= 15.0:
+                    wrong.append((yaw_deg, chip, sign, got.source, round(error, 1), round(got.confidence, 2)))
+    assert not wrong, wrong
 
 
 # ---------------------------------------------------------------- NaN and infinity

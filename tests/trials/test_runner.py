@@ -25,7 +25,7 @@ pytest.importorskip("roboticstoolbox")
 pytest.importorskip("onnxruntime")
 
 REPO = Path(__file__).resolve().parents[2]
-MODEL = str(REPO / "models" / "supermag_fast.onnx")
+MODEL = str(REPO / "models" / "supermag.onnx")
 THIN_RODS = [TrialObject("cylinder", "cylinder_3mm", {"size_mm": 3.0}),
              TrialObject("hex_bar", "hex_bar_4mm", {"size_mm": 4.0})]
 
