@@ -6,9 +6,10 @@
 
 For every ``--model`` the presses of elongated objects in the dataset's test split (rods and flat bars; single
 frames, as recorded) go through :class:`~tactile_manip.perception.TactilePoseEstimator`: the image route alone
-(the principal axis of the reconstruction), and, for a model file with an angle head, the head alone (its axis,
-straight from the reading) and the estimator's default, which takes whichever of the two is the more likely
-within 5 deg. Beside them: the principal axis of the true (simulated) depth image, what the image route would
+(the principal axis of the reconstruction), and, for a model file with an angle head, the estimator's default
+(the head's angle, its confidence calibrated), the head's raw output, and "likelier", whichever of image and
+head is the more likely within 5 deg (the image's probability from the calibration of the same image graphs,
+``models/supermag_robust.calibration.json``). Beside them: the principal axis of the true (simulated) depth image, what the image route would
 get from a perfect reconstruction, and with ``--bound`` (the JSON of ``benchmarks.angle_information`` on the
 same dataset) the share an efficient estimator would reach per band (Cramer-Rao, pose and sensor unknown).
 Reported: share within 5 and 2 deg, median error, within 5 deg per force band and per object; and the head's
@@ -19,6 +20,7 @@ benchmarks/results/angle_ablation.json; asserts nothing.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 from typing import Any
 
@@ -31,6 +33,7 @@ from tactile_manip.perception.angle_head import within_probability
 from tactile_manip.perception.confidence import load_calibration_beside
 from tactile_manip.perception.evaluation import ELONGATED
 from tactile_manip.perception.pose import angle_from_image
+from tactile_manip.shipped import shipped_model
 
 FORCE_BANDS_N = ((2.0, 5.0), (5.0, 8.0), (8.0, 11.0), (11.0, 15.0))
 RELIABILITY_BINS = ((0.0, 0.5), (0.5, 0.8), (0.8, 0.95), (0.95, 1.0001))
@@ -57,9 +60,14 @@ def route_estimates(path: str, readings: np.ndarray) -> dict[str, tuple[np.ndarr
     """(angle, defined, probability-or-confidence) per route of one model file on ``readings`` (N, R, C, A)."""
     model = load_reconstructor(path, threads=2)
     calibration = load_calibration_beside(path)
-    routes = {"image": TactilePoseEstimator(model, calibration=calibration, use_angle_head=False)}
+    routes = {"image": TactilePoseEstimator(model, angle_source="image")}
     if model.angle_head is not None:
-        routes["image + head"] = TactilePoseEstimator(model, calibration=calibration)
+        routes["head (the default)"] = TactilePoseEstimator(
+            model, calibration=calibration if calibration is not None and calibration.route == "head" else None)
+        image_cal = load_calibration_beside(shipped_model("robust"))  # the same image graphs, fitted on their angles
+        if image_cal is not None:  # the image's probability is its calibrated confidence
+            routes["likelier of image and head"] = TactilePoseEstimator(
+                model, calibration=dataclasses.replace(image_cal, route="likelier"), angle_source="likelier")
     out = {}
     for name, est in routes.items():
         ests = [e for s in range(0, len(readings), 256)
@@ -68,7 +76,8 @@ def route_estimates(path: str, readings: np.ndarray) -> dict[str, tuple[np.ndarr
                      np.array([e.confidence for e in ests]))
     if model.angle_head is not None:
         angle, kappa = model.angle_head.axes(np.stack([model.checked(r) for r in readings]))
-        out["head"] = (angle, np.ones(len(angle), bool), within_probability(kappa, math.radians(5.0)))
+        out["head, raw probability"] = (angle, np.ones(len(angle), bool),
+                                            within_probability(kappa, math.radians(5.0)))
     return out
 
 
@@ -100,7 +109,7 @@ def main() -> None:
         for route, (angle, defined, prob) in route_estimates(path, readings).items():
             err = errors_deg(angle, defined, yaw)
             results[f"{label}: {route}"] = {**summary(err, force, names), "model": path,
-                                            "reliability": reliability(prob, err) if route != "image" else []}
+                                            "reliability": reliability(prob, err) if route.startswith("head") else []}
     if data.has_images:
         truth = [angle_from_image(img, pixel_mm=data.image.pixel_mm) for img in data.depth_mm(idx)]
         err = errors_deg(np.array([t.angle_rad for t in truth]), np.array([t.defined for t in truth]), yaw)
@@ -123,19 +132,23 @@ def bound_shares(info: dict[str, Any]) -> dict[str, Any]:
     return {"all": pick.get("all"), "by_force": {k: v for k, v in pick.items() if k.endswith(" N")}}
 
 
+def _share(x: float | None) -> str:
+    return "-" if x is None or not math.isfinite(x) else f"{x:.1%}"
+
+
 def markdown(report: dict[str, Any]) -> str:
     bands = [f"{lo:g}-{hi:g} N" for lo, hi in FORCE_BANDS_N]
-    lines = [f"Single frames of the {report['presses']} bar presses of {report['data']}'s test split (unseen rods "
-             "and flat bars, 2-15 N, drawn sensors).", "",
+    lines = [f"Single frames of the {report['presses']} presses of elongated objects (rods, flat bars) in "
+             f"{report['data']}'s test split, each as recorded; within 5 deg per band of the pressing force.", "",
              "| route | within 5 deg | within 2 deg | median deg | " + " | ".join(bands) + " |",
              "|---" * (4 + len(bands)) + "|"]
     if "bound" in report:
         b = report["bound"]
         lines.append(f"| Cramer-Rao bound (pose and sensor unknown) | {b['all']:.1%} | - | - | "
-                     + " | ".join(f"{b['by_force'].get(k, math.nan):.1%}" for k in bands) + " |")
+                     + " | ".join(_share(b["by_force"].get(k)) for k in bands) + " |")
     for name, r in report["results"].items():
         lines.append(f"| {name} | {r['within_5']:.1%} | {r['within_2']:.1%} | {r['median_deg']:.2f} | "
-                     + " | ".join(f"{r['by_force'].get(k, math.nan):.1%}" for k in bands) + " |")
+                     + " | ".join(_share(r["by_force"].get(k)) for k in bands) + " |")
     objects = sorted({o for r in report["results"].values() for o in r["by_object"]})
     lines += ["", "Within 5 deg per object:", "", "| route | " + " | ".join(objects) + " |",
               "|---" * (1 + len(objects)) + "|"]

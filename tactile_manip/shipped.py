@@ -6,8 +6,8 @@
 
 The default, ``supermag`` (``models/supermag.onnx``), is the one model every shipped scene, task, example and
 doc uses: the image graphs of the decoder trained on the paper's protocol and on 2-15 N presses of drawn
-sensors, with an angle head inside (the contact's axis read straight from the reading, weighed against the
-image by :class:`~tactile_manip.perception.estimator.TactilePoseEstimator`). The others are kept only as
+sensors, with an angle head inside (the contact's axis read straight from the reading, from which
+:class:`~tactile_manip.perception.estimator.TactilePoseEstimator` takes the angle by default). The others are kept only as
 references for ``tactile-manip bench`` and the published results: ``fast`` (the same decoder trained on the
 paper's protocol only), ``robust`` (the default's image graphs without the angle head) and ``compact`` (the
 larger decoder shipped before them, the accuracy reference).

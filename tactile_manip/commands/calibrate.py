@@ -71,7 +71,7 @@ def run(args: argparse.Namespace) -> int:
     if args.symmetrized:
         reconstructor = SymmetrizedReconstructor(reconstructor)
     # the image's confidence alone: the estimator maps it before weighing a model's angle head against it
-    estimator = TactilePoseEstimator(reconstructor, use_angle_head=False)
+    estimator = TactilePoseEstimator(reconstructor)  # the route the estimator takes by default (its angle head)
     fit = load_dataset(args.fit)
     fit.require_images(f"calibrate --fit {args.fit}")
     _, fit_conf, fit_err = _rods(fit, "--fit", args.fit, args.fit_split, estimator)

@@ -236,25 +236,25 @@ class TactilePoseEstimator:
             if flags.any():
                 confidence *= _unsaturated_fraction(flags)
             est = replace(est, confidence=confidence)
-        if self.angle_head is not None and field is not None:
-            est = self._with_head(est, field, flags)
+        # the head was trained on sound readings: a chip at its rail or beyond its range, or an image without any
+        # contact, leaves the angle to the image (which clamps and sees where the contact is)
+        if self.angle_head is not None and field is not None and not flags.any() and est.reason != "empty contact":
+            est = self._with_head(est, field)
         if est.defined and self.calibration is not None:
             est = replace(est, confidence=float(self.calibration(est.confidence)))
         return est
 
-    def _with_head(self, est: AngleEstimate, field: np.ndarray, flags: np.ndarray) -> AngleEstimate:
+    def _with_head(self, est: AngleEstimate, field: np.ndarray) -> AngleEstimate:
         """The angle head's estimate (route "head"), or the image's or the head's, whichever is the more likely
         within the tolerance (route "likelier").
 
-        The head's probability comes from its von Mises concentration, times the unsaturated fraction of chips;
-        the image's is its confidence, which only a calibration makes a probability (so "likelier" wants one).
+        The head's probability comes from its von Mises concentration; the image's is its confidence, which only
+        a calibration makes a probability (so "likelier" wants one).
         The head's estimate keeps the image's centroid and area, and is defined even where the image's is not
         (a short or faint contact whose reading still carries the axis).
         """
         angle, kappa = self.angle_head.axis(self.reconstructor.checked(field))
         p_head = within_probability(kappa, self._tolerance_rad)
-        if flags.any():
-            p_head *= _unsaturated_fraction(flags)
         if self.angle_source == "likelier" and est.defined:
             p_image = est.confidence if self.calibration is None else float(self.calibration(est.confidence))
             if p_image >= p_head:

@@ -77,7 +77,7 @@ class Reconstructor(abc.ABC):
     ``board_layout`` names the sensor board (``tactile_manip.sensors.layout``) whose readings it was made for;
     :meth:`check_layout` refuses readings of another board. ``angle_head`` is the model file's angle head
     (:class:`~tactile_manip.perception.angle_head.AngleHead`: the contact's axis straight from the reading,
-    which the pose estimator weighs against the image's), or None.
+    from which the pose estimator takes the angle by default), or None.
     """
 
     name: str = "reconstructor"

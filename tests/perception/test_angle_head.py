@@ -114,13 +114,24 @@ def test_no_contact_field_stays_no_contact_whatever_the_head_says() -> None:
     assert not est.defined and est.reason == "no contact field" and head.calls == 0
 
 
-def test_saturated_chips_lower_the_heads_probability_too() -> None:
+def test_a_saturated_chip_leaves_the_angle_to_the_image() -> None:
     head = FakeHead(0.5, 1e4)
     reading = _reading()
     reading[0, 0, 2] = 1e5   # beyond the chip's range: clamped and flagged
-    est = TactilePoseEstimator(Stripe(round_=True, head=head)).estimate(reading)
-    assert est.saturated_chips == 1
-    assert est.confidence == pytest.approx(within_probability(1e4, TOLERANCE) * 15 / 16)
+    est = TactilePoseEstimator(Stripe(0.2, head=head)).estimate(reading)
+    assert est.saturated_chips == 1 and est.source == "image" and head.calls == 0
+    assert est.angle_rad == pytest.approx(0.2, abs=0.02)
+
+
+class Empty(Stripe):
+    def _run(self, fields_ut: np.ndarray) -> tuple[np.ndarray, None]:
+        return np.zeros((len(fields_ut), *self.output_shape), np.float32), None
+
+
+def test_an_image_without_any_contact_is_not_given_an_angle_by_the_head() -> None:
+    head = FakeHead(0.5, 1e4)
+    est = TactilePoseEstimator(Empty(head=head)).estimate(_reading())
+    assert not est.defined and est.reason == "empty contact" and head.calls == 0
 
 
 def test_the_head_can_be_left_out_and_bad_readings_are_still_refused() -> None:

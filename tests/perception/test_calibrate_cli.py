@@ -62,15 +62,15 @@ def test_calibrate_writes_a_calibration_beside_the_model_and_its_reliability_rep
     mean_conf = sum(r["mean_confidence"] * r["count"] for r in rows) / 60
     assert mean_conf == pytest.approx(report["report"]["within_tolerance"], abs=0.05)
     assert "expected calibration error" in capsys.readouterr().out
-    # fitted on the image's confidence, which is what the estimator maps before it weighs the angle head
-    image = TactilePoseEstimator(load_reconstructor(model), use_angle_head=False)
-    weighed = TactilePoseEstimator(load_reconstructor(model))
-    assert weighed.angle_head is not None
+    # fitted on the confidence of the route the estimator takes by default: the angle head's, for this model
+    image = TactilePoseEstimator(load_reconstructor(model), angle_source="image")
+    default = TactilePoseEstimator(load_reconstructor(model))
+    assert default.angle_source == "head" and cal.route == "head" and report["route"] == "head"
     _, conf_image, _ = rod_estimates(load_dataset(rods), load_dataset(rods).indices("test"), image)
-    _, conf_weighed, _ = rod_estimates(load_dataset(rods), load_dataset(rods).indices("test"), weighed)
-    assert not np.allclose(conf_image, conf_weighed)  # the head wins on some of these presses
+    _, conf_default, _ = rod_estimates(load_dataset(rods), load_dataset(rods).indices("test"), default)
+    assert not np.allclose(conf_image, conf_default)
     assert sorted(r["mean_confidence"] for r in report["deciles_raw"]) == pytest.approx(
-        sorted(float(np.mean(c)) for c in np.array_split(np.sort(conf_image), 10)), abs=1e-9)
+        sorted(float(np.mean(c)) for c in np.array_split(np.sort(conf_default), 10)), abs=1e-9)
     # a second run refuses to replace it without --force, in one line
     assert main(args) == 2
     assert_one_line_error(capsys.readouterr().err, "calibrate", "exists")
@@ -90,7 +90,8 @@ def test_trials_use_the_calibration_beside_the_model_and_build_the_escalation(ro
 
     model = tmp_path / "m.onnx"
     shutil.copy(MODEL, model)
-    ConfidenceCalibration((0.2, 0.9), (0.1, 0.95), 5.0, 100).save(calibration_path(model))
+    fitted = ConfidenceCalibration((0.2, 0.9), (0.1, 0.95), 5.0, 100, route="head")  # the model's route
+    fitted.save(calibration_path(model))
     scene = TrialScene(methods=[MethodSpec("a", str(model), escalate_below=0.5),
                                 MethodSpec("b", str(model), calibrated=False, escalate_below=0.5,
                                            escalation="samples", escalation_samples=4),
@@ -98,11 +99,14 @@ def test_trials_use_the_calibration_beside_the_model_and_build_the_escalation(ro
                                 MethodSpec("d", str(model), symmetrize=True)],
                        presentation=PresentationConfig(objects=[TrialObject("cylinder", "c3", {"size_mm": 3.0})]))
     est = build_estimators(scene)
-    assert est["a"].calibration == ConfidenceCalibration((0.2, 0.9), (0.1, 0.95), 5.0, 100)
+    assert est["a"].calibration == fitted
     assert isinstance(est["a"].escalation, SymmetrizedReconstructor) and est["a"].escalate_below == 0.5
     assert est["b"].calibration is None and est["b"].escalation.samples == 4
     assert est["c"].calibration is None and est["c"].escalation is None
-    assert est["d"].calibration is None  # fitted for the one-pass estimator, not the symmetry-averaged one
+    # the head reads the reading whatever reconstructs the image: symmetry averaging does not change its angles
+    assert est["d"].calibration == fitted
+    ConfidenceCalibration((0.2, 0.9), (0.1, 0.95), 5.0, 100).save(calibration_path(model))   # the image's route
+    assert build_estimators(scene)["a"].calibration is None   # fitted for another route: not applied
     for bad in ({"escalate_below": 1.5}, {"escalation": "more"}, {"escalation_samples": 1},
                 {"symmetrize": True, "escalate_below": 0.5},
                 {"reconstructor": "bilinear", "escalate_below": 0.5, "escalation": "samples"}):

@@ -83,8 +83,8 @@ def test_averaging_over_the_symmetries_sharpens_the_rod_angle() -> None:
     pytest.importorskip("onnxruntime")
     pair, rng = SensorPair(seed=0), np.random.default_rng(3)
     # the image's angle alone: the model's angle head reads the reading, not the averaged image
-    single = TactilePoseEstimator(load_reconstructor(MODEL), use_angle_head=False)
-    averaged = TactilePoseEstimator(SymmetrizedReconstructor(load_reconstructor(MODEL)), use_angle_head=False)
+    single = TactilePoseEstimator(load_reconstructor(MODEL), angle_source="image")
+    averaged = TactilePoseEstimator(SymmetrizedReconstructor(load_reconstructor(MODEL)), angle_source="image")
     errors = {"single": [], "averaged": []}
     for i in range(24):
         size = (8.0, 5.0)[i % 2]

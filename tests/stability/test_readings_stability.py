@@ -41,7 +41,7 @@ def _estimator(name: str) -> TactilePoseEstimator:
         pytest.importorskip("onnxruntime", reason="the shipped model needs onnxruntime")
         samples = 4 if name.endswith("x4") else 1
         return TactilePoseEstimator(load_reconstructor(MODEL, samples=samples, seed=0),
-                                    use_angle_head=name != "supermag-image")
+                                    angle_source="image" if name == "supermag-image" else "auto")
     if name == "bilinear16":
         return TactilePoseEstimator(load_reconstructor("bilinear", output_px=16))
     return TactilePoseEstimator(load_reconstructor(name))
