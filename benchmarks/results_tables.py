@@ -33,10 +33,15 @@ TABLE1_MD = "models/eval/table.md"
 TABLE1_ROBUST = "docs/results/robust/robust_b48/table1.json"  # the same evaluation of the robust model
 NETWORK_LATENCY = "models/eval/latency.json"  # python -m benchmarks.bench_model
 BENCH = "docs/results/bench_2026-11-25_one_reading/report.json"  # tactile-manip bench
+BENCH_DEFAULT = "docs/results/bench_2026-11-25_default/report.json"  # tactile-manip bench of the default model
+ABLATIONS = {"data/robust.npz": "docs/results/angle_head/ablation_robust.json",  # python -m benchmarks.angle_ablation
+             "data/rods_test.npz": "docs/results/angle_head/ablation_rods_test.json",
+             "data/supermag.npz": "docs/results/angle_head/ablation_supermag.json"}
 SINGLE_FRAMES = ("docs/results/robust/fast_vs_compact/single_frame.json",  # evaluate on data/robust.npz
                  "docs/results/robust/robust_b48/single_frame.json")
 INFORMATION = "docs/results/robust/information/angle_information.json"  # python -m benchmarks.angle_information
-CALIBRATIONS = {"supermag_fast": "models/supermag_fast.calibration.reliability.json",
+CALIBRATIONS = {"supermag": "models/supermag.calibration.reliability.json",
+                "supermag_fast": "models/supermag_fast.calibration.reliability.json",
                 "supermag_robust": "models/supermag_robust.calibration.reliability.json",
                 "supermag_compact": "models/supermag_compact.calibration.reliability.json"}
 
@@ -52,20 +57,23 @@ EVAL_MODELS = {
     "Bilinear": None,
     "Bicubic": None,
 }
-DEFAULT_EVAL = "SuperMag fast, shipped (40 ep)"  # the headline's model row of TABLE1
+DEFAULT_EVAL = "SuperMag fast, robust data"  # the default model's image graphs: its row of TABLE1_ROBUST
+DEFAULT_ROUTE = "default: head (the default)"  # the default estimator's row of the ablations
 BASELINE_EVAL = "Bilinear"
 # the speed report's method names -> (model file, what the row is)
 BENCH_MODELS = {
     "bilinear": (None, "bilinear, 200 px"),
     "bicubic": (None, "bicubic, 200 px"),
-    "fast": ("supermag_fast", "default model"),
+    "supermag": ("supermag", "default model"),
+    "fast": ("supermag_fast", "previous default"),
     "fast_sym": ("supermag_fast", "symmetry-averaged"),
     "robust": ("supermag_robust", "robust model"),
     "compact": ("supermag_compact", "previous model"),
     "compact_sym": ("supermag_compact", "symmetry-averaged"),
     "paper": (None, "paper preset, untrained (latency only)"),
 }
-MODEL_ROLES = {"supermag_fast": "default", "supermag_robust": "robust scene", "supermag_compact": "previous"}
+MODEL_ROLES = {"supermag": "default", "supermag_fast": "reference: previous default",
+               "supermag_robust": "reference: the default's image graphs", "supermag_compact": "reference"}
 METHODS = {  # trial method names -> what they do
     "supermag": "one pass per reading",
     "supermag_sym": "symmetry-averaged (8 passes)",
@@ -87,16 +95,21 @@ class TrialRun:
 
 
 MAIN_JOB = TrialRun("main job: `configs/scenes/reorient_sim.toml`, 100 presentations of 6 unseen rods, 10-11 N",
-                    "docs/results/trials_fast/reorient_sim/summary.json",
-                    {"supermag": "supermag_fast", "supermag_sym": "supermag_fast", "bilinear": None})
+                    "docs/results/supermag/reorient_sim/summary.json",
+                    {"supermag": "supermag", "supermag_sym": "supermag", "bilinear": None})
+MAIN_JOB_FAST = TrialRun(MAIN_JOB.scene, "docs/results/trials_fast/reorient_sim/summary.json",
+                         {"supermag": "supermag_fast", "supermag_sym": "supermag_fast", "bilinear": None})
 ROBUST_SCENE = TrialRun("robust scene: `configs/scenes/reorient_robust.toml`, 300 presentations, 2-15 N, a drawn "
                         "sensor per trial, calibrated re-grasp below 0.8",
-                        "docs/results/robust/robust_b48/trials_robust.md",
-                        {"supermag": "supermag_robust", "supermag_esc": "supermag_robust"})
+                        "docs/results/supermag/reorient_robust/summary.json",
+                        {"supermag": "supermag", "supermag_esc": "supermag", "bilinear": None})
+ROBUST_SCENE_B48 = TrialRun(ROBUST_SCENE.scene, "docs/results/robust/robust_b48/trials_robust.md",
+                            {"supermag": "supermag_robust", "supermag_esc": "supermag_robust"})
 ROBUST_SCENE_FAST = TrialRun(ROBUST_SCENE.scene, "docs/results/robust/fast_vs_compact/trials_fast.md",
                              {"supermag": "supermag_fast", "supermag_esc": "supermag_fast", "bilinear": None})
 TRIAL_RUNS = (
     MAIN_JOB,
+    MAIN_JOB_FAST,
     TrialRun("study: `tasks/reorient_study.toml`, 300 presentations of the same rods, another seed",
              "docs/results/trials_fast/reorient_study/summary.json",
              {"supermag": "supermag_fast", "supermag_sym": "supermag_fast", "bilinear": None}),
@@ -107,6 +120,7 @@ TRIAL_RUNS = (
              "docs/results/robust/robust_b48/trials_main_scene_vs_fast.md",
              {"fast": "supermag_fast", "robust": "supermag_robust"}),
     ROBUST_SCENE,
+    ROBUST_SCENE_B48,
     ROBUST_SCENE_FAST,
     TrialRun(ROBUST_SCENE.scene, "docs/results/robust/fast_vs_compact/trials_compact.md",
              {"supermag": "supermag_compact", "supermag_esc": "supermag_compact", "bilinear": None}),
@@ -188,15 +202,15 @@ def _first_table(root: Path, path: str, starts: str) -> tuple[list[str], list[li
     raise ValueError(f"{path}: no results table (a header starting {starts!r})")
 
 
-def _bench_rows(root: Path) -> list[dict[str, Any]]:
-    return _json(root, BENCH)["rows"]
+def _bench_rows(root: Path, path: str = BENCH) -> list[dict[str, Any]]:
+    return _json(root, path)["rows"]
 
 
-def _bench_row(root: Path, method: str, runtime: str = "onnxruntime 1 thread") -> dict[str, Any]:
-    for row in _bench_rows(root):
+def _bench_row(root: Path, method: str, runtime: str = "onnxruntime 1 thread", path: str = BENCH) -> dict[str, Any]:
+    for row in _bench_rows(root, path):
         if row["method"] == method and row["runtime"] == runtime:
             return row
-    raise ValueError(f"{BENCH}: no row {method!r} on {runtime!r}")
+    raise ValueError(f"{path}: no row {method!r} on {runtime!r}")
 
 
 # --- formatting ------------------------------------------------------------------------------------------------
@@ -225,37 +239,63 @@ def _ms(row: dict[str, Any], key: str) -> str:
 
 # --- tables ----------------------------------------------------------------------------------------------------
 def headline(root: Path, doc: str) -> list[str]:
-    """The README's table: the default model against the paper's baseline, and the robust model's scene."""
-    sm, bl = _eval_row(root, TABLE1, DEFAULT_EVAL), _eval_row(root, TABLE1, BASELINE_EVAL)
+    """The README's table: the default model against the paper's baseline."""
+    sm, bl = _eval_row(root, TABLE1_ROBUST, DEFAULT_EVAL), _eval_row(root, TABLE1, BASELINE_EVAL)
     presses = sum(o["count"] for o in sm["per_object"].values())
-    rods = sm["angle_error_deg"]["count"]
-    main = trial_results(root, MAIN_JOB)
-    robust, robust_fast = trial_results(root, ROBUST_SCENE), trial_results(root, ROBUST_SCENE_FAST)
-    pose_sm, pose_bl = _bench_row(root, "fast"), _bench_row(root, "bilinear", "numpy")
+    main, robust = trial_results(root, MAIN_JOB), trial_results(root, ROBUST_SCENE)
+    pose_sm = _bench_row(root, "supermag", path=BENCH_DEFAULT)
+    pose_bl = _bench_row(root, "bilinear", "numpy", path=BENCH_DEFAULT)
+    single = _json(root, ABLATIONS["data/robust.npz"])
+    head, bound = single["results"][DEFAULT_ROUTE], single["bound"]
+    image_bl = _json(root, SINGLE_FRAMES[0])["results"]
+    bl_single = next(r for r in image_bl if r["method"] == BASELINE_EVAL)["angle_error_deg"]
+    nominal = _json(root, ABLATIONS["data/supermag.npz"])["results"][DEFAULT_ROUTE]
+    bl_nominal = bl["angle_error_deg"]
 
     def trials(r: MethodResult) -> str:
         return f"{r.successes}/{r.n} ({r.wilson[0]:.1f}-{r.wilson[1]:.1f} %)"
 
-    def angle(row: dict[str, Any]) -> str:
-        a = row["angle_error_deg"]
-        return f"{a['median']:.1f} / {a['p95']:.1f} deg"
-
     runs = _link("trials", _readable(MAIN_JOB.summary, root), doc)
+    ablation = _link("ablation", ABLATIONS["data/robust.npz"].replace(".json", ".md"), doc)
     rows = [
         [f"depth image of {presses} unseen test presses: PSNR / SSIM", f"{sm['psnr_db_mean']:.2f} dB / "
          f"{sm['ssim_mean']:.3f}", f"{bl['psnr_db_mean']:.2f} dB / {bl['ssim_mean']:.3f}",
-         _link("Table I", TABLE1_MD, doc)],
-        [f"rod angle error on {rods} unseen rod presses: median / p95", angle(sm), angle(bl),
-         _link("Table I", TABLE1_MD, doc)],
+         _link("Table I", TABLE1_ROBUST.replace(".json", ".md"), doc)],
+        [f"rod angle within 2 deg, one reading: {nominal['presses']} unseen rod presses, nominal sensor, 10-11 N",
+         _pct(nominal["within_2"]), _pct(bl_nominal["within_2_deg"]),
+         _link("ablation", ABLATIONS["data/supermag.npz"].replace(".json", ".md"), doc)],
+        [f"rod angle within 5 deg, one reading: {head['presses']} unseen rod presses, 2-15 N, drawn sensors "
+         f"(bound {_pct(bound['all'])})", _pct(head["within_5"]), _pct(bl_single["within_5_deg"]), ablation],
         [f"main job: {main['supermag'].n} reorientations within 5 deg (6 unseen rods, 10-11 N)",
          trials(main["supermag"]), trials(main["bilinear"]), runs],
-        [f"robust scene: {robust['supermag'].n} reorientations within 5 deg (2-15 N, a drawn sensor per trial; "
-         "`supermag_robust`)", trials(robust["supermag"]), trials(robust_fast["bilinear"]),
-         f"{_link('trials', ROBUST_SCENE.summary, doc)}, {_link('baseline', ROBUST_SCENE_FAST.summary, doc)}"],
+        [f"robust scene: {robust['supermag'].n} reorientations within 5 deg (2-15 N, a drawn sensor per trial)",
+         trials(robust["supermag"]), trials(robust["bilinear"]), _link("trials", _readable(ROBUST_SCENE.summary,
+                                                                                             root), doc)],
         ["reading -> angle on one CPU thread: p50 / p99", f"{_ms(pose_sm, 'pose')} ms", f"{_ms(pose_bl, 'pose')} ms",
-         _link("speed report", BENCH.replace("report.json", "report.md"), doc)],
+         _link("speed report", BENCH_DEFAULT.replace("report.json", "report.md"), doc)],
     ]
-    return _table(["result", "SuperMag (`supermag_fast`)", "bilinear (the paper's baseline)", "from"], rows)
+    return _table(["result", "SuperMag (`supermag`, the default)", "bilinear (the paper's baseline)", "from"], rows)
+
+
+def angle(root: Path, doc: str) -> list[str]:
+    """The default model's angle on single frames, per route and force band, beside the information bound."""
+    lines: list[str] = []
+    for data, path in ABLATIONS.items():
+        report = _json(root, path)
+        bands = [b for b in ("2-5 N", "5-8 N", "8-11 N", "11-15 N")
+                 if any(b in r["by_force"] for r in report["results"].values())]
+        rows = []
+        if "bound" in report:
+            b = report["bound"]
+            rows.append(["Cramer-Rao bound (pose, force and sensor unknown)", _pct(b["all"]), "",
+                         *(_pct(b["by_force"][k]) for k in bands)])
+        for name, r in report["results"].items():
+            rows.append([name, _pct(r["within_5"]), _pct(r["within_2"]), *(_pct(r["by_force"][k]) for k in bands)])
+        lines += [f"## `{data}`: {report['presses']} single frames of unseen rods"
+                  + (" and flat bars" if "flat" in " ".join(next(iter(report["results"].values()))["by_object"])
+                     else ""), "", *_table(["route", "within 5 deg", "within 2 deg", *(f"5 deg at {k}" for k in bands)],
+                                           rows), "", f"From {_link(Path(path).name, path, doc)}.", ""]
+    return lines[:-1]
 
 
 def models(root: Path, doc: str) -> list[str]:
@@ -367,7 +407,8 @@ def robust(root: Path, doc: str) -> list[str]:
 
 TABLES = {"headline.md": ("Headline results", headline), "models.md": ("Models", models),
           "trials.md": ("Reorientation trials", trials_table), "latency.md": ("Speed against error", latency),
-          "robust.md": ("Beyond the paper's protocol", robust)}
+          "robust.md": ("Beyond the paper's protocol", robust),
+          "angle.md": ("The default model's angle on single frames", angle)}
 
 
 def render(root: Path = ROOT) -> dict[str, str]:

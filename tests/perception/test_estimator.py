@@ -148,14 +148,18 @@ def test_a_stalled_sensor_raises_instead_of_returning_stale_estimates(supermag, 
 
 
 def test_saturated_chips_lower_the_confidence(supermag, pair) -> None:
+    """A flagged chip hands the angle to the image (the head was trained on sound readings), whose confidence
+    it lowers by the unsaturated fraction of chips."""
     from tactile_manip.types import TactileReading
 
     field = _rod_field(pair, 25.0).astype(np.float32)
     flags = np.zeros((4, 4, 3), bool)
-    clean = supermag.estimate(TactileReading(field, field, flags, t_host_s=0.0))
+    assert supermag.estimate(TactileReading(field, field, flags, t_host_s=0.0)).source == "head"
+    image = TactilePoseEstimator(supermag.reconstructor, angle_source="image")
+    clean = image.estimate(TactileReading(field, field, flags, t_host_s=0.0))
     flags[1, 2, 2] = flags[2, 2, 0] = True                  # two chips with an axis at the rail
     railed = supermag.estimate(TactileReading(field, field, flags, t_host_s=0.0))
-    assert railed.angle_rad == clean.angle_rad
+    assert railed.source == "image" and railed.angle_rad == clean.angle_rad
     assert railed.confidence == pytest.approx(clean.confidence * 14 / 16)
     frames = supermag.estimate_frames([TactileReading(field, field, np.zeros_like(flags), t_host_s=0.0),
                                        TactileReading(field, field, flags, t_host_s=0.0)])
@@ -179,6 +183,7 @@ def test_a_value_beyond_the_chips_range_is_clamped_flagged_and_lowers_the_confid
     from tactile_manip.perception.reconstruct import READING_LIMIT_UT, out_of_range
 
     field = _rod_field(pair, 25.0).astype(np.float64)
+    supermag = TactilePoseEstimator(supermag.reconstructor, angle_source="image")  # where a flagged chip leads
     clean = supermag.estimate(field)
     bad = field.copy()
     bad[1, 2, 2] = value                                     # one channel, e.g. a corrupt buffer
@@ -346,6 +351,7 @@ def test_a_calibration_maps_the_raw_confidence_of_defined_estimates(pair) -> Non
 
 
 def test_escalation_runs_only_below_the_level_and_replaces_the_estimate(pair) -> None:
+    from tactile_manip import perception
     from tactile_manip.perception.symmetry import SymmetrizedReconstructor
 
     calls = []
@@ -357,6 +363,13 @@ def test_escalation_runs_only_below_the_level_and_replaces_the_estimate(pair) ->
 
     model = load_reconstructor(MODEL)
     field = _rod_field(pair, 25.0)
+    # the head reads the reading, which another reconstruction does not change: escalation is for the image
+    head = perception.TactilePoseEstimator(model, escalation=Counting(model), escalate_below=1.0).estimate(field)
+    assert calls == [] and head.source == "head" and not head.escalated
+
+    def TactilePoseEstimator(*args, **kwargs):  # noqa: N802 - the image's route from here on
+        return perception.TactilePoseEstimator(*args, angle_source="image", **kwargs)
+
     plain = TactilePoseEstimator(model).estimate(field)
     assert plain.defined and not plain.escalated and "escalate" not in plain.timings_s
     never = TactilePoseEstimator(model, escalation=Counting(model), escalate_below=0.0).estimate(field)
