@@ -34,10 +34,8 @@ from tactile_manip.data import load_dataset
 from tactile_manip.perception import TactilePoseEstimator, load_reconstructor, wrap_axial
 from tactile_manip.perception.evaluation import rod_estimates
 from tactile_manip.perception.pose import angle_from_image
-from tactile_manip.perception.symmetry import transform_reading
 
 FORCE_BANDS_N = ((2.0, 5.0), (5.0, 8.0), (8.0, 11.0), (11.0, 15.0))
-SYMMETRIES = [(k, m) for m in (False, True) for k in range(4)]
 
 
 def features(readings: np.ndarray) -> np.ndarray:
@@ -61,20 +59,11 @@ def labelled(data, split: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return data.readings[idx[keep]], np.array(angle), np.array(conf)
 
 
-def augmented(readings: np.ndarray, angle: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-    """Each reading under a random symmetry of the sensor, and its angle moved with it."""
-    out, out_angle = np.empty_like(readings), np.empty_like(angle)
-    choice = rng.integers(0, len(SYMMETRIES), len(readings))
-    for s, (turns, mirror) in enumerate(SYMMETRIES):
-        sel = choice == s
-        out[sel] = transform_reading(readings[sel], turns, mirror)
-        out_angle[sel] = (-angle[sel] if mirror else angle[sel]) + turns * math.pi / 2
-    return out, out_angle
-
-
 def train(readings: np.ndarray, angle: np.ndarray, weight: np.ndarray, *, epochs: int, seed: int):
     import torch
     from torch import nn
+
+    from tactile_manip.learning.angle_train import symmetric
 
     torch.manual_seed(seed)
     torch.set_num_threads(2)
@@ -85,7 +74,7 @@ def train(readings: np.ndarray, angle: np.ndarray, weight: np.ndarray, *, epochs
     rng = np.random.default_rng(seed)
     w = torch.as_tensor(weight, dtype=torch.float32)
     for _ in range(epochs):
-        x, a = augmented(readings, angle, rng)
+        x, a = symmetric(readings, angle, rng)
         x = torch.as_tensor(features(x))
         target = torch.as_tensor(np.stack([np.cos(2 * a), np.sin(2 * a)], 1), dtype=torch.float32)
         for batch in torch.randperm(len(x)).split(256):

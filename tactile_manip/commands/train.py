@@ -10,6 +10,7 @@ Start it with ``torchrun --nproc_per_node N -m tactile_manip train ...`` to trai
 from __future__ import annotations
 
 import argparse
+from typing import Any
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -98,31 +99,33 @@ def _config_kind(path: str) -> str:
         return "cvae"
 
 
-def _refuse_cvae_flags(args: argparse.Namespace, what: str) -> None:
+def _small_net_config(args: argparse.Namespace, what: str, load: Any) -> Any:
+    """The config of a small network (``load(path)``), with the command line's overrides, once the CVAE-only
+    flags are refused, the run folder checked and every dataset found (each a one-line error)."""
+    import dataclasses
+
+    from tactile_manip.data import check_dataset_file
     from tactile_manip.errors import ConfigError
 
     given = [f for f, v in (("--resume", args.resume), ("--init", args.init), ("--device", args.device),
                             ("--max-minutes", args.max_minutes)) if v]
     if given:
         raise ConfigError(f"{', '.join(given)}: not for {what}, which trains in minutes on the CPU")
+    _check_run_folder(args)
+    for path in args.data:
+        check_dataset_file(path)
+    changes = {k: v for k, v in (("epochs", args.epochs), ("seed", args.seed), ("threads", args.threads))
+               if v is not None}
+    return dataclasses.replace(load(args.config), **changes)
 
 
 def _run_angle_head(args: argparse.Namespace) -> int:
     """Train the pose model's angle head on simulated presses; the CVAE-only flags are refused."""
-    import dataclasses
-
     from tqdm import tqdm
 
-    from tactile_manip.data import check_dataset_file
     from tactile_manip.learning.angle_train import load_angle_config, train_angle_head
 
-    _refuse_cvae_flags(args, 'an angle head (kind = "angle_head")')
-    _check_run_folder(args)
-    for path in args.data:
-        check_dataset_file(path)
-    cfg = load_angle_config(args.config)
-    cfg = dataclasses.replace(cfg, **{k: v for k, v in (("epochs", args.epochs), ("seed", args.seed),
-                                                         ("threads", args.threads)) if v is not None})
+    cfg = _small_net_config(args, 'an angle head (kind = "angle_head")', load_angle_config)
     bars = []
 
     def start(total: int) -> None:
@@ -148,21 +151,11 @@ def _run_angle_head(args: argparse.Namespace) -> int:
 
 def _run_contact(args: argparse.Namespace) -> int:
     """Train the contact network (targets from labelled presses); the CVAE-only flags are refused."""
-    import dataclasses
-
     from tqdm import tqdm
 
-    from tactile_manip.data import check_dataset_file
     from tactile_manip.learning.contact_train import load_contact_config, train_contact
 
-    _refuse_cvae_flags(args, 'a contact model (kind = "contact")')
-    _check_run_folder(args)
-    for path in args.data:
-        check_dataset_file(path)
-    cfg = load_contact_config(args.config)
-    changes = {k: v for k, v in (("epochs", args.epochs), ("seed", args.seed), ("threads", args.threads))
-               if v is not None}
-    cfg = dataclasses.replace(cfg, **changes)
+    cfg = _small_net_config(args, 'a contact model (kind = "contact")', load_contact_config)
     bars = []
 
     def start(total: int) -> None:

@@ -18,7 +18,7 @@ import numpy as np
 import torch
 
 from tactile_manip.learning.angle_model import AngleHead, AngleModelConfig, count_parameters
-from tactile_manip.learning.checkpoint import CheckpointError, read_checkpoint
+from tactile_manip.learning.checkpoint import load_net_checkpoint
 from tactile_manip.learning.export import ExportError
 from tactile_manip.perception.angle_head import ANGLE_HEAD_KEY, ANGLE_HEAD_META_KEY, encode
 from tactile_manip.perception.reconstruct import read_metadata
@@ -30,18 +30,7 @@ PARITY_TOLERANCE = 1e-3   # largest |ONNX - torch| of the axis vector, relative 
 
 def load_angle_checkpoint(path: str | Path) -> tuple[AngleHead, dict[str, Any]]:
     """The angle head (eval mode) and the checkpoint payload."""
-    payload = read_checkpoint(path)
-    if payload.get("kind") != KIND:
-        raise CheckpointError(f"{path} is not an angle head checkpoint (kind {payload.get('kind', 'cvae')!r})")
-    try:
-        mcfg = AngleModelConfig(**{k: tuple(v) if isinstance(v, list) else v
-                                   for k, v in payload["model_config"].items()})
-        model = AngleHead(mcfg)
-        model.load_state_dict(payload["model"])
-    except (TypeError, ValueError, RuntimeError) as e:
-        raise CheckpointError(f"{path}: the checkpoint does not fit this code's angle head "
-                              f"({type(e).__name__}: {' '.join(str(e).split())[:160]})") from e
-    return model.eval(), payload
+    return load_net_checkpoint(path, KIND, "an angle head", lambda cfg: AngleHead(AngleModelConfig(**cfg)))
 
 
 def head_onnx_bytes(model: AngleHead) -> bytes:

@@ -34,6 +34,7 @@ from tactile_manip.errors import DatasetError
 from tactile_manip.learning.angle_model import (AngleHead, AngleModelConfig, count_parameters, reading_features,
                                                 von_mises_nll)
 from tactile_manip.learning.train import TrainingError
+from tactile_manip.learning.schedule import check_schedule
 from tactile_manip.perception.evaluation import ELONGATED
 from tactile_manip.perception.pose import angle_from_image, wrap_axial
 from tactile_manip.perception.symmetry import transform_reading
@@ -64,13 +65,7 @@ class AngleTrainConfig:
     threads: int = 0              # torch CPU threads (0: torch's default)
 
     def __post_init__(self) -> None:
-        for name in ("epochs", "batch_size", "patience"):
-            if getattr(self, name) < 1:
-                raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
-        if not (math.isfinite(self.lr) and 0 < self.lr < 1):
-            raise ValueError(f"lr must be in (0, 1), got {self.lr}")
-        if not (math.isfinite(self.weight_decay) and self.weight_decay >= 0):
-            raise ValueError(f"weight_decay must be >= 0, got {self.weight_decay}")
+        check_schedule(self)
         self.model_config((4, 4, 3))
 
     def model_config(self, cells: tuple[int, int, int]) -> AngleModelConfig:

@@ -43,3 +43,20 @@ def read_checkpoint(path: str | Path) -> dict[str, Any]:
         raise CheckpointError(f"{path} is not a tactile_manip training checkpoint (no {', '.join(missing)}; "
                               "expected RUN/best.pt or RUN/checkpoint.pt of `tactile-manip train`)")
     return payload
+
+
+def load_net_checkpoint(path: str | Path, kind: str, what: str, build: Any) -> tuple[Any, dict[str, Any]]:
+    """A small network's checkpoint of ``kind`` (e.g. "contact", "angle_head"; ``what`` names it in errors):
+    ``build(model_config)`` makes the module from the stored config (lists as tuples), whose weights are then
+    loaded; returns it in eval mode with the payload. Raises :class:`CheckpointError` for another kind or
+    weights that do not fit."""
+    payload = read_checkpoint(path)
+    if payload.get("kind") != kind:
+        raise CheckpointError(f"{path} is not {what} checkpoint (kind {payload.get('kind', 'cvae')!r})")
+    try:
+        model = build({k: tuple(v) if isinstance(v, list) else v for k, v in payload["model_config"].items()})
+        model.load_state_dict(payload["model"])
+    except (TypeError, ValueError, RuntimeError) as e:
+        raise CheckpointError(f"{path}: the checkpoint does not fit this code's {what.split(' ', 1)[1]} "
+                              f"({type(e).__name__}: {' '.join(str(e).split())[:160]})") from e
+    return model.eval(), payload

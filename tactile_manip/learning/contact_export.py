@@ -21,7 +21,7 @@ import torch
 
 from tactile_manip.config import to_dict
 from tactile_manip.data.targets import target_unit
-from tactile_manip.learning.checkpoint import CheckpointError, read_checkpoint
+from tactile_manip.learning.checkpoint import load_net_checkpoint
 from tactile_manip.learning.contact_model import (ContactModel, ContactModelConfig, FusedContactModel,
                                                   count_parameters)
 from tactile_manip.learning.export import ExportError
@@ -35,18 +35,7 @@ PARITY_TOLERANCE = 1e-4   # relative to each target's training spread
 
 def load_contact_checkpoint(path: str | Path) -> tuple[ContactModel, dict[str, Any]]:
     """The contact model (eval mode) and the checkpoint payload."""
-    payload = read_checkpoint(path)
-    if payload.get("kind") != KIND:
-        raise CheckpointError(f"{path} is not a contact model checkpoint (kind {payload.get('kind', 'cvae')!r})")
-    try:
-        mcfg = ContactModelConfig(**{k: tuple(v) if isinstance(v, list) else v
-                                     for k, v in payload["model_config"].items()})
-        model = ContactModel(mcfg)
-        model.load_state_dict(payload["model"])
-    except (TypeError, ValueError, RuntimeError) as e:
-        raise CheckpointError(f"{path}: the checkpoint does not fit this code's contact model "
-                              f"({type(e).__name__}: {' '.join(str(e).split())[:160]})") from e
-    return model.eval(), payload
+    return load_net_checkpoint(path, KIND, "a contact model", lambda cfg: ContactModel(ContactModelConfig(**cfg)))
 
 
 def export_contact_onnx(checkpoint: str | Path, out: str | Path, *, metrics: dict | None = None,

@@ -35,6 +35,7 @@ from tactile_manip.errors import ConfigError, DatasetError
 from tactile_manip.learning.contact_model import (ContactModel, ContactModelConfig, GaussianMLP, count_parameters,
                                                   frame_features)
 from tactile_manip.learning.train import TrainingError
+from tactile_manip.learning.schedule import check_schedule
 from tactile_manip.perception.contact_context import context_windows
 
 KIND = "contact"
@@ -68,13 +69,7 @@ class ContactTrainConfig:
     threads: int = 0              # torch CPU threads (0: torch's default)
 
     def __post_init__(self) -> None:
-        for name in ("epochs", "batch_size", "patience"):
-            if getattr(self, name) < 1:
-                raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
-        if not (math.isfinite(self.lr) and 0 < self.lr < 1):
-            raise ValueError(f"lr must be in (0, 1), got {self.lr}")
-        if not (math.isfinite(self.weight_decay) and self.weight_decay >= 0):
-            raise ValueError(f"weight_decay must be >= 0, got {self.weight_decay}")
+        check_schedule(self)
         if not 0 <= self.nll_beta <= 1:
             raise ValueError(f"nll_beta must be in [0, 1], got {self.nll_beta}")
         if not 0 < self.val_fraction < 1:
