@@ -198,7 +198,8 @@ def markdown(report: dict[str, Any]) -> str:
 
 def plot(report: dict[str, Any], compare: list[str], path: str) -> None:
     """Share within 5 deg per force band: the bounds (one frame; after a tare), beside the methods of each
-    ``tactile-manip evaluate`` results.json in ``compare`` (their per-force rod angles)."""
+    ``tactile-manip evaluate`` results.json in ``compare`` (their per-force rod angles), or of each route of a
+    ``benchmarks.angle_ablation`` report."""
     from tactile_manip.plots import _pyplot
 
     bands = [f"{lo:g}-{hi:g} N" for lo, hi in FORCE_BANDS_N]
@@ -207,7 +208,14 @@ def plot(report: dict[str, Any], compare: list[str], path: str) -> None:
               "bound, one frame after a tare": [report["bounds"]["one frame, baseline tared"][b]["pose_sensor_within_5"]
                                                 for b in bands]}
     for file in compare:
-        for res in json.loads(Path(file).read_text())["results"]:
+        results = json.loads(Path(file).read_text())["results"]
+        if isinstance(results, dict):  # benchmarks.angle_ablation: one row per model and route
+            for name, res in results.items():
+                if all(b in res["by_force"] for b in bands) and not any(
+                        skip in name for skip in ("likelier", "raw probability", "default: image")):
+                    series[name] = [res["by_force"][b] for b in bands]
+            continue
+        for res in results:
             force = res.get("per_group", {}).get("force", {})
             if all(b in force for b in bands):
                 series[res["method"]] = [force[b]["angle_within_5_deg"] for b in bands]
@@ -220,7 +228,7 @@ def plot(report: dict[str, Any], compare: list[str], path: str) -> None:
                label=name, hatch=hatch, edgecolor="black" if hatch else None, alpha=0.6 if hatch else 1.0)
     ax.axhline(95, color="grey", linestyle="--", linewidth=1)
     ax.set_xticks(np.arange(len(bands)), bands)
-    ax.set_ylabel("unseen rods within 5 deg [%]")
+    ax.set_ylabel("unseen bars within 5 deg [%]")
     ax.set_ylim(0, 102)
     ax.set_title(f"One reading: the Cramer-Rao bound against the methods ({report['source']})", fontsize=10)
     ax.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.1), ncols=3)
