@@ -20,7 +20,8 @@ import torch
 from tactile_manip.learning.angle_model import AngleHead, AngleModelConfig, count_parameters
 from tactile_manip.learning.checkpoint import load_net_checkpoint
 from tactile_manip.learning.export import ExportError
-from tactile_manip.perception.angle_head import ANGLE_HEAD_KEY, ANGLE_HEAD_META_KEY, encode
+from tactile_manip.perception.angle_head import ANGLE_HEAD_KEY, ANGLE_HEAD_META_KEY
+from tactile_manip.perception.one_reading import encode
 from tactile_manip.perception.reconstruct import read_metadata
 from tactile_manip.version import __version__
 

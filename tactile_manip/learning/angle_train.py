@@ -33,8 +33,7 @@ from tactile_manip.data import PairedDataset, load_dataset
 from tactile_manip.errors import DatasetError
 from tactile_manip.learning.angle_model import (AngleHead, AngleModelConfig, count_parameters, reading_features,
                                                 von_mises_nll)
-from tactile_manip.learning.train import TrainingError
-from tactile_manip.learning.schedule import check_schedule
+from tactile_manip.learning.schedule import check_schedule, optimise_step
 from tactile_manip.perception.evaluation import ELONGATED
 from tactile_manip.perception.pose import angle_from_image, wrap_axial
 from tactile_manip.perception.symmetry import transform_reading
@@ -174,15 +173,7 @@ def train_angle_head(cfg: AngleTrainConfig, data_paths: list[str | Path], out: s
         model.train()
         total = 0.0
         for i in torch.randperm(n, generator=gen).split(cfg.batch_size):
-            loss = von_mises_loss(model(x[i]), a[i])
-            if not torch.isfinite(loss):
-                raise TrainingError(f"training diverged: the loss became {float(loss)} in epoch {epoch} "
-                                    f"(lr {sched.get_last_lr()[0]:g}); lower lr")
-            opt.zero_grad(set_to_none=True)
-            loss.backward()
-            opt.step()
-            sched.step()
-            total += float(loss.detach()) * len(i)
+            total += optimise_step(von_mises_loss(model(x[i]), a[i]), opt, sched, epoch) * len(i)
         row = {"epoch": epoch, "loss": total / n, **validation(model, xv, av, val["axial"])}
         history.append(row)
         if progress:

@@ -34,8 +34,7 @@ from tactile_manip.data import PairedDataset, load_datasets
 from tactile_manip.errors import ConfigError, DatasetError
 from tactile_manip.learning.contact_model import (ContactModel, ContactModelConfig, GaussianMLP, count_parameters,
                                                   frame_features)
-from tactile_manip.learning.train import TrainingError
-from tactile_manip.learning.schedule import check_schedule
+from tactile_manip.learning.schedule import check_schedule, optimise_step
 from tactile_manip.perception.contact_context import context_windows
 
 KIND = "contact"
@@ -220,14 +219,7 @@ def _train_member(cfg: ContactTrainConfig, mcfg: ContactModelConfig, z: torch.Te
             i = order[b:b + cfg.batch_size]
             mean, log_var = net(xt[i])
             loss = beta_nll(mean, log_var, yt[i], cfg.nll_beta)
-            if not torch.isfinite(loss):
-                raise TrainingError(f"training diverged: the loss became {float(loss)} in epoch {epoch} "
-                                   f"(lr {sched.get_last_lr()[0]:g}); lower lr or check the targets")
-            opt.zero_grad(set_to_none=True)
-            loss.backward()
-            opt.step()
-            sched.step()
-            total += float(loss.detach()) * len(i)
+            total += optimise_step(loss, opt, sched, epoch, hint="lower lr or check the targets") * len(i)
         net.eval()
         with torch.no_grad():
             val = float(((net(xv)[0] - yv) ** 2).sum(1).mean().sqrt())

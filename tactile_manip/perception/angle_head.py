@@ -73,10 +73,6 @@ def within_probability(kappa: float | np.ndarray, tolerance_rad: float) -> float
     return float(p) if np.ndim(kappa) == 0 else p
 
 
-def encode(onnx_bytes: bytes) -> str:
-    return base64.b64encode(onnx_bytes).decode("ascii")
-
-
 def open_angle_head(ort: Any, main: Any, *, where: str, options: Any, providers: list[str],
                     input_shape: tuple[int, int, int], error: type[TactileManipError]) -> AngleHead | None:
     """The angle head in ``main``'s file (None when it has none), opened like ``main``.

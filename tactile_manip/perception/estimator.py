@@ -222,7 +222,7 @@ class TactilePoseEstimator:
         return (est, rec) if image else est
 
     def _angle(self, rec: Reconstruction, flags: np.ndarray, contact: bool,
-               field: np.ndarray | None = None) -> AngleEstimate:
+               field: np.ndarray) -> AngleEstimate:
         """The angle and its confidence: the image's PCA, times the prior samples' agreement and the unsaturated
         fraction of chips (``flags`` (R, C, A)); with an angle head, the head's reading of ``field`` in its place
         or weighed against it (:meth:`_with_head`); calibrated last when the estimator has a calibration."""
@@ -238,7 +238,7 @@ class TactilePoseEstimator:
             est = replace(est, confidence=confidence)
         # the head was trained on sound readings: a chip at its rail or beyond its range, or an image without any
         # contact, leaves the angle to the image (which clamps and sees where the contact is)
-        if self.angle_head is not None and field is not None and not flags.any() and est.reason != "empty contact":
+        if self.angle_head is not None and not flags.any() and est.reason != "empty contact":
             est = self._with_head(est, field)
         if est.defined and self.calibration is not None:
             est = replace(est, confidence=float(self.calibration(est.confidence)))

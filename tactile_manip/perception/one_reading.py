@@ -30,7 +30,7 @@ PARITY_TOLERANCE = 1e-4
 
 
 def encode(onnx_bytes: bytes) -> str:
-    """The metadata value that carries a serialised one-reading graph."""
+    """The metadata value that carries a serialised ONNX graph (the one-reading graph, an angle head)."""
     return base64.b64encode(onnx_bytes).decode("ascii")
 
 
