@@ -9,7 +9,9 @@ sure to be from the labels themselves: a round contact's image axis is noise, so
 small concentration there.
 
 Each epoch shows every training reading under a random symmetry of the board (a quarter turn adds 90 deg to
-the axis, a mirror negates it), so the head never favours a direction the board does not. AdamW with a
+the axis, a mirror negates it), so the head never favours a direction the board does not; with
+``redraw_noise``, through new chip drift and noise as well (:mod:`.noise`), so the head cannot learn one draw
+of them. AdamW with a
 one-cycle learning rate; the weights of the epoch with the lowest validation negative log-likelihood are kept,
 and a run stops ``patience`` epochs after its best once the rate falls. ``RUN/best.pt`` holds the weights and
 everything the export needs; ``RUN/history.json`` the per-epoch curve and the validation figures.
@@ -33,6 +35,7 @@ from tactile_manip.data import PairedDataset, load_dataset
 from tactile_manip.errors import DatasetError
 from tactile_manip.learning.angle_model import (AngleHead, AngleModelConfig, count_parameters, reading_features,
                                                 von_mises_nll)
+from tactile_manip.learning.noise import ChipNoise
 from tactile_manip.learning.schedule import check_schedule, optimise_step
 from tactile_manip.perception.evaluation import ELONGATED
 from tactile_manip.perception.pose import angle_from_image, wrap_axial
@@ -41,7 +44,7 @@ from tactile_manip.perception.symmetry import transform_reading
 KIND = "angle_head"
 WARMUP_FRACTION = 0.3
 #: dataset labels (prefixes) of objects whose contact has a straight axis along the object's local x
-AXIAL_PREFIXES = (*ELONGATED, "procedural_bar", "ridge")
+AXIAL_PREFIXES = (*ELONGATED, "procedural_bar", "procedural_prism", "ridge")
 SYMMETRIES = tuple((k, m) for m in (False, True) for k in range(4))
 
 
@@ -59,6 +62,7 @@ class AngleTrainConfig:
     weight_decay: float = 1e-4    # AdamW
     symmetry: bool = True         # a random symmetry of the board per reading and epoch
     image_labels: bool = True     # label presses of other objects with the axis of their true image
+    redraw_noise: bool = False    # each epoch reads the training presses through new chip drift and noise
     patience: int = 40            # epochs without a better validation NLL (counted once the rate falls)
     seed: int = 0
     threads: int = 0              # torch CPU threads (0: torch's default)
@@ -101,9 +105,12 @@ def axis_labels(data: PairedDataset, idx: np.ndarray, *, image_labels: bool = Tr
     return np.concatenate(keep), wrap_axial(np.concatenate(angle)), kind
 
 
-def labelled_presses(paths: list[str | Path], *, image_labels: bool = True) -> dict[str, dict[str, np.ndarray]]:
-    """Readings, axis angles and kinds of the train and val splits of several datasets, concatenated."""
+def labelled_presses(paths: list[str | Path], *, image_labels: bool = True, redraw_noise: bool = False
+                     ) -> dict[str, dict[str, Any]]:
+    """Readings, axis angles and kinds of the train and val splits of several datasets, concatenated; with
+    ``redraw_noise``, the train split's :class:`.noise.ChipNoise` too (key ``"noise"``)."""
     parts: dict[str, list] = {"train": [], "val": []}
+    noise: list[ChipNoise] = []
     cells = None
     for path in paths:
         data = load_dataset(path)
@@ -113,10 +120,14 @@ def labelled_presses(paths: list[str | Path], *, image_labels: bool = True) -> d
         for split in parts:
             idx, angle, axial = axis_labels(data, data.indices(split), image_labels=image_labels)
             parts[split].append((data.readings[idx].astype(np.float32), angle, axial))
-    out = {}
+            if redraw_noise and split == "train":
+                noise.append(ChipNoise.of(data, idx))
+    out: dict[str, dict[str, Any]] = {}
     for split, rows in parts.items():
         out[split] = {"readings": np.concatenate([r[0] for r in rows]), "angle_rad": np.concatenate([r[1] for r in rows]),
                       "axial": np.concatenate([r[2] for r in rows])}
+    if noise:
+        out["train"]["noise"] = ChipNoise.concatenate(noise)
     return out
 
 
@@ -142,7 +153,7 @@ def train_angle_head(cfg: AngleTrainConfig, data_paths: list[str | Path], out: s
     """
     if cfg.threads:
         torch.set_num_threads(cfg.threads)
-    data = labelled_presses(list(data_paths), image_labels=cfg.image_labels)
+    data = labelled_presses(list(data_paths), image_labels=cfg.image_labels, redraw_noise=cfg.redraw_noise)
     train, val = data["train"], data["val"]
     if len(train["angle_rad"]) < cfg.batch_size or len(val["angle_rad"]) < 1:
         raise DatasetError(f"{len(train['angle_rad'])} training and {len(val['angle_rad'])} validation presses with "
@@ -167,6 +178,8 @@ def train_angle_head(cfg: AngleTrainConfig, data_paths: list[str | Path], out: s
     history = []
     for epoch in range(1, cfg.epochs + 1):
         x, a = train["readings"], train["angle_rad"]
+        if cfg.redraw_noise:
+            x = train["noise"].draw(rng)
         if cfg.symmetry:
             x, a = symmetric(x, a, rng)
         x, a = torch.from_numpy(x), torch.from_numpy(a.astype(np.float32))

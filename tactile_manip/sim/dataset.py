@@ -5,7 +5,9 @@ Each press is stored with its magnetic reading, its depth image (unless ``images
 pad frame; where the pressure acts, not the object's origin), the skin's indentation depth (``depth_mm``,
 the rigid approach into it), the normal force (``force_n``) and ``in_contact``; a press that misses the pad
 has 0 for all of them. Extras beside them include the contact area (``contact_area_mm2``) and the centroid of
-the contact patch, unweighted by pressure (``contact_centroid_mm``, (N, 2) mm, pad frame).
+the contact patch, unweighted by pressure (``contact_centroid_mm``, (N, 2) mm, pad frame), and the reading
+without drift, noise and quantisation (``field_clean_ut``, (N, 4, 4, 3) uT), from which training can draw the
+chips' noise afresh (``redraw_noise`` of the angle head).
 
 Every sample ``i`` draws everything (pose, force, optional parameter randomisation, sensor noise) from
 ``np.random.default_rng([seed, i])``, and results are assembled in index order, so the output does not
@@ -194,7 +196,7 @@ def _simulate(task: _Task) -> dict[str, Any]:
         if not (s.bottomed_out and cfg.bottomed_out == "redraw"):
             break
     return {**drawn, "bottomed_out": s.bottomed_out, "field_ut": s.field_ut, "field_raw_ut": s.field_raw_ut,
-            "saturated": s.saturated, "depth_q": None if s.depth_mm is None else quantise_depth(s.depth_mm),
+            "field_clean_ut": s.field_clean_ut, "saturated": s.saturated, "depth_q": None if s.depth_mm is None else quantise_depth(s.depth_mm),
             "pose": [pose.x_mm, pose.y_mm, pose.yaw_rad, pose.tilt_x_rad, pose.tilt_y_rad],
             "force_n": s.force_n, "approach_mm": s.approach_mm, "skin_approach_mm": s.skin_approach_mm,
             "contact": s.contact, "targets": sample_targets(s), "contact_area_mm2": s.pressure.area_mm2,
@@ -296,7 +298,8 @@ def _assemble(cfg: DatasetConfig, tasks: list[_Task], results: list[dict[str, An
     provenance = {"source": "tactile-manip simulate", "config": to_dict(cfg), "code_version": code_version(),
                   "created_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
                   "generation_seconds": round(seconds, 2), "workers": workers}
-    extras = {"field_raw_ut": stack("field_raw_ut", np.float32), "saturated": stack("saturated", bool),
+    extras = {"field_raw_ut": stack("field_raw_ut", np.float32),
+              "field_clean_ut": stack("field_clean_ut", np.float32), "saturated": stack("saturated", bool),
               "pose": stack("pose", np.float32), "force_n": stack("force_n", np.float32),
               "approach_mm": stack("approach_mm", np.float32),
               "skin_approach_mm": stack("skin_approach_mm", np.float32), "contact": stack("contact", bool),

@@ -47,6 +47,8 @@ class PairedSample:
         field_raw_ut: (4, 4, 3) float32, raw reading (counts x LSB), microtesla.
         saturated: (4, 4, 3) bool, channels at the int16 rail.
         field_change_ut: (4, 4, 3) float32, noise-free field change caused by the contact, microtesla.
+        field_clean_ut: (4, 4, 3) float32, what ``field_ut`` would read without drift, noise and quantisation
+            (the contact's field change in chip axes), microtesla.
         depth_mm: (200, 200) float32 VBTS depth image (DTact pipeline), or None when not rendered.
         imprint_mm: (200, 200) float32 ideal rigid imprint on the VBTS gel, mm.
         contact_mask: (200, 200) bool, where the imprint is positive.
@@ -65,6 +67,7 @@ class PairedSample:
     field_raw_ut: np.ndarray
     saturated: np.ndarray
     field_change_ut: np.ndarray
+    field_clean_ut: np.ndarray
     depth_mm: np.ndarray | None
     imprint_mm: np.ndarray
     contact_mask: np.ndarray
@@ -165,12 +168,14 @@ class SensorPair:
             imprint = np.clip(delta_v - np.nan_to_num(gap_i, nan=np.inf), 0.0, None)
             summary = self._summary(skin)
         m = self.chips.measure(self.baseline_field_ut + change_ut, rng, drift_ut=drift_ut)
+        clean = self.chips.expected_ut(self.baseline_field_ut + change_ut) - self.baseline_ut
         depth = None
         if render_depth:
             depth = dtact_depth(imprint, p.vbts, rng) if imprint.any() else np.zeros(imprint.shape, np.float32)
         return PairedSample(
             field_ut=(m.raw_ut - self.baseline_ut).astype(np.float32), field_raw_ut=m.raw_ut,
-            saturated=m.saturated, field_change_ut=change_ut.astype(np.float32), depth_mm=depth,
+            saturated=m.saturated, field_change_ut=change_ut.astype(np.float32),
+            field_clean_ut=clean.astype(np.float32), depth_mm=depth,
             imprint_mm=imprint.astype(np.float32), contact_mask=imprint > 0, contact=bool(imprint.any()),
             approach_mm=delta_v, skin_approach_mm=delta_m, force_n=force if touching else 0.0,
             pressure=summary, object_name=indenter.name, pose=pose, params=p, t_s=t_s,

@@ -207,6 +207,45 @@ def procedural_bar(seed: int, *, length_mm: float = 40.0) -> Indenter:
     return _indenter(h, origin, f"procedural_bar_{int(seed)}")
 
 
+#: regular sections of :func:`procedural_prism` (sides); the rest of its seeds are strips
+PRISM_SIDES = (3, 4, 5, 6, 8)
+
+
+def procedural_prism(seed: int) -> Indenter:
+    """A seeded family of sharp-edged straight bars of any length, lying on a face along local x, reference
+    point at the section's centre: what :func:`procedural_bar`'s rounded sections and long bars leave out.
+
+    Half the seeds have a regular section (3, 4, 5, 6 or 8 sides, 2-12 mm across corners), half a
+    strip (2-20 mm wide, 0.5-5 mm thick, edges rounded by 0-0.3 mm); each bar is 12-50 mm long with flat-cut
+    ends, so a bar shorter than the pad's diagonal, or one off centre, ends on the pad. The family contains no
+    section and length of the built-in rods and flat bars exactly; the same seed always gives the same array.
+    """
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
+    rng = np.random.default_rng([int(seed), 31])
+    length = rng.uniform(12.0, 50.0)
+    px = DEFAULT_PIXEL_MM
+    if rng.random() < 0.5:
+        sides = int(rng.choice(PRISM_SIDES))
+        radius = rng.uniform(1.0, 6.0)                     # centre to corner
+        apothem = radius * math.cos(math.pi / sides)
+        normals = math.pi / 2 + 2 * math.pi * np.arange(sides) / sides   # the face on the pad has normal +z
+        corners = normals[:, None] + np.array([-math.pi, math.pi]) / sides
+        half_w = float(np.max(np.abs(np.cos(corners)))) * radius
+        x, y, origin = _grid((-length / 2 - px, length / 2 + px), (-half_w - px, half_w + px), px)
+        upper = np.sin(normals) > 1e-9
+        lines = (apothem - y[..., None] * np.cos(normals[upper])) / np.sin(normals[upper])
+        profile = np.where(np.abs(y) <= half_w + 1e-9, lines.min(axis=-1), np.nan)
+        name = f"procedural_prism_{int(seed)}"
+    else:
+        width, thick = rng.uniform(2.0, 20.0), rng.uniform(0.5, 5.0)
+        fillet = rng.uniform(0.0, min(0.3, thick / 2))
+        x, y, origin = _grid((-length / 2 - px, length / 2 + px), (-width / 2 - px, width / 2 + px), px)
+        profile = _extrude(width / 2 - np.abs(y), thick / 2, fillet)
+        name = f"procedural_prism_{int(seed)}"
+    return _indenter(np.where(np.abs(x) <= length / 2 + 1e-9, profile, np.nan), origin, name)
+
+
 def ridge(*, angle_deg: float = 60.0, tip_radius_mm: float = 0.1, height_mm: float = 3.0,
           length_mm: float = 30.0) -> Indenter:
     """A knife-edge: a straight wedge bar along local x with apex angle ``angle_deg`` and a tip rounded to
@@ -344,6 +383,7 @@ SHAPES: dict[str, Callable[..., Indenter]] = {
     "procedural_sharp": procedural_sharp,
     "flat_bar": flat_bar,
     "procedural_bar": procedural_bar,
+    "procedural_prism": procedural_prism,
 }
 
 

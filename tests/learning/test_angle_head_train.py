@@ -100,7 +100,8 @@ def test_symmetries_move_the_axis_with_the_reading() -> None:
 
 def test_labels_come_from_the_axis_of_bars_and_the_image_of_the_rest() -> None:
     assert is_axial("procedural_bar") and is_axial("cylinder_6mm") and is_axial("flat_bar_10x2mm")
-    assert is_axial("ridge_70deg") and not is_axial("letter_r") and not is_axial("procedural")
+    assert is_axial("ridge_70deg") and is_axial("procedural_prism_3")
+    assert not is_axial("letter_r") and not is_axial("procedural")
     data = bar_dataset(20, images=True)
     idx, angle, axial = axis_labels(data, np.arange(20))
     assert axial.all() and np.allclose(angle, wrap_axial(data.extra("pose")[:, 2]))

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tactile_manip.sim.shapes import SHAPES, flat_bar, make_indenter, procedural_bar
+from tactile_manip.sim.shapes import SHAPES, flat_bar, make_indenter, procedural_bar, procedural_prism
 
 PX = 0.05
 
@@ -67,9 +67,32 @@ def test_procedural_bars_span_narrow_to_pad_wide_and_lie_along_local_x() -> None
 def test_procedural_bar_seeds_must_be_non_negative_integers(seed) -> None:
     with pytest.raises(ValueError, match="seed"):
         procedural_bar(seed)
+    with pytest.raises(ValueError, match="seed"):
+        procedural_prism(seed)
+
+
+def test_procedural_prisms_are_sharp_edged_bars_of_any_length_lying_on_a_face() -> None:
+    lengths, widths, flat_tops = [], [], 0
+    for seed in range(60):
+        h = procedural_prism(seed).height_mm
+        along, across = _footprint(h)
+        lengths.append(along)
+        widths.append(across)
+        assert along > across or along >= 12.0 - 2 * PX     # a bar along local x (a wide strip may be short)
+        mid = h[:, h.shape[1] // 2]
+        top = np.nanmax(mid)
+        # the face on the pad is flat: its highest line is a plateau, not a point
+        flat_tops += np.sum(np.isclose(mid, top, atol=1e-6)) * PX >= 0.5
+        # flat-cut ends: the height across the section is the same all along the bar
+        np.testing.assert_allclose(h[:, h.shape[1] // 4], mid, equal_nan=True)
+    assert min(lengths) < 20.0 and max(lengths) > 40.0   # some end on the 20 mm pad, some do not
+    assert min(widths) < 4.0 and max(widths) > 14.0
+    assert flat_tops == 60
+    np.testing.assert_array_equal(procedural_prism(5).height_mm, procedural_prism(5).height_mm)
 
 
 def test_both_are_in_the_registry() -> None:
-    assert {"flat_bar", "procedural_bar"} <= set(SHAPES)
+    assert {"flat_bar", "procedural_bar", "procedural_prism"} <= set(SHAPES)
+    assert make_indenter("procedural_prism", seed=7).name == "procedural_prism_7"
     assert make_indenter("procedural_bar", seed=7).name == "procedural_bar_7"
     assert make_indenter("flat_bar", width_mm=8.0).name == "flat_bar"
