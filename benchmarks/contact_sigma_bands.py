@@ -22,9 +22,9 @@ import numpy as np
 
 from benchmarks._common import machine_info, publish
 from tactile_manip.data import load_dataset
+from tactile_manip.perception.confidence import ONE_SIGMA
 from tactile_manip.perception.contact import ContactEstimator
 
-ONE_SIGMA = 0.6827
 TRUE_BANDS_N = ((0.5, 5.0), (5.0, 10.0), (10.0, 20.0))
 MIN_BAND_PRESSES = 20   # a band with fewer validation presses keeps the factor 1
 

@@ -93,6 +93,7 @@ def contact_metadata(model: ContactModel, payload: dict[str, Any], metrics: dict
                           "what": "features standardised with the training split's mean and spread (inside the "
                                   "graph); outputs mapped back to target units; sigma times sigma_scale, fitted on "
                                   "the validation samples (68.3 % of their errors within one sigma)"},
+        "sigma_calibration": payload.get("sigma_calibration", {}),
         "model_config": to_dict(cfg), "train_config": payload["train_config"],
         "training_data": payload.get("data", {}), "parameters": count_parameters(model), "metrics": metrics,
     }

@@ -10,7 +10,10 @@ the weights of its best validation epoch (RMSE of the standardised targets); onc
 begun to fall, it stops after ``patience`` epochs without improvement (while the rate still rises the
 validation error may stall without the run being done). Last, the mixture's sigma is scaled per target so
 that 68.3 % of the validation errors fall within one sigma (``calibrate_sigma``): the members' variance heads
-and their disagreement are otherwise too wide or too narrow by a factor that depends on the data.
+and their disagreement are otherwise too wide or too narrow by a factor that depends on the data. Then
+(``sigma_map``) a non-decreasing map of that sigma makes it hold wherever the sigma lies, not only on the
+validation samples' mix (:class:`~tactile_manip.perception.confidence.SigmaCalibration`, the isotonic fit the
+pose estimator's confidence calibration uses); the export carries it and the runtime applies it.
 
 ``RUN/best.pt`` holds the mixture of the members with everything the export needs; ``RUN/history.json`` each
 member's curve and the validation RMSE per target of the mixture.
@@ -35,11 +38,11 @@ from tactile_manip.errors import ConfigError, DatasetError
 from tactile_manip.learning.contact_model import (ContactModel, ContactModelConfig, GaussianMLP, count_parameters,
                                                   frame_features)
 from tactile_manip.learning.schedule import check_schedule, optimise_step
+from tactile_manip.perception.confidence import ONE_SIGMA, SigmaCalibration
 from tactile_manip.perception.contact_context import context_windows
 
 KIND = "contact"
 WARMUP_FRACTION = 0.3  # share of the one-cycle schedule over which the learning rate rises
-ONE_SIGMA = 0.6827     # share of a Gaussian within one standard deviation
 
 
 @dataclass(frozen=True)
@@ -64,6 +67,7 @@ class ContactTrainConfig:
     patience: int = 60            # epochs without a better validation RMSE before a member stops (counted once
                                   # the learning rate falls)
     calibrate_sigma: bool = True  # scale sigma so that 68.3 % of validation errors are within one sigma
+    sigma_map: bool = True        # then map it so that holds wherever the sigma lies (needs 80+ val samples)
     seed: int = 0
     threads: int = 0              # torch CPU threads (0: torch's default)
 
@@ -160,19 +164,22 @@ def train_contact(cfg: ContactTrainConfig, data_paths: list[str | Path], out: st
         model.members[m].load_state_dict(member.state_dict())
         curves.append(curve)
     model.eval()
+    sigma_maps: dict[str, dict[str, Any]] = {}
     if cfg.calibrate_sigma:
         fit_sigma_scale(model, windows[val_idx], targets[val_idx])
+        if cfg.sigma_map and len(val_idx) >= 2 * SIGMA_MAP_RUN:
+            sigma_maps = fit_sigma_maps(model, windows[val_idx], targets[val_idx], names)
     val_rmse = _rmse_per_target(model, windows[val_idx], targets[val_idx], names)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     summary = {"kind": KIND, "train_config": to_dict(cfg), "model_config": to_dict(mcfg), "targets": names,
-               "sigma_scale": model.sigma_scale.tolist(),
+               "sigma_scale": model.sigma_scale.tolist(), "sigma_calibration": sigma_maps,
                "parameters": count_parameters(model), "train_samples": int(len(train_idx)),
                "val_samples": int(len(val_idx)), "val_rmse": val_rmse,
                "best_epochs": [c["best_epoch"] for c in curves], "train_seconds": round(time.perf_counter() - start, 1),
                "data_fingerprint": data.fingerprint(), "members": curves}
     payload = {"kind": KIND, "model": model.state_dict(), "model_config": to_dict(mcfg), "train_config": to_dict(cfg),
-               "input": _input_record(data, cfg), "targets": names,
+               "input": _input_record(data, cfg), "targets": names, "sigma_calibration": sigma_maps,
                "data": {"fingerprint": data.fingerprint(), "samples": len(data), "provenance_source":
                         data.provenance.get("source"), "val_rmse": val_rmse}}
     tmp = out / "best.pt.partial"
@@ -254,6 +261,20 @@ def fit_sigma_scale(model: ContactModel, windows: torch.Tensor, targets: torch.T
     scale = torch.quantile(z, ONE_SIGMA, dim=0).clamp_min(1e-6)
     model.sigma_scale.copy_(scale)
     return scale
+
+
+SIGMA_MAP_RUN = 40      # validation samples per knot of a sigma map
+
+
+@torch.no_grad()
+def fit_sigma_maps(model: ContactModel, windows: torch.Tensor, targets: torch.Tensor, names: list[str]
+                   ) -> dict[str, dict[str, Any]]:
+    """Per target, the :class:`~tactile_manip.perception.confidence.SigmaCalibration` of the model's sigma on
+    ``windows`` against ``targets`` (runs of :data:`SIGMA_MAP_RUN`), as dicts by target name."""
+    mean, sigma = model(windows)
+    err = (mean - targets).abs().numpy()
+    return {n: SigmaCalibration.fit(sigma[:, k].numpy(), err[:, k], min_per_knot=SIGMA_MAP_RUN).to_dict()
+            for k, n in enumerate(names)}
 
 
 @torch.no_grad()

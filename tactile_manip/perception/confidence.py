@@ -18,6 +18,7 @@ A model's calibration lives beside it as ``<model>.calibration.json`` (:func:`ca
 
 from __future__ import annotations
 
+import bisect
 import json
 import math
 from dataclasses import dataclass
@@ -130,6 +131,107 @@ def load_calibration_beside(model_path: str | Path) -> ConfidenceCalibration | N
     return ConfidenceCalibration.load(path) if path.is_file() else None
 
 
+def run_starts(n: int, min_count: int) -> np.ndarray:
+    """Starts of the runs of ``min_count`` consecutive held-out samples (of ``n``) that every calibration here
+    fits one value to; a short tail joins the last run."""
+    starts = np.arange(0, n, min_count)
+    if starts.size > 1 and n - starts[-1] < min_count:
+        starts = starts[:-1]
+    return starts
+
+
+def isotonic_in_order(values: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """The non-decreasing least-squares fit of ``values`` in their order, weighted (scikit-learn's
+    IsotonicRegression, extra ``sklearn``): the one fit behind the angle's confidence and the contact's sigma."""
+    isotonic = require("sklearn.isotonic", "fitting a calibration")
+    return isotonic.IsotonicRegression().fit_transform(np.arange(len(values), dtype=np.float64),
+                                                       np.asarray(values, np.float64), sample_weight=weights)
+
+
+#: share of a calibrated Gaussian's errors within one sigma
+ONE_SIGMA = 0.6827
+
+
+@dataclass(frozen=True)
+class SigmaCalibration:
+    """A non-decreasing map from a model's sigma of one target to a sigma that holds :data:`ONE_SIGMA` of the
+    held-out errors wherever the model's sigma lies (not only on average): the contact model's counterpart of
+    :class:`ConfidenceCalibration`, fitted by the same isotonic regression over runs of held-out samples.
+
+    A single scale per target is right on average over the held-out samples and wrong wherever their mix
+    differs: on the eFlesh force run, readings without load (a sigma the model already makes small) are far
+    more precise than it says, readings under load less. Between the knots the map is linear; beyond them it
+    keeps the ratio of the nearest knot (a sigma twice the last knot's maps to twice its value).
+    """
+
+    knots: tuple[float, ...]      # the model's sigma, ascending, > 0
+    values: tuple[float, ...]     # the calibrated sigma there, non-decreasing, > 0
+    samples: int = 0              # held-out samples it was fitted on
+
+    def __post_init__(self) -> None:
+        k, v = np.asarray(self.knots, float), np.asarray(self.values, float)
+        if k.ndim != 1 or k.size < 1 or k.shape != v.shape:
+            raise ValueError(f"knots and values must be 1-D of one length >= 1, got {k.shape} and {v.shape}")
+        if not (np.isfinite(k).all() and np.isfinite(v).all()) or k.min() <= 0 or v.min() <= 0:
+            raise ValueError("knots and values must be finite and > 0")
+        if np.any(np.diff(k) <= 0) or np.any(np.diff(v) < 0):
+            raise ValueError("knots must increase and values must not decrease")
+
+    def __call__(self, sigma: float | np.ndarray) -> np.ndarray:
+        s = np.asarray(sigma, np.float64)
+        k, v = self.knots, self.values
+        return np.where(s < k[0], s * (v[0] / k[0]), np.where(s > k[-1], s * (v[-1] / k[-1]), np.interp(s, k, v)))
+
+    def one(self, sigma: float) -> float:
+        """The map of one sigma, in plain Python (a control loop's call: no array is made)."""
+        k, v = self.knots, self.values
+        if sigma <= k[0]:
+            return sigma * v[0] / k[0]
+        if sigma >= k[-1]:
+            return sigma * v[-1] / k[-1]
+        i = bisect.bisect_right(k, sigma)
+        t = (sigma - k[i - 1]) / (k[i] - k[i - 1])
+        return v[i - 1] + t * (v[i] - v[i - 1])
+
+    @classmethod
+    def fit(cls, sigma: np.ndarray, abs_error: np.ndarray, *, min_per_knot: int = 40) -> SigmaCalibration:
+        """Order the held-out samples by the model's sigma, take runs of ``min_per_knot``, give each run the
+        sigma that holds :data:`ONE_SIGMA` of its errors (its mean sigma times the quantile of error / sigma),
+        and fit those in order by isotonic regression (:func:`isotonic_in_order`)."""
+        sigma = np.asarray(sigma, np.float64)
+        err = np.abs(np.asarray(abs_error, np.float64))
+        ok = np.isfinite(sigma) & np.isfinite(err) & (sigma > 0)
+        if sigma.shape != err.shape or sigma.ndim != 1 or ok.sum() < min_per_knot:
+            raise ValueError(f"need matching 1-D sigmas and errors with at least {min_per_knot} finite pairs; got "
+                             f"{sigma.shape}, {err.shape} ({int(ok.sum())} finite)")
+        sigma, err = sigma[ok], err[ok]
+        order = np.argsort(sigma, kind="stable")
+        sigma, ratio = sigma[order], err[order] / sigma[order]
+        starts = run_starts(sigma.size, min_per_knot)
+        ends = np.append(starts[1:], sigma.size)
+        knots = np.array([sigma[a:b].mean() for a, b in zip(starts, ends)])
+        local = np.array([np.quantile(ratio[a:b], ONE_SIGMA) for a, b in zip(starts, ends)]) * knots
+        values = np.maximum(isotonic_in_order(local, (ends - starts).astype(np.float64)), 1e-12)
+        values = _last_of_ties(knots, values)           # runs of one tied sigma: the higher value
+        knots = np.unique(knots)
+        return cls(tuple(float(k) for k in knots), tuple(float(x) for x in values), int(sigma.size))
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"knots": list(self.knots), "values": list(self.values), "samples": self.samples}
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> SigmaCalibration:
+        return cls(tuple(d["knots"]), tuple(d["values"]), int(d.get("samples", 0)))
+
+
+def _last_of_ties(knots: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """Per distinct knot (ascending), the largest value fitted at it."""
+    out: dict[float, float] = {}
+    for k, v in zip(knots, values):
+        out[float(k)] = max(out.get(float(k), 0.0), float(v))
+    return np.array([out[k] for k in sorted(out)])
+
+
 def _isotonic_blocks(x: np.ndarray, y: np.ndarray, min_count: int) -> list[tuple[float, float]]:
     """Blocks (mean x, mean y) of the isotonic regression of 0/1 y on sorted x, each of >= min_count points.
 
@@ -139,14 +241,10 @@ def _isotonic_blocks(x: np.ndarray, y: np.ndarray, min_count: int) -> list[tuple
     running mean returns to that value: adjacent blocks of equal mean keep a knot each, so the interpolated curve
     stays flat across a plateau instead of one knot at its middle.
     """
-    isotonic = require("sklearn.isotonic", "fitting a calibration")
-    starts = np.arange(0, x.size, min_count)
-    if starts.size > 1 and x.size - starts[-1] < min_count:   # a short tail joins its neighbour
-        starts = starts[:-1]
+    starts = run_starts(x.size, min_count)
     counts = np.diff(np.append(starts, x.size)).astype(np.float64)
     sum_x, sum_y = np.add.reduceat(x, starts), np.add.reduceat(y, starts)
-    fitted = isotonic.IsotonicRegression().fit_transform(np.arange(starts.size, dtype=np.float64), sum_y / counts,
-                                                         sample_weight=counts)
+    fitted = isotonic_in_order(sum_y / counts, counts)
     new_value = np.r_[True, fitted[1:] != fitted[:-1]]
     first, stretch = np.flatnonzero(new_value), np.cumsum(new_value) - 1
     total_y, total_n = np.add.reduceat(sum_y, first)[stretch], np.add.reduceat(counts, first)[stretch]

@@ -4,7 +4,9 @@
 run; onnxruntime, no torch) on a reading (R, C, 3) in microtesla, baseline-subtracted, and returns a
 :class:`ContactState`: position x/y (mm), depth (mm), normal force (N), shear x/y (N) where the model was
 trained on them (None otherwise), the in-contact flag, and a sigma (one standard deviation, same unit) for
-each. It keeps the last few readings itself, for models that read a short temporal context::
+each, calibrated on held-out samples where the model carries a map
+(:class:`~tactile_manip.perception.confidence.SigmaCalibration`). It keeps the last few readings itself, for
+models that read a short temporal context::
 
     from tactile_manip.perception.contact import ContactEstimator
     contact = ContactEstimator("models/contact.onnx")
@@ -45,6 +47,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from tactile_manip.extras import require
+from tactile_manip.perception.confidence import SigmaCalibration
 from tactile_manip.perception.contact_context import ContextBuffer
 from tactile_manip.perception.estimator import StreamStats, stream_estimates
 from tactile_manip.perception.onnx_session import session_options
@@ -123,6 +126,15 @@ class ContactEstimator:
             self.max_gap_s = float(context.get("max_gap_s", 0.0))
         except (KeyError, IndexError, TypeError, ValueError) as e:
             raise ModelFileError(f"{self.path}: contact model metadata is incomplete ({type(e).__name__}: {e})") from e
+        try:
+            maps = {str(n): SigmaCalibration.from_dict(d) for n, d in self.metadata.get("sigma_calibration", {}).items()}
+        except (KeyError, TypeError, ValueError) as e:
+            raise ModelFileError(f"{self.path}: its sigma calibration is unreadable ({type(e).__name__}: {e})") from e
+        unknown = set(maps) - set(self.target_names)
+        if unknown:
+            raise ModelFileError(f"{self.path}: a sigma calibration for {sorted(unknown)}, which are not its targets")
+        #: per target index, the map of the graph's sigma onto the calibrated one (models exported with one)
+        self.sigma_maps: dict[int, SigmaCalibration] = {self.target_names.index(n): m for n, m in maps.items()}
         self.board_layout = str(self.metadata.get("board_layout", ""))
         self.min_field_ut = float(min_field_ut)
         ort = require("onnxruntime", "running a contact model")
@@ -161,6 +173,13 @@ class ContactEstimator:
                                  f"{', '.join(map(str, self.input_shape))}) window with {len(self.target_names)} "
                                  f"targets: {' '.join(str(e).split())[:200]}") from e
         return binding, mean, sigma
+
+    def calibrated_sigma(self, sigma: np.ndarray) -> np.ndarray:
+        """The graph's sigmas (n, K) through the model's sigma calibration (a copy; unchanged without one)."""
+        out = np.array(sigma, dtype=np.float64)
+        for k, sigma_map in self.sigma_maps.items():
+            out[:, k] = sigma_map(out[:, k])
+        return out
 
     def __repr__(self) -> str:
         return (f"ContactEstimator({str(self.path)!r}, targets={list(self.target_names)}, "
@@ -222,6 +241,8 @@ class ContactEstimator:
     def _state(self, peak_ut: float, latency_s: float) -> ContactState:
         """The state of the outputs the last run left in ``_mean`` and ``_sigma``."""
         mean, sigma = self._mean[0].tolist(), self._sigma[0].tolist()
+        for k, sigma_map in self.sigma_maps.items():
+            sigma[k] = sigma_map.one(sigma[k])
         fields = self._blank.copy()
         for k, name, sigma_field in self._state_fields:
             fields[name], fields[sigma_field] = mean[k], sigma[k]

@@ -6,9 +6,7 @@ targets (no context, no variance):
 - ``Linear``: least squares with an intercept;
 - ``kNN``: the mean of the 5 nearest training readings, weighted by inverse distance;
 - ``MLP``: a plain MLP, two hidden layers of 128 ReLU units, Adam on the squared error of standardised
-  targets (the size the eFlesh characterisation used), trained to convergence: up to 500 epochs, stopped
-  30 epochs after the best loss on a random tenth of the training split held out for it, whose weights it
-  keeps (a stop on the training loss's progress would end it long before it fits).
+  targets (the size the eFlesh characterisation used).
 
 kNN and MLP use scikit-learn when it is installed (extra ``baselines``); otherwise the numpy versions here
 (the same definitions, trained by the same recipe, not bit-identical to scikit-learn).
@@ -24,8 +22,6 @@ import numpy as np
 KNN_NEIGHBOURS = 5
 MLP_HIDDEN = (128, 128)
 MLP_EPOCHS = 500
-MLP_PATIENCE = 30           # epochs without a better held-out loss before the MLP stops
-MLP_HELD_OUT = 0.1          # share of the training split held out for that
 
 
 @dataclass
@@ -80,8 +76,7 @@ def _sklearn_mlp(a: np.ndarray, y: np.ndarray, b: np.ndarray, seed: int) -> np.n
     from sklearn.exceptions import ConvergenceWarning
     from sklearn.neural_network import MLPRegressor
 
-    mlp = MLPRegressor(hidden_layer_sizes=MLP_HIDDEN, max_iter=MLP_EPOCHS, random_state=seed, early_stopping=True,
-                       validation_fraction=MLP_HELD_OUT, n_iter_no_change=MLP_PATIENCE, tol=0.0)
+    mlp = MLPRegressor(hidden_layer_sizes=MLP_HIDDEN, max_iter=MLP_EPOCHS, random_state=seed)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ConvergenceWarning)
         mlp.fit(a, y if y.shape[1] > 1 else y[:, 0])
@@ -102,8 +97,7 @@ def knn_predict(a: np.ndarray, y: np.ndarray, b: np.ndarray, k: int = KNN_NEIGHB
 
 
 class NumpyMLP:
-    """Two ReLU hidden layers of 128, Adam (lr 1e-3, batch 200), squared error, stopped on a held-out tenth:
-    scikit-learn's recipe with ``early_stopping``."""
+    """Two ReLU hidden layers of 128, Adam (lr 1e-3, batch 200), squared error: scikit-learn's recipe."""
 
     def __init__(self, inputs: int, outputs: int, seed: int = 0) -> None:
         rng = np.random.default_rng(seed)
@@ -126,11 +120,6 @@ class NumpyMLP:
         m = [np.zeros_like(p) for p in self.params]
         v = [np.zeros_like(p) for p in self.params]
         step = 0
-        shuffled = self.rng.permutation(len(x))
-        held = shuffled[:int(MLP_HELD_OUT * len(x))] if len(x) >= 20 else shuffled[:0]
-        x_held, y_held = x[held], y[held]
-        x, y = np.delete(x, held, axis=0), np.delete(y, held, axis=0)
-        best, best_params, since = np.inf, [p.copy() for p in self.params], 0
         for _ in range(epochs):
             order = self.rng.permutation(len(x))
             for s in range(0, len(x), batch):
@@ -149,15 +138,6 @@ class NumpyMLP:
                     vv *= 0.999
                     vv += 0.001 * g * g
                     p -= lr * (mm / (1 - 0.9 ** step)) / (np.sqrt(vv / (1 - 0.999 ** step)) + 1e-8)
-            if not len(held):
-                continue
-            loss = float(np.mean((self.predict(x_held) - y_held) ** 2))
-            if loss < best:
-                best, best_params, since = loss, [p.copy() for p in self.params], 0
-            elif (since := since + 1) >= MLP_PATIENCE:
-                break
-        if len(held):
-            self.params = best_params
         return self
 
     def predict(self, x: np.ndarray) -> np.ndarray:

@@ -37,7 +37,7 @@ def model_predictions(estimator: ContactEstimator, data: PairedDataset, index: n
         m, sd = estimator.session.run(None, {"field_ut": windows[s:s + 1024]})
         means.append(m)
         sigmas.append(sd)
-    return np.concatenate(means).astype(np.float64), np.concatenate(sigmas).astype(np.float64)
+    return np.concatenate(means).astype(np.float64), estimator.calibrated_sigma(np.concatenate(sigmas))
 
 
 def check_model_targets(estimator: ContactEstimator, data: PairedDataset, label: str) -> list[int]:

@@ -39,7 +39,8 @@ again from the same reading by the escalation reconstructor; that estimate repla
 
 The escalated estimate replaces the first whatever its confidence, which the same calibration maps (it was
 fitted on the one-pass estimator, so for the escalated one it is an approximation); a contact whose angle is
-undefined (confidence 0) escalates too.
+undefined (confidence 0) escalates too. Only an angle read from the image escalates: with the angle head's
+route, that is where the head stood aside (a chip flagged saturated, an image without contact).
 """
 
 from __future__ import annotations
@@ -209,9 +210,11 @@ class TactilePoseEstimator:
         est = self._angle(rec, flags, contact, field)
         t2 = time.perf_counter()
         timings = {"reconstruct": t1 - t0, "pose": t2 - t1, "total": t2 - t0}
-        # the head reads the reading, not the image: another reconstruction of the same reading cannot change it
+        # the head reads the reading, not the image: another reconstruction of the same reading cannot change its
+        # angle, so only an angle that came from the image escalates (on the head's route: where the head stood
+        # aside, a chip flagged or an image without contact)
         if (self.escalation is not None and contact and est.confidence < self.escalate_below
-                and self.angle_source != "head"):
+                and est.source == "image"):
             rec = self.escalation.reconstruct(field)
             est = replace(self._angle(rec, flags, contact, field), escalated=True)
             timings["escalate"] = time.perf_counter() - t2

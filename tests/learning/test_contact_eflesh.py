@@ -3,7 +3,8 @@
 import -> train (configs/train/contact.toml, default settings) -> export -> evaluate, through the CLI, on the
 chronological 80/20 split of each run: 2-D localisation RMSE <= 0.5 mm on the spatial run, normal force RMSE
 <= 0.27 N on the normal-force run, both better than the plain-MLP baseline evaluate prints beside them, and
-68 +- 7 % of the test errors within 1 sigma. Minutes of CPU: marked slow.
+68 +- 7 % of the test errors within 1 sigma (each exported model carries a sigma map per target). Minutes of
+CPU: marked slow.
 """
 
 from __future__ import annotations
@@ -30,6 +31,9 @@ def _run(run_dir, tmp_path, name: str, import_args: list[str]) -> dict:
                  "--out", str(tmp_path / f"run_{name}")]) == 0
     model = tmp_path / f"{name}.onnx"
     assert main(["export", "--checkpoint", str(tmp_path / f"run_{name}" / "best.pt"), "--out", str(model)]) == 0
+    from tactile_manip.perception.contact import ContactEstimator
+
+    assert len(ContactEstimator(model).sigma_maps) == len(import_args[import_args.index("--targets") + 1].split(","))
     assert main(["evaluate", "--data", str(data), "--model", f"ours={model}",
                  "--out", str(tmp_path / f"ev_{name}")]) == 0
     return json.loads((tmp_path / f"ev_{name}" / "results.json").read_text())["methods"]

@@ -105,3 +105,38 @@ def test_applying_a_calibration_needs_no_sklearn_and_fitting_names_the_extra(tmp
     raw, errors = _synthetic(200, np.random.default_rng(5))
     with pytest.raises(MissingExtraError, match=r"fitting a calibration needs scikit-learn.*extra 'sklearn'"):
         ConfidenceCalibration.fit(raw, errors)
+
+
+def test_a_sigma_map_gives_each_regime_of_the_models_sigma_its_own_scale() -> None:
+    from tactile_manip.perception.confidence import ONE_SIGMA, SigmaCalibration
+
+    rng = np.random.default_rng(0)
+    # the model says 0.1 for a precise regime (errors 0.02) and 1.0 for a loose one (errors 1.5): one scale for
+    # both would cover the first always and the second seldom
+    sigma = np.r_[np.full(400, 0.1), np.full(400, 1.0)] * rng.uniform(0.9, 1.1, 800)
+    err = np.abs(np.r_[rng.normal(0, 0.02, 400), rng.normal(0, 1.5, 400)])
+    cal = SigmaCalibration.fit(sigma, err)
+    inside = err <= cal(sigma)
+    assert abs(inside[:400].mean() - ONE_SIGMA) < 0.06 and abs(inside[400:].mean() - ONE_SIGMA) < 0.06
+    assert cal.samples == 800 and all(np.diff(cal.values) >= 0) and all(np.diff(cal.knots) > 0)
+    # beyond the knots the ratio of the nearest knot holds; one() is the same map without arrays
+    lo, hi = cal.knots[0] / 2, cal.knots[-1] * 3
+    assert cal(lo) == pytest.approx(lo * cal.values[0] / cal.knots[0])
+    assert cal(hi) == pytest.approx(hi * cal.values[-1] / cal.knots[-1])
+    for s in (lo, 0.1, 0.5, 1.0, hi):
+        assert cal.one(s) == pytest.approx(float(cal(s)))
+    assert SigmaCalibration.from_dict(cal.to_dict()) == cal
+
+
+def test_a_sigma_map_refuses_what_cannot_be_one() -> None:
+    from tactile_manip.perception.confidence import SigmaCalibration
+
+    with pytest.raises(ValueError, match="at least 40"):
+        SigmaCalibration.fit(np.ones(10), np.ones(10))
+    with pytest.raises(ValueError, match="increase"):
+        SigmaCalibration(knots=(0.2, 0.1), values=(0.1, 0.2))
+    with pytest.raises(ValueError, match="> 0"):
+        SigmaCalibration(knots=(0.0, 0.1), values=(0.1, 0.2))
+    # NaN sigmas or errors are left out of the fit, not spread into it
+    sigma, err = np.r_[np.ones(60), np.nan], np.r_[np.full(60, 0.5), 1.0]
+    assert SigmaCalibration.fit(sigma, err).samples == 60

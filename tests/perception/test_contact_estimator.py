@@ -238,3 +238,23 @@ def test_one_reading_gives_angle_and_contact_with_the_pose_estimator(tmp_path, c
     assert est.contact.force_n == pytest.approx(alone.force_n, rel=1e-6) and est.contact.force_sigma_n > 0
     with pytest.raises(ValueError, match="one board"):
         TactileEstimator(pose, ContactEstimator(contact_model_files[2]))
+
+
+def test_a_model_with_a_sigma_map_reports_the_mapped_sigma(contact_model_of_layout) -> None:
+    from tactile_manip.perception.confidence import SigmaCalibration
+
+    plain = ContactEstimator(contact_model_of_layout("supermag-4x4"))
+    halve = SigmaCalibration(knots=(0.01, 100.0), values=(0.005, 50.0))
+    mapped = ContactEstimator(contact_model_of_layout("supermag-4x4",
+                                                      sigma_calibration={"force_n": halve.to_dict()}))
+    reading = np.zeros((4, 4, 3), np.float32)
+    reading[1:3, 1:3, 2] = 150.0
+    a, b = plain.estimate(reading), mapped.estimate(reading)
+    assert b.force_n == a.force_n and b.force_sigma_n == pytest.approx(a.force_sigma_n / 2)
+    assert b.x_sigma_mm == a.x_sigma_mm   # targets without a map keep the graph's sigma
+    sigmas = np.array([[a.sigmas[n] for n in plain.target_names]])
+    np.testing.assert_allclose(mapped.calibrated_sigma(sigmas)[0, 3], a.force_sigma_n / 2)
+    with pytest.raises(ModelFileError, match="not its targets"):
+        ContactEstimator(contact_model_of_layout("supermag-4x4", sigma_calibration={"shear_z_n": halve.to_dict()}))
+    with pytest.raises(ModelFileError, match="sigma calibration"):
+        ContactEstimator(contact_model_of_layout("supermag-4x4", sigma_calibration={"force_n": {"knots": [1.0]}}))

@@ -364,8 +364,18 @@ def test_escalation_runs_only_below_the_level_and_replaces_the_estimate(pair) ->
     model = load_reconstructor(MODEL)
     field = _rod_field(pair, 25.0)
     # the head reads the reading, which another reconstruction does not change: escalation is for the image
-    head = perception.TactilePoseEstimator(model, escalation=Counting(model), escalate_below=1.0).estimate(field)
+    by_head = perception.TactilePoseEstimator(model, escalation=Counting(model), escalate_below=1.0)
+    head = by_head.estimate(field)
     assert calls == [] and head.source == "head" and not head.escalated
+    # ... but where the head stands aside (a chip flagged at its rail), the image's angle escalates
+    from tactile_manip.types import TactileReading
+
+    flags = np.zeros((4, 4, 3), bool)
+    flags[0, 0, 2] = True
+    railed = TactileReading(field, field, flags, t_host_s=0.0)
+    aside = by_head.estimate(railed)
+    assert aside.source == "image" and aside.escalated and calls == [1]
+    calls.clear()
 
     def TactilePoseEstimator(*args, **kwargs):  # noqa: N802 - the image's route from here on
         return perception.TactilePoseEstimator(*args, angle_source="image", **kwargs)
