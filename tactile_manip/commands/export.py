@@ -33,6 +33,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--checkpoint", default=None, help="training checkpoint (RUN/best.pt) to write as ONNX")
     p.add_argument("--attach-to", default=None, metavar="MODEL",
                    help="with an angle head's checkpoint: the pose model (.onnx) to copy to --out with the head inside")
+    p.add_argument("--head-symmetries", type=int, choices=(1, 8), default=8,
+                   help="with --attach-to: read each reading in the board's 8 symmetric copies and average their "
+                        "axes (default), or once (1)")
     p.add_argument("--out", required=True,
                    help="output: the dataset folder (lerobot), the .rrd / .mcap file, or the .onnx file")
     p.add_argument("--force", action="store_true", help="replace an existing --out (and --card)")
@@ -184,9 +187,12 @@ def _attach_angle_head(args: argparse.Namespace) -> int:
     readings = None
     if args.data:  # datasets with and without images: each is read alone
         readings = np.concatenate([d.readings[d.indices("val")][:64] for d in map(load_dataset, args.data)])
-    record = attach_angle_head(args.checkpoint, args.attach_to, args.out, check_readings=readings)
+    record = attach_angle_head(args.checkpoint, args.attach_to, args.out, check_readings=readings,
+                               symmetries=args.head_symmetries == 8)
     val = record["validation"]
-    print(f"wrote {args.out}: {args.attach_to} with an angle head of {record['parameters']:,} parameters "
+    copies = "its 8 symmetric copies" if record["symmetries"] == 8 else "1 copy (no symmetric copies)"
+    print(f"wrote {args.out}: {args.attach_to} with an angle head of {record['parameters']:,} parameters reading "
+          f"{copies} "
           f"(validation {val.get('val_within_5', float('nan')):.1%} within 5 deg), ONNX vs torch max |diff| "
           f"{record['parity_max_abs']:.2e}")
     return 0

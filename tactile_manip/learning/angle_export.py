@@ -3,7 +3,9 @@
 ``tactile-manip export --checkpoint RUN/best.pt --attach-to models/base.onnx --out models/new.onnx`` exports
 the head (:mod:`.angle_model`) to ONNX, ``field_ut`` (N, R, C, A) -> ``axis`` (N, 2), checks it on
 onnxruntime against torch, and writes a copy of the base model with the head (base64) and its record (JSON:
-training config, data, validation figures) in the metadata (:mod:`tactile_manip.perception.angle_head`). The
+training config, data, validation figures) in the metadata. By default the graph reads each reading in the
+board's 8 symmetric copies and averages their axes (:func:`symmetrized`; ``--head-symmetries 1`` leaves that
+out) (:mod:`tactile_manip.perception.angle_head`). The
 base model's graphs and metadata are kept as they are; its input shape must be the head's.
 """
 
@@ -17,12 +19,13 @@ from typing import Any
 import numpy as np
 import torch
 
-from tactile_manip.learning.angle_model import AngleHead, AngleModelConfig, count_parameters
+from tactile_manip.learning.angle_model import AngleHead, AngleModelConfig, SymmetrizedAngleHead, count_parameters
 from tactile_manip.learning.checkpoint import load_net_checkpoint
 from tactile_manip.learning.export import ExportError
 from tactile_manip.perception.angle_head import ANGLE_HEAD_KEY, ANGLE_HEAD_META_KEY
 from tactile_manip.perception.one_reading import encode
 from tactile_manip.perception.reconstruct import read_metadata
+from tactile_manip.perception.symmetry import transform_reading
 from tactile_manip.version import __version__
 
 KIND = "angle_head"
@@ -34,7 +37,24 @@ def load_angle_checkpoint(path: str | Path) -> tuple[AngleHead, dict[str, Any]]:
     return load_net_checkpoint(path, KIND, "an angle head", lambda cfg: AngleHead(AngleModelConfig(**cfg)))
 
 
-def head_onnx_bytes(model: AngleHead) -> bytes:
+def symmetrized(model: AngleHead) -> SymmetrizedAngleHead:
+    """``model`` read over the board's 8 symmetries (4 quarter turns, with and without the mirror): the maps
+    of :func:`~tactile_manip.perception.symmetry.transform_reading` on the flattened reading, and the same
+    symmetry's action on the axis (a mirror negates it, a quarter turn adds 90 deg), inverted."""
+    cells = tuple(model.cfg.cells)
+    n = int(np.prod(cells))
+    basis = np.eye(n, dtype=np.float64).reshape(n, *cells)
+    reading_maps, axis_maps = [], []
+    for mirror in (False, True):
+        for turns in range(4):
+            reading_maps.append(transform_reading(basis, turns, mirror).reshape(n, n).T)
+            # a copy's doubled angle is (+-2t + turns * pi): back by (-1)^turns, then the mirror's sign on sin
+            axis_maps.append(np.diag([1.0, -1.0 if mirror else 1.0]) * (-1.0) ** turns)
+    return SymmetrizedAngleHead(model, torch.from_numpy(np.stack(reading_maps)),
+                                torch.from_numpy(np.stack(axis_maps))).eval()
+
+
+def head_onnx_bytes(model: AngleHead | SymmetrizedAngleHead) -> bytes:
     """The head as a serialised ONNX graph with a dynamic batch dimension."""
     buffer = io.BytesIO()
     example = torch.zeros(2, *model.cfg.cells)
@@ -44,12 +64,14 @@ def head_onnx_bytes(model: AngleHead) -> bytes:
 
 
 def attach_angle_head(checkpoint: str | Path, base: str | Path, out: str | Path, *,
-                      check_readings: np.ndarray | None = None) -> dict[str, Any]:
+                      check_readings: np.ndarray | None = None, symmetries: bool = True) -> dict[str, Any]:
     """Write ``out``: ``base`` with the head of ``checkpoint`` attached; returns the head's record (with
-    ``parity_max_abs``). ``check_readings`` (N, R, C, A): real readings for the parity check."""
+    ``parity_max_abs``). ``check_readings`` (N, R, C, A): real readings for the parity check. ``symmetries``:
+    the graph reads every reading in its 8 symmetric copies and averages their axes (:func:`symmetrized`)."""
     import onnx
 
-    model, payload = load_angle_checkpoint(checkpoint)
+    head, payload = load_angle_checkpoint(checkpoint)
+    model = symmetrized(head) if symmetries else head
     base_meta = read_metadata(base)  # a readable pose model, or a one-line ModelFileError
     base_cells = tuple(int(v) for v in base_meta["input"]["shape"][1:])
     if base_cells != tuple(model.cfg.cells):
@@ -62,7 +84,8 @@ def attach_angle_head(checkpoint: str | Path, base: str | Path, out: str | Path,
                         "units": "microtesla, baseline-subtracted"},
               "output": {"name": "axis", "shape": ["batch", 2],
                          "what": "kappa (cos 2t, sin 2t): von Mises natural parameter of the doubled axis angle"},
-              "parameters": count_parameters(model), "model_config": payload["model_config"],
+              "parameters": count_parameters(head), "symmetries": 8 if symmetries else 1,
+              "model_config": payload["model_config"],
               "train_config": payload["train_config"], "training_data": payload.get("data", {}),
               "validation": payload.get("val", {}), "parity_max_abs": parity}
     proto = onnx.load(str(base))
@@ -79,7 +102,7 @@ def attach_angle_head(checkpoint: str | Path, base: str | Path, out: str | Path,
     return record
 
 
-def check_head_parity(model: AngleHead, graph: bytes, readings: np.ndarray | None = None) -> float:
+def check_head_parity(model: AngleHead | SymmetrizedAngleHead, graph: bytes, readings: np.ndarray | None = None) -> float:
     """Max |ONNX - torch| of the axis vector over real and random readings, relative to its length (at least
     1); raises above :data:`PARITY_TOLERANCE`."""
     import onnxruntime as ort

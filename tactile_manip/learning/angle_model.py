@@ -82,6 +82,33 @@ class AngleHead(nn.Module):
         return self.mlp(x)
 
 
+class SymmetrizedAngleHead(nn.Module):
+    """A trained head read over the board's symmetries: each reading's symmetric copies go through the head,
+    each copy's axis is turned back, and the mean is the axis. The head learnt the symmetries from augmented
+    data and holds them only approximately; the mean holds them exactly and averages out some of the head's
+    own error, at the cost of one batch of copies per reading. Where the copies disagree, the mean's length
+    (its ``kappa``) shrinks, so the concentration says so.
+
+    Args:
+        head: the trained head.
+        reading_maps: (S, N, N) the linear map of each symmetry on the flattened reading (N = R * C * A).
+        axis_maps: (S, 2, 2) the map turning a copy's (cos 2t, sin 2t) back to the reading's.
+    """
+
+    def __init__(self, head: AngleHead, reading_maps: torch.Tensor, axis_maps: torch.Tensor) -> None:
+        super().__init__()
+        self.head, self.cfg = head, head.cfg
+        self.register_buffer("reading_maps", reading_maps.to(torch.float32))
+        self.register_buffer("axis_maps", axis_maps.to(torch.float32))
+
+    def forward(self, field_ut: torch.Tensor) -> torch.Tensor:
+        batch, copies = field_ut.shape[0], self.reading_maps.shape[0]
+        flat = field_ut.reshape(1, batch, -1)
+        turned = torch.matmul(flat, self.reading_maps.transpose(1, 2))            # (S, B, N)
+        axes = self.head(turned.reshape(copies * batch, *self.cfg.cells)).reshape(copies, batch, 2)
+        return torch.matmul(axes, self.axis_maps.transpose(1, 2)).mean(dim=0)     # (B, 2)
+
+
 def von_mises_nll(axis: torch.Tensor, angle_rad: torch.Tensor) -> torch.Tensor:
     """Per-sample negative log-likelihood of the axis angles ``angle_rad`` (B,) under the von Mises of the
     doubled angle whose natural parameter is ``axis`` (B, 2) (constant log 2 pi left out)."""

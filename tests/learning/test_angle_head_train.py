@@ -118,8 +118,9 @@ def test_labels_come_from_the_axis_of_bars_and_the_image_of_the_rest() -> None:
 def test_attaching_keeps_the_image_model_and_adds_a_head_that_matches_torch(trained, tmp_path) -> None:
     data, run, _ = trained
     out = tmp_path / "with_head.onnx"
-    record = attach_angle_head(run / "best.pt", BASE, out, check_readings=bar_dataset(8).readings)
+    record = attach_angle_head(run / "best.pt", BASE, out, check_readings=bar_dataset(8).readings, symmetries=False)
     assert record["parity_max_abs"] < 1e-3 and record["validation"]["val_within_5"] > 0.5
+    assert record["symmetries"] == 1
     with_head, plain = load_reconstructor(out), load_reconstructor(BASE)
     assert plain.angle_head is None and with_head.angle_head is not None
     reading = bar_dataset(1, seed=3).readings[0]
@@ -131,6 +132,33 @@ def test_attaching_keeps_the_image_model_and_adds_a_head_that_matches_torch(trai
     assert angle == pytest.approx(0.5 * math.atan2(ref[1], ref[0]), abs=1e-4)
     assert kappa == pytest.approx(math.hypot(*ref), rel=1e-4)
     assert load_reconstructor(out, angle_head=False).angle_head is None
+
+
+def test_the_default_head_reads_the_8_symmetric_copies_and_turns_exactly_with_the_reading(trained, tmp_path) -> None:
+    _, run, _ = trained
+    out = tmp_path / "symmetric.onnx"
+    record = attach_angle_head(run / "best.pt", BASE, out)
+    assert record["symmetries"] == 8 and record["parity_max_abs"] < 1e-3
+    head = load_reconstructor(out).angle_head
+    model, _ = load_angle_checkpoint(run / "best.pt")
+    readings = bar_dataset(6, seed=5).readings
+    # the mean of the head's axes over the copies, each turned back, by hand
+    total = np.zeros((len(readings), 2))
+    for mirror in (False, True):
+        for turns in range(4):
+            copy = transform_reading(readings, turns, mirror).astype(np.float32)
+            with torch.no_grad():
+                v = model(torch.from_numpy(copy)).numpy()
+            a = 0.5 * np.arctan2(v[:, 1], v[:, 0]) - turns * math.pi / 2
+            a = -a if mirror else a
+            total += np.hypot(v[:, 0], v[:, 1])[:, None] * np.c_[np.cos(2 * a), np.sin(2 * a)]
+    angle, kappa = head.axes(readings)
+    np.testing.assert_allclose(kappa, np.hypot(*(total / 8).T), rtol=1e-4)
+    np.testing.assert_allclose(wrap_axial(angle - 0.5 * np.arctan2(total[:, 1], total[:, 0])), 0.0, atol=1e-4)
+    # a turned and mirrored reading gives the turned and mirrored axis, to rounding, and the same kappa
+    turned_angle, turned_kappa = head.axes(transform_reading(readings, 1, True).astype(np.float32))
+    np.testing.assert_allclose(wrap_axial(turned_angle - (-angle + math.pi / 2)), 0.0, atol=1e-4)
+    np.testing.assert_allclose(turned_kappa, kappa, rtol=1e-4)
 
 
 def test_a_head_for_another_board_is_refused(trained, tmp_path) -> None:
@@ -177,7 +205,11 @@ def test_the_commands_train_and_attach_and_refuse_what_does_not_fit(trained, tmp
     assert not out.exists()
     assert main(["export", "--checkpoint", str(run / "best.pt"), "--attach-to", str(BASE), "--out", str(out),
                  "--data", str(data)]) == 0
-    assert "angle head" in capsys.readouterr().out and out.exists()
+    assert "its 8 symmetric copies" in capsys.readouterr().out and out.exists()
+    once = tmp_path / "once.onnx"
+    assert main(["export", "--checkpoint", str(run / "best.pt"), "--attach-to", str(BASE), "--out", str(once),
+                 "--head-symmetries", "1"]) == 0
+    assert "no symmetric copies" in capsys.readouterr().out
     assert main(["export", "--checkpoint", str(run / "best.pt"), "--attach-to", str(tmp_path / "missing.onnx"),
                  "--out", str(tmp_path / "n.onnx")]) == 2
     assert_one_line_error(capsys.readouterr().err, "export", "missing.onnx")
