@@ -33,7 +33,7 @@ TABLE1_MD = "models/eval/table.md"
 TABLE1_ROBUST = "docs/results/robust/robust_b48/table1.json"  # the same evaluation of the robust model
 NETWORK_LATENCY = "models/eval/latency.json"  # python -m benchmarks.bench_model
 BENCH = "docs/results/bench_2026-11-25_one_reading/report.json"  # tactile-manip bench
-BENCH_DEFAULT = "docs/results/bench_2026-11-25_default/report.json"  # tactile-manip bench of the default model
+BENCH_DEFAULT = "docs/results/bench_2026-11-27_default/report.json"  # tactile-manip bench of the default model
 ABLATIONS = {"data/robust.npz": "docs/results/angle_head/ablation_robust.json",  # python -m benchmarks.angle_ablation
              "data/rods_test.npz": "docs/results/angle_head/ablation_rods_test.json",
              "data/supermag.npz": "docs/results/angle_head/ablation_supermag.json"}
