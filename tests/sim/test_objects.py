@@ -190,7 +190,7 @@ def test_procedural_sharp_is_seeded_sharp_and_separate_from_procedural() -> None
 
 def test_registry() -> None:
     assert set(SHAPES) == {"allen_key", "letter_r", "cylinder", "hex_bar", "square_bar", "procedural", "ridge",
-                           "procedural_sharp", "flat_bar", "procedural_bar"}
+                           "procedural_sharp", "flat_bar", "procedural_bar", "procedural_prism"}
     assert make_indenter("hex_bar", size_mm=5.0).name == "hex_bar"
     with pytest.raises(ValueError, match="unknown object 'banana'; known: allen_key"):
         make_indenter("banana")
