@@ -102,7 +102,8 @@ def attach_angle_head(checkpoint: str | Path, base: str | Path, out: str | Path,
     return record
 
 
-def check_head_parity(model: AngleHead | SymmetrizedAngleHead, graph: bytes, readings: np.ndarray | None = None) -> float:
+def check_head_parity(model: AngleHead | SymmetrizedAngleHead, graph: bytes,
+                      readings: np.ndarray | None = None) -> float:
     """Max |ONNX - torch| of the axis vector over real and random readings, relative to its length (at least
     1); raises above :data:`PARITY_TOLERANCE`."""
     import onnxruntime as ort

@@ -11,10 +11,10 @@ small concentration there.
 Each epoch shows every training reading under a random symmetry of the board (a quarter turn adds 90 deg to
 the axis, a mirror negates it), so the head never favours a direction the board does not; with
 ``redraw_noise``, through new chip drift and noise as well (:mod:`.noise`), so the head cannot learn one draw
-of them. AdamW with a
-one-cycle learning rate; the weights of the epoch with the lowest validation negative log-likelihood are kept,
-and a run stops ``patience`` epochs after its best once the rate falls. ``RUN/best.pt`` holds the weights and
-everything the export needs; ``RUN/history.json`` the per-epoch curve and the validation figures.
+of them. AdamW with a one-cycle learning rate; the weights of the epoch with the lowest validation negative
+log-likelihood are kept, and a run stops ``patience`` epochs after its best once the rate falls.
+``RUN/best.pt`` holds the weights and everything the export needs; ``RUN/history.json`` the per-epoch curve
+and the validation figures.
 """
 
 from __future__ import annotations

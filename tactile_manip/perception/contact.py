@@ -127,7 +127,8 @@ class ContactEstimator:
         except (KeyError, IndexError, TypeError, ValueError) as e:
             raise ModelFileError(f"{self.path}: contact model metadata is incomplete ({type(e).__name__}: {e})") from e
         try:
-            maps = {str(n): SigmaCalibration.from_dict(d) for n, d in self.metadata.get("sigma_calibration", {}).items()}
+            maps = {str(n): SigmaCalibration.from_dict(d)
+                    for n, d in self.metadata.get("sigma_calibration", {}).items()}
         except (KeyError, TypeError, ValueError) as e:
             raise ModelFileError(f"{self.path}: its sigma calibration is unreadable ({type(e).__name__}: {e})") from e
         unknown = set(maps) - set(self.target_names)
