@@ -121,3 +121,31 @@ def test_sigma_is_scaled_so_that_68_percent_of_validation_errors_are_within_one_
     inside = ((mean - torch.from_numpy(data.targets[val])).abs() <= sigma).float().mean(0)
     np.testing.assert_allclose(inside.numpy(), 0.683, atol=0.03)
     assert (model.sigma_scale > 0).all() and not torch.equal(model.sigma_scale, torch.ones(3))
+
+
+def test_the_sigma_map_holds_68_percent_in_each_part_of_the_models_sigma(contact_model_files,
+                                                                          labelled_presses) -> None:
+    from tactile_manip.learning.contact_train import SIGMA_MAP_RUN, fit_sigma_maps
+    from tactile_manip.perception.confidence import SigmaCalibration
+
+    _, run, _ = contact_model_files
+    model, payload = load_contact_checkpoint(run / "best.pt")
+    data = labelled_presses(n=1200, seed=4)
+    windows = torch.from_numpy(dataset_windows(data, payload["input"]["context"]))
+    targets = torch.from_numpy(data.targets)
+    maps = fit_sigma_maps(model, windows, targets, list(payload["targets"]))
+    assert set(maps) == {"x_mm", "y_mm", "force_n"}
+    with torch.no_grad():
+        mean, sigma = model(windows)
+    err = (mean - targets).abs().numpy()
+    for k, name in enumerate(payload["targets"]):
+        cal = SigmaCalibration.from_dict(maps[name])
+        assert cal.samples == 1200 and len(cal.knots) >= 2
+        raw = sigma[:, k].numpy()
+        inside = err[:, k] <= cal(raw)
+        # the fitted samples: 68.3 % overall, and in the lower and the upper half of the model's sigma alike
+        low = raw <= np.median(raw)
+        assert abs(inside.mean() - 0.683) < 0.04
+        assert abs(inside[low].mean() - 0.683) < 0.08 and abs(inside[~low].mean() - 0.683) < 0.08
+    # a validation tail shorter than two runs keeps the global scale only: the fixture's model has no map
+    assert 0.1 * 0.8 * 600 < 2 * SIGMA_MAP_RUN and payload.get("sigma_calibration") == {}
