@@ -3,10 +3,10 @@
 ``tactile-manip export --checkpoint RUN/best.pt --attach-to models/base.onnx --out models/new.onnx`` exports
 the head (:mod:`.angle_model`) to ONNX, ``field_ut`` (N, R, C, A) -> ``axis`` (N, 2), checks it on
 onnxruntime against torch, and writes a copy of the base model with the head (base64) and its record (JSON:
-training config, data, validation figures) in the metadata. By default the graph reads each reading in the
-board's 8 symmetric copies and averages their axes (:func:`symmetrized`; ``--head-symmetries 1`` leaves that
-out) (:mod:`tactile_manip.perception.angle_head`). The
-base model's graphs and metadata are kept as they are; its input shape must be the head's.
+training config, data, validation figures) in the metadata (:mod:`tactile_manip.perception.angle_head`). By
+default the graph reads each reading in the board's 8 symmetric copies and averages their axes
+(:func:`symmetrized`; ``--head-symmetries 1`` leaves that out). The base model's graphs and metadata are kept
+as they are; its input shape must be the head's.
 """
 
 from __future__ import annotations

@@ -78,7 +78,7 @@ class ChipNoise:
         noise = rng.standard_normal(shape, dtype=np.float32) * self.noise_ut.reshape(n, 1, 1, 3)
         out = np.rint((self.clean_ut + drift + noise) / self.lsb_ut) * self.lsb_ut
         out[self.at_rail] = self.stored_ut[self.at_rail]
-        return out.astype(np.float32)
+        return out.astype(np.float32, copy=False)
 
     @staticmethod
     def concatenate(parts: list[ChipNoise]) -> ChipNoise:

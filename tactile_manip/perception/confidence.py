@@ -95,7 +95,7 @@ class ConfidenceCalibration:
         blocks = _isotonic_blocks(x, y, min_per_knot)
         knots = [b[0] for b in blocks]
         values = [b[1] for b in blocks]
-        knots, values = _strictly_increasing(knots, values)
+        knots, values = _strictly_increasing([min(max(k, 0.0), 1.0) for k in knots], values)
         return cls(tuple(knots), tuple(values), float(tolerance_deg), int(raw.size), int(prior_samples),
                    bool(symmetrized), str(aperture), str(route))
 
@@ -218,9 +218,8 @@ class SigmaCalibration:
         knots = np.array([sigma[a:b].mean() for a, b in zip(starts, ends)])
         local = np.array([np.quantile(ratio[a:b], ONE_SIGMA) for a, b in zip(starts, ends)]) * knots
         values = np.maximum(isotonic_in_order(local, (ends - starts).astype(np.float64)), 1e-12)
-        values = _last_of_ties(knots, values)           # runs of one tied sigma: the higher value
-        knots = np.unique(knots)
-        return cls(tuple(float(k) for k in knots), tuple(float(x) for x in values), int(sigma.size))
+        knots, values = _strictly_increasing(knots.tolist(), values.tolist())   # tied sigmas: the higher value
+        return cls(tuple(knots), tuple(values), int(sigma.size))
 
     def to_dict(self) -> dict[str, Any]:
         return {"knots": list(self.knots), "values": list(self.values), "samples": self.samples}
@@ -228,14 +227,6 @@ class SigmaCalibration:
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> SigmaCalibration:
         return cls(tuple(d["knots"]), tuple(d["values"]), int(d.get("samples", 0)))
-
-
-def _last_of_ties(knots: np.ndarray, values: np.ndarray) -> np.ndarray:
-    """Per distinct knot (ascending), the largest value fitted at it."""
-    out: dict[float, float] = {}
-    for k, v in zip(knots, values):
-        out[float(k)] = max(out.get(float(k), 0.0), float(v))
-    return np.array([out[k] for k in sorted(out)])
 
 
 def _isotonic_blocks(x: np.ndarray, y: np.ndarray, min_count: int) -> list[tuple[float, float]]:
@@ -266,14 +257,14 @@ def _isotonic_blocks(x: np.ndarray, y: np.ndarray, min_count: int) -> list[tuple
 
 
 def _strictly_increasing(knots: list[float], values: list[float]) -> tuple[list[float], list[float]]:
-    """Drop knots that repeat an x (ties of raw confidence), keeping the later (higher) value."""
+    """Drop knots that repeat an x (ties of raw confidence or of sigma), keeping the later (higher) value."""
     out_k, out_v = [], []
     for k, v in zip(knots, values):
         if out_k and k <= out_k[-1]:
             out_v[-1] = max(out_v[-1], v)
             continue
-        out_k.append(min(max(k, 0.0), 1.0))
-        out_v.append(v)
+        out_k.append(float(k))
+        out_v.append(float(v))
     return out_k, out_v
 
 

@@ -196,7 +196,8 @@ def _simulate(task: _Task) -> dict[str, Any]:
         if not (s.bottomed_out and cfg.bottomed_out == "redraw"):
             break
     return {**drawn, "bottomed_out": s.bottomed_out, "field_ut": s.field_ut, "field_raw_ut": s.field_raw_ut,
-            "field_clean_ut": s.field_clean_ut, "saturated": s.saturated, "depth_q": None if s.depth_mm is None else quantise_depth(s.depth_mm),
+            "field_clean_ut": s.field_clean_ut, "saturated": s.saturated,
+            "depth_q": None if s.depth_mm is None else quantise_depth(s.depth_mm),
             "pose": [pose.x_mm, pose.y_mm, pose.yaw_rad, pose.tilt_x_rad, pose.tilt_y_rad],
             "force_n": s.force_n, "approach_mm": s.approach_mm, "skin_approach_mm": s.skin_approach_mm,
             "contact": s.contact, "targets": sample_targets(s), "contact_area_mm2": s.pressure.area_mm2,

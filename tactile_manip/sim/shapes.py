@@ -83,6 +83,12 @@ def _polygon_inside(x: np.ndarray, y: np.ndarray, verts: np.ndarray) -> np.ndarr
     return np.where(inside, dist, -dist)
 
 
+def _check_seed(seed: object) -> None:
+    """Refuse a seed of a procedural family that is not a non-negative integer (ValueError)."""
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
+
+
 def _indenter(height_mm: np.ndarray, origin_mm: tuple[float, float], name: str) -> Indenter:
     return Indenter(height_mm, DEFAULT_PIXEL_MM, name=name, origin_mm=origin_mm)
 
@@ -193,8 +199,7 @@ def procedural_bar(seed: int, *, length_mm: float = 40.0) -> Indenter:
     section of the built-in rods exactly, so those stay unseen shapes; the same seed always gives the same
     array.
     """
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-        raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
+    _check_seed(seed)
     length = check_finite_scalar("length_mm", length_mm, low=10.0, high=150.0)
     rng = np.random.default_rng(int(seed))
     power, half_w, half_h = rng.uniform(1.5, 8.0), rng.uniform(1.0, 10.0), rng.uniform(0.5, 4.0)
@@ -220,8 +225,7 @@ def procedural_prism(seed: int) -> Indenter:
     ends, so a bar shorter than the pad's diagonal, or one off centre, ends on the pad. The family contains no
     section and length of the built-in rods and flat bars exactly; the same seed always gives the same array.
     """
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-        raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
+    _check_seed(seed)
     rng = np.random.default_rng([int(seed), 31])
     length = rng.uniform(12.0, 50.0)
     px = DEFAULT_PIXEL_MM
@@ -236,14 +240,12 @@ def procedural_prism(seed: int) -> Indenter:
         upper = np.sin(normals) > 1e-9
         lines = (apothem - y[..., None] * np.cos(normals[upper])) / np.sin(normals[upper])
         profile = np.where(np.abs(y) <= half_w + 1e-9, lines.min(axis=-1), np.nan)
-        name = f"procedural_prism_{int(seed)}"
     else:
         width, thick = rng.uniform(2.0, 20.0), rng.uniform(0.5, 5.0)
         fillet = rng.uniform(0.0, min(0.3, thick / 2))
         x, y, origin = _grid((-length / 2 - px, length / 2 + px), (-width / 2 - px, width / 2 + px), px)
         profile = _extrude(width / 2 - np.abs(y), thick / 2, fillet)
-        name = f"procedural_prism_{int(seed)}"
-    return _indenter(np.where(np.abs(x) <= length / 2 + 1e-9, profile, np.nan), origin, name)
+    return _indenter(np.where(np.abs(x) <= length / 2 + 1e-9, profile, np.nan), origin, f"procedural_prism_{int(seed)}")
 
 
 def ridge(*, angle_deg: float = 60.0, tip_radius_mm: float = 0.1, height_mm: float = 3.0,
@@ -326,8 +328,7 @@ def procedural(seed: int, *, size_mm: float = 14.0) -> Indenter:
     polyline strokes), each 0.5-2.5 mm high, on a base plate (protrusion 0) for about half the seeds.
     The same seed always gives the same array.
     """
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-        raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
+    _check_seed(seed)
     size = check_finite_scalar("size_mm", size_mm, low=4.0, high=30.0)
     rng = np.random.default_rng(int(seed))
     x, y, origin = _grid((-size / 2, size / 2), (-size / 2, size / 2), DEFAULT_PIXEL_MM)
@@ -352,8 +353,7 @@ def procedural_sharp(seed: int, *, size_mm: float = 14.0) -> Indenter:
 
     A separate family (not a flag of :func:`procedural`), so that every procedural seed keeps its shape.
     """
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-        raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
+    _check_seed(seed)
     size = check_finite_scalar("size_mm", size_mm, low=4.0, high=30.0)
     rng = np.random.default_rng(int(seed))
     x, y, origin = _grid((-size / 2, size / 2), (-size / 2, size / 2), DEFAULT_PIXEL_MM)
