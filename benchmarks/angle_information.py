@@ -18,7 +18,10 @@ deviation of any unbiased angle estimate:
 
 - ``oracle``: everything but the angle known: sigma >= 1 / sqrt(J_aa), the most optimistic bound;
 - ``pose``: the offsets, force and tilts unknown as well: sigma >= sqrt([J^-1]_aa) over those parameters;
-- ``pose_sensor``: the sensor's remanence, gap and skin modulus unknown too.
+- ``pose_sensor``: the sensor's remanence, gap and skin modulus unknown too;
+- ``pose_sensor_shape``: the rod's dimensions unknown as well (its size, length, and a flat bar's width and
+  thickness), as they are to a method that meets the rod for the first time. The section's kind (round, hex,
+  square, flat) stays known: a discrete unknown has no derivative, so this is still an upper bound.
 
 Saturated channels carry no information. The share of presses within 5 deg (2 deg) that an efficient estimator
 would reach is the mean over presses of erf(tol / (sqrt(2) sigma)). Where the signal is weak the bound is
@@ -51,7 +54,9 @@ STEPS = {"angle_rad": math.radians(1.0), "x_mm": 0.1, "y_mm": 0.1, "force_rel": 
          "sensor_rel": 0.02}
 POSE_NUISANCES = ("x_mm", "y_mm", "force_n", "tilt_x_rad", "tilt_y_rad")
 SENSOR_NUISANCES = ("magnet.remanence_t", "magnet.chip_gap_mm", "layer.skin_modulus_kpa")
-BOUNDS = ("oracle", "pose", "pose_sensor")
+SHAPE_NUISANCES = ("size_mm", "length_mm", "width_mm", "thickness_mm")  # those the rod's kind has
+SHAPE_STEP_MM = 0.2  # two pixels of the indenter's height map: a finer step would not change the map
+BOUNDS = ("oracle", "pose", "pose_sensor", "pose_sensor_shape")
 FORCE_BANDS_N = ((2.0, 5.0), (5.0, 8.0), (8.0, 11.0), (11.0, 15.0))
 TOLERANCES_DEG = (5.0, 2.0)
 CASES = {"one frame": (1, True), "four frames averaged": (4, True), "one frame, baseline tared": (1, False)}
@@ -93,11 +98,12 @@ def _information(job: dict[str, Any]) -> dict[str, Any]:
     params = SimParams() if job["params"] is None else with_values(SimParams(), job["params"])
     nominal = SensorPair(params, seed=job["sensor_seed"])
     rod = make_indenter(job["kind"], **job["kwargs"])
+    sizes = shape_sizes(job["kind"], job["kwargs"])
     pose0, force = np.asarray(job["pose"], float), job["force_n"]
     rng = np.random.default_rng(0)  # the noise draw is not used: only the noise-free field change
 
-    def reading(pose: np.ndarray, scale: float = 1.0, pair: SensorPair = nominal) -> np.ndarray:
-        s = pair.press(rod, IndenterPose(*pose), force * scale, rng, render_depth=False)
+    def reading(pose: np.ndarray, scale: float = 1.0, pair: SensorPair = nominal, shape: Any = rod) -> np.ndarray:
+        s = pair.press(shape, IndenterPose(*pose), force * scale, rng, render_depth=False)
         return pair.chips.expected_ut(pair.baseline_field_ut + s.field_change_ut).ravel()
 
     def along_pose(k: int, step: float) -> np.ndarray:
@@ -111,35 +117,63 @@ def _information(job: dict[str, Any]) -> dict[str, Any]:
                  for sign in (1, -1)]
         return (reading(pose0, pair=pairs[0]) - reading(pose0, pair=pairs[1])) / (2 * rel * value)
 
+    def along_shape(name: str) -> np.ndarray:
+        # central where the shape allows both sides, else one-sided (an 8 mm rod is the largest one can make)
+        for hi, lo in ((1, -1), (1, 0), (0, -1)):
+            try:
+                shapes = [make_indenter(job["kind"], **(sizes | {name: sizes[name] + k * SHAPE_STEP_MM}))
+                          for k in (hi, lo)]
+            except ValueError:
+                continue
+            return (reading(pose0, shape=shapes[0]) - reading(pose0, shape=shapes[1])) / ((hi - lo) * SHAPE_STEP_MM)
+        raise ValueError(f"{job['kind']}: {name} = {sizes[name]} mm cannot be varied by {SHAPE_STEP_MM} mm")
+
     columns = [along_pose(2, STEPS["angle_rad"]), along_pose(0, STEPS["x_mm"]), along_pose(1, STEPS["y_mm"]),
                (reading(pose0, 1 + STEPS["force_rel"]) - reading(pose0, 1 - STEPS["force_rel"]))
                / (2 * STEPS["force_rel"] * force),
                along_pose(3, STEPS["tilt_rad"]), along_pose(4, STEPS["tilt_rad"]),
-               *[along_sensor(name, STEPS["sensor_rel"]) for name in SENSOR_NUISANCES]]
+               *[along_sensor(name, STEPS["sensor_rel"]) for name in SENSOR_NUISANCES],
+               *[along_shape(name) for name in sizes]]
     coarse = along_pose(2, 3 * STEPS["angle_rad"])  # the angle's derivative again, at three times the step
     c = params.chip
     noise = np.tile([c.noise_xy_ut, c.noise_xy_ut, c.noise_z_ut], 16) ** 2
     lsb = np.tile([c.lsb_xy_ut, c.lsb_xy_ut, c.lsb_z_ut], 16) ** 2 / 12.0
     return {"index": job["index"], "label": job["label"], "force_n": force, "jacobian": np.stack(columns, 1).tolist(),
             "white_var": (noise + lsb).tolist(), "drift_var": c.drift_ut ** 2, "noise_xy_ut": c.noise_xy_ut,
-            "saturated": np.asarray(job["saturated"], bool).ravel().tolist(),
+            "saturated": np.asarray(job["saturated"], bool).ravel().tolist(), "shape_nuisances": list(sizes),
             "step_check": float(np.linalg.norm(coarse - columns[0]) / max(np.linalg.norm(columns[0]), 1e-12))}
 
 
-def bounds_deg(info: dict[str, Any], frames: int, drift: bool) -> tuple[float, float, float]:
+def shape_sizes(kind: str, kwargs: dict[str, Any]) -> dict[str, float]:
+    """The rod's dimensions among ``SHAPE_NUISANCES`` (mm): those of ``kwargs``, else the shape's defaults."""
+    import inspect
+
+    from tactile_manip.sim.shapes import SHAPES
+
+    params = inspect.signature(SHAPES[kind]).parameters
+    return {name: float(kwargs.get(name, params[name].default)) for name in SHAPE_NUISANCES if name in params}
+
+
+def bounds_deg(info: dict[str, Any], frames: int, drift: bool) -> tuple[float, ...]:
     """The bounds (deg) on the angle's standard deviation for one press: everything else known (oracle), the
-    pose and force unknown, and the sensor's magnet, gap and skin unknown as well."""
+    pose and force unknown, the sensor's magnet, gap and skin unknown as well, and the rod's dimensions too
+    (the last equals the third for a press computed without them)."""
     jac = np.asarray(info["jacobian"])
     var = np.asarray(info["white_var"]) / frames + (info["drift_var"] if drift else 0.0)
     jac = np.where(np.asarray(info["saturated"])[:, None], 0.0, jac)
     fisher = jac.T @ (jac / var[:, None])
     out = []
-    for n in (1, 1 + len(POSE_NUISANCES), fisher.shape[0]):
-        sub = fisher[:n, :n]
-        try:
-            out.append(math.degrees(math.sqrt(max(np.linalg.inv(sub)[0, 0], 0.0))) if sub[0, 0] > 0 else math.inf)
-        except np.linalg.LinAlgError:
-            out.append(math.inf)
+    for n in (1, 1 + len(POSE_NUISANCES), 1 + len(POSE_NUISANCES) + len(SENSOR_NUISANCES), fisher.shape[0]):
+        info = fisher[0, 0]
+        nuisance, cross = fisher[1:n, 1:n], fisher[0, 1:n]
+        scale = np.sqrt(np.diag(nuisance))
+        moves = scale > 0  # a nuisance that does not move the reading (a rod's far end off the pad) costs nothing
+        if moves.any():
+            unit = scale[moves]
+            corr = nuisance[np.ix_(moves, moves)] / np.outer(unit, unit)
+            c = cross[moves] / unit
+            info -= float(c @ np.linalg.pinv(corr, rcond=1e-10, hermitian=True) @ c)  # the Schur complement
+        out.append(math.degrees(1.0 / math.sqrt(info)) if info > 0 else math.inf)
     return tuple(out)
 
 
@@ -179,16 +213,17 @@ def markdown(report: dict[str, Any]) -> str:
              f"{report['seconds']:.0f} s; Cramer-Rao bounds on the angle's standard deviation (median sigma) and "
              f"the share an efficient estimator would get within 5 / 2 deg. Known: oracle, everything but the "
              f"angle; pose, the offsets, force and tilts unknown too; + sensor, the magnet's remanence, chip gap "
-             f"and skin modulus unknown as well. Derivative check: the angle's derivative at 3 deg steps differs "
+             f"and skin modulus unknown as well; + rod dimensions, its size, length, width and thickness (those its "
+             f"kind has) unknown too. Derivative check: the angle's derivative at 3 deg steps differs "
              f"from the 1 deg one by {report['step_check_median']:.1%} (median), "
              f"{report['step_check_p95']:.1%} (p95).", ""]
     for case, groups in report["bounds"].items():
         lines += [f"**{case}**", "", "| presses | n | oracle sigma deg | oracle within 5 / 2 deg | pose unknown sigma "
-                  "| within 5 / 2 deg | + sensor unknown sigma | within 5 / 2 deg |",
-                  "|---|---|---|---|---|---|---|---|"]
+                  "| within 5 / 2 deg | + sensor unknown sigma | within 5 / 2 deg | + rod dimensions unknown sigma "
+                  "| within 5 / 2 deg |", "|---|---|---|---|---|---|---|---|---|---|"]
         for name, r in groups.items():
             cells = [f"{r[f'{b}_median_sigma_deg']:.2f} | {r[f'{b}_within_5']:.1%} / {r[f'{b}_within_2']:.1%}"
-                     for b in BOUNDS]
+                     if f"{b}_median_sigma_deg" in r else " | " for b in BOUNDS]  # reports made before a bound existed
             lines.append(f"| {name} | {r['presses']} | " + " | ".join(cells) + " |")
         lines.append("")
     lines.append("The shares are upper bounds for efficient unbiased estimators (erf of the tolerance over the "
@@ -204,9 +239,12 @@ def plot(report: dict[str, Any], compare: list[str], path: str) -> None:
 
     bands = [f"{lo:g}-{hi:g} N" for lo, hi in FORCE_BANDS_N]
     series = {"bound, one frame (pose and sensor unknown)":
-              [report["bounds"]["one frame"][b]["pose_sensor_within_5"] for b in bands],
-              "bound, one frame after a tare": [report["bounds"]["one frame, baseline tared"][b]["pose_sensor_within_5"]
-                                                for b in bands]}
+              [report["bounds"]["one frame"][b]["pose_sensor_within_5"] for b in bands]}
+    if "pose_sensor_shape_within_5" in report["bounds"]["one frame"]["all"]:
+        series["bound, one frame (rod dimensions unknown too)"] = [
+            report["bounds"]["one frame"][b]["pose_sensor_shape_within_5"] for b in bands]
+    series["bound, one frame after a tare"] = [report["bounds"]["one frame, baseline tared"][b]["pose_sensor_within_5"]
+                                               for b in bands]
     for file in compare:
         results = json.loads(Path(file).read_text())["results"]
         if isinstance(results, dict):  # benchmarks.angle_ablation: one row per model and route

@@ -285,10 +285,11 @@ def angle(root: Path, doc: str) -> list[str]:
         bands = [b for b in ("2-5 N", "5-8 N", "8-11 N", "11-15 N")
                  if any(b in r["by_force"] for r in report["results"].values())]
         rows = []
-        if "bound" in report:
-            b = report["bound"]
-            rows.append(["Cramer-Rao bound (pose, force and sensor unknown)", _pct(b["all"]), "",
-                         *(_pct(b["by_force"][k]) for k in bands)])
+        for key, name in (("bound", "Cramer-Rao bound (pose, force and sensor unknown)"),
+                          ("bound_shape", "Cramer-Rao bound (the rod's dimensions unknown too)")):
+            if key in report:
+                b = report[key]
+                rows.append([name, _pct(b["all"]), "", *(_pct(b["by_force"][k]) for k in bands)])
         for name, r in report["results"].items():
             rows.append([name, _pct(r["within_5"]), _pct(r["within_2"]), *(_pct(r["by_force"][k]) for k in bands)])
         lines += [f"## `{data}`: {report['presses']} single frames of unseen rods"
@@ -396,10 +397,13 @@ def robust(root: Path, doc: str) -> list[str]:
                          " / ".join(f"{100 * force[b]['angle_within_5_deg']:.1f}" for b in bands),
                          _link(Path(path).name, path, doc)])
     info = _json(root, INFORMATION)["bounds"]["one frame"]
-    rows.append(["Cramer-Rao bound of an efficient estimator (pose, force and sensor unknown)", "",
-                 "", f"{_pct(info['all']['pose_sensor_within_5'])} / {_pct(info['all']['pose_sensor_within_2'])}",
-                 " / ".join(f"{100 * info[b]['pose_sensor_within_5']:.1f}" for b in bands),
-                 _link(Path(INFORMATION).name, INFORMATION, doc)])
+    for key, name in (("pose_sensor", "pose, force and sensor unknown"),
+                      ("pose_sensor_shape", "the rod's dimensions unknown too")):
+        if f"{key}_within_5" in info["all"]:
+            rows.append([f"Cramer-Rao bound of an efficient estimator ({name})", "", "",
+                         f"{_pct(info['all'][f'{key}_within_5'])} / {_pct(info['all'][f'{key}_within_2'])}",
+                         " / ".join(f"{100 * info[b][f'{key}_within_5']:.1f}" for b in bands),
+                         _link(Path(INFORMATION).name, INFORMATION, doc)])
     lines += _table(["method", "model", "PSNR dB", "within 5 / 2 deg", "within 5 deg at " + " / ".join(bands) + " %",
                      "from"], rows)
     return lines

@@ -36,6 +36,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--head-symmetries", type=int, choices=(1, 8), default=8,
                    help="with --attach-to: read each reading in the board's 8 symmetric copies and average their "
                         "axes (default), or once (1)")
+    p.add_argument("--image-position-weight", type=float, default=None, metavar="W",
+                   help="contact models: the reconstructed image's share in the position that TactileEstimator "
+                        "gives with this model (0-1; benchmarks/contact_position_fusion.py chooses it on "
+                        "validation presses); default: the contact model's position alone")
     p.add_argument("--out", required=True,
                    help="output: the dataset folder (lerobot), the .rrd / .mcap file, or the .onnx file")
     p.add_argument("--force", action="store_true", help="replace an existing --out (and --card)")
@@ -210,10 +214,11 @@ def _export_contact(args: argparse.Namespace) -> int:
     windows = None
     if args.data:
         _, payload = load_contact_checkpoint(args.checkpoint)
-        data = load_datasets(args.data)
+        data = load_datasets(args.data, images=False)
         windows = dataset_windows(data, payload["input"]["context"])[data.indices("test")]
     metrics = json.loads(open(args.metrics).read()) if args.metrics else {}
-    meta = export_contact_onnx(args.checkpoint, args.out, metrics=metrics, check_windows=windows)
+    meta = export_contact_onnx(args.checkpoint, args.out, metrics=metrics, check_windows=windows,
+                               image_position_weight=args.image_position_weight)
     targets = ", ".join(f"{n} [{u}]" for n, u in zip(meta["targets"]["names"], meta["targets"]["units"]))
     print(f"wrote {args.out}: contact model, {meta['parameters']:,} parameters, targets {targets}, "
           f"{meta['context']['frames']} frame(s) of context, ONNX vs torch max |diff| "

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import json
 import zipfile
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -93,9 +94,13 @@ def check_dataset_file(path: str | Path) -> Path:
     return path
 
 
-def load_dataset(path: str | Path) -> PairedDataset:
+def load_dataset(path: str | Path, *, images: bool = True) -> PairedDataset:
     """Read a dataset written by :func:`save_dataset` (format 3) or by earlier versions (formats 1 and 2), or
     every shard of a shard folder (:mod:`tactile_manip.data.shards`) joined into one dataset in memory.
+
+    ``images=False`` leaves the images of a labelled-press dataset unread (a file's image array is not
+    decompressed): what a consumer of readings and targets needs, in a fraction of the memory. A dataset
+    without targets keeps its images, since it would hold nothing else.
 
     Raises:
         DatasetError: missing file, not a numpy file, not a dataset of ours, missing arrays, inconsistent
@@ -103,7 +108,8 @@ def load_dataset(path: str | Path) -> PairedDataset:
             does not match the manifest's.
     """
     if is_shard_folder(path):
-        return ShardedDataset(path).load()
+        data = ShardedDataset(path).load()
+        return data if images or data.targets is None else replace(data, images=None)
     path = check_dataset_file(path)
     if numpy_file_kind(path) == "other":  # np.load would call any other file a pickle
         raise DatasetError(f"{path} is not a tactile_manip dataset: it is not a numpy file (.npz); "
@@ -121,7 +127,7 @@ def load_dataset(path: str | Path) -> PairedDataset:
             version = meta.get("format_version")
             if version in READABLE_VERSIONS:
                 try:
-                    return _from_v1(path, z, meta) if version == 1 else _from_v2_or_v3(path, z, meta, version)
+                    return _from_v1(path, z, meta) if version == 1 else _from_v2_or_v3(path, z, meta, version, images)
                 except DatasetError as e:
                     raise e if str(path) in str(e) else DatasetError(f"{path}: {e}") from e
             raise DatasetError(f"{path}: dataset format version {version!r}, this code reads "
@@ -132,9 +138,12 @@ def load_dataset(path: str | Path) -> PairedDataset:
         raise DatasetError(f"{path} is not a tactile_manip dataset: {npz_read_problem(e)}") from e
 
 
-def load_datasets(paths: list[str | Path] | tuple[str | Path, ...]) -> PairedDataset:
+def load_datasets(paths: list[str | Path] | tuple[str | Path, ...], *, images: bool = True) -> PairedDataset:
     """One dataset (file or shard folder), or several concatenated
     (:func:`~tactile_manip.data.dataset.concatenate`; each part's provenance then records its path).
+
+    ``images=False``: readings and targets only (see :func:`load_dataset`), so labelled presses with and
+    without images join into one dataset.
 
     Raises:
         DatasetError: no path, or the same file given twice (its samples would count twice).
@@ -145,7 +154,7 @@ def load_datasets(paths: list[str | Path] | tuple[str | Path, ...]) -> PairedDat
     twice = sorted({str(p) for p in paths if resolved.count(Path(p).resolve()) > 1})
     if twice:
         raise DatasetError(f"the same dataset is given more than once: {', '.join(twice)}")
-    parts = [load_dataset(p) for p in paths]
+    parts = [load_dataset(p, images=images) for p in paths]
     if len(parts) == 1:
         return parts[0]
     both = concatenate(parts)
@@ -173,9 +182,11 @@ def numpy_file_kind(path: str | Path) -> str:
     return "npz" if head[:4] in (b"PK\x03\x04", b"PK\x05\x06") else "other"
 
 
-def _from_v2_or_v3(path: Path, z: np.lib.npyio.NpzFile, meta: dict[str, Any], version: int) -> PairedDataset:
+def _from_v2_or_v3(path: Path, z: np.lib.npyio.NpzFile, meta: dict[str, Any], version: int,
+                   images: bool = True) -> PairedDataset:
     names = meta.get("target_names", []) if version >= 3 else []
-    required = ["readings", "split"] + (["images"] if version == 2 or meta.get("image") is not None else []) \
+    with_images = version == 2 or meta.get("image") is not None
+    required = ["readings", "split"] + (["images"] if with_images and (images or not names) else []) \
         + (["targets"] if names else [])
     missing = [k for k in required if k not in z.files]
     if missing:

@@ -6,7 +6,8 @@ baseline-subtracted) and returns ``mean`` (B, K) and ``sigma`` (B, K) in the tar
 standardisation run inside the graph. The JSON under the metadata key ``tactile_manip`` holds the kind
 (``"contact"``), the target names and units, the input's shape, layout and units, the board layout, the
 temporal context (frames, largest gap, the training stream's frame period), the normalisation, the training
-and model configs, the data fingerprint and the validation RMSE. Export re-runs the file with onnxruntime on
+and model configs, the data fingerprint and the validation RMSE, and where given the image centroid's share in a
+combined position estimate (``image_position_weight``). Export re-runs the file with onnxruntime on
 real and random windows and refuses to keep one that disagrees with torch.
 """
 
@@ -39,11 +40,17 @@ def load_contact_checkpoint(path: str | Path) -> tuple[ContactModel, dict[str, A
 
 
 def export_contact_onnx(checkpoint: str | Path, out: str | Path, *, metrics: dict | None = None,
-                        check_windows: np.ndarray | None = None) -> dict[str, Any]:
+                        check_windows: np.ndarray | None = None,
+                        image_position_weight: float | None = None) -> dict[str, Any]:
     """Write ``out`` (.onnx) from ``checkpoint`` and return its metadata (with ``parity_max_abs``).
 
     ``check_windows`` (N, T, R, C, A): real input windows for the parity check (random ones are added).
+    ``image_position_weight``: the image centroid's share in the position of a
+    :class:`~tactile_manip.perception.contact_pose.TactileEstimator` built with this model (stored in the
+    metadata; chosen with ``benchmarks/contact_position_fusion.py``); none: the model's own position.
     """
+    if image_position_weight is not None and not 0.0 <= image_position_weight <= 1.0:
+        raise ValueError(f"image_position_weight must be a share in [0, 1], got {image_position_weight!r}")
     import onnx
 
     model, payload = load_contact_checkpoint(checkpoint)
@@ -57,6 +64,8 @@ def export_contact_onnx(checkpoint: str | Path, out: str | Path, *, metrics: dic
                       output_names=["mean", "sigma"],
                       dynamic_axes={"field_ut": {0: "batch"}, "mean": {0: "batch"}, "sigma": {0: "batch"}})
     meta = contact_metadata(model, payload, metrics or {})
+    if image_position_weight is not None:
+        meta["image_position_weight"] = float(image_position_weight)
     proto = onnx.load(str(tmp))
     entry = proto.metadata_props.add()
     entry.key, entry.value = METADATA_KEY, json.dumps(meta)

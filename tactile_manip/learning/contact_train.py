@@ -33,10 +33,11 @@ import numpy as np
 import torch
 
 from tactile_manip.config import to_dict
-from tactile_manip.data import PairedDataset, load_datasets
+from tactile_manip.data import PairedDataset, load_dataset, load_datasets
 from tactile_manip.errors import ConfigError, DatasetError
 from tactile_manip.learning.contact_model import (ContactModel, ContactModelConfig, GaussianMLP, count_parameters,
                                                   frame_features)
+from tactile_manip.learning.noise import ChipNoise
 from tactile_manip.learning.schedule import check_schedule, optimise_step
 from tactile_manip.perception.confidence import ONE_SIGMA, SigmaCalibration
 from tactile_manip.perception.contact_context import context_windows
@@ -68,6 +69,8 @@ class ContactTrainConfig:
                                   # the learning rate falls)
     calibrate_sigma: bool = True  # scale sigma so that 68.3 % of validation errors are within one sigma
     sigma_map: bool = True        # then map it so that holds wherever the sigma lies (needs 80+ val samples)
+    redraw_noise: bool = False    # each epoch reads the training presses through new chip drift and noise
+                                  # (simulated datasets, one frame of context: tactile_manip.learning.noise)
     seed: int = 0
     threads: int = 0              # torch CPU threads (0: torch's default)
 
@@ -79,6 +82,9 @@ class ContactTrainConfig:
             raise ValueError(f"val_fraction must be in (0, 1), got {self.val_fraction}")
         if not (math.isfinite(self.context_max_gap_s) and self.context_max_gap_s >= 0):
             raise ValueError(f"context_max_gap_s must be >= 0, got {self.context_max_gap_s}")
+        if self.redraw_noise and self.context_frames != 1:
+            raise ValueError(f"redraw_noise draws the noise of one frame; it needs context_frames = 1, got "
+                             f"{self.context_frames}")
         self.model_config((3, 3, 3), 1)  # the architecture fields, checked by ContactModelConfig
 
     def model_config(self, cells: tuple[int, int, int], targets: int) -> ContactModelConfig:
@@ -140,7 +146,7 @@ def train_contact(cfg: ContactTrainConfig, data_paths: list[str | Path], out: st
     """
     if cfg.threads:
         torch.set_num_threads(cfg.threads)
-    data = load_datasets([Path(p) for p in data_paths])
+    data = load_datasets([Path(p) for p in data_paths], images=False)
     names = chosen_targets(data, cfg)
     train_idx, val_idx = split_indices(data, cfg.val_fraction)
     if len(train_idx) < 2:
@@ -154,12 +160,20 @@ def train_contact(cfg: ContactTrainConfig, data_paths: list[str | Path], out: st
         model.set_normalisation(frame_features(windows[train_idx], mcfg), targets[train_idx])
         z = model.standardised_features(windows)
         y = (targets - model.target_offset) / model.target_scale
+    noise = _train_noise(data_paths, train_idx) if cfg.redraw_noise else None
     if on_start:
         on_start(cfg.members * cfg.epochs)
     start = time.perf_counter()
     curves = []
     for m in range(cfg.members):
-        member, curve = _train_member(cfg, mcfg, z, y, train_idx, val_idx, seed=cfg.seed * 1000 + m,
+        fresh = None
+        if noise is not None:
+            rng = np.random.default_rng(cfg.seed * 1000 + m)
+
+            def fresh(noise: ChipNoise = noise, rng: np.random.Generator = rng) -> torch.Tensor:
+                with torch.no_grad():
+                    return model.standardised_features(torch.from_numpy(noise.draw(rng))[:, None])
+        member, curve = _train_member(cfg, mcfg, z, y, train_idx, val_idx, seed=cfg.seed * 1000 + m, fresh=fresh,
                                       progress=(lambda row, m=m: progress({"member": m, **row})) if progress else None)
         model.members[m].load_state_dict(member.state_dict())
         curves.append(curve)
@@ -189,6 +203,17 @@ def train_contact(cfg: ContactTrainConfig, data_paths: list[str | Path], out: st
     return summary
 
 
+def _train_noise(paths: list[str | Path], train_idx: np.ndarray) -> ChipNoise:
+    """The train split's chip noise, dataset by dataset (each with its own chip settings), in the order of
+    ``train_idx`` over the datasets joined."""
+    noise = ChipNoise.concatenate([ChipNoise.of(d, d.indices("train")) for d in
+                                   (load_dataset(p, images=False) for p in paths)])
+    if len(noise) != len(train_idx):
+        raise DatasetError("redraw_noise needs datasets with a val split, as simulated ones have; these have "
+                           "none, so the validation samples come out of the train split")
+    return noise
+
+
 def _input_record(data: PairedDataset, cfg: ContactTrainConfig) -> dict[str, Any]:
     """What the model reads: shape, channels, board layout, and the stream's frame period for the context."""
     period = None
@@ -204,8 +229,10 @@ def _input_record(data: PairedDataset, cfg: ContactTrainConfig) -> dict[str, Any
 
 def _train_member(cfg: ContactTrainConfig, mcfg: ContactModelConfig, z: torch.Tensor, y: torch.Tensor,
                   train_idx: np.ndarray, val_idx: np.ndarray, *, seed: int,
-                  progress: Callable[[dict[str, Any]], None] | None) -> tuple[GaussianMLP, dict[str, Any]]:
-    """One member, trained on standardised features ``z`` (N, F) and targets ``y`` (N, K); its best weights."""
+                  progress: Callable[[dict[str, Any]], None] | None,
+                  fresh: Callable[[], torch.Tensor] | None = None) -> tuple[GaussianMLP, dict[str, Any]]:
+    """One member, trained on standardised features ``z`` (N, F) and targets ``y`` (N, K); its best weights.
+    ``fresh()``, where given, returns the training samples' features read through new chip noise, each epoch."""
     torch.manual_seed(seed)
     gen = torch.Generator().manual_seed(seed)
     net = GaussianMLP(mcfg)
@@ -219,6 +246,8 @@ def _train_member(cfg: ContactTrainConfig, mcfg: ContactModelConfig, z: torch.Te
     best = {"val_rmse": math.inf, "best_epoch": 0, "state": None}
     history = []
     for epoch in range(1, cfg.epochs + 1):
+        if fresh is not None:
+            xt = fresh()
         net.train()
         order = torch.randperm(len(xt), generator=gen)
         total = 0.0

@@ -137,6 +137,8 @@ class ContactEstimator:
         #: per target index, the map of the graph's sigma onto the calibrated one (models exported with one)
         self.sigma_maps: dict[int, SigmaCalibration] = {self.target_names.index(n): m for n, m in maps.items()}
         self.board_layout = str(self.metadata.get("board_layout", ""))
+        #: the image centroid's share in a TactileEstimator's position (0: this model's position alone)
+        self.image_position_weight = float(self.metadata.get("image_position_weight", 0.0))
         self.min_field_ut = float(min_field_ut)
         ort = require("onnxruntime", "running a contact model")
         try:

@@ -9,13 +9,22 @@
     both = TactileEstimator(TactilePoseEstimator(load_reconstructor("models/supermag.onnx")),
                             ContactEstimator("models/contact_supermag.onnx"))
     est = both.estimate(field_ut)        # -> TactileEstimate
-    est.angle.angle_rad, est.contact.position_mm, est.contact.force_n
+    est.angle.angle_rad, est.position_mm, est.contact.force_n
     for est in both.stream(sensor):      # one TactileEstimate per new frame
         ...
 
-The two run one after the other on the same reading (no shared work: the contact model reads the field, not
-the reconstructed image). Each keeps its own contract: the angle may be undefined (``angle.defined``), the
-contact's quantities carry their sigmas.
+The two run one after the other on the same reading (the contact model reads the field, not the reconstructed
+image). Each keeps its own contract: the angle may be undefined (``angle.defined``), the contact's quantities
+carry their sigmas.
+
+Where the contact is, two estimates exist: the centroid of the reconstructed contact (``angle.centroid_mm``)
+and the contact model's centre of pressure (``contact.position_mm``). They err differently: on objects neither
+model was trained on, the image's centroid is the better one and their weighted mean better than either
+(``benchmarks/contact_position_fusion.py``), while a model trained on the one probe it presses beats the image.
+``position_mm`` is that mean, with the image's share ``image_position_weight``: by default the one stored in the
+contact model (``export --image-position-weight``, chosen on validation presses; 0.5 for the shipped
+``models/contact_supermag.onnx``), else 0 (the contact model's position). It falls back on whichever of the
+two exists.
 """
 
 from __future__ import annotations
@@ -28,6 +37,7 @@ import numpy as np
 
 from tactile_manip.perception.contact import ContactEstimator, ContactState
 from tactile_manip.perception.estimator import StreamStats, TactilePoseEstimator, stream_estimates
+from tactile_manip.perception.pose import ISOTROPIC_REASON
 from tactile_manip.types import AngleEstimate, TactileReading
 
 if TYPE_CHECKING:
@@ -36,19 +46,48 @@ if TYPE_CHECKING:
 
 @dataclass(frozen=True)
 class TactileEstimate:
-    """What one reading tells: the in-plane angle (pose estimator) and the contact state (contact model)."""
+    """What one reading tells: the in-plane angle (pose estimator), the contact state (contact model), and where
+    the contact is from both (``position_mm``, pad frame, mm; None when neither sees a contact)."""
 
     angle: AngleEstimate
     contact: ContactState
+    position_mm: tuple[float, float] | None = None
+
+
+def image_centroid_mm(angle: AngleEstimate) -> tuple[float, float] | None:
+    """The reconstructed contact's centroid, where the image has a contact (an isotropic one too), else None."""
+    if angle.defined or angle.reason.startswith(ISOTROPIC_REASON):
+        return angle.centroid_mm
+    return None
+
+
+def fused_position_mm(angle: AngleEstimate, contact: ContactState, image_weight: float
+                      ) -> tuple[float, float] | None:
+    """``image_weight`` times the image's centroid plus the rest times the contact model's position; either
+    alone where the other has none (the contact model's only while it reports a contact)."""
+    image = image_centroid_mm(angle)
+    model = contact.position_mm if contact.in_contact else None
+    if image is None or model is None:
+        return image or model
+    return (image_weight * image[0] + (1.0 - image_weight) * model[0],
+            image_weight * image[1] + (1.0 - image_weight) * model[1])
 
 
 class TactileEstimator:
     """A :class:`TactilePoseEstimator` and a :class:`ContactEstimator` of the same board, run on each reading.
 
-    Raises ValueError at construction when the two take readings of different shapes or board layouts.
+    ``image_position_weight``: the reconstructed image's share in :attr:`TactileEstimate.position_mm`; None
+    takes the contact model's (its ``image_position_weight``, 0 where its file has none).
+
+    Raises ValueError at construction when the two take readings of different shapes or board layouts, or for a
+    weight outside [0, 1].
     """
 
-    def __init__(self, pose: TactilePoseEstimator, contact: ContactEstimator) -> None:
+    def __init__(self, pose: TactilePoseEstimator, contact: ContactEstimator, *,
+                 image_position_weight: float | None = None) -> None:
+        if image_position_weight is not None and not (
+                isinstance(image_position_weight, (int, float)) and 0.0 <= image_position_weight <= 1.0):
+            raise ValueError(f"image_position_weight must be a share in [0, 1], got {image_position_weight!r}")
         if not isinstance(pose, TactilePoseEstimator):
             raise TypeError(f"pose must be a TactilePoseEstimator, got {type(pose).__name__}")
         if not isinstance(contact, ContactEstimator):
@@ -60,12 +99,17 @@ class TactileEstimator:
                              "models of one board")
         self.pose = pose
         self.contact = contact
+        self.image_position_weight = float(contact.image_position_weight if image_position_weight is None
+                                           else image_position_weight)
 
     def estimate(self, reading: TactileReading | np.ndarray) -> TactileEstimate:
-        """Angle and contact of ``reading`` (R, C, 3) uT, baseline-subtracted (ValueError for NaN or a wrong
-        shape, from either estimator; the contact estimator checks first, so its history stays unchanged)."""
+        """Angle, contact and position of ``reading`` (R, C, 3) uT, baseline-subtracted (ValueError for NaN or
+        a wrong shape, from either estimator; the contact estimator checks first, so its history stays
+        unchanged)."""
         contact = self.contact.estimate(reading)
-        return TactileEstimate(angle=self.pose.estimate(reading), contact=contact)
+        angle = self.pose.estimate(reading)
+        return TactileEstimate(angle=angle, contact=contact,
+                               position_mm=fused_position_mm(angle, contact, self.image_position_weight))
 
     def stream(self, sensor: TactileSensor, *, timeout_s: float = 0.1, max_estimates: int | None = None,
                stats: StreamStats | None = None) -> Iterator[TactileEstimate]:

@@ -33,6 +33,7 @@ DEFAULT_THRESHOLD_MM = 0.1     # pixels shallower than this are not contact
 DEFAULT_SIGMA_MM = 0.3         # Gaussian filter before PCA
 MIN_CONTACT_PX = 20            # fewer contact pixels: angle undefined
 ISOTROPY_LIMIT = 0.9           # minor/major eigenvalue ratio above this: angle undefined
+ISOTROPIC_REASON = "isotropic contact"  # how an undefined angle whose contact has a centroid begins its reason
 OUTLIER_FRACTION = 0.1         # contact regions smaller than this fraction of the largest are removed
 DEPTH_CAP_MM = 1e6             # depths are capped far above any real indentation so sums cannot overflow
 GAUSS_TRUNCATE = 4.0           # the Gaussian kernel's reach in standard deviations (scipy.ndimage's default)
@@ -153,7 +154,7 @@ def angle_from_image(depth_mm: np.ndarray, *, pixel_mm: float = 0.1, threshold_m
     major, minor = 0.5 * (sxx + syy) + radius, 0.5 * (sxx + syy) - radius
     ratio = minor / major if major > 0 else 1.0
     if ratio > p.isotropy_limit:
-        return AngleEstimate(0.0, 0.0, False, m.centroid_mm, area, f"isotropic contact (eigenvalue ratio {ratio:.2f})")
+        return AngleEstimate(0.0, 0.0, False, m.centroid_mm, area, f"{ISOTROPIC_REASON} (eigenvalue ratio {ratio:.2f})")
     angle = wrap_axial(0.5 * math.atan2(2.0 * sxy, sxx - syy))
     return AngleEstimate(angle, min(max(1.0 - ratio, 0.0), 1.0), True, m.centroid_mm, area)
 

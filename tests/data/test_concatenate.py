@@ -70,6 +70,22 @@ def test_load_datasets_reads_one_or_several_files(tmp_path):
         load_datasets([])
 
 
+def test_labelled_presses_with_and_without_images_join_when_images_are_left_unread(tmp_path):
+    import dataclasses
+
+    targets = {"targets": np.arange(12, dtype=np.float32).reshape(6, 2), "target_names": ("x_mm", "force_n")}
+    pictured = dataclasses.replace(_data(6, ["x"]), **targets)
+    bare = dataclasses.replace(_data(6, ["y"], seed=1), images=None, **targets)
+    pa, pb = save_dataset(tmp_path / "a.npz", pictured), save_dataset(tmp_path / "b.npz", bare)
+    with pytest.raises(DatasetError, match="images"):
+        load_datasets([pa, pb])
+    both = load_datasets([pa, pb], images=False)
+    assert not both.has_images and len(both) == 12
+    np.testing.assert_array_equal(both.targets, np.concatenate([pictured.targets, bare.targets]))
+    # images without targets are all such a dataset holds: they stay
+    assert load_datasets([save_dataset(tmp_path / "c.npz", _data(3, ["z"]))], images=False).has_images
+
+
 def test_select_drops_flagged_presses_and_keeps_data_without_the_flag():
     torch = pytest.importorskip("torch", reason=TORCH_MISSING)  # noqa: F841 (learning.data imports torch)
     from tactile_manip.learning.data import select

@@ -77,3 +77,29 @@ def test_training_reads_the_presses_through_new_chips(pressed, tmp_path) -> None
     old = save_dataset(tmp_path / "old.npz", dataclasses.replace(pressed, extras=extras))
     with pytest.raises(DatasetError, match="field_clean_ut"):
         train_angle_head(cfg, [old], tmp_path / "run_old")
+
+
+def test_contact_training_reads_the_presses_of_each_dataset_through_new_chips(pressed, tmp_path) -> None:
+    pytest.importorskip("torch", reason=TORCH_MISSING)
+    from tactile_manip.data import load_datasets
+    from tactile_manip.learning.contact_train import ContactTrainConfig, _train_noise, split_indices, train_contact
+
+    first = save_dataset(tmp_path / "first.npz", pressed)
+    second = save_dataset(tmp_path / "second.npz", pressed.subset(np.arange(20, 40)))
+    joined = load_datasets([first, second], images=False)
+    train_idx, _ = split_indices(joined, 0.1)
+    noise = _train_noise([first, second], train_idx)
+    # each part's presses in the joined train split's order: the clean reading of the same press
+    np.testing.assert_array_equal(noise.clean_ut, joined.extra("field_clean_ut")[train_idx])
+    np.testing.assert_array_equal(noise.stored_ut, joined.readings[train_idx])
+    cfg = ContactTrainConfig(hidden=16, layers=1, members=1, epochs=3, batch_size=8, patience=3, threads=1,
+                             context_frames=1, redraw_noise=True, sigma_map=False)
+    summary = train_contact(cfg, [first, second], tmp_path / "run")
+    assert summary["train_config"]["redraw_noise"] and summary["members"][0]["epochs_run"] == 3
+    assert np.isfinite([row["loss"] for row in summary["members"][0]["history"]]).all()
+    extras = {k: v for k, v in pressed.extras.items() if k != "field_clean_ut"}
+    old = save_dataset(tmp_path / "old.npz", dataclasses.replace(pressed, extras=extras))
+    with pytest.raises(DatasetError, match="field_clean_ut"):
+        train_contact(cfg, [old], tmp_path / "run_old")
+    with pytest.raises(ValueError, match="context_frames = 1"):
+        ContactTrainConfig(context_frames=3, redraw_noise=True)

@@ -217,7 +217,7 @@ def test_one_reading_gives_angle_and_contact_with_the_pose_estimator(tmp_path, c
     from tactile_manip.learning.contact_export import export_contact_onnx
     from tactile_manip.learning.contact_train import ContactTrainConfig, train_contact
     from tactile_manip.perception import TactilePoseEstimator, load_reconstructor
-    from tactile_manip.perception.contact_pose import TactileEstimate, TactileEstimator
+    from tactile_manip.perception.contact_pose import TactileEstimate, TactileEstimator, image_centroid_mm
     from tactile_manip.types import AngleEstimate
 
     rng = np.random.default_rng(0)
@@ -232,12 +232,24 @@ def test_one_reading_gives_angle_and_contact_with_the_pose_estimator(tmp_path, c
     export_contact_onnx(tmp_path / "run" / "best.pt", tmp_path / "board.onnx")
     pose = TactilePoseEstimator(load_reconstructor("bilinear"))
     both = TactileEstimator(pose, ContactEstimator(tmp_path / "board.onnx"))
+    assert both.image_position_weight == 0.0  # a model exported without a share: its own position
+    export_contact_onnx(tmp_path / "run" / "best.pt", tmp_path / "shared.onnx", image_position_weight=0.25)
+    assert TactileEstimator(pose, ContactEstimator(tmp_path / "shared.onnx")).image_position_weight == 0.25
+    assert TactileEstimator(pose, ContactEstimator(tmp_path / "shared.onnx"),
+                            image_position_weight=1.0).image_position_weight == 1.0
+    with pytest.raises(ValueError, match="image_position_weight"):
+        export_contact_onnx(tmp_path / "run" / "best.pt", tmp_path / "bad.onnx", image_position_weight=2.0)
+    assert not (tmp_path / "bad.onnx").exists()
     est = both.estimate(readings[3])
     assert isinstance(est, TactileEstimate) and isinstance(est.angle, AngleEstimate)
     alone = ContactEstimator(tmp_path / "board.onnx").estimate(readings[3])
     assert est.contact.force_n == pytest.approx(alone.force_n, rel=1e-6) and est.contact.force_sigma_n > 0
     with pytest.raises(ValueError, match="one board"):
         TactileEstimator(pose, ContactEstimator(contact_model_files[2]))
+    # a force-only model gives no position: where the contact is comes from the image alone
+    assert est.position_mm == image_centroid_mm(est.angle)
+    with pytest.raises(ValueError, match="image_position_weight"):
+        TactileEstimator(pose, ContactEstimator(tmp_path / "board.onnx"), image_position_weight=1.5)
 
 
 def test_a_model_with_a_sigma_map_reports_the_mapped_sigma(contact_model_of_layout) -> None:

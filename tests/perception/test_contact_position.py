@@ -1,0 +1,43 @@
+"""Where the contact is: the image's centroid and the contact model's position, weighted; either alone where
+the other has none."""
+
+from __future__ import annotations
+
+import pytest
+
+from tactile_manip.perception.contact import ContactState
+from tactile_manip.perception.contact_pose import fused_position_mm, image_centroid_mm
+from tactile_manip.perception.pose import ISOTROPIC_REASON, angle_from_image
+from tactile_manip.types import AngleEstimate
+
+LINE = AngleEstimate(0.3, 0.9, True, centroid_mm=(2.0, -1.0), area_mm2=12.0)
+TOUCH = ContactState(in_contact=True, x_mm=1.0, y_mm=1.0, x_sigma_mm=0.5, y_sigma_mm=0.5)
+
+
+def test_both_estimates_are_weighted_by_the_images_share() -> None:
+    assert fused_position_mm(LINE, TOUCH, 0.7) == pytest.approx((0.7 * 2.0 + 0.3 * 1.0, 0.7 * -1.0 + 0.3 * 1.0))
+    assert fused_position_mm(LINE, TOUCH, 1.0) == pytest.approx((2.0, -1.0))
+    assert fused_position_mm(LINE, TOUCH, 0.0) == pytest.approx((1.0, 1.0))
+
+
+def test_either_alone_where_the_other_sees_no_contact() -> None:
+    empty = AngleEstimate(0.0, 0.0, False, area_mm2=0.0, reason="empty contact")
+    small = AngleEstimate(0.0, 0.0, False, area_mm2=0.1, reason="contact too small (3 px after filtering < 20)")
+    assert fused_position_mm(empty, TOUCH, 0.7) == (1.0, 1.0)
+    assert fused_position_mm(small, TOUCH, 0.7) == (1.0, 1.0)  # its centroid is no centroid
+    lifted = ContactState(in_contact=False, x_mm=4.0, y_mm=4.0)
+    assert fused_position_mm(LINE, lifted, 0.7) == (2.0, -1.0)
+    force_only = ContactState(in_contact=True, force_n=3.0)
+    assert fused_position_mm(LINE, force_only, 0.7) == (2.0, -1.0)
+    assert fused_position_mm(empty, lifted, 0.7) is None
+
+
+def test_an_isotropic_contact_has_no_angle_but_keeps_its_centroid() -> None:
+    import numpy as np
+
+    y, x = np.mgrid[:200, :200]
+    disc = np.clip(1.0 - ((x - 130) ** 2 + (y - 100) ** 2) / 30.0 ** 2, 0, None)  # a round press right of centre
+    est = angle_from_image(disc, pixel_mm=0.1)
+    assert not est.defined and est.reason.startswith(ISOTROPIC_REASON)
+    assert image_centroid_mm(est) == pytest.approx((3.05, -0.05), abs=0.01)
+    assert fused_position_mm(est, TOUCH, 0.5) == pytest.approx(((3.05 + 1.0) / 2, (-0.05 + 1.0) / 2), abs=0.01)
