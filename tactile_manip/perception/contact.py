@@ -138,7 +138,10 @@ class ContactEstimator:
         self.sigma_maps: dict[int, SigmaCalibration] = {self.target_names.index(n): m for n, m in maps.items()}
         self.board_layout = str(self.metadata.get("board_layout", ""))
         #: the image centroid's share in a TactileEstimator's position (0: this model's position alone)
-        self.image_position_weight = float(self.metadata.get("image_position_weight", 0.0))
+        weight = self.metadata.get("image_position_weight", 0.0)
+        if not (isinstance(weight, (int, float)) and 0.0 <= weight <= 1.0):
+            raise ModelFileError(f"{self.path}: its image_position_weight {weight!r} is not a share in [0, 1]")
+        self.image_position_weight = float(weight)
         self.min_field_ut = float(min_field_ut)
         ort = require("onnxruntime", "running a contact model")
         try:

@@ -171,6 +171,18 @@ def test_a_graph_without_the_exported_inputs_and_outputs_is_refused(tmp_path, co
         ContactEstimator(tmp_path / "renamed.onnx")
 
 
+def test_a_stored_image_share_outside_0_to_1_is_refused(tmp_path, contact_model_files) -> None:
+    onnx = pytest.importorskip("onnx", reason="rewriting the metadata needs onnx")
+    import json
+
+    proto = onnx.load(str(contact_model_files[2]))
+    entry = next(e for e in proto.metadata_props if e.key == "tactile_manip")
+    entry.value = json.dumps(json.loads(entry.value) | {"image_position_weight": 1.5})
+    onnx.save(proto, str(tmp_path / "share.onnx"))
+    with pytest.raises(ModelFileError, match="share.onnx.*image_position_weight 1.5"):
+        ContactEstimator(tmp_path / "share.onnx")
+
+
 def test_missing_foreign_and_image_model_files_are_one_clear_error(tmp_path) -> None:
     with pytest.raises(ModelFileError, match="not found: .*nothere.onnx"):
         ContactEstimator(tmp_path / "nothere.onnx")
