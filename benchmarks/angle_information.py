@@ -121,7 +121,7 @@ def _information(job: dict[str, Any]) -> dict[str, Any]:
         # central where the shape allows both sides, else one-sided (an 8 mm rod is the largest one can make)
         for hi, lo in ((1, -1), (1, 0), (0, -1)):
             try:
-                shapes = [make_indenter(job["kind"], **(sizes | {name: sizes[name] + k * SHAPE_STEP_MM}))
+                shapes = [make_indenter(job["kind"], **(job["kwargs"] | {name: sizes[name] + k * SHAPE_STEP_MM}))
                           for k in (hi, lo)]
             except ValueError:
                 continue
@@ -164,16 +164,21 @@ def bounds_deg(info: dict[str, Any], frames: int, drift: bool) -> tuple[float, .
     fisher = jac.T @ (jac / var[:, None])
     out = []
     for n in (1, 1 + len(POSE_NUISANCES), 1 + len(POSE_NUISANCES) + len(SENSOR_NUISANCES), fisher.shape[0]):
-        info = fisher[0, 0]
+        # the angle's information left once the nuisances are estimated too: the Schur complement of their block,
+        # through a pseudo-inverse. The block can be singular: a nuisance that does not move the reading (a
+        # rod's far end off the pad; the offset along a centred bar) or two that move it alike. A matrix inverse
+        # fails there; projecting the nuisances out gives the angle what the reading carries. Columns are scaled
+        # to unit information first (their units differ: mm, N, rad, T, kPa).
+        angle_info = fisher[0, 0]
         nuisance, cross = fisher[1:n, 1:n], fisher[0, 1:n]
         scale = np.sqrt(np.diag(nuisance))
-        moves = scale > 0  # a nuisance that does not move the reading (a rod's far end off the pad) costs nothing
+        moves = scale > 0
         if moves.any():
             unit = scale[moves]
             corr = nuisance[np.ix_(moves, moves)] / np.outer(unit, unit)
             c = cross[moves] / unit
-            info -= float(c @ np.linalg.pinv(corr, rcond=1e-10, hermitian=True) @ c)  # the Schur complement
-        out.append(math.degrees(1.0 / math.sqrt(info)) if info > 0 else math.inf)
+            angle_info -= float(c @ np.linalg.pinv(corr, rcond=1e-10, hermitian=True) @ c)
+        out.append(math.degrees(1.0 / math.sqrt(angle_info)) if angle_info > 0 else math.inf)
     return tuple(out)
 
 
@@ -223,7 +228,7 @@ def markdown(report: dict[str, Any]) -> str:
                   "| within 5 / 2 deg |", "|---|---|---|---|---|---|---|---|---|---|"]
         for name, r in groups.items():
             cells = [f"{r[f'{b}_median_sigma_deg']:.2f} | {r[f'{b}_within_5']:.1%} / {r[f'{b}_within_2']:.1%}"
-                     if f"{b}_median_sigma_deg" in r else " | " for b in BOUNDS]  # reports made before a bound existed
+                     if f"{b}_median_sigma_deg" in r else " | " for b in BOUNDS]  # a report without this bound
             lines.append(f"| {name} | {r['presses']} | " + " | ".join(cells) + " |")
         lines.append("")
     lines.append("The shares are upper bounds for efficient unbiased estimators (erf of the tolerance over the "

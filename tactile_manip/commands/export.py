@@ -14,9 +14,22 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 
 
-CHECKPOINT_ONLY = ("data", "metrics", "pixel_mm", "card", "history", "table", "latency", "attach_to")
+CHECKPOINT_ONLY = ("data", "metrics", "pixel_mm", "card", "history", "table", "latency", "attach_to",
+                   "image_position_weight")
+
+
+def share(text: str) -> float:
+    """A number in [0, 1] (argparse type)."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not 0.0 <= value <= 1.0:
+        raise argparse.ArgumentTypeError(f"expected a share from 0 to 1, got {text!r}")
+    return value
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -36,7 +49,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--head-symmetries", type=int, choices=(1, 8), default=8,
                    help="with --attach-to: read each reading in the board's 8 symmetric copies and average their "
                         "axes (default), or once (1)")
-    p.add_argument("--image-position-weight", type=float, default=None, metavar="W",
+    p.add_argument("--image-position-weight", type=share, default=None, metavar="W",
                    help="contact models: the reconstructed image's share in the position that TactileEstimator "
                         "gives with this model (0-1; benchmarks/contact_position_fusion.py chooses it on "
                         "validation presses); default: the contact model's position alone")
@@ -104,6 +117,9 @@ def _export_checkpoint(args: argparse.Namespace) -> int:
     require("onnxruntime", "export's parity check")
     check_output_file(args.out, force=args.force)
     kind = _checkpoint_kind(args.checkpoint)
+    if args.image_position_weight is not None and kind != "contact":
+        raise ValueError(f"--image-position-weight is for a contact model's checkpoint; {args.checkpoint} is a "
+                         f"{kind} checkpoint")
     if kind == "angle_head":
         return _attach_angle_head(args)
     if args.attach_to is not None:

@@ -99,8 +99,9 @@ def load_dataset(path: str | Path, *, images: bool = True) -> PairedDataset:
     every shard of a shard folder (:mod:`tactile_manip.data.shards`) joined into one dataset in memory.
 
     ``images=False`` leaves the images of a labelled-press dataset unread (a file's image array is not
-    decompressed): what a consumer of readings and targets needs, in a fraction of the memory. A dataset
-    without targets keeps its images, since it would hold nothing else.
+    decompressed; a shard folder's are read, then dropped): what a consumer of readings and targets needs, in
+    a fraction of the memory. Its fingerprint is then that of the data without images. A dataset without
+    targets keeps its images, since it would hold nothing else.
 
     Raises:
         DatasetError: missing file, not a numpy file, not a dataset of ours, missing arrays, inconsistent

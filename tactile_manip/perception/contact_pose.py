@@ -36,7 +36,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from tactile_manip.perception.contact import ContactEstimator, ContactState
-from tactile_manip.perception.estimator import StreamStats, TactilePoseEstimator, stream_estimates
+from tactile_manip.perception.estimator import (NO_CONTACT_FIELD, StreamStats, TactilePoseEstimator,
+                                                 stream_estimates)
 from tactile_manip.perception.pose import ISOTROPIC_REASON
 from tactile_manip.types import AngleEstimate, TactileReading
 
@@ -54,18 +55,29 @@ class TactileEstimate:
     position_mm: tuple[float, float] | None = None
 
 
-def image_centroid_mm(angle: AngleEstimate) -> tuple[float, float] | None:
-    """The reconstructed contact's centroid, where the image has a contact (an isotropic one too), else None."""
+def image_centroid_mm(angle: AngleEstimate, min_area_mm2: float = 0.0) -> tuple[float, float] | None:
+    """The reconstructed contact's centroid, where the image holds a contact of at least ``min_area_mm2`` (the
+    pose estimator's smallest contact: ``min_contact_px`` pixels), else None.
+
+    An isotropic contact has a centroid but no angle. An estimate whose angle came from the angle head is
+    defined even where the image's contact is too small to have a centroid; its area tells.
+    """
+    if angle.area_mm2 <= 0.0 or angle.area_mm2 < min_area_mm2:
+        return None
     if angle.defined or angle.reason.startswith(ISOTROPIC_REASON):
         return angle.centroid_mm
     return None
 
 
-def fused_position_mm(angle: AngleEstimate, contact: ContactState, image_weight: float
-                      ) -> tuple[float, float] | None:
+def fused_position_mm(angle: AngleEstimate, contact: ContactState, image_weight: float,
+                      min_area_mm2: float = 0.0) -> tuple[float, float] | None:
     """``image_weight`` times the image's centroid plus the rest times the contact model's position; either
-    alone where the other has none (the contact model's only while it reports a contact)."""
-    image = image_centroid_mm(angle)
+    alone where the other has none (the contact model's only while it reports a contact). None where the
+    reading's field is below the pose estimator's ``min_field_ut``: a contact model trained on presses only
+    reports a contact on an empty pad."""
+    if angle.reason == NO_CONTACT_FIELD:
+        return None
+    image = image_centroid_mm(angle, min_area_mm2)
     model = contact.position_mm if contact.in_contact else None
     if image is None or model is None:
         return image or model
@@ -101,6 +113,7 @@ class TactileEstimator:
         self.contact = contact
         self.image_position_weight = float(contact.image_position_weight if image_position_weight is None
                                            else image_position_weight)
+        self._min_area_mm2 = pose.params.min_contact_px * rec.pixel_mm ** 2  # the image's smallest contact
 
     def estimate(self, reading: TactileReading | np.ndarray) -> TactileEstimate:
         """Angle, contact and position of ``reading`` (R, C, 3) uT, baseline-subtracted (ValueError for NaN or
@@ -109,7 +122,8 @@ class TactileEstimator:
         contact = self.contact.estimate(reading)
         angle = self.pose.estimate(reading)
         return TactileEstimate(angle=angle, contact=contact,
-                               position_mm=fused_position_mm(angle, contact, self.image_position_weight))
+                               position_mm=fused_position_mm(angle, contact, self.image_position_weight,
+                                                             self._min_area_mm2))
 
     def stream(self, sensor: TactileSensor, *, timeout_s: float = 0.1, max_estimates: int | None = None,
                stats: StreamStats | None = None) -> Iterator[TactileEstimate]:

@@ -61,6 +61,7 @@ from tactile_manip.types import AngleEstimate, TactileReading
 
 T = TypeVar("T")
 ANGLE_SOURCES = ("auto", "image", "head", "likelier")
+NO_CONTACT_FIELD = "no contact field"  # the reason of a reading whose field is below the estimator's min_field_ut
 
 if TYPE_CHECKING:  # the sensors layer is only needed for type hints here
     from tactile_manip.sensors.base import TactileSensor
@@ -230,7 +231,7 @@ class TactilePoseEstimator:
         fraction of chips (``flags`` (R, C, A)); with an angle head, the head's reading of ``field`` in its place
         or weighed against it (:meth:`_with_head`); calibrated last when the estimator has a calibration."""
         if not contact:
-            return AngleEstimate(0.0, 0.0, False, reason="no contact field")
+            return AngleEstimate(0.0, 0.0, False, reason=NO_CONTACT_FIELD)
         est = angle_from_image(rec.depth_mm, pixel_mm=self.reconstructor.pixel_mm, params=self.params)
         if est.defined:
             confidence = est.confidence

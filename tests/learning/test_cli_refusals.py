@@ -124,6 +124,18 @@ def test_inception_onnx_that_is_another_model_is_one_line(run, tiny_data, tmp_pa
     assert_one_line_error(capsys.readouterr().err, "evaluate", "not a readable ONNX model")
 
 
+def test_export_refuses_an_image_share_for_an_image_model_or_outside_0_to_1(run, capsys):
+    out = run / "share.onnx"
+    assert main(["export", "--checkpoint", str(run / "run" / "best.pt"), "--out", str(out),
+                 "--image-position-weight", "0.5"]) == 2
+    assert_one_line_error(capsys.readouterr().err, "export", "for a contact model's checkpoint")
+    with pytest.raises(SystemExit):  # argparse: usage and exit 2, before anything is read
+        main(["export", "--checkpoint", str(run / "run" / "best.pt"), "--out", str(out),
+              "--image-position-weight", "1.5"])
+    assert "expected a share from 0 to 1, got '1.5'" in capsys.readouterr().err
+    assert not out.exists()
+
+
 def test_evaluate_refuses_to_replace_an_earlier_report_without_force(tiny_data, tmp_path, capsys):
     out = tmp_path / "eval"
     out.mkdir()

@@ -7,6 +7,7 @@ import pytest
 
 from tactile_manip.perception.contact import ContactState
 from tactile_manip.perception.contact_pose import fused_position_mm, image_centroid_mm
+from tactile_manip.perception.estimator import NO_CONTACT_FIELD
 from tactile_manip.perception.pose import ISOTROPIC_REASON, angle_from_image
 from tactile_manip.types import AngleEstimate
 
@@ -18,6 +19,21 @@ def test_both_estimates_are_weighted_by_the_images_share() -> None:
     assert fused_position_mm(LINE, TOUCH, 0.7) == pytest.approx((0.7 * 2.0 + 0.3 * 1.0, 0.7 * -1.0 + 0.3 * 1.0))
     assert fused_position_mm(LINE, TOUCH, 1.0) == pytest.approx((2.0, -1.0))
     assert fused_position_mm(LINE, TOUCH, 0.0) == pytest.approx((1.0, 1.0))
+
+
+def test_no_position_where_the_field_is_below_the_pose_estimators_contact_rule() -> None:
+    # a contact model trained on presses only says "in contact" on an empty pad; the field rule says not
+    nothing = AngleEstimate(0.0, 0.0, False, reason=NO_CONTACT_FIELD)
+    assert fused_position_mm(nothing, TOUCH, 0.5) is None
+
+
+def test_a_head_angle_over_an_image_too_small_for_a_centroid_keeps_the_models_position() -> None:
+    # the head defines the angle of a faint contact whose image holds 5 pixels: its centroid is no centroid
+    head = AngleEstimate(0.4, 0.8, True, centroid_mm=(0.0, 0.0), area_mm2=5 * 0.01, source="head")
+    assert image_centroid_mm(head, min_area_mm2=20 * 0.01) is None
+    assert fused_position_mm(head, TOUCH, 0.5, min_area_mm2=20 * 0.01) == (1.0, 1.0)
+    uniform = AngleEstimate(0.4, 0.8, True, area_mm2=0.0, source="head")  # nothing above the background
+    assert fused_position_mm(uniform, TOUCH, 0.5) == (1.0, 1.0)
 
 
 def test_either_alone_where_the_other_sees_no_contact() -> None:

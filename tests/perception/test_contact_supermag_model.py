@@ -49,3 +49,27 @@ def test_simulated_cylinder_presses_give_forces_that_rise_with_the_press() -> No
         assert state.force_sigma_n > 0 and np.isfinite(state.force_n)
         forces.append(state.force_n)
     assert forces[0] < forces[1] < forces[2]
+
+
+def test_with_the_pose_model_the_position_lies_between_the_image_and_the_model_and_is_none_on_an_empty_pad() -> None:
+    from tactile_manip.perception import TactilePoseEstimator, load_reconstructor
+    from tactile_manip.perception.contact_pose import TactileEstimator
+    from tactile_manip.sim.objects import IndenterPose
+    from tactile_manip.sim.pair import SensorPair
+    from tactile_manip.sim.shapes import make_indenter
+
+    both = TactileEstimator(TactilePoseEstimator(load_reconstructor(MODELS / "supermag.onnx")),
+                            ContactEstimator(MODEL))
+    assert both.image_position_weight == 0.5  # stored in the shipped file
+    assert both.estimate(np.zeros((4, 4, 3), np.float32)).position_mm is None
+    press = SensorPair().press(make_indenter("hex_bar", size_mm=4.0), IndenterPose(x_mm=2.0, y_mm=-1.0, yaw_rad=0.5),
+                               8.0, np.random.default_rng(0))
+    est = both.estimate(press.field_ut.astype(np.float32))
+    image, model = np.array(est.angle.centroid_mm), np.array(est.contact.position_mm)
+    np.testing.assert_allclose(est.position_mm, (image + model) / 2, atol=1e-9)
+    assert np.hypot(*(np.array(est.position_mm) - press.pressure.centroid_mm)) < 1.0  # the centre of pressure
+    # a tenth of that press is under the pose estimator's 20 uT field rule: the contact model still says "in
+    # contact" (it never saw an empty pad), and the position follows the field rule
+    faint = both.estimate((press.field_ut * 0.1).astype(np.float32))
+    assert faint.contact.in_contact and faint.angle.reason == "no contact field"
+    assert faint.position_mm is None
