@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
-from benchmarks._common import machine_info, publish
+from benchmarks._common import fit_best_mse, machine_info, publish
 from tactile_manip.data import load_datasets
 from tactile_manip.perception.reconstruct import OnnxReconstructor
 
@@ -54,27 +54,13 @@ def train_and_test(x: np.ndarray, y: np.ndarray, train: np.ndarray, val: np.ndar
                               torch.nn.Linear(width, width), torch.nn.GELU(), torch.nn.Linear(width, y.shape[1]))
     opt = torch.optim.AdamW(net.parameters(), 1e-3, weight_decay=1e-3)
     sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, epochs)
-    rows = torch.from_numpy(train)
-    best = (np.inf, None, 0)
-    for epoch in range(epochs):
-        net.train()
-        for batch in rows[torch.randperm(len(rows))].split(128):
-            loss = ((net(xs[batch]) - yt[batch]) ** 2).mean()
-            opt.zero_grad()
-            loss.backward()
-            opt.step()
-        sched.step()
-        net.eval()
-        with torch.no_grad():
-            val_mse = float(((net(xs[val]) - yt[val]) ** 2).mean())
-        if val_mse < best[0]:
-            best = (val_mse, {k: v.clone() for k, v in net.state_dict().items()}, epoch + 1)
-    net.load_state_dict(best[1])
+    best_epoch = fit_best_mse(net, opt, sched, xs, yt, train, val, epochs=epochs, batch_size=128)
     net.eval()
     with torch.no_grad():
         err = net(xs[test]).numpy() * ys + ym - y[test]
-    return {"best_epoch": best[2], "rmse": {n: float(np.sqrt(np.mean(err[:, k] ** 2))) for k, n in enumerate(TARGETS)},
-            "rmse_2d_mm": float(np.sqrt(np.mean(err[:, 0] ** 2 + err[:, 1] ** 2)))}
+    rmse = {n: float(np.sqrt(np.mean(err[:, k] ** 2))) for k, n in enumerate(TARGETS)}
+    position = float(np.sqrt(np.mean(err[:, 0] ** 2 + err[:, 1] ** 2)))
+    return {"best_epoch": best_epoch, "rmse": rmse, "rmse_2d_mm": position}
 
 
 def compute(args: argparse.Namespace) -> dict[str, Any]:

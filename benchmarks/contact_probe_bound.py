@@ -32,7 +32,7 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks._common import machine_info, publish
+from benchmarks._common import fit_best_mse, machine_info, publish
 from tactile_manip.data import load_dataset
 from tactile_manip.sim.dataset import load_dataset_config
 from tactile_manip.sim.objects import IndenterPose
@@ -96,22 +96,10 @@ def plain_mlp(readings: np.ndarray, targets: np.ndarray, split: np.ndarray, *, e
     opt = torch.optim.Adam(net.parameters(), lr=1e-3)
     sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, epochs)
     gen = torch.Generator().manual_seed(seed)
-    xt, yt, best = z[tr], y[tr], (math.inf, 0, None)
-    for epoch in range(1, epochs + 1):
-        for batch in torch.randperm(len(xt), generator=gen).split(200):
-            loss = ((net(xt[batch]) - yt[batch]) ** 2).mean()
-            opt.zero_grad()
-            loss.backward()
-            opt.step()
-        sched.step()
-        with torch.no_grad():
-            val = float(((net(z[va]) - y[va]) ** 2).mean())
-        if val < best[0]:
-            best = (val, epoch, {k: v.clone() for k, v in net.state_dict().items()})
-    net.load_state_dict(best[2])
+    best_epoch = fit_best_mse(net, opt, sched, z, y, tr, va, epochs=epochs, batch_size=200, gen=gen)
     with torch.no_grad():
         pred = net(z).numpy() * ys + ym
-    out: dict[str, Any] = {"best_epoch": best[1]}
+    out: dict[str, Any] = {"best_epoch": best_epoch}
     for name in ("val", "test"):
         err = pred[split == name] - targets[split == name]
         out[name] = {"x_mm": float(np.sqrt((err[:, 0] ** 2).mean())), "y_mm": float(np.sqrt((err[:, 1] ** 2).mean())),
