@@ -35,12 +35,12 @@ from tactile_manip.perception.reconstruct import OnnxReconstructor
 
 
 def positions(data, index: np.ndarray, pose: TactilePoseEstimator, contact: ContactEstimator
-              ) -> tuple[np.ndarray, np.ndarray]:
-    """(n, 2) mm: the image's centroid (NaN where the image has no contact) and the contact model's position."""
-    min_area_mm2 = pose.params.min_contact_px * pose.reconstructor.pixel_mm ** 2  # as TactileEstimator
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(n, 2) mm each: the image's centroid (NaN where the image has no contact), the contact model's position
+    and its sigma."""
     image = np.full((len(index), 2), np.nan)
     for k, i in enumerate(tqdm(index, desc="reconstructing", leave=False)):
-        c = image_centroid_mm(pose.estimate(data.readings[i]), min_area_mm2)
+        c = image_centroid_mm(pose.estimate(data.readings[i]), pose.min_contact_area_mm2)
         if c is not None:
             image[k] = c
     mean, sigma = model_predictions(contact, data, index)

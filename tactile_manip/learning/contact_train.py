@@ -21,6 +21,7 @@ member's curve and the validation RMSE per target of the mixture.
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 import time
@@ -33,7 +34,7 @@ import numpy as np
 import torch
 
 from tactile_manip.config import to_dict
-from tactile_manip.data import PairedDataset, load_dataset, load_datasets
+from tactile_manip.data import PairedDataset, load_datasets
 from tactile_manip.errors import ConfigError, DatasetError
 from tactile_manip.learning.contact_model import (ContactModel, ContactModelConfig, GaussianMLP, count_parameters,
                                                   frame_features)
@@ -160,20 +161,20 @@ def train_contact(cfg: ContactTrainConfig, data_paths: list[str | Path], out: st
         model.set_normalisation(frame_features(windows[train_idx], mcfg), targets[train_idx])
         z = model.standardised_features(windows)
         y = (targets - model.target_offset) / model.target_scale
-    noise = _train_noise(data_paths, train_idx) if cfg.redraw_noise else None
+    noise = ChipNoise.of(data, train_idx) if cfg.redraw_noise else None
     if on_start:
         on_start(cfg.members * cfg.epochs)
     start = time.perf_counter()
     curves = []
-    for m in range(cfg.members):
-        fresh = None
-        if noise is not None:
-            rng = np.random.default_rng(cfg.seed * 1000 + m)
 
-            def fresh(noise: ChipNoise = noise, rng: np.random.Generator = rng) -> torch.Tensor:
-                with torch.no_grad():
-                    return model.standardised_features(torch.from_numpy(noise.draw(rng))[:, None])
-        member, curve = _train_member(cfg, mcfg, z, y, train_idx, val_idx, seed=cfg.seed * 1000 + m, fresh=fresh,
+    @torch.no_grad()
+    def fresh(rng: np.random.Generator) -> torch.Tensor:  # the training presses' features through new chips
+        return model.standardised_features(torch.from_numpy(noise.draw(rng))[:, None])
+
+    for m in range(cfg.members):
+        seed = cfg.seed * 1000 + m
+        redraw = None if noise is None else functools.partial(fresh, np.random.default_rng(seed))
+        member, curve = _train_member(cfg, mcfg, z, y, train_idx, val_idx, seed=seed, fresh=redraw,
                                       progress=(lambda row, m=m: progress({"member": m, **row})) if progress else None)
         model.members[m].load_state_dict(member.state_dict())
         curves.append(curve)
@@ -201,17 +202,6 @@ def train_contact(cfg: ContactTrainConfig, data_paths: list[str | Path], out: st
     tmp.replace(out / "best.pt")
     (out / "history.json").write_text(json.dumps(summary, indent=1))
     return summary
-
-
-def _train_noise(paths: list[str | Path], train_idx: np.ndarray) -> ChipNoise:
-    """The train split's chip noise, dataset by dataset (each with its own chip settings), in the order of
-    ``train_idx`` over the datasets joined."""
-    noise = ChipNoise.concatenate([ChipNoise.of(d, d.indices("train")) for d in
-                                   (load_dataset(p, images=False) for p in paths)])
-    if len(noise) != len(train_idx):
-        raise DatasetError("redraw_noise needs datasets with a val split, as simulated ones have; these have "
-                           "none, so the validation samples come out of the train split")
-    return noise
 
 
 def _input_record(data: PairedDataset, cfg: ContactTrainConfig) -> dict[str, Any]:

@@ -39,8 +39,9 @@ class ChipNoise:
     at_rail: np.ndarray       # (N,) bool: a channel at the register's rail
 
     @classmethod
-    def of(cls, data: PairedDataset, idx: np.ndarray) -> ChipNoise:
-        """The presses ``idx`` of a simulated dataset.
+    def of(cls, data: PairedDataset, idx: np.ndarray, provenance: dict | None = None) -> ChipNoise:
+        """The presses ``idx`` (ascending) of a simulated dataset, or of several joined
+        (:func:`~tactile_manip.data.concatenate`: each part's presses with its own chip settings).
 
         Raises:
             DatasetError: the dataset has no clean readings (made before they were stored, or not simulated).
@@ -52,9 +53,14 @@ class ChipNoise:
             raise DatasetError("drawing the chips' noise afresh needs the readings without noise "
                                "('field_clean_ut'), which `tactile-manip simulate` stores; this dataset has none: "
                                "simulate it again, or train with redraw_noise = false")
-        chip = from_dict(DatasetConfig, data.provenance["config"], where="the dataset's provenance").sim.chip
+        provenance = data.provenance if provenance is None else provenance
+        if "config" not in provenance and "parts" in provenance:
+            ends = np.cumsum([part["samples"] for part in provenance["parts"]])
+            return cls.concatenate([cls.of(data, idx[(idx >= end - part["samples"]) & (idx < end)], part)
+                                    for part, end in zip(provenance["parts"], ends)])
+        chip = from_dict(DatasetConfig, provenance["config"], where="the dataset's provenance").sim.chip
         levels = np.tile(np.array([[chip.noise_xy_ut, chip.noise_z_ut, chip.drift_ut]], np.float32), (len(idx), 1))
-        names = list(data.provenance.get("sensor_param_names", []))
+        names = list(provenance.get("sensor_param_names", []))
         if data.has("sensor_params"):
             drawn = data.extra("sensor_params")[idx]
             for k, name in enumerate(NOISE_PARAMS):

@@ -57,7 +57,7 @@ class TactileEstimate:
 
 def image_centroid_mm(angle: AngleEstimate, min_area_mm2: float = 0.0) -> tuple[float, float] | None:
     """The reconstructed contact's centroid, where the image holds a contact of at least ``min_area_mm2`` (the
-    pose estimator's smallest contact: ``min_contact_px`` pixels), else None.
+    pose estimator's smallest, :attr:`TactilePoseEstimator.min_contact_area_mm2`), else None.
 
     An isotropic contact has a centroid but no angle. An estimate whose angle came from the angle head is
     defined even where the image's contact is too small to have a centroid; its area tells.
@@ -113,7 +113,6 @@ class TactileEstimator:
         self.contact = contact
         self.image_position_weight = float(contact.image_position_weight if image_position_weight is None
                                            else image_position_weight)
-        self._min_area_mm2 = pose.params.min_contact_px * rec.pixel_mm ** 2  # the image's smallest contact
 
     def estimate(self, reading: TactileReading | np.ndarray) -> TactileEstimate:
         """Angle, contact and position of ``reading`` (R, C, 3) uT, baseline-subtracted (ValueError for NaN or
@@ -123,7 +122,7 @@ class TactileEstimator:
         angle = self.pose.estimate(reading)
         return TactileEstimate(angle=angle, contact=contact,
                                position_mm=fused_position_mm(angle, contact, self.image_position_weight,
-                                                             self._min_area_mm2))
+                                                             self.pose.min_contact_area_mm2))
 
     def stream(self, sensor: TactileSensor, *, timeout_s: float = 0.1, max_estimates: int | None = None,
                stats: StreamStats | None = None) -> Iterator[TactileEstimate]:

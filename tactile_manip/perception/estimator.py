@@ -156,6 +156,12 @@ class TactilePoseEstimator:
         self._tolerance_rad = math.radians(calibration.tolerance_deg if calibration is not None else 5.0)
 
     @property
+    def min_contact_area_mm2(self) -> float:
+        """The smallest contact the image route measures (``params.min_contact_px`` pixels): an estimate's
+        ``area_mm2`` below it holds no centroid, even where the angle head defined its angle."""
+        return self.params.min_contact_px * self.reconstructor.pixel_mm ** 2
+
+    @property
     def name(self) -> str:
         """The reconstructor's name (e.g. "supermag", "bilinear")."""
         return self.reconstructor.name

@@ -82,16 +82,21 @@ def test_training_reads_the_presses_through_new_chips(pressed, tmp_path) -> None
 def test_contact_training_reads_the_presses_of_each_dataset_through_new_chips(pressed, tmp_path) -> None:
     pytest.importorskip("torch", reason=TORCH_MISSING)
     from tactile_manip.data import load_datasets
-    from tactile_manip.learning.contact_train import ContactTrainConfig, _train_noise, split_indices, train_contact
+    from tactile_manip.learning.contact_train import ContactTrainConfig, split_indices, train_contact
 
     first = save_dataset(tmp_path / "first.npz", pressed)
     second = save_dataset(tmp_path / "second.npz", pressed.subset(np.arange(20, 40)))
     joined = load_datasets([first, second], images=False)
     train_idx, _ = split_indices(joined, 0.1)
-    noise = _train_noise([first, second], train_idx)
-    # each part's presses in the joined train split's order: the clean reading of the same press
+    noise = ChipNoise.of(joined, train_idx)
+    # each part's presses in the joined train split's order, each with its own part's chip settings: the clean
+    # reading of the same press
     np.testing.assert_array_equal(noise.clean_ut, joined.extra("field_clean_ut")[train_idx])
     np.testing.assert_array_equal(noise.stored_ut, joined.readings[train_idx])
+    parts = (pressed, pressed.subset(np.arange(20, 40)))
+    apart = ChipNoise.concatenate([ChipNoise.of(d, d.indices("train")) for d in parts])
+    np.testing.assert_array_equal(noise.noise_ut, apart.noise_ut)
+    np.testing.assert_array_equal(noise.drift_ut, apart.drift_ut)
     cfg = ContactTrainConfig(hidden=16, layers=1, members=1, epochs=3, batch_size=8, patience=3, threads=1,
                              context_frames=1, redraw_noise=True, sigma_map=False)
     summary = train_contact(cfg, [first, second], tmp_path / "run")

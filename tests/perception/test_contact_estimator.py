@@ -259,7 +259,7 @@ def test_one_reading_gives_angle_and_contact_with_the_pose_estimator(tmp_path, c
     with pytest.raises(ValueError, match="one board"):
         TactileEstimator(pose, ContactEstimator(contact_model_files[2]))
     # a force-only model gives no position: where the contact is comes from the image alone
-    assert est.position_mm == image_centroid_mm(est.angle, both._min_area_mm2)
+    assert est.position_mm == image_centroid_mm(est.angle, both.pose.min_contact_area_mm2)
     with pytest.raises(ValueError, match="image_position_weight"):
         TactileEstimator(pose, ContactEstimator(tmp_path / "board.onnx"), image_position_weight=1.5)
 
