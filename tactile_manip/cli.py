@@ -5,8 +5,12 @@ Each subcommand lives in ``tactile_manip.commands.<module>`` with ``add_argument
 fast. :func:`main` is the one place that turns errors into exit statuses: errors this package raises on
 purpose, bad values (ValueError), file-system errors (the OSError family: missing, unreadable or unwritable
 paths) and a missing optional package (the line names its extra and install command) print one line
-``tactile-manip CMD: error: ...`` and exit with status 2; Ctrl-C exits with 130, a closed stdout (``| head``)
-quietly with 141; anything else is a bug and keeps its traceback.
+``tactile-manip CMD: error: ...`` and exit with status 2, as does a bad command line (argparse's refusal, without
+its usage block); Ctrl-C exits with 130 and SIGTERM with 143 (raised as :class:`Terminated`, a
+KeyboardInterrupt, so what a command cleans up on Ctrl-C it cleans up on SIGTERM too), a closed stdout
+(``| head``) quietly with 141; anything else is a bug and keeps its traceback. Warnings raised while a command
+runs (numpy's overflow on a file of 1e300 values) are held until it ends: shown if it succeeds or crashes,
+dropped if it stops on an expected error, whose one line is then all that prints.
 """
 
 from __future__ import annotations
@@ -14,8 +18,12 @@ from __future__ import annotations
 import argparse
 import importlib
 import os
+import signal
 import sys
+import threading
+import warnings
 from collections.abc import Sequence
+from typing import NoReturn
 
 from tactile_manip.errors import TactileManipError
 from tactile_manip.extras import missing_extra_message
@@ -61,10 +69,83 @@ class _Version(argparse.Action):
         parser.exit()
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse that refuses a bad command line in one line, without the usage block (``--help`` shows it):
+    ``tactile-manip export: error: argument --format: invalid choice: 'parquet' (choose from ...) (see
+    `tactile-manip export --help`)``, exit status 2. Its subparsers are of this class too, and an unrecognized
+    argument is reported by the innermost (sub)command given."""
+
+    _command_action: argparse.Action | None = None  # the subparsers action, once added
+
+    def add_subparsers(self, **kwargs):
+        kwargs.setdefault("parser_class", type(self))
+        self._command_action = super().add_subparsers(**kwargs)
+        return self._command_action
+
+    def parse_args(self, args=None, namespace=None):
+        namespace, extra = self.parse_known_args(args, namespace)
+        if extra:
+            self._innermost(namespace).error(f"unrecognized arguments: {' '.join(extra)}")
+        return namespace
+
+    def _innermost(self, namespace: argparse.Namespace) -> _Parser:
+        action = self._command_action
+        sub = action.choices.get(getattr(namespace, action.dest, None)) if action is not None else None
+        return sub._innermost(namespace) if isinstance(sub, _Parser) else self
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {' '.join(message.split())} (see `{self.prog} --help`)\n")
+
+
+class _HeldWarnings:
+    """Holds the warnings raised inside the ``with`` block and shows them, where they were raised, when it ends,
+    unless :meth:`drop` was called. The filters in force still apply: ``-W error`` still raises at the warning."""
+
+    def __enter__(self) -> _HeldWarnings:
+        self._catcher = warnings.catch_warnings(record=True)
+        self._held = self._catcher.__enter__()
+        self._dropped = False
+        return self
+
+    def drop(self) -> None:
+        """Show nothing at the end: the command failed on its input and its error line says all there is."""
+        self._dropped = True
+
+    def __exit__(self, *exc_info) -> None:
+        self._catcher.__exit__(*exc_info)
+        for w in [] if self._dropped else self._held:
+            warnings.showwarning(w.message, w.category, w.filename, w.lineno, w.file, w.line)
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM arrived while a command ran (``kill``, a scheduler's stop, the end of ``timeout``)."""
+
+
+class _SigtermRaises:
+    """Inside the ``with`` block, SIGTERM raises :class:`Terminated` where the command is, so its ``finally`` and
+    ``except BaseException`` cleanups run; a second SIGTERM during that cleanup ends the process at once. Only the
+    main thread can hold a signal handler: elsewhere this does nothing."""
+
+    def __enter__(self) -> _SigtermRaises:
+        self._installed = threading.current_thread() is threading.main_thread()
+        if self._installed:
+            self._previous = signal.signal(signal.SIGTERM, self._raise)
+        return self
+
+    @staticmethod
+    def _raise(signum, frame) -> NoReturn:
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
+        raise Terminated()
+
+    def __exit__(self, *exc_info) -> None:
+        if self._installed:  # None: a handler set outside Python, which cannot be put back; the default then
+            signal.signal(signal.SIGTERM, signal.SIG_DFL if self._previous is None else self._previous)
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="tactile-manip", description=__doc__.splitlines()[0])
+    parser = _Parser(prog="tactile-manip", description=__doc__.splitlines()[0])
     parser.add_argument("--version", action=_Version)
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True, parser_class=_Parser)
     for name, (module, help_text) in COMMANDS.items():
         cmd = sub.add_parser(name, help=help_text, description=help_text)
         importlib.import_module(module).add_arguments(cmd)
@@ -74,23 +155,27 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    try:
-        status = int(importlib.import_module(args._module).run(args) or 0)
-        sys.stdout.flush()  # a closed stdout shows here, not in the interpreter's exit
-        return status
-    except BrokenPipeError:  # the reader went away (`tactile-manip params | head -1`): nothing left to say
-        _silence_stdout()
-        return 141
-    except (TactileManipError, ValueError, OSError) as e:
-        return _fail(args.command, error_line(e))
-    except ImportError as e:
-        line = missing_extra_message(e)
-        if line is None:  # one of our own modules failed to import: a bug, keep the traceback
-            raise
-        return _fail(args.command, line)
-    except KeyboardInterrupt:
-        print(f"tactile-manip {args.command}: interrupted", file=sys.stderr)
-        return 130
+    with _HeldWarnings() as held, _SigtermRaises():
+        try:
+            status = int(importlib.import_module(args._module).run(args) or 0)
+            sys.stdout.flush()  # a closed stdout shows here, not in the interpreter's exit
+            return status
+        except BrokenPipeError:  # the reader went away (`tactile-manip params | head -1`): nothing left to say
+            _silence_stdout()
+            return 141
+        except (TactileManipError, ValueError, OSError) as e:
+            held.drop()
+            return _fail(args.command, error_line(e))
+        except ImportError as e:
+            line = missing_extra_message(e)
+            if line is None:  # one of our own modules failed to import: a bug, keep the traceback
+                raise
+            held.drop()
+            return _fail(args.command, line)
+        except KeyboardInterrupt as e:  # Ctrl-C, or SIGTERM (Terminated)
+            stop = "terminated" if isinstance(e, Terminated) else "interrupted"
+            print(f"tactile-manip {args.command}: {stop}", file=sys.stderr)
+            return 143 if isinstance(e, Terminated) else 130
 
 
 def error_line(error: BaseException) -> str:

@@ -58,15 +58,38 @@ def from_dict(cls: type[T], data: dict[str, Any], *, where: str = "config", pref
     if unknown:
         raise ConfigError(f"{where}: unknown key(s) {', '.join(_dot(prefix, k) for k in unknown)}; "
                           f"allowed: {', '.join(sorted(fields))}")
+    missing = [name for name, f in fields.items() if name not in data
+               and f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING]
+    if missing:
+        raise ConfigError(f"{where}: missing key(s) {', '.join(_dot(prefix, k) for k in missing)}")
     kwargs = {}
     for name, value in data.items():
         kwargs[name] = _coerce(hints[name], value, where=where, key=_dot(prefix, name))
     try:
         return cls(**kwargs)
-    except ConfigError:
-        raise
-    except (ValueError, TypeError) as e:
+    except (ValueError, TypeError) as e:  # refused by __post_init__ (a ConfigError too): name the file
+        if isinstance(e, ConfigError) and str(e).startswith(f"{where}:"):
+            raise
         raise ConfigError(f"{where}: {_dot(prefix, '') or cls.__name__}: {e}") from e
+
+
+def check_ranges(obj: Any, ranges: dict[str, tuple[float, float]], *, units: dict[str, str] | None = None) -> None:
+    """Refuse a field of ``obj`` (a config dataclass) outside its closed range ``ranges[name] = (low, high)``.
+
+    Integer bounds ask for an integer; the upper bounds keep a typo (1000000 frames of context) from allocating
+    gigabytes or running for days. ``units`` names the unit of a field in the message.
+
+    Raises:
+        ConfigError: the field, its value and the allowed range.
+    """
+    for name, (low, high) in ranges.items():
+        value = getattr(obj, name)
+        integer = isinstance(low, int) and isinstance(high, int)
+        kind = (int,) if integer else (int, float)
+        if isinstance(value, bool) or not isinstance(value, kind) or not low <= value <= high:  # NaN fails too
+            unit = f" {units[name]}" if units and name in units else ""
+            what = "an integer" if integer else "a number"
+            raise ConfigError(f"{name} must be {what} in [{low:g}, {high:g}]{unit}, got {value!r}")
 
 
 def to_dict(obj: Any) -> Any:
@@ -109,6 +132,9 @@ def _coerce(hint: Any, value: Any, *, where: str, key: str) -> Any:
         return from_dict(hint, value, where=where, prefix=key)
     if origin in (typing.Union, types.UnionType):
         args = typing.get_args(hint)
+        present = [a for a in args if a is not type(None)]
+        if value is not None and len(present) == 1:  # an optional table or value: its own error names the key
+            return _coerce(present[0], value, where=where, key=key)
         errors = []
         for arg in args:
             try:

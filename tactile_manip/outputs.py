@@ -7,7 +7,9 @@ that names the path and what to do.
 
 from __future__ import annotations
 
+import os
 import tempfile
+from collections.abc import Iterable
 from pathlib import Path
 
 from tactile_manip.errors import TactileManipError
@@ -48,6 +50,36 @@ def check_output_dir(path: str | Path) -> Path:
     else:
         check_writable_parent(path)
     return path
+
+
+def check_apart(out: str | Path, inputs: Iterable[tuple[str, str | Path]], *, option: str = "--out") -> None:
+    """Refuse an output that would write over, into or around one of a command's inputs.
+
+    ``inputs`` are ``(label, path)`` pairs, e.g. ``("the source", "run.tmrec")``; paths are compared after
+    resolving symlinks (and a hard link to an input counts as the input). Checked with or without ``--force``;
+    ``option`` is the output's option, named in the message.
+
+    Raises:
+        OutputPathError: ``out`` is an input, lies inside an input folder, or is a folder holding an input.
+    """
+    target = Path(out).resolve()
+    for label, given in inputs:
+        source = Path(given).resolve()
+        if target == source or _same_file(target, source):
+            raise OutputPathError(f"{out} is {label} {given} itself; refusing to write over it: choose another "
+                                  f"{option}")
+        if target.is_relative_to(source):
+            raise OutputPathError(f"{out} is inside {label} {given}; refusing to write there: choose an {option} "
+                                  "outside it")
+        if source.is_relative_to(target):
+            raise OutputPathError(f"{out} holds {label} {given}; refusing to replace it: choose another {option}")
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    try:
+        return os.path.samefile(a, b)
+    except OSError:  # one of them does not exist (yet)
+        return False
 
 
 def check_writable_parent(path: str | Path) -> Path:

@@ -36,6 +36,10 @@ class TactileReading:
         return tuple(self.field_ut.shape)
 
 
+#: the ``reason`` of an angle estimate whose reading is implausible (its ``implausible_reason`` says why)
+IMPLAUSIBLE_READING = "implausible reading"
+
+
 @dataclass(frozen=True)
 class AngleEstimate:
     """In-plane orientation of a contact, as the pose pipeline reports it (an expected outcome, not an error).
@@ -45,12 +49,15 @@ class AngleEstimate:
             0.0 when ``defined`` is False.
         confidence: in [0, 1]: 1 - (minor / major eigenvalue) of the contact's second moments, times the
             agreement of prior samples where those are available; 0.0 when ``defined`` is False.
-        defined: False for an empty, too small or isotropic contact (then ``reason`` says which).
+        defined: False for an empty, too small or isotropic contact, or an implausible reading (then ``reason`` says
+            which).
         centroid_mm: contact centroid (x, y) in the pad frame, mm.
         area_mm2: contact area, mm^2.
         reason: why the angle is undefined ("" when defined).
         saturated_chips: chips with an axis at the ADC rail or beyond the chip's range (clamped before the
-            reconstruction); the confidence is scaled by the fraction of chips without.
+            reconstruction); with any, the confidence is at most
+            :data:`~tactile_manip.perception.estimator.SATURATED_CONFIDENCE_CAP` times the fraction of chips
+            without (after the calibration: a railed chip's value is a bound, not a measurement).
         timings_s: named durations of the estimate's stages in s (e.g. "reconstruct", "pose", "total"; and
             "age", from the reading's arrival to the estimate; "escalate" when extra inference ran), empty when
             not measured.
@@ -58,6 +65,12 @@ class AngleEstimate:
             ``escalation`` reconstructor (extra inference: prior samples, symmetry averaging).
         source: where the angle comes from: "image" (the principal axis of the reconstructed image) or "head"
             (the model's angle head, read straight from the reading, where it was the more likely).
+        plausible: False when the reading holds a value beyond what the chip can report as a change, or far
+            beyond the field of a press the model was made for (2000 uT on the SuperMag board: see
+            :mod:`tactile_manip.perception.estimator`); the estimate is then no answer: ``defined`` False,
+            ``angle_rad`` and ``confidence`` 0.0, ``reason`` :data:`IMPLAUSIBLE_READING`.
+        implausible_reason: what made the reading implausible (which chip, which value, which bound); "" when
+            ``plausible``.
     """
 
     angle_rad: float
@@ -70,3 +83,5 @@ class AngleEstimate:
     timings_s: dict[str, float] = field(default_factory=dict, compare=False)
     escalated: bool = False
     source: str = "image"
+    plausible: bool = True
+    implausible_reason: str = ""

@@ -2,13 +2,16 @@
 the real eFlesh probe-rig runs where they are on disk.
 
 Also the report's torch line: without torch about a hundred tests skip, so the header and the summary say so
-in words instead of leaving it to a count of skips.
+in words instead of leaving it to a count of skips. And a run ends with its summary line: the caches that hold
+nanobind objects are emptied before the interpreter exits (see :func:`pytest_unconfigure`).
 """
 
 from __future__ import annotations
 
+import gc
 import importlib.util
 import os
+import sys
 from collections.abc import Callable
 from pathlib import Path
 
@@ -50,6 +53,24 @@ def pytest_terminal_summary(terminalreporter, exitstatus, config) -> None:
     if skipped:
         terminalreporter.write_sep("!", f"{len(skipped)} tests or test files SKIPPED: {TORCH_MISSING}", red=True,
                                    bold=True)
+
+
+def pytest_unconfigure(config) -> None:
+    """Empties the functools caches of the packages holding nanobind objects before the interpreter exits.
+
+    roboticstoolbox keeps its robots in class-level ``lru_cache``s (``BaseRobot.ets``, ``_getlink``) and the twin
+    caches its kinematics; with torch loaded, those objects (roboticstoolbox ``_ETObj``, spatialgeometry
+    ``_Node``) outlive the extensions' own cleanup at exit, and nanobind prints some 70 lines of leak report
+    after the summary line. Freed here, while the extensions are still alive, they leave nothing to report.
+    """
+    for name, module in list(sys.modules.items()):
+        if module is None or name.partition(".")[0] not in ("roboticstoolbox", "spatialgeometry", "tactile_manip"):
+            continue
+        for obj in list(vars(module).values()):
+            for member in (obj, *(vars(obj).values() if isinstance(obj, type) else ())):
+                if callable(getattr(member, "cache_clear", None)):
+                    member.cache_clear()
+    gc.collect()
 
 
 @pytest.fixture
@@ -145,20 +166,49 @@ def contact_model_files(tmp_path_factory):
 @pytest.fixture
 def contact_model_of_layout(tmp_path: Path) -> Callable[[str], Path]:
     """Factory ``make(layout, **metadata)``: the shipped SuperMag contact model with ``board_layout`` in its
-    metadata set to ``layout`` (e.g. "anyskin-5": a model that claims another board) and the other top-level
-    metadata entries given replaced (e.g. ``targets=...``)."""
+    metadata set to ``layout`` and the other top-level metadata entries given replaced (e.g. ``targets=...``).
+    For a layout of another reading grid (e.g. "anyskin-5": a model of another board) the graph is a small one
+    taking that grid's readings (zero means, unit sigmas), so that its metadata agrees with it."""
     onnx = pytest.importorskip("onnx", reason="rewriting a model's metadata needs onnx (pip install -e '.[train]')")
     import json
 
     from tactile_manip.perception.reconstruct import METADATA_KEY
+    from tactile_manip.sensors.layout import get_layout
 
     def make(layout: str, **metadata) -> Path:
         proto = onnx.load(str(SHIPPED_CONTACT_MODEL))
+        grid = get_layout(layout).grid
+        if grid != (4, 4):
+            proto = _contact_graph_of_grid(proto, grid)
         for prop in proto.metadata_props:
             if prop.key == METADATA_KEY:
-                prop.value = json.dumps({**json.loads(prop.value), "board_layout": layout, **metadata})
+                meta = json.loads(prop.value)
+                meta["input"]["shape"] = ["batch", meta["input"]["shape"][1], *grid, 3]
+                prop.value = json.dumps({**meta, "board_layout": layout, **metadata})
         path = tmp_path / f"contact_{layout}_{len(list(tmp_path.glob('contact_*.onnx')))}.onnx"
         onnx.save(proto, str(path))
         return path
 
     return make
+
+
+def _contact_graph_of_grid(shipped, grid: tuple[int, int]):
+    """A contact graph of ``shipped``'s names and outputs (K targets) taking (N, 1, R, C, 3) readings of ``grid``:
+    mean 0 and sigma 1 for every target, with ``shipped``'s metadata."""
+    from onnx import TensorProto, helper, numpy_helper
+
+    targets = [d.dim_value for d in shipped.graph.output[0].type.tensor_type.shape.dim][1]
+    weights = numpy_helper.from_array(np.zeros((grid[0] * grid[1] * 3, targets), np.float32), "w")
+    ones = numpy_helper.from_array(np.ones(targets, np.float32), "one")
+    nodes = [helper.make_node("Flatten", ["field_ut"], ["flat"], axis=1),
+             helper.make_node("MatMul", ["flat", "w"], ["mean"]),
+             helper.make_node("Add", ["mean", "one"], ["sigma"])]
+    inputs = [helper.make_tensor_value_info("field_ut", TensorProto.FLOAT, ["batch", 1, *grid, 3])]
+    outputs = [helper.make_tensor_value_info(n, TensorProto.FLOAT, ["batch", targets]) for n in ("mean", "sigma")]
+    graph = helper.make_graph(nodes, "contact_of_grid", inputs, outputs, initializer=[weights, ones])
+    model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)])
+    model.ir_version = shipped.ir_version
+    for prop in shipped.metadata_props:
+        entry = model.metadata_props.add()
+        entry.key, entry.value = prop.key, prop.value
+    return model

@@ -222,4 +222,5 @@ def test_no_command_is_a_usage_error(capsys):
     with pytest.raises(SystemExit) as info:
         main([])
     assert info.value.code == 2
-    assert "usage: tactile-manip" in capsys.readouterr().err
+    assert_one_line_error(capsys.readouterr().err, "tactile-manip", "required: COMMAND",
+                          "(see `tactile-manip --help`)", program="")

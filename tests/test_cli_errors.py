@@ -12,6 +12,9 @@ For each command in ``cli.COMMANDS`` (in-process, so the whole file runs in seco
 
 Each must give exit status 2, exactly one line on stderr starting ``tactile-manip CMD: error:``, and no
 traceback anywhere. Commands or faults without such a path are listed in ``NO_PATH`` with the reason.
+
+The same one line, alone, when numpy warned before the error (an overflow) and when argparse refuses the
+command line (no usage block; ``--help`` still shows it).
 """
 
 from __future__ import annotations
@@ -19,8 +22,11 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
+import types
+import warnings
 from pathlib import Path
 
+import numpy as np
 import pytest
 from checks import assert_one_line_error
 
@@ -177,3 +183,103 @@ def test_an_import_error_of_our_own_code_keeps_its_traceback(monkeypatch):
     monkeypatch.setitem(sys.modules, "tactile_manip.sim.params", None)
     with pytest.raises(ImportError):
         main(["params"])
+
+
+# ---------------------------------------------------------------- nothing before the one line
+
+
+def _overflowing_import(folder: Path) -> list[str]:
+    """``import`` arguments whose images hold 1e300 (beyond float32, where storing them as float32 made numpy warn
+    of an overflow) and whose split names an unknown part."""
+    folder.mkdir()
+    images = np.zeros((10, 20, 20))
+    images[:, 5, 5] = 1e300
+    np.save(folder / "readings.npy", np.random.default_rng(0).normal(0.0, 50.0, (10, 4, 4, 3)))
+    np.save(folder / "images.npy", images)
+    np.save(folder / "split.npy", np.array(["train"] * 9 + ["bogus"]))
+    return ["import", "--readings", str(folder / "readings.npy"), "--images", str(folder / "images.npy"),
+            "--split", str(folder / "split.npy"), "--out", str(folder / "d.npz")]
+
+
+def test_an_overflow_before_an_expected_error_prints_only_the_error_line(tmp_path):
+    """The user reads one line, not numpy's warning and its source line above it: values that would overflow the
+    dataset's float32 are refused by name before any cast warns."""
+    argv = _overflowing_import(tmp_path / "in")
+    done = subprocess.run([sys.executable, "-m", "tactile_manip.cli", *argv], capture_output=True, text=True,
+                          timeout=120, cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)})
+    assert done.returncode == 2, done.stderr
+    assert_one_line_error(done.stderr, "import", "beyond float32's range")
+
+
+def _warning_command(monkeypatch, outcome: str) -> None:
+    """Adds a command ``warn`` that warns of an overflow, then fails (ValueError), crashes (a bug) or succeeds."""
+
+    def run(args) -> int:
+        np.float32(np.float64(1e300))  # RuntimeWarning: overflow encountered in cast
+        if outcome == "fails":
+            raise ValueError("the readings are not finite")
+        if outcome == "crashes":
+            raise ZeroDivisionError("a bug")
+        return 0
+
+    module = types.ModuleType("warning_command")
+    module.add_arguments, module.run = lambda parser: None, run
+    monkeypatch.setitem(sys.modules, module.__name__, module)
+    monkeypatch.setitem(COMMANDS, "warn", (module.__name__, "warn, then " + outcome))
+
+
+def test_warnings_of_a_command_that_fails_on_its_input_are_not_shown(monkeypatch, capsys):
+    _warning_command(monkeypatch, "fails")
+    with warnings.catch_warnings(record=True) as shown:
+        warnings.simplefilter("always")
+        assert main(["warn"]) == 2
+    assert [str(w.message) for w in shown] == []
+    assert_one_line_error(capsys.readouterr().err, "warn", "the readings are not finite")
+
+
+@pytest.mark.parametrize("outcome", ["succeeds", "crashes"])
+def test_warnings_of_a_command_that_succeeds_or_crashes_are_shown_once(outcome, monkeypatch):
+    _warning_command(monkeypatch, outcome)
+    with warnings.catch_warnings(record=True) as shown:
+        warnings.simplefilter("always")
+        if outcome == "crashes":
+            with pytest.raises(ZeroDivisionError):  # a bug keeps its traceback
+                main(["warn"])
+        else:
+            assert main(["warn"]) == 0
+    assert [(w.category, str(w.message)) for w in shown] == [(RuntimeWarning, "overflow encountered in cast")]
+    assert shown[0].filename == __file__  # where it was raised, not where it was shown
+
+
+# ---------------------------------------------------------------- argparse's refusals
+
+
+@pytest.mark.parametrize("argv,prog,needles", [
+    (["export", "run.tmrec", "--format", "parquet", "--out", "x"], "tactile-manip export",
+     ["argument --format: invalid choice: 'parquet'", "'lerobot'", "'mcap'", "'rrd'"]),
+    (["export", "run.tmrec"], "tactile-manip export", ["the following arguments are required: --out"]),
+    (["export", "run.tmrec", "--out", "x", "--bogus"], "tactile-manip export", ["unrecognized arguments: --bogus"]),
+    (["collect", "run", "--sim", "--calibration", "c.npz", "--out", "x", "--bogus"], "tactile-manip collect run",
+     ["unrecognized arguments: --bogus"]),
+    (["collect", "run", "--sim"], "tactile-manip collect run",
+     ["the following arguments are required: --calibration, --out"]),
+    (["exprot"], "tactile-manip", ["argument COMMAND: invalid choice: 'exprot'", "'export'"]),
+    ([], "tactile-manip", ["the following arguments are required: COMMAND"]),
+])
+def test_a_bad_command_line_is_one_line_naming_the_command(argv, prog, needles, capsys):
+    """argparse's refusals: the (sub)command's name, what is wrong and where the usage is, without the usage."""
+    with pytest.raises(SystemExit) as stop:
+        main(argv)
+    assert stop.value.code == 2
+    out, err = capsys.readouterr()
+    assert out == ""
+    line = assert_one_line_error(err, prog, *needles, program="")
+    assert line.endswith(f"(see `{prog} --help`)"), line
+
+
+def test_help_still_shows_the_usage(capsys):
+    with pytest.raises(SystemExit) as stop:
+        main(["export", "--help"])
+    assert stop.value.code == 0
+    out, err = capsys.readouterr()
+    assert out.startswith("usage: tactile-manip export") and "--format {lerobot,mcap,rrd}" in out and err == ""

@@ -1,6 +1,7 @@
 """``tactile-manip evaluate``: SuperMag's Table I on our unseen test objects, with a gallery figure.
 
-On a dataset of labelled presses (targets, no images) it evaluates contact models instead: RMSE and MAE per
+On a dataset of labelled presses (targets, no images), or with contact models (``kind = "contact"`` in their
+metadata) on any dataset with targets, images or not, it evaluates contact models instead: RMSE and MAE per
 target, sigma calibration, per run and force band, against linear, kNN and MLP baselines fitted on the same
 split (:mod:`tactile_manip.perception.contact_evaluation`); it writes table.md, results.json and contact.png.
 
@@ -54,7 +55,7 @@ def run(args: argparse.Namespace) -> int:
         require("onnxruntime", "evaluating exported models")
     check_output_dir(args.out)  # before reading the data; which report files it will hold depends on them
     data = load_dataset(args.data)
-    if not data.has_images and data.has_targets:
+    if _contact_models(args.model, data, args.data) or (not data.has_images and data.has_targets):
         return _run_contact(args, data)
     check_report_folder(args.out, REPORT_FILES, force=args.force)
     data.require_images(f"evaluate's image metrics (PSNR, SSIM, angle) on {args.data}")
@@ -93,6 +94,32 @@ def run(args: argparse.Namespace) -> int:
         print(f"note: {', '.join(skipped)}: untrained (0 epochs in the model's metadata), left out of the gallery")
     print(f"wrote {args.out}/table.md, results.json, gallery.png")
     return 0
+
+
+def _contact_models(specs: list[str], data, data_path: str) -> bool:
+    """Whether the ``--model`` files are contact models (evaluated on the dataset's targets, whether or not it
+    also holds images); ValueError for a mix of contact and image models or contact models on data without
+    targets."""
+    from tactile_manip.errors import DatasetError
+    from tactile_manip.perception.reconstruct import read_metadata
+
+    kinds = {}
+    for spec in specs:
+        label, sep, path = spec.partition("=")
+        if sep and label and path:  # a malformed spec is refused where the models are loaded
+            kinds[spec] = read_metadata(path).get("kind", "image")
+    contact = [s for s, k in kinds.items() if k == "contact"]
+    if not contact:
+        return False
+    if len(contact) != len(kinds):
+        image = [s for s in kinds if s not in contact]
+        raise ValueError(f"--model {contact[0]} is a contact model and --model {image[0]} an image model: evaluate "
+                         "them in two runs (contact models on labelled presses, image models on images)")
+    if not data.has_targets:
+        label, _, path = contact[0].partition("=")
+        raise DatasetError(f"--model {label}: {path} is a contact model, and {data_path} has no per-sample targets "
+                           "to evaluate it on (it holds images only); evaluate it on labelled presses")
+    return True
 
 
 def _baseline_fit_indices(data, objects: str) -> np.ndarray:

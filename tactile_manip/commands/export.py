@@ -2,12 +2,14 @@
 
 ``tactile-manip export SOURCE --format lerobot|rrd|mcap --out OUT [--force]`` converts a trial run folder, a
 recording or a pair log (:mod:`tactile_manip.interop.export`: the output appears whole or not at all; a
-damaged source gives what is intact and the command lists what it skipped).
+damaged source gives what is intact and the command lists what it skipped). ``--force`` replaces only an earlier
+export of the same format: never the source, a path inside it or a folder holding it, nor anything else.
 
 ``tactile-manip export --checkpoint RUN/best.pt --out m.onnx`` writes a checkpoint as ONNX (prior + decoder)
 with its metadata; for an angle head (``kind = "angle_head"``), ``--attach-to MODEL.onnx`` writes a copy of that
 pose model with the head inside (:mod:`tactile_manip.learning.angle_export`). The parity check runs the ONNX file on onnxruntime against torch on the same inputs (real
-readings from ``--data`` when given) and refuses to keep a file that disagrees.
+readings from ``--data`` when given) and refuses to keep a file that disagrees. ``--out`` and ``--card`` must not
+be one of the inputs; ``--force`` replaces only an ONNX model of tactile_manip.
 """
 
 from __future__ import annotations
@@ -55,7 +57,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "validation presses); default: the contact model's position alone")
     p.add_argument("--out", required=True,
                    help="output: the dataset folder (lerobot), the .rrd / .mcap file, or the .onnx file")
-    p.add_argument("--force", action="store_true", help="replace an existing --out (and --card)")
+    p.add_argument("--force", action="store_true",
+                   help="replace an earlier output of export at --out (and --card); never the source, nor a file or "
+                        "folder export did not write")
     p.add_argument("--data", default=None, nargs="+", action="extend",
                    help="the training dataset(s), as given to train: real readings for the parity check, pixel size "
                         "and provenance")
@@ -115,7 +119,7 @@ def _export_checkpoint(args: argparse.Namespace) -> int:
 
     require("onnx", "export")
     require("onnxruntime", "export's parity check")
-    check_output_file(args.out, force=args.force)
+    _check_model_outputs(args)
     kind = _checkpoint_kind(args.checkpoint)
     if args.image_position_weight is not None and kind != "contact":
         raise ValueError(f"--image-position-weight is for a contact model's checkpoint; {args.checkpoint} is a "
@@ -157,6 +161,42 @@ def _export_checkpoint(args: argparse.Namespace) -> int:
                          commands=_commands(args), latency=latency)
         print(f"wrote {args.card}")
     return 0
+
+
+def _check_model_outputs(args: argparse.Namespace) -> None:
+    """Refuse an --out or --card that is one of the command's inputs, and an existing --out that is not an ONNX
+    model of tactile_manip (with or without --force): --force replaces only what export wrote."""
+    from pathlib import Path
+
+    from tactile_manip.outputs import OutputPathError, check_apart, check_output_file
+
+    files = ("attach_to", "metrics", "history", "table", "latency")
+    inputs = [("the --checkpoint", args.checkpoint), *(("the --data", path) for path in args.data or ()),
+              *((f"the --{name.replace('_', '-')}", getattr(args, name)) for name in files if getattr(args, name))]
+    check_apart(args.out, inputs)
+    if args.card:
+        check_apart(args.card, [*inputs, ("the --out", args.out)], option="--card")
+    out = Path(args.out)
+    if out.is_file():
+        why = _not_our_model(out)
+        if why is not None:
+            raise OutputPathError(f"{out} is not an ONNX model written by tactile-manip export ({why}); refusing "
+                                  "to replace it: choose another --out or remove it yourself")
+    check_output_file(out, force=args.force)
+
+
+def _not_our_model(path) -> str | None:
+    """Why the file ``path`` is not an ONNX model of tactile_manip (its producer, or our metadata), or None."""
+    import onnx
+
+    try:
+        proto = onnx.load(str(path), load_external_data=False)
+    except Exception:  # noqa: BLE001 - protobuf and onnx fail in their own ways on what is not a model
+        return "it does not parse as an ONNX model"
+    keys = [p.key for p in proto.metadata_props]
+    if proto.producer_name == "tactile_manip" or any(k.split(".")[0] == "tactile_manip" for k in keys):
+        return None
+    return f"its producer is {proto.producer_name or 'unnamed'} and it holds no tactile_manip metadata"
 
 
 def _cpu_name() -> str:

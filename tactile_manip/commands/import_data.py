@@ -50,8 +50,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     probe.add_argument("--missing", action="append", metavar="VALUE|COLUMN=VALUE", default=[],
                        help="value meaning 'no reading' in the used label columns (e.g. -1), or in one column "
                             "(force_gf=-1); such label rows are not matched")
-    probe.add_argument("--layout", default="anyskin-5",
-                       help="board layout of the readings (anyskin-5: 5 chips in a cross on 3x3 cells; supermag-4x4)")
+    probe.add_argument("--board", "--layout", dest="layout", default="anyskin-5", metavar="NAME|FILE",
+                       help="the board of the readings: a shipped board (anyskin-5: 5 chips in a cross on 3x3 cells; "
+                            "eflesh; supermag-4x4), generic:N (N chips, no geometry) or a board file (.toml); "
+                            "--layout is the same option")
     probe.add_argument("--tolerance-s", type=float, default=None,
                        help="largest sensor-to-label time difference matched, s (default 3 median label periods)")
     probe.add_argument("--match", choices=("nearest", "linear"), default="nearest",
@@ -102,7 +104,7 @@ def run(args: argparse.Namespace) -> int:
     for name in ("readings", "images"):
         if arrays[name] is None:
             raise ValueError(f"--{name} is required (a .npy file, or an array name with --arrays)")
-    names = tuple(n.strip() for n in args.channel_names.split(",")) if args.channel_names else None
+    names = tuple(_names(args.channel_names, "--channel-names")) if args.channel_names else None
     data = from_arrays(
         arrays["readings"], arrays["images"], split=arrays["split"], groups=arrays["groups"],
         objects=arrays["objects"], val_fraction=_or(args.val_fraction, 0.1),
@@ -137,11 +139,12 @@ def _run_probe_logs(args: argparse.Namespace, out) -> int:
         raise ValueError("--targets is required with probe logs (e.g. --targets x_mm,y_mm or --targets force_n)")
     split = (args.split or "chronological").replace("-", "_")
     data = from_probe_logs(
-        args.readings_csv, args.labels_csv, targets=_names(args.targets), label_columns=_names(args.label_columns),
+        args.readings_csv, args.labels_csv, targets=_names(args.targets, "--targets"),
+        label_columns=_names(args.label_columns, "--label-columns"),
         layout=args.layout, contact=args.contact, missing=_missing(args.missing), tolerance_s=args.tolerance_s,
         match=args.match, split=split, test_fraction=_or(args.test_fraction, 0.2),
         val_fraction=_or(args.val_fraction, 0.0), held_out_run=args.held_out_run,
-        run_names=_names(args.run_names), time_offset_s=args.time_offset_s, baseline_s=args.baseline_s,
+        run_names=_names(args.run_names, "--run-names"), time_offset_s=args.time_offset_s, baseline_s=args.baseline_s,
         provenance={"source": "tactile-manip import", "inputs": {"readings_csv": args.readings_csv,
                                                                  "labels_csv": args.labels_csv}})
     for line in probe_summary(data):
@@ -156,7 +159,8 @@ def _run_probe_logs(args: argparse.Namespace, out) -> int:
 
 
 def probe_summary(data) -> list[str]:
-    """Three lines per run of a probe-log import: rows, what was matched and dropped, gaps and split sizes."""
+    """Three lines per run of a probe-log import: rows, what was matched and dropped, gaps and split sizes; one
+    more for repeated times, and one for what a damaged recording lost."""
     lines = []
     for r in data.provenance["runs"]:
         matched = r["reading_rows"] - r["nan_readings"] - r["unmatched"]
@@ -171,11 +175,46 @@ def probe_summary(data) -> list[str]:
                   f"  time gaps > {r['tolerance_s']:.3g} s: {rg['count']} in the sensor stream (longest "
                   f"{rg['longest_s']:.3g} s), {lg['count']} in the labels (longest {lg['longest_s']:.3g} s); "
                   f"{r['samples']} samples: {r['train']} train / {r['val']} val / {r['test']} test"]
+        lines += [line for line in (_repeated_times(r), _recording_losses(r["readings"])) if line]
     return lines
 
 
-def _names(text: str | None) -> list[str] | None:
-    return None if text is None else [n.strip() for n in text.split(",") if n.strip()]
+def _repeated_times(run: dict) -> str | None:
+    """One line on the rows whose time repeats the row before, or None when no time repeats."""
+    parts = []
+    for stream, name in (("reading", "sensor"), ("label", "label")):
+        count, first = run.get(f"repeated_{stream}_times", 0), run.get(f"first_repeated_{stream}_row")
+        rows = "row" if count == 1 else "rows"
+        parts.append(f"{count} {name} {rows}" + (f" (first at row {first})" if count else ""))
+    if not run.get("repeated_reading_times") and not run.get("repeated_label_times"):
+        return None
+    return f"  repeated times: {', '.join(parts)}; each sensor row is kept, a repeated label time matches its first row"
+
+
+def _recording_losses(info: dict) -> str | None:
+    """One line on what a damaged recording lost (bytes, places, about how many frames, where), or None."""
+    skipped, tail = info.get("skipped_bytes", 0), info.get("truncated_bytes", 0)
+    if not skipped and not tail:
+        return None
+    places = info.get("damaged_places", 0)
+    at = [str(a) for a in info.get("damage_at_bytes", []) if a >= 0]
+    where = f", at byte{'s' if len(at) > 1 else ''} {', '.join(at[:5])}{', ...' if len(at) > 5 else ''}" if at else ""
+    parts = [f"{skipped} damaged bytes skipped in {places} place{'s' if places != 1 else ''}"] if skipped else []
+    parts += [f"a torn tail of {tail} bytes"] if tail else []
+    frames = info.get("frames_lost", 0)
+    return (f"  recording {info['source']}: {' and '.join(parts)} (about {frames} frame{'s' if frames != 1 else ''}"
+            f"{where})")
+
+
+def _names(text: str | None, flag: str) -> list[str] | None:
+    """The comma-separated names of ``flag``; ValueError naming a name given twice."""
+    if text is None:
+        return None
+    names = [n.strip() for n in text.split(",") if n.strip()]
+    twice = [n for i, n in enumerate(names) if n in names[:i]]
+    if twice:
+        raise ValueError(f"{flag} names {twice[0]!r} twice ({','.join(names)}): give each once")
+    return names
 
 
 def _missing(values: list[str]) -> float | dict[str, float] | None:

@@ -5,7 +5,8 @@ with ``--resume``) and each trial's per-frame streams to ``OUT/frames/`` (``tact
 them into a LeRobot dataset; ``--no-frames`` skips them), then the summary (success rates with Wilson 95 %
 intervals, angle errors, the paired comparison) and plots. ``tactile-manip score OUT --tolerance-deg X`` re-scores
 it later. ``--rerun`` lets you watch the run in Rerun (every sensor frame, the arm, each estimate and outcome): in
-a viewer, a .rrd file or a gRPC server on this machine.
+a viewer, a .rrd file or a gRPC server on this machine, which stops when the run ends (done, failed, Ctrl-C or
+SIGTERM).
 """
 
 from __future__ import annotations
@@ -65,7 +66,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         summary = run_trials(scene, out, scene_path=args.config, resume=args.resume, progress=not args.quiet,
                              trial_observer=observer, frames=args.frames)
-    except BaseException:
+    except BaseException:  # an error, Ctrl-C or SIGTERM: the viewer's server stops too
         if observer is not None:
             observer.close()
             if args.save and observer.trials == 0:  # refused before any trial ran: leave no recording behind
@@ -123,5 +124,9 @@ def _rerun_observer(args: argparse.Namespace, name: str):
     sink = open_live(save=args.save, spawn=args.spawn or (args.save is None and not args.serve), serve=args.serve,
                      bind=args.bind, port=args.rerun_port, recording_name=f"trials {name}",
                      default_blueprint=blueprint(EntityPaths("mbts"), robot=True, depth=False))
-    print(f"trials: Rerun, {sink.description}" + "".join(f"\ntrials: {n}" for n in sink.notes), file=sys.stderr)
-    return RerunTrialObserver(sink)
+    try:
+        print(f"trials: Rerun, {sink.description}" + "".join(f"\ntrials: {n}" for n in sink.notes), file=sys.stderr)
+        return RerunTrialObserver(sink)
+    except BaseException:
+        sink.close()
+        raise

@@ -7,7 +7,9 @@ last frame, so the view works (and is tested) without a display.
 ``--rerun`` streams every frame to Rerun instead (extra ``viz``): the field as arrows at the taxels, a Bz heat
 map, and, from ``--model`` at ``--estimate-hz``, the reconstructed depth and the angle and confidence, on the
 sensor clock. It goes to a file (``--save F.rrd``), a viewer it starts (``--spawn``, the default) or a gRPC
-server (``--serve``), both listening on 127.0.0.1 unless ``--bind`` names another address.
+server (``--serve``), both listening on 127.0.0.1 unless ``--bind`` names another address. It ends after
+``--seconds``, at Ctrl-C or at SIGTERM (which the CLI raises as a KeyboardInterrupt), each time finishing the
+file or stopping the server it started.
 """
 
 from __future__ import annotations

@@ -155,6 +155,11 @@ def _as_real(name: str, a: Any) -> np.ndarray:
         if bad.any():
             first = tuple(int(i) for i in np.argwhere(bad)[0])
             raise DatasetError(f"{name}: {int(bad.sum())} NaN or infinite values (first at index {first})")
+        big = np.abs(a) > np.finfo(np.float32).max  # stored as float32: these would become inf
+        if big.any():
+            first = tuple(int(i) for i in np.argwhere(big)[0])
+            raise DatasetError(f"{name}: {int(big.sum())} values beyond float32's range (+-3.4e38), which the dataset "
+                               f"stores (first at index {first}: {a[first]:.3g}); they would become inf")
     return a
 
 

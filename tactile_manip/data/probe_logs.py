@@ -4,8 +4,9 @@
 nearest in time, among the label rows that have a reading in every column used (``missing`` marks "no
 reading", e.g. -1 where a load cell sent nothing). A sensor row whose nearest usable label is farther than
 ``tolerance_s`` (default 3x the median period of the usable labels) is unmatched and dropped; a sensor row
-with a NaN is skipped. Both are counted, with the gaps in either stream longer than the tolerance, per run in
-``provenance["runs"]``. Streams whose clocks never overlap are refused.
+with a NaN or infinite value is skipped. Both are counted, with the gaps in either stream longer than the
+tolerance and the rows whose time repeats the row before, per run in ``provenance["runs"]``. Times that are
+not finite or go backwards, and streams whose clocks never overlap, are refused.
 
 ``contact`` (one comparison such as ``"z_mm < 145.1"``) keeps the rows that satisfy it; when ``in_contact``
 is one of the targets, every row is kept and the comparison becomes that 0/1 target instead. The default
@@ -165,6 +166,11 @@ class _Run:
                                f"columns {','.join(labels)}")
         report: dict[str, Any] = {"name": name, "readings": r_info, "labels": l_info, "reading_rows": len(t_r),
                                   "label_rows": len(labels[TIME_COLUMN])}
+        # both streams are in time order (streams.check_times); a repeated time is kept and counted
+        for stream, t in (("reading", t_r), ("label", labels[TIME_COLUMN])):
+            repeated = np.flatnonzero(np.diff(t) == 0) + 1
+            report[f"repeated_{stream}_times"] = int(len(repeated))
+            report[f"first_repeated_{stream}_row"] = int(repeated[0]) + 1 if len(repeated) else None
         # label rows: a usable time and a reading in every used column
         t_l = labels[TIME_COLUMN]
         usable = np.isfinite(t_l)
@@ -174,18 +180,15 @@ class _Run:
         if usable.sum() < 2:
             raise DatasetError(f"run {name}: {int(usable.sum())} label rows have a reading in {','.join(used)}; "
                                f"matching needs at least 2")
-        order = np.argsort(t_l[usable], kind="stable")
-        lab_idx = np.flatnonzero(usable)[order]
+        lab_idx = np.flatnonzero(usable)
         t_lab = t_l[lab_idx]
-        # sensor rows: finite time and values, in time order
-        finite = np.isfinite(t_r) & np.isfinite(values.reshape(len(values), -1)).all(axis=1)
+        # sensor rows: finite values (the times are finite and in order)
+        finite = np.isfinite(values.reshape(len(values), -1)).all(axis=1)
         report["nan_readings"] = int((~finite).sum())
         keep = np.flatnonzero(finite)
-        report["out_of_order_readings"] = int(np.sum(np.diff(t_r[keep]) < 0))
-        keep = keep[np.argsort(t_r[keep], kind="stable")]
         t_s = t_r[keep]
         if not len(t_s):
-            raise DatasetError(f"run {name}: every sensor row has a NaN")
+            raise DatasetError(f"run {name}: every sensor row has a NaN or infinite value")
         if t_s[-1] < t_lab[0] or t_s[0] > t_lab[-1]:
             raise DatasetError(f"run {name}: the sensor stream (t = {t_s[0]:.3f} .. {t_s[-1]:.3f} s) and the label "
                                f"stream (t = {t_lab[0]:.3f} .. {t_lab[-1]:.3f} s) never overlap: stamp both with "

@@ -93,7 +93,9 @@ def read_reading_stream(path: str | Path) -> tuple[np.ndarray, np.ndarray, dict]
 
     Returns:
         (t_s (M,), values, info): values (M, V) from a CSV, or (M, R, C, 3) raw fields in uT on the
-        recording's layout; info names the source, and for a recording its layout and clock.
+        recording's layout; info names the source, and for a recording its layout, clock and what its damage
+        lost (``skipped_bytes``, ``damaged_places`` and their ``damage_at_bytes``, ``truncated_bytes``, about
+        how many ``frames_lost``).
     """
     path = Path(path)
     if path.suffix == RECORDING_SUFFIX:
@@ -107,7 +109,10 @@ def read_reading_stream(path: str | Path) -> tuple[np.ndarray, np.ndarray, dict]
         if not len(rec):
             raise DatasetError(f"recording {path}: no frames")
         info = {"source": str(path), "kind": "recording", "layout": rec.layout_name,
-                "clock": "time.monotonic() of the recording host"}
+                "clock": "time.monotonic() of the recording host", "frames": len(rec),
+                "skipped_bytes": rec.skipped_bytes, "damaged_places": rec.damaged_records,
+                "damage_at_bytes": [at for at, _ in rec.damage], "truncated_bytes": rec.truncated_bytes,
+                "frames_lost": rec.frames_lost}
         return rec.t_host_s, rec.field_raw_ut(), info
     table, _ = read_csv_table(path, what="readings")
     return table[:, 0], table[:, 1:], {"source": str(path), "kind": "csv", "columns": int(table.shape[1])}
@@ -152,9 +157,11 @@ def reading_stream(item: ReadingStream, board: Any, offset_s: float, baseline_s:
                                    f"(M, {board.n_chips}, 3): x, y, z of each chip of layout {board.name}")
             raise DatasetError(f"{where}: {flat.shape[1] + 1} columns, expected {1 + 3 * board.n_chips}: time (s), "
                                f"then x, y, z of each of the {board.n_chips} chips of layout {board.name}")
+        _check_values(flat, where, table=info["kind"] != "arrays")
         readings = board.readings_from_chips(flat.reshape(len(flat), board.n_chips, 3))
     if len(t) != len(readings):
         raise DatasetError(f"{where}: {len(t)} times for {len(readings)} readings")
+    check_times(t, where)
     t = t + float(offset_s)
     if baseline_s is not None:
         first = np.isfinite(t) & (t <= np.nanmin(t) + baseline_s) & np.isfinite(readings).all(axis=(1, 2, 3))
@@ -184,6 +191,11 @@ def label_stream(item: LabelStream, columns: Sequence[str] | None,
         names = list(columns) if columns is not None else header
         if names is None:
             raise DatasetError(f"{where}: no header; name its columns (label columns, e.g. time_s,x_mm,y_mm,z_mm)")
+        twice = [n for i, n in enumerate(names) if n in names[:i]]
+        if twice:  # a dict by name would keep the last of them: another column's data under the first's name
+            named_by = "the label columns name" if columns is not None else "its header names"
+            raise DatasetError(f"{where}: {named_by} the column {twice[0]!r} twice ({','.join(names)}): give each "
+                               f"column its own name")
         if table.shape[1] != len(names):
             raise DatasetError(f"{where}: {table.shape[1]} columns, but the label columns name {len(names)} "
                                f"({','.join(names)})")
@@ -193,7 +205,54 @@ def label_stream(item: LabelStream, columns: Sequence[str] | None,
     lengths = {len(v) for v in labels.values()}
     if len(lengths) != 1:
         raise DatasetError(f"{where}: columns of different lengths {sorted(lengths)}")
+    check_times(labels[TIME_COLUMN], where)
     return labels, info
+
+
+def check_times(t_s: np.ndarray, where: str) -> None:
+    """Refuse a stream's times (M,) s that are not finite or go backwards, naming the row (1-based data rows).
+
+    Both streams are matched by time: a row out of order would take another row's label, so it is refused rather
+    than sorted. Repeated times pass (the caller counts them).
+
+    Raises:
+        DatasetError: ``where``, the row and its time.
+    """
+    t = np.asarray(t_s, dtype=np.float64)
+    bad = ~np.isfinite(t)
+    if bad.any():
+        i = int(np.argmax(bad))
+        count = int(bad.sum())
+        raise DatasetError(f"{where}: row {i + 1} has time {float(t[i])}: every row needs a finite time (s) "
+                           f"({count} {'row does' if count == 1 else 'rows do'} not)")
+    back = np.diff(t) < 0
+    if back.any():
+        i = int(np.argmax(back))
+        count = int(back.sum())
+        raise DatasetError(f"{where}: time goes backwards at row {i + 2} ({t[i + 1]:.6f} s, after {t[i]:.6f} s at "
+                           f"row {i + 1}; {count} backward step{'s' if count > 1 else ''} in all): rows are matched "
+                           "by time, so they must be in time order; sort them or fix the clock")
+
+
+def _check_values(flat: np.ndarray, where: str, *, table: bool) -> None:
+    """Refuse finite values (M, V) too large for float32 (they would become inf) and rows that are all NaN or inf.
+
+    ``table``: the values are columns 2.. of a table whose column 1 is the time (named so); else value indices.
+    """
+    def place(r: int, c: int) -> str:
+        return f"row {r + 1}, column {c + 2}" if table else f"row {r + 1}, value {c}"
+
+    with np.errstate(invalid="ignore"):
+        huge = np.isfinite(flat) & (np.abs(flat) > np.finfo(np.float32).max)
+    if huge.any():
+        r, c = (int(i) for i in np.argwhere(huge)[0])
+        raise DatasetError(f"{where}: {place(r, c)} holds {flat[r, c]:g}: too large to be a reading (beyond "
+                           f"float32's range, +-3.4e38, it would overflow to inf; {int(huge.sum())} such values)")
+    bad = ~np.isfinite(flat)
+    if len(flat) and bad.any(axis=1).all():
+        r, c = (int(i) for i in np.argwhere(bad)[0])
+        raise DatasetError(f"{where}: every sensor row has a NaN or infinite value (first: {place(r, c)}, "
+                           f"{flat[r, c]}): no reading to match")
 
 
 def _is_number(text: str) -> bool:

@@ -1,13 +1,18 @@
 """Where a live Rerun recording goes: a ``.rrd`` file, a viewer we start, or a gRPC server on this machine.
 
-The viewer and the server are the ``rerun`` command of the installed rerun-sdk (``python -m rerun``), started
-with ``--bind`` so they listen on 127.0.0.1 unless the caller asks for another address: the SDK's own
-``rr.spawn`` and ``rr.serve_grpc`` listen on every interface. The logging process then connects to it over
-gRPC.
+The viewer and the server are the ``rerun`` program of the installed rerun-sdk, started with ``--bind`` so they
+listen on 127.0.0.1 unless the caller asks for another address: the SDK's own ``rr.spawn`` and
+``rr.serve_grpc`` listen on every interface. The logging process then connects to it over gRPC. The program
+runs as a process group of its own: a server is stopped with everything in that group when the sink closes,
+and a viewer is not hit by the terminal's Ctrl-C.
 """
 
 from __future__ import annotations
 
+import errno
+import importlib.util
+import os
+import signal
 import socket
 import subprocess
 import sys
@@ -20,25 +25,61 @@ from tactile_manip.interop.rerun_log import APPLICATION_ID, require_rerun
 DEFAULT_PORT = 9876          # Rerun's own default gRPC port
 LOCALHOST = "127.0.0.1"
 START_TIMEOUT_S = 20.0       # a cold viewer or server takes a few seconds to listen
+STOP_TIMEOUT_S = 5.0         # a server asked to stop is killed after this long
+NO_DISPLAY = "no display (DISPLAY and WAYLAND_DISPLAY are unset): use --save F.rrd or --serve"
+_WINDOWS = sys.platform == "win32"
+
+
+def rerun_program() -> list[str]:
+    """The command that runs the ``rerun`` program of the installed rerun-sdk.
+
+    The binary that the ``rerun_cli`` package ships, where it is found (``$RERUN_CLI_PATH`` overrides it, as it
+    does for ``python -m rerun``); else ``python -m rerun``, a wrapper that runs the binary as its child.
+    """
+    if os.environ.get("RERUN_CLI_PATH"):
+        return [os.environ["RERUN_CLI_PATH"]]
+    spec = importlib.util.find_spec("rerun_cli")
+    if spec is not None and spec.origin:
+        folder = Path(spec.origin).parent
+        names = ("rerun.exe",) if _WINDOWS else (os.path.join("Rerun.app", "Contents", "MacOS", "Rerun"), "rerun")
+        for name in names:
+            if (folder / name).is_file():
+                return [str(folder / name)]
+    return [sys.executable, "-m", "rerun"]
 
 
 def viewer_command(*, serve: bool, bind: str, port: int) -> list[str]:
     """The ``rerun`` command line of a viewer (``serve=False``) or a viewer-less gRPC server, on ``bind:port``."""
-    cmd = [sys.executable, "-m", "rerun", "--bind", bind, "--port", str(port)]
+    cmd = [*rerun_program(), "--bind", bind, "--port", str(port)]
     return cmd + ["--serve-grpc"] if serve else cmd
 
 
+def grpc_host(bind: str) -> str:
+    """The address to reach a server bound to ``bind`` from this machine."""
+    return LOCALHOST if bind in ("0.0.0.0", "::", "") else bind
+
+
 def grpc_url(host: str, port: int) -> str:
-    """The proxy URL an SDK or a viewer connects to."""
-    host = LOCALHOST if host in ("0.0.0.0", "::", "") else host
-    return f"rerun+http://{host}:{port}/proxy"
+    """The proxy URL an SDK or a viewer connects to (an IPv6 address in brackets)."""
+    host = grpc_host(host)
+    return f"rerun+http://{f'[{host}]' if ':' in host else host}:{port}/proxy"
+
+
+def display_problem() -> str | None:
+    """Why a viewer window cannot open here (X11 and Wayland desktops: no display set), or None."""
+    if sys.platform in ("darwin", "win32", "cygwin"):
+        return None
+    if any(os.environ.get(name) for name in ("DISPLAY", "WAYLAND_DISPLAY", "WAYLAND_SOCKET")):
+        return None
+    return NO_DISPLAY
 
 
 @dataclass
 class LiveSink:
     """An open recording and the process behind it (None for a file); :meth:`close` flushes and stops it.
 
-    A spawned viewer is left running (it is the user's window); a server this process started is stopped.
+    A spawned viewer is left running (it is the user's window); a server this process started is stopped,
+    with any process it started.
     """
 
     recording: object
@@ -52,12 +93,8 @@ class LiveSink:
             self.recording.flush()
             self.recording.disconnect()
         finally:
-            if self.process is not None and self.stop_process and self.process.poll() is None:
-                self.process.terminate()
-                try:
-                    self.process.wait(timeout=5.0)
-                except subprocess.TimeoutExpired:
-                    self.process.kill()
+            if self.process is not None and self.stop_process:
+                stop_process_group(self.process)
 
     def __enter__(self) -> LiveSink:
         return self
@@ -73,7 +110,7 @@ def open_live(*, save: str | Path | None = None, spawn: bool = False, serve: boo
 
     Raises:
         ValueError: none or several sinks asked for, or a port out of range.
-        OSError: the viewer or server did not start listening on ``bind:port``.
+        OSError: no display for a viewer to start, or the viewer or server did not listen on ``bind:port``.
     """
     if sum((save is not None, spawn, serve)) != 1:
         raise ValueError("rerun: give exactly one of --save F.rrd, --spawn or --serve")
@@ -92,39 +129,78 @@ def open_live(*, save: str | Path | None = None, spawn: bool = False, serve: boo
             raise OSError(f"port {port} is taken on {grpc_host(bind)}; choose another with --rerun-port")
         rr.connect_grpc(url, default_blueprint=default_blueprint, recording=rec)  # a viewer runs there: use it
         return LiveSink(rec, f"viewer at {url}")
-    cmd = viewer_command(serve=serve, bind=bind, port=port)
-    proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                            start_new_session=spawn)  # a viewer outlives us; a server is ours to stop
+    if spawn and display_problem():
+        raise OSError(display_problem())
+    proc = _start(viewer_command(serve=serve, bind=bind, port=port))
     try:
-        _wait_listening(grpc_host(bind), port, proc)
-    except OSError:
-        if proc.poll() is None:
-            proc.terminate()
+        _wait_listening(bind, port, proc)
+        rr.connect_grpc(url, default_blueprint=default_blueprint, recording=rec)
+    except BaseException:  # not listening, or Ctrl-C meanwhile: the process we started goes too
+        stop_process_group(proc)
         raise
-    rr.connect_grpc(url, default_blueprint=default_blueprint, recording=rec)
     sink = LiveSink(rec, f"{'serving' if serve else 'viewer'} at {url}", process=proc, stop_process=serve)
     if serve:
         sink.notes.append(f"connect a viewer with: rerun --connect {url}")
-    if bind not in (LOCALHOST, "localhost", "::1"):
-        sink.notes.append(f"warning: listening on {bind}:{port}, reachable from other machines")
+    if bind not in (LOCALHOST, "::1"):
+        sink.notes.append(f"warning: listening on {bind} port {port}, reachable from other machines")
     return sink
 
 
-def grpc_host(bind: str) -> str:
-    """The address to reach a server bound to ``bind`` from this machine."""
-    return LOCALHOST if bind in ("0.0.0.0", "::", "") else bind
+def _start(cmd: list[str]) -> subprocess.Popen:
+    """``cmd`` as the leader of a new process group (so the group can be stopped as one)."""
+    group = ({"creationflags": subprocess.CREATE_NEW_PROCESS_GROUP} if _WINDOWS else {"start_new_session": True})
+    return subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                            **group)
 
 
-def _wait_listening(host: str, port: int, proc: subprocess.Popen) -> None:
+def stop_process_group(proc: subprocess.Popen, *, timeout_s: float = STOP_TIMEOUT_S) -> None:
+    """Stop ``proc``, started by :func:`_start`, and every process of its group: SIGTERM, then SIGKILL to what is
+    left once ``proc`` has exited or ``timeout_s`` has passed."""
+    if _WINDOWS:  # the binary itself (see rerun_program): no group to stop
+        if proc.poll() is None:
+            proc.terminate()
+        try:
+            proc.wait(timeout=timeout_s)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+        return
+    for sig in (signal.SIGTERM, signal.SIGKILL):
+        try:
+            os.killpg(proc.pid, sig)  # the group outlives its leader while a child of the leader runs
+        except ProcessLookupError:
+            break
+        try:
+            proc.wait(timeout=timeout_s)
+        except subprocess.TimeoutExpired:
+            continue
+    proc.poll()
+
+
+def _wait_listening(bind: str, port: int, proc: subprocess.Popen) -> None:
+    host = grpc_host(bind)
     deadline = time.monotonic() + START_TIMEOUT_S
     while time.monotonic() < deadline:
         if proc.poll() is not None:
-            raise OSError(f"rerun exited with status {proc.returncode} before listening on {host}:{port} "
-                          f"(is the port taken? try --rerun-port)")
+            raise OSError(f"rerun exited with status {proc.returncode} before listening on {bind} port {port}"
+                          f"{_exit_reason(bind, port, proc.args)}")
         if _listening(host, port):
             return
         time.sleep(0.1)
-    raise OSError(f"rerun did not listen on {host}:{port} within {START_TIMEOUT_S:.0f} s")
+    raise OSError(f"rerun did not listen on {bind} port {port} within {START_TIMEOUT_S:.0f} s")
+
+
+def _exit_reason(bind: str, port: int, cmd: list[str]) -> str:
+    """Why a viewer or server may have exited: the port taken, the address not this machine's, or unknown."""
+    family = socket.AF_INET6 if ":" in bind else socket.AF_INET
+    with socket.socket(family) as s:
+        try:
+            s.bind((bind, port))
+        except OSError as e:
+            if e.errno == errno.EADDRINUSE:
+                return ": the port is taken (choose another with --rerun-port)"
+            if e.errno == errno.EADDRNOTAVAIL:
+                return f": {bind} is not an address of this machine (see --bind)"
+    return f" (run `{' '.join(cmd)}` to see its message)"
 
 
 def _listening(host: str, port: int) -> bool:

@@ -52,12 +52,15 @@ class RerunTrialObserver:
         self.trials += 1
 
     def close(self) -> None:
-        """Stop the frame thread and close the sink (the file is complete, a server this process started stops)."""
+        """Stop the frame thread and close the sink (the file is complete, a server this process started stops,
+        even when the last flush fails)."""
         self._stop.set()
-        if self._thread is not None:
-            self._thread.join(timeout=5.0)
-            self.logger.flush()
-        self.sink.close()
+        try:
+            if self._thread is not None:
+                self._thread.join(timeout=5.0)
+                self.logger.flush()
+        finally:
+            self.sink.close()
 
     def __enter__(self) -> RerunTrialObserver:
         return self

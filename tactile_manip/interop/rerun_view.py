@@ -31,37 +31,48 @@ def stream_to_rerun(sensor, *, save: str | Path | None = None, spawn: bool = Fal
                     bind: str = LOCALHOST, port: int = DEFAULT_PORT, model: str = "bilinear",
                     estimate_hz: float = 10.0, seconds: float | None = None, name: str = "mbts") -> int:
     """Log ``sensor``'s frames (and estimates from ``model``) until ``seconds`` pass or Ctrl-C; returns 0 when
-    frames were logged, 1 when none came. With no sink given, a viewer is spawned."""
-    from tactile_manip.errors import SensorTimeoutError
+    frames were logged, 1 when none came. With no sink given, a viewer is spawned. A server started here is
+    stopped on the way out, whatever ends the stream."""
     from tactile_manip.interop.rerun_log import EntityPaths, RerunLogger, blueprint
 
     estimator = load_estimator(model, sensor.layout.name)  # a bad model fails before a viewer starts
     if save is None and not serve:
         spawn = True
-    sink = open_live(save=save, spawn=spawn, serve=serve, bind=bind, port=port, recording_name=f"view {sensor.source}",
-                     default_blueprint=blueprint(EntityPaths(name)))
-    print(f"view: {sensor.source} -> Rerun, {sink.description}" + "".join(f"\nview: {n}" for n in sink.notes),
-          file=sys.stderr, flush=True)
-    logger = RerunLogger(sink.recording, name=name, grid=sensor.layout.grid, layout=sensor.layout)
+    logger = None
+    with open_live(save=save, spawn=spawn, serve=serve, bind=bind, port=port, recording_name=f"view {sensor.source}",
+                   default_blueprint=blueprint(EntityPaths(name))) as sink:  # closed (a server stopped) however we end
+        print(f"view: {sensor.source} -> Rerun, {sink.description}" + "".join(f"\nview: {n}" for n in sink.notes),
+              file=sys.stderr, flush=True)
+        try:
+            logger = RerunLogger(sink.recording, name=name, grid=sensor.layout.grid, layout=sensor.layout)
+            _log_frames(sensor, logger, estimator, estimate_hz=estimate_hz, seconds=seconds)
+        except KeyboardInterrupt:  # Ctrl-C (or SIGTERM, raised as one by the CLI) ends the stream, not an error
+            pass
+        finally:
+            if logger is not None:
+                logger.flush()
+    frames = 0 if logger is None else logger.frames
+    print(f"view: logged {frames} frames to Rerun ({sink.description})", file=sys.stderr)
+    return 0 if frames else 1
+
+
+def _log_frames(sensor, logger, estimator, *, estimate_hz: float, seconds: float | None) -> None:
+    """Every frame of ``sensor`` to ``logger``, the estimate at most ``estimate_hz`` times a second, for
+    ``seconds`` (None: until interrupted)."""
+    from tactile_manip.errors import SensorTimeoutError
+
     period = 1.0 / estimate_hz
     next_estimate = -math.inf
     end = math.inf if seconds is None else time.monotonic() + seconds
-    with sink, sensor.subscribe() as frames:
-        try:
-            while time.monotonic() < end:
-                try:
-                    reading = frames.get(timeout_s=min(0.5, max(end - time.monotonic(), 0.0))).reading
-                except SensorTimeoutError:
-                    continue
-                logger.log_reading(reading)
-                if estimator is not None and reading.t_host_s >= next_estimate:
-                    next_estimate = reading.t_host_s + period
-                    est, rec = estimator.estimate_with_image(reading)
-                    logger.log_estimate(angle_rad=est.angle_rad if est.defined else math.nan,
-                                        confidence=est.confidence, depth_mm=rec.depth_mm)
-        except KeyboardInterrupt:
-            pass
-        finally:
-            logger.flush()
-    print(f"view: logged {logger.frames} frames to Rerun ({sink.description})", file=sys.stderr)
-    return 0 if logger.frames else 1
+    with sensor.subscribe() as frames:
+        while time.monotonic() < end:
+            try:
+                reading = frames.get(timeout_s=min(0.5, max(end - time.monotonic(), 0.0))).reading
+            except SensorTimeoutError:
+                continue
+            logger.log_reading(reading)
+            if estimator is not None and reading.t_host_s >= next_estimate:
+                next_estimate = reading.t_host_s + period
+                est, rec = estimator.estimate_with_image(reading)
+                logger.log_estimate(angle_rad=est.angle_rad if est.defined else math.nan,
+                                    confidence=est.confidence, depth_mm=rec.depth_mm)

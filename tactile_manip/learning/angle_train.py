@@ -30,13 +30,14 @@ from typing import Any, Literal
 import numpy as np
 import torch
 
-from tactile_manip.config import load_config, to_dict
+from tactile_manip.config import check_ranges, load_config, to_dict
 from tactile_manip.data import PairedDataset, load_dataset
 from tactile_manip.errors import DatasetError
 from tactile_manip.learning.angle_model import (AngleHead, AngleModelConfig, count_parameters, reading_features,
                                                 von_mises_nll)
 from tactile_manip.learning.noise import ChipNoise
 from tactile_manip.learning.schedule import check_schedule, optimise_step
+from tactile_manip.learning.train import THREADS_RANGE, check_finite_readings
 from tactile_manip.perception.evaluation import ELONGATED
 from tactile_manip.perception.pose import angle_from_image, wrap_axial
 from tactile_manip.perception.symmetry import transform_reading
@@ -69,6 +70,7 @@ class AngleTrainConfig:
 
     def __post_init__(self) -> None:
         check_schedule(self)
+        check_ranges(self, {"hidden": (1, 4096), "layers": (1, 16), "threads": THREADS_RANGE})
         self.model_config((4, 4, 3))
 
     def model_config(self, cells: tuple[int, int, int]) -> AngleModelConfig:
@@ -117,6 +119,7 @@ def labelled_presses(paths: list[str | Path], *, image_labels: bool = True, redr
         if cells is not None and tuple(data.readings.shape[1:]) != cells:
             raise DatasetError(f"{path}: readings of shape {data.readings.shape[1:]}, the others {cells}")
         cells = tuple(data.readings.shape[1:])
+        check_finite_readings(data, np.flatnonzero(np.isin(data.split, tuple(parts))), str(path))
         for split in parts:
             idx, angle, axial = axis_labels(data, data.indices(split), image_labels=image_labels)
             parts[split].append((data.readings[idx].astype(np.float32), angle, axial))

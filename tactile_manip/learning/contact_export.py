@@ -7,13 +7,17 @@ standardisation run inside the graph. The JSON under the metadata key ``tactile_
 (``"contact"``), the target names and units, the input's shape, layout and units, the board layout, the
 temporal context (frames, largest gap, the training stream's frame period), the normalisation, the training
 and model configs, the data fingerprint and the validation RMSE, and where given the image centroid's share in a
-combined position estimate (``image_position_weight``). Export re-runs the file with onnxruntime on
-real and random windows and refuses to keep one that disagrees with torch.
+combined position estimate (``image_position_weight``), the largest |field| of a reading the model answers for
+(``input.plausible_field_ut``) and the targets' trained ranges (``targets.range``), which
+:class:`~tactile_manip.perception.contact.ContactEstimator` reads with defaults where a file has none. Export
+re-runs the file with onnxruntime on real and random windows and refuses to keep one that disagrees with torch.
 """
 
 from __future__ import annotations
 
 import json
+import math
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -41,19 +45,33 @@ def load_contact_checkpoint(path: str | Path) -> tuple[ContactModel, dict[str, A
 
 def export_contact_onnx(checkpoint: str | Path, out: str | Path, *, metrics: dict | None = None,
                         check_windows: np.ndarray | None = None,
-                        image_position_weight: float | None = None) -> dict[str, Any]:
+                        image_position_weight: float | None = None, plausible_field_ut: float | None = None,
+                        target_ranges: Mapping[str, tuple[float, float]] | None = None) -> dict[str, Any]:
     """Write ``out`` (.onnx) from ``checkpoint`` and return its metadata (with ``parity_max_abs``).
 
     ``check_windows`` (N, T, R, C, A): real input windows for the parity check (random ones are added).
     ``image_position_weight``: the image centroid's share in the position of a
     :class:`~tactile_manip.perception.contact_pose.TactileEstimator` built with this model (stored in the
     metadata; chosen with ``benchmarks/contact_position_fusion.py``); none: the model's own position.
+    ``plausible_field_ut``: the largest |field| (uT) of a reading the model answers for (none: its board's bound,
+    :data:`~tactile_manip.perception.estimator.PLAUSIBLE_FIELD_UT`). ``target_ranges``: the range [low, high] of
+    each named target in the training data (none: the normalisation's mean +- 4 standard deviations).
     """
     if image_position_weight is not None and not 0.0 <= image_position_weight <= 1.0:
         raise ValueError(f"image_position_weight must be a share in [0, 1], got {image_position_weight!r}")
+    if plausible_field_ut is not None and not (math.isfinite(plausible_field_ut) and plausible_field_ut > 0):
+        raise ValueError(f"plausible_field_ut must be a finite number of uT > 0, got {plausible_field_ut!r}")
+    ranges = {str(n): [float(lo), float(hi)] for n, (lo, hi) in (target_ranges or {}).items()}
+    for name, (lo, hi) in ranges.items():
+        if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
+            raise ValueError(f"target_ranges[{name!r}] must be finite with low < high, got {[lo, hi]}")
     import onnx
 
     model, payload = load_contact_checkpoint(checkpoint)
+    unknown = set(ranges) - set(payload["targets"])
+    if unknown:
+        raise ValueError(f"target_ranges names {sorted(unknown)}, which are not the model's targets "
+                         f"({', '.join(payload['targets'])})")
     cfg = model.cfg
     example = torch.zeros(2, cfg.context_frames, *cfg.cells)
     final = Path(out)
@@ -66,6 +84,10 @@ def export_contact_onnx(checkpoint: str | Path, out: str | Path, *, metrics: dic
     meta = contact_metadata(model, payload, metrics or {})
     if image_position_weight is not None:
         meta["image_position_weight"] = float(image_position_weight)
+    if plausible_field_ut is not None:
+        meta["input"]["plausible_field_ut"] = float(plausible_field_ut)
+    if ranges:
+        meta["targets"]["range"] = ranges
     proto = onnx.load(str(tmp))
     entry = proto.metadata_props.add()
     entry.key, entry.value = METADATA_KEY, json.dumps(meta)

@@ -26,9 +26,15 @@ from typing import Literal
 import torch
 from torch import nn
 
+from tactile_manip.config import check_ranges
+
 FEATURES = ("field", "field_direction")
 ACTIVATIONS = {"gelu": nn.GELU, "relu": nn.ReLU, "silu": nn.SiLU}
 LOG_VAR_LIMIT = 12.0  # clamp of the standardised log variance: sigma within e^-6 .. e^6 target spreads
+# allowed sizes: far above the shipped configs (3 frames, 128 units, 3 layers, 5 members), low enough that a typo
+# fails at once (a million frames of context would allocate gigabytes)
+SIZE_RANGES = {"targets": (1, 256), "context_frames": (1, 64), "hidden": (1, 4096), "layers": (1, 16),
+               "members": (1, 32)}
 
 
 @dataclass(frozen=True)
@@ -48,9 +54,7 @@ class ContactModelConfig:
     def __post_init__(self) -> None:
         if len(self.cells) != 3 or min(self.cells) < 1:
             raise ValueError(f"cells must be (rows, cols, channels) >= 1, got {self.cells}")
-        for name in ("targets", "context_frames", "hidden", "layers", "members"):
-            if getattr(self, name) < 1:
-                raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
+        check_ranges(self, SIZE_RANGES)
         if self.features not in FEATURES:
             raise ValueError(f"features must be one of {FEATURES}, got {self.features!r}")
         if self.act not in ACTIVATIONS:

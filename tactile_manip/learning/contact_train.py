@@ -15,6 +15,9 @@ and their disagreement are otherwise too wide or too narrow by a factor that dep
 validation samples' mix (:class:`~tactile_manip.perception.confidence.SigmaCalibration`, the isotonic fit the
 pose estimator's confidence calibration uses); the export carries it and the runtime applies it.
 
+A dataset without training rows, or with a NaN or infinite reading anywhere (any row may be another's
+context), is refused before training with a ``DatasetError`` naming it.
+
 ``RUN/best.pt`` holds the mixture of the members with everything the export needs; ``RUN/history.json`` each
 member's curve and the validation RMSE per target of the mixture.
 """
@@ -33,13 +36,14 @@ from typing import Any, Literal
 import numpy as np
 import torch
 
-from tactile_manip.config import to_dict
+from tactile_manip.config import check_ranges, to_dict
 from tactile_manip.data import PairedDataset, load_datasets
 from tactile_manip.errors import ConfigError, DatasetError
 from tactile_manip.learning.contact_model import (ContactModel, ContactModelConfig, GaussianMLP, count_parameters,
                                                   frame_features)
 from tactile_manip.learning.noise import ChipNoise
 from tactile_manip.learning.schedule import check_schedule, optimise_step
+from tactile_manip.learning.train import THREADS_RANGE, check_finite_readings, check_training_rows, data_name
 from tactile_manip.perception.confidence import ONE_SIGMA, SigmaCalibration
 from tactile_manip.perception.contact_context import context_windows
 
@@ -81,8 +85,8 @@ class ContactTrainConfig:
             raise ValueError(f"nll_beta must be in [0, 1], got {self.nll_beta}")
         if not 0 < self.val_fraction < 1:
             raise ValueError(f"val_fraction must be in (0, 1), got {self.val_fraction}")
-        if not (math.isfinite(self.context_max_gap_s) and self.context_max_gap_s >= 0):
-            raise ValueError(f"context_max_gap_s must be >= 0, got {self.context_max_gap_s}")
+        check_ranges(self, {"context_max_gap_s": (0.0, 3600.0), "threads": THREADS_RANGE},
+                     units={"context_max_gap_s": "s"})
         if self.redraw_noise and self.context_frames != 1:
             raise ValueError(f"redraw_noise draws the noise of one frame; it needs context_frames = 1, got "
                              f"{self.context_frames}")
@@ -149,6 +153,8 @@ def train_contact(cfg: ContactTrainConfig, data_paths: list[str | Path], out: st
         torch.set_num_threads(cfg.threads)
     data = load_datasets([Path(p) for p in data_paths], images=False)
     names = chosen_targets(data, cfg)
+    check_training_rows(data, data_name(data_paths))
+    check_finite_readings(data, np.arange(len(data)), data_name(data_paths))  # any row may be a context frame
     train_idx, val_idx = split_indices(data, cfg.val_fraction)
     if len(train_idx) < 2:
         raise DatasetError(f"{len(train_idx)} training sample(s): too few to train on")

@@ -87,11 +87,17 @@ def load_checkpoint(path: str | Path) -> tuple[SuperMagCVAE, InputSpec, dict[str
 
 
 def export_onnx(checkpoint: str | Path, out: str | Path, *, pixel_mm: float, metrics: dict | None = None,
-                extra: dict | None = None, check_readings: np.ndarray | None = None) -> dict[str, Any]:
+                extra: dict | None = None, check_readings: np.ndarray | None = None,
+                plausible_field_ut: float | None = None) -> dict[str, Any]:
     """Write ``out`` (.onnx) from ``checkpoint`` and return its metadata.
 
     ``check_readings`` (N, R, C, 3) real readings for the parity check (random ones are added).
+    ``plausible_field_ut``: the largest |field| (uT) of a reading the model answers for, stored as
+    ``input.plausible_field_ut`` (none: the pose estimator takes its board's bound,
+    :data:`~tactile_manip.perception.estimator.PLAUSIBLE_FIELD_UT`).
     """
+    if plausible_field_ut is not None and not (math.isfinite(plausible_field_ut) and plausible_field_ut > 0):
+        raise ValueError(f"plausible_field_ut must be a finite number of uT > 0, got {plausible_field_ut!r}")
     import onnx
 
     model, spec, payload = load_checkpoint(checkpoint)
@@ -111,6 +117,8 @@ def export_onnx(checkpoint: str | Path, out: str | Path, *, pixel_mm: float, met
     torch.onnx.export(one, (field[:1],), one_bytes, dynamo=False, opset_version=17, input_names=["field_ut"],
                       output_names=["depth_mm"])
     meta = _metadata(model, spec, payload, pixel_mm, metrics or {}, extra or {})
+    if plausible_field_ut is not None:
+        meta["input"]["plausible_field_ut"] = float(plausible_field_ut)
     proto = onnx.load(str(out))
     for key, value in ((METADATA_KEY, json.dumps(meta)), (ONE_READING_KEY, encode(one_bytes.getvalue()))):
         entry = proto.metadata_props.add()

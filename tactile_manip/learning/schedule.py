@@ -7,15 +7,15 @@ from typing import Any
 
 import torch
 
-from tactile_manip.learning.train import TrainingError
+from tactile_manip.config import check_ranges
+from tactile_manip.learning.train import SCHEDULE_RANGES, TrainingError
 
 
 def check_schedule(cfg: Any) -> None:
-    """Refuse (ValueError) epochs, batch size or patience below 1, a learning rate outside (0, 1) or a negative
-    weight decay on ``cfg`` (a dataclass with those fields)."""
-    for name in ("epochs", "batch_size", "patience"):
-        if getattr(cfg, name) < 1:
-            raise ValueError(f"{name} must be >= 1, got {getattr(cfg, name)}")
+    """Refuse epochs, batch size or patience outside :data:`~tactile_manip.learning.train.SCHEDULE_RANGES`
+    (ConfigError), a learning rate outside (0, 1) or a negative weight decay (ValueError) on ``cfg`` (a dataclass
+    with those fields)."""
+    check_ranges(cfg, SCHEDULE_RANGES)
     if not (math.isfinite(cfg.lr) and 0 < cfg.lr < 1):
         raise ValueError(f"lr must be in (0, 1), got {cfg.lr}")
     if not (math.isfinite(cfg.weight_decay) and cfg.weight_decay >= 0):

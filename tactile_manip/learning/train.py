@@ -9,7 +9,9 @@ with the fixed 2 mm data range) and writes ``checkpoint.pt`` (everything needed 
 validation PSNR), ``history.json`` and ``loss.png`` to the output folder. Early stopping ends the run when the
 validation PSNR has not improved for ``patience`` epochs; a NaN or infinite loss (checked at every step), or non-finite
 weights or validation output (checked before each checkpoint), stops it with a ``TrainingError`` naming the
-epoch and the learning rate, and keeps the last good checkpoint.
+epoch and the learning rate, and keeps the last good checkpoint. Before that, a dataset in memory without
+training rows, or with NaN or infinite readings in its train or val split, is refused with a ``DatasetError``
+naming it (:func:`check_training_rows`, :func:`check_finite_readings`, shared by every network's training).
 """
 
 from __future__ import annotations
@@ -25,10 +27,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
+import numpy as np
 import torch
 
-from tactile_manip.config import config_differences, load_config, to_dict
-from tactile_manip.errors import TactileManipError
+from tactile_manip.config import check_ranges, config_differences, load_config, to_dict
+from tactile_manip.errors import ConfigError, DatasetError, TactileManipError
 from tactile_manip.learning.checkpoint import read_checkpoint
 from tactile_manip.learning.data import (InputSpec, OutputSpec, StreamedData, StreamedPairs, TensorPairs, augment_batch,
                                          open_training_data, select)
@@ -39,6 +42,41 @@ from tactile_manip.data import PairedDataset
 
 class TrainingError(TactileManipError, RuntimeError):
     """Training cannot go on (a non-finite loss, an incompatible checkpoint)."""
+
+
+# allowed ranges of the training loop's sizes (every network's): far above any shipped config, low enough that a
+# typo fails at once instead of allocating gigabytes or running for weeks
+SCHEDULE_RANGES = {"epochs": (1, 100_000), "batch_size": (1, 65_536), "patience": (1, 100_000)}
+THREADS_RANGE = (0, 1024)   # torch CPU threads (0: torch's default)
+
+
+def data_name(paths: list[str | Path] | tuple[str | Path, ...]) -> str:
+    """How messages name the dataset of one or several ``--data`` paths."""
+    return " + ".join(str(p) for p in paths)
+
+
+def check_training_rows(data: PairedDataset, name: str) -> None:
+    """Refuse (DatasetError) a dataset with no sample in its train split, saying which splits hold its rows."""
+    if not np.any(data.split == "train"):
+        held = sorted(set(data.split.tolist()))
+        where = f"the {held[0]} split" if len(held) == 1 else f"the {' and '.join(held)} splits"
+        raise DatasetError(f"no training rows: every row of {name} is in {where}; give it a train split (import "
+                           "splits it by time, `--split` names one) or train on another dataset")
+
+
+def check_finite_readings(data: PairedDataset, index: np.ndarray, name: str) -> None:
+    """Refuse (DatasetError) NaN or infinite readings among the samples ``index`` of ``data``, naming the dataset,
+    how many there are and the channel and cell of the first (a non-finite reading turns the loss NaN, or is
+    clamped into a value no sensor read; targets are checked when a dataset is made)."""
+    readings = data.readings[np.asarray(index)]
+    bad = ~np.isfinite(readings)
+    if bad.any():
+        i, r, c, a = (int(v) for v in np.argwhere(bad)[0])
+        samples = int(bad.reshape(len(bad), -1).any(axis=1).sum())
+        raise DatasetError(f"{name}: {int(bad.sum())} NaN or infinite readings in {samples} samples (first: sample "
+                           f"{int(np.asarray(index)[i])}, channel "
+                           f"{data.channels.names[a]!r} of cell ({r}, {c})); drop those samples or import the data "
+                           "again")
 
 
 @dataclass(frozen=True)
@@ -52,8 +90,9 @@ class DecoderOverrides:
     act: str = ""                        # "gelu" / "relu" in the decoder's conv blocks ("": keep)
 
     def __post_init__(self) -> None:
-        if self.native_scale < 0 or self.dec_blocks < -1 or any(c < 1 for c in self.channels):
-            raise ValueError(f"decoder: native_scale >= 0, dec_blocks >= -1 and channels >= 1 needed, got {self}")
+        check_ranges(self, {"native_scale": (0, 64), "dec_blocks": (-1, 16)})
+        if any(isinstance(c, bool) or not isinstance(c, int) or not 1 <= c <= 4096 for c in self.channels):
+            raise ConfigError(f"decoder: channels must be integers in [1, 4096], got {list(self.channels)}")
 
     def overrides(self) -> dict[str, Any]:
         """The CVAEConfig fields this sets (validated by CVAEConfig itself)."""
@@ -95,11 +134,8 @@ class TrainConfig:
     shard_buffer: int = 2                # shard folders: shards shuffled together (memory grows with it)
 
     def __post_init__(self) -> None:
-        positive = {"epochs": self.epochs, "batch_size": self.batch_size, "patience": self.patience,
-                    "shard_buffer": self.shard_buffer}
-        for name, value in positive.items():
-            if value < 1:
-                raise ValueError(f"{name} must be >= 1, got {value}")
+        check_ranges(self, {**SCHEDULE_RANGES, "shard_buffer": (1, 64), "latent": (0, 4096), "threads": THREADS_RANGE,
+                            "max_minutes": (0.0, 60.0 * 24 * 365)}, units={"max_minutes": "min"})
         if not (math.isfinite(self.lr) and 0 < self.lr < 1):
             raise ValueError(f"lr must be in (0, 1), got {self.lr}")
         if not (math.isfinite(self.lr_min) and 0 <= self.lr_min < 1):  # the cosine schedule ends at lr_min
@@ -213,6 +249,9 @@ def _train(cfg: TrainConfig, data_paths: list[Path], out: Path, resume: bool, pr
         torch.backends.cudnn.allow_tf32 = True
     data = open_training_data(data_paths)  # in memory, or a view of shard folders streamed each epoch
     data.require_images("training the image model")
+    if isinstance(data, PairedDataset):  # in memory: checked whole here (shard folders stream part by part)
+        check_training_rows(data, data_name(data_paths))
+        check_finite_readings(data, np.flatnonzero(np.isin(data.split, ("train", "val"))), data_name(data_paths))
     if cfg.drop_bottomed_out and not data.has("bottomed_out") and dist.main:
         dropped = data.provenance.get("dropped_extras", [])
         why = " (only some of the datasets record it)" if "bottomed_out" in dropped else ""

@@ -29,6 +29,24 @@ Bad input raises ValueError naming the problem (wrong shape, NaN or infinite val
 the history is unchanged); a missing or foreign model file raises
 :class:`~tactile_manip.perception.reconstruct.ModelFileError` naming the path.
 
+No answer is silently wrong: a state is flagged (``plausible`` False, ``implausible_reason`` saying why) and holds
+no quantity (every value and sigma None, ``values`` and ``sigmas`` empty) when
+
+- the reading holds a |value| at or beyond :attr:`ContactEstimator.plausible_limits_ut` (more than an MLX90393
+  can report as a change, or far beyond the field of a press: the model's ``input.plausible_field_ut``, else its
+  board's :data:`~tactile_manip.perception.estimator.PLAUSIBLE_FIELD_UT`, 2000 uT on the SuperMag board, the
+  pose estimator's bound). The model does not run, the reading stays out of the context, and ``in_contact`` is
+  the field rule (largest |value| >= ``min_field_ut``);
+- the model's output is non-finite, places the contact off the pad (:data:`CHECKED_TARGETS`: +-10 mm on the
+  SuperMag board, the layout's grid times pitch; the trained range for a layout not known here) or gives a force
+  outside its trained range (``targets.range`` where the file stores it, widened by
+  :data:`TRAINED_RANGE_MARGIN`; else the training targets' mean +- :data:`TRAINED_RANGE_SIGMAS` standard
+  deviations: -7.3 to 22.5 N for ``models/contact_supermag.onnx``). ``in_contact`` is then the model's.
+
+On the 8675 simulated presses below 2000 uT checked (the shipped training and test sets' configs, rods and bars
+at 2-15 N on drawn sensors) the shipped model's position stays within 8.7 mm and its force within 0.3-14.9 N:
+no plausible press is flagged, and its state is the one the model gave before these checks.
+
 Speed: a call is built for a control loop on one thread (``python -m benchmarks.bench_contact`` measures it).
 The model's input and outputs are arrays allocated once and bound to the onnxruntime session, so a call copies
 the reading into the context window, runs the graph and reads two small arrays back; nothing else is
@@ -49,7 +67,8 @@ import numpy as np
 from tactile_manip.extras import require
 from tactile_manip.perception.confidence import SigmaCalibration
 from tactile_manip.perception.contact_context import ContextBuffer
-from tactile_manip.perception.estimator import StreamStats, stream_estimates
+from tactile_manip.perception.estimator import StreamStats, implausible_field, plausible_limits_ut, stream_estimates
+from tactile_manip.perception.model_metadata import check_metadata
 from tactile_manip.perception.onnx_session import session_options
 from tactile_manip.perception.reconstruct import ModelFileError, read_metadata
 from tactile_manip.types import TactileReading
@@ -61,6 +80,16 @@ if TYPE_CHECKING:
 STATE_FIELDS = {"x_mm": "x_sigma_mm", "y_mm": "y_sigma_mm", "depth_mm": "depth_sigma_mm",
                 "force_n": "force_sigma_n", "shear_x_n": "shear_x_sigma_n", "shear_y_n": "shear_y_sigma_n"}
 CONTACT_FLAG = "in_contact"
+#: outputs checked against where a contact can be and what the model was trained on: the position against the
+#: pad (the board layout's cells, grid times pitch: +-10 mm on the SuperMag board), the forces against their
+#: trained range
+CHECKED_TARGETS = ("x_mm", "y_mm", "force_n", "shear_x_n", "shear_y_n")
+#: a target's trained range where the model stores none (``targets.range``): the training targets' mean +- this
+#: many standard deviations (``normalisation.target_offset`` / ``target_scale``). A target drawn uniformly spans
+#: +-1.73 of them, so 4 leaves 2.3 times its half-width: -7.3 to 22.5 N for the shipped model's 0-15 N presses
+TRAINED_RANGE_SIGMAS = 4.0
+#: a stored trained range [low, high] is widened by this share of its width on each side
+TRAINED_RANGE_MARGIN = 0.25
 
 
 @dataclass(frozen=True)
@@ -71,6 +100,13 @@ class ContactState:
     gives (about 0 N without contact for a model trained on free readings too). Sigmas are one standard
     deviation of the model's Gaussian (ensemble mixture), in the quantity's unit. ``values`` and ``sigmas``
     hold every target of the model by name (also those beyond the standard ones, e.g. a stage's ``z_mm``).
+
+    ``plausible`` is False when the state is no answer (``implausible_reason`` says why): the reading holds a
+    value beyond what the chip can report or far beyond the field of a press (the model is then not run on it,
+    the reading does not enter the context, and ``in_contact`` is the field rule: its largest |value| >=
+    ``min_field_ut``), or the model's output is non-finite, places the contact off the pad, or gives a force
+    outside its trained range (``in_contact`` is then the model's, where finite). Every quantity and sigma is
+    then None, and ``values`` and ``sigmas`` are empty: no number of an implausible state can be used by mistake.
     """
 
     in_contact: bool
@@ -89,8 +125,10 @@ class ContactState:
     in_contact_probability: float | None = None  # the model's in_contact output clipped to [0, 1], where trained
     values: Mapping[str, float] = field(default_factory=dict)
     sigmas: Mapping[str, float] = field(default_factory=dict)
-    context_frames: int = 1      # frames of real context used (1: the reading alone)
+    context_frames: int = 1      # frames of real context used (1: the reading alone; 0: the model did not run)
     latency_s: float = 0.0
+    plausible: bool = True
+    implausible_reason: str = ""  # "" when plausible
 
     @property
     def position_mm(self) -> tuple[float, float] | None:
@@ -143,12 +181,26 @@ class ContactEstimator:
             raise ModelFileError(f"{self.path}: its image_position_weight {weight!r} is not a share in [0, 1]")
         self.image_position_weight = float(weight)
         self.min_field_ut = float(min_field_ut)
+        channels = self.metadata["input"].get("channels", {"kind": "magnetic_vector", "unit": "uT"})
+        self._magnetic_ut = channels.get("kind") == "magnetic_vector" and channels.get("unit") == "uT"
+        #: (channels,) uT: a reading with a |value| at or beyond its channel's limit is implausible (no answer)
+        self.plausible_limits_ut = plausible_limits_ut(self.metadata, channels=self.input_shape[-1],
+                                                       board_layout=self.board_layout, magnetic_ut=self._magnetic_ut)
+        self._plausible_ut = float(self.plausible_limits_ut.min())  # below it, one comparison says "plausible"
+        try:
+            #: (name, low, high, what) of each output a state is checked against (see CHECKED_TARGETS)
+            self.output_bounds: tuple[tuple[str, float, float, str], ...] = self._output_bounds()
+        except (AttributeError, TypeError, ValueError) as e:
+            raise ModelFileError(f"{self.path}: its targets' range or normalisation is unreadable "
+                                 f"({type(e).__name__}: {e})") from e
+        self._bounds = [(self.target_names.index(n), n, lo, hi, what) for n, lo, hi, what in self.output_bounds]
         ort = require("onnxruntime", "running a contact model")
         try:
             self.session = ort.InferenceSession(str(self.path), sess_options=session_options(ort, threads=threads),
                                                 providers=["CPUExecutionProvider"])
         except Exception as e:  # noqa: BLE001 - onnxruntime raises its own Fail/InvalidGraph classes
             raise ModelFileError(f"{self.path}: onnxruntime cannot load it: {' '.join(str(e).split())[:200]}") from e
+        check_metadata(self.metadata, self.session, path=self.path)  # frames and targets against the graph
         self._history = ContextBuffer(self.context_frames, self.max_gap_s, shape=self.input_shape)
         self._abs = np.empty(self.input_shape, np.float32)  # |reading|, allocated once
         self._state_fields = [(k, n, STATE_FIELDS[n]) for k, n in enumerate(self.target_names) if n in STATE_FIELDS]
@@ -187,6 +239,29 @@ class ContactEstimator:
             out[:, k] = sigma_map(out[:, k])
         return out
 
+    def _output_bounds(self) -> tuple[tuple[str, float, float, str], ...]:
+        """Where each of the model's :data:`CHECKED_TARGETS` can lie: the pad for the position (where the board
+        layout is known), else the trained range (stored, or from the normalisation); unchecked without either."""
+        pad = _pad_half_size_mm(self.board_layout)
+        stored = self.metadata.get("targets", {}).get("range", {})
+        norm = self.metadata.get("normalisation", {})
+        offset, scale = norm.get("target_offset", []), norm.get("target_scale", [])
+        bounds = []
+        for k, name in enumerate(self.target_names):
+            if name not in CHECKED_TARGETS:
+                continue
+            if pad is not None and name in ("x_mm", "y_mm"):
+                half = pad[name == "y_mm"]
+                bounds.append((name, -half, half, f"the {self.board_layout} pad"))
+            elif isinstance(stored, dict) and name in stored:
+                lo, hi = (float(v) for v in stored[name])
+                margin = TRAINED_RANGE_MARGIN * (hi - lo)
+                bounds.append((name, lo - margin, hi + margin, "the trained range"))
+            elif len(offset) == len(scale) == len(self.target_names):
+                lo, hi = offset[k] - TRAINED_RANGE_SIGMAS * scale[k], offset[k] + TRAINED_RANGE_SIGMAS * scale[k]
+                bounds.append((name, float(lo), float(hi), "the trained range"))
+        return tuple(bounds)
+
     def __repr__(self) -> str:
         return (f"ContactEstimator({str(self.path)!r}, targets={list(self.target_names)}, "
                 f"context_frames={self.context_frames}, board_layout={self.board_layout!r})")
@@ -206,16 +281,22 @@ class ContactEstimator:
 
         ``t_s``: the reading's time (s, monotonic); default its ``t_host_s``, or the time of the call.
 
+        A reading beyond what the chip can report or far beyond the field of a press (:attr:`plausible_limits_ut`),
+        and a state whose output is non-finite, off the pad or outside the trained range (:attr:`output_bounds`),
+        give a state with ``plausible`` False and no quantities (see :class:`ContactState`).
+
         Raises:
             ValueError: wrong shape, or NaN / infinite values (nothing is estimated, the history is unchanged).
         """
         t0 = time.perf_counter()
         if isinstance(reading, TactileReading):
-            field_ut, peak_ut = self._check(reading.field_ut)
+            field_ut, peak_ut, why = self._check(reading.field_ut)
             if t_s is None:
                 t_s = reading.t_host_s
         else:
-            field_ut, peak_ut = self._check(reading)
+            field_ut, peak_ut, why = self._check(reading)
+        if why:  # no answer, and the reading stays out of the context
+            return self._implausible_state(peak_ut >= self.min_field_ut, None, why, time.perf_counter() - t0)
         self._history.push(field_ut, time.monotonic() if t_s is None else float(t_s))  # the bound input
         self.session.run_with_iobinding(self._binding)                                # into _mean, _sigma
         return self._state(peak_ut, time.perf_counter() - t0)
@@ -231,22 +312,35 @@ class ContactEstimator:
         return stream_estimates(sensor, self.estimate, timeout_s=timeout_s, max_estimates=max_estimates,
                                 stats=stats)
 
-    def _check(self, field_ut: np.ndarray) -> tuple[np.ndarray, float]:
-        """The reading as float32 (R, C, A) and its largest |value| (uT); ValueError for a wrong shape or a NaN
-        or infinite value (one reduction finds both: NaN and inf carry through the maximum)."""
+    def _check(self, field_ut: np.ndarray) -> tuple[np.ndarray, float, str]:
+        """The reading as float32 (R, C, A), its largest |value| (uT) and why it is implausible ("" when it is
+        not); ValueError for a wrong shape or a NaN or infinite value. One reduction decides for a plausible
+        reading: NaN and inf carry through the maximum, and a peak below every limit is plausible."""
         arr = np.asarray(field_ut, dtype=np.float32)
         if arr.shape != self.input_shape:
             raise ValueError(f"expected a reading of shape {self.input_shape} (rows, cols, axes) for "
                              f"{self.path.name}, got {arr.shape}")
         peak_ut = float(np.abs(arr, out=self._abs).max())
+        if peak_ut < self._plausible_ut:
+            return arr, peak_ut, ""
         if not math.isfinite(peak_ut):
-            bad = int(arr.size - np.count_nonzero(np.isfinite(arr)))
-            raise ValueError(f"the reading holds {bad} NaN or infinite value(s): nothing estimated")
-        return arr, peak_ut
+            given = np.asarray(field_ut, dtype=np.float64)
+            bad = int(given.size - np.count_nonzero(np.isfinite(given)))
+            if bad:
+                raise ValueError(f"the reading holds {bad} NaN or infinite value(s): nothing estimated")
+            arr = given  # finite, beyond float32's range: a huge reading, not a broken one
+        return arr, peak_ut, implausible_field(arr, self.plausible_limits_ut, magnetic_ut=self._magnetic_ut)
 
     def _state(self, peak_ut: float, latency_s: float) -> ContactState:
         """The state of the outputs the last run left in ``_mean`` and ``_sigma``."""
         mean, sigma = self._mean[0].tolist(), self._sigma[0].tolist()
+        why = self._implausible_output(mean, sigma)
+        if why:
+            probability = None if self._flag is None else mean[self._flag]
+            if probability is None or not math.isfinite(probability):  # the field rule, as without that output
+                return self._implausible_state(peak_ut >= self.min_field_ut, None, why, latency_s)
+            probability = min(max(probability, 0.0), 1.0)
+            return self._implausible_state(probability > 0.5, probability, why, latency_s)
         for k, sigma_map in self.sigma_maps.items():
             sigma[k] = sigma_map.one(sigma[k])
         fields = self._blank.copy()
@@ -268,3 +362,33 @@ class ContactEstimator:
         state.__dict__.update(fields)
         return state
 
+    def _implausible_output(self, mean: list[float], sigma: list[float]) -> str:
+        """Why the model's outputs (one value and sigma per target) are no answer, "" when they are one."""
+        if not math.isfinite(sum(mean) + sum(sigma)):  # NaN and inf carry through the sum
+            return "the model gave a non-finite output"
+        for k, name, lo, hi, what in self._bounds:
+            if not lo <= mean[k] <= hi:
+                return f"{name} {mean[k]:.4g} is outside {what} ({lo:.4g} to {hi:.4g})"
+        return ""
+
+    def _implausible_state(self, in_contact: bool, probability: float | None, why: str,
+                           latency_s: float) -> ContactState:
+        """A state that is no answer (every quantity None), with its in-contact flag and why."""
+        return ContactState(in_contact=bool(in_contact), in_contact_probability=probability, values={}, sigmas={},
+                            context_frames=self._history.frames_used if probability is not None else 0,
+                            latency_s=latency_s, plausible=False, implausible_reason=why)
+
+
+def _pad_half_size_mm(layout: str) -> tuple[float, float] | None:
+    """Half the pad's size (x, y) in mm: the board layout's cells (grid times pitch), or None for a layout
+    that is not known here."""
+    if not layout:
+        return None
+    from tactile_manip.sensors.layout import get_layout
+
+    try:
+        board = get_layout(layout)
+    except (ValueError, OSError):  # a board of its own (a dataset's layout name): no geometry
+        return None
+    rows, cols = board.grid
+    return cols * board.pitch_mm / 2.0, rows * board.pitch_mm / 2.0

@@ -15,7 +15,10 @@
 
 The two run one after the other on the same reading (the contact model reads the field, not the reconstructed
 image). Each keeps its own contract: the angle may be undefined (``angle.defined``), the contact's quantities
-carry their sigmas.
+carry their sigmas, and either may be no answer (``plausible`` False, with its ``implausible_reason``): for a
+reading beyond what the chip can report or far beyond the field of a press both are (the same bound: 2000 uT on
+the SuperMag board), and a contact state whose output is off the pad or outside the trained force range is.
+:attr:`TactileEstimate.plausible` says whether both are answers.
 
 Where the contact is, two estimates exist: the centroid of the reconstructed contact (``angle.centroid_mm``)
 and the contact model's centre of pressure (``contact.position_mm``). They err differently: on objects neither
@@ -24,7 +27,7 @@ model was trained on, the image's centroid is the better one and their weighted 
 ``position_mm`` is that mean, with the image's share ``image_position_weight``: by default the one stored in the
 contact model (``export --image-position-weight``, chosen on validation presses; 0.5 for the shipped
 ``models/contact_supermag.onnx``), else 0 (the contact model's position). It falls back on whichever of the
-two exists.
+two exists (an implausible estimate gives none).
 """
 
 from __future__ import annotations
@@ -53,6 +56,12 @@ class TactileEstimate:
     angle: AngleEstimate
     contact: ContactState
     position_mm: tuple[float, float] | None = None
+
+    @property
+    def plausible(self) -> bool:
+        """Both estimates are answers (else ``angle.implausible_reason`` or ``contact.implausible_reason`` says
+        why not; ``position_mm`` then comes from the other alone, or is None)."""
+        return self.angle.plausible and self.contact.plausible
 
 
 def image_centroid_mm(angle: AngleEstimate, min_area_mm2: float = 0.0) -> tuple[float, float] | None:

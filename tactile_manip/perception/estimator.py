@@ -41,27 +41,56 @@ The escalated estimate replaces the first whatever its confidence, which the sam
 fitted on the one-pass estimator, so for the escalated one it is an approximation); a contact whose angle is
 undefined (confidence 0) escalates too. Only an angle read from the image escalates: with the angle head's
 route, that is where the head stood aside (a chip flagged saturated, an image without contact).
+
+No answer is silently wrong. A reading with a |value| at or beyond :attr:`TactilePoseEstimator.plausible_limits_ut`
+is implausible: more than an MLX90393 can report as a change (:data:`CHANGE_LIMIT_UT`, twice its full scale), or
+far beyond the field of any press the model was made for (the model's ``input.plausible_field_ut``, else its
+board's :data:`PLAUSIBLE_FIELD_UT`: 2000 uT on the SuperMag board, where no simulated press of a rod or bar
+comes near). Its estimate is no answer: ``plausible`` False, ``implausible_reason`` naming the chip, the value
+and the bound, ``defined`` False, angle and confidence 0.0, ``reason`` "implausible reading"; it does not
+escalate. A plausible reading's estimate is what it was before the check (the check is one comparison of the
+reading's largest |value|, which the no-contact rule computes anyway). NaN and infinite values still raise
+ValueError. A chip flagged saturated (at its ADC rail, or beyond the chip's full scale in a reading whose bound
+is higher) caps the confidence after the calibration at :data:`SATURATED_CONFIDENCE_CAP` times the fraction of
+chips without: the calibration was fitted on readings without one, and a railed value is a bound, not a
+measurement; escalation goes through the same cap.
 """
 
 from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import numpy as np
 
 from tactile_manip.perception.confidence import ConfidenceCalibration
 from tactile_manip.perception.angle_head import within_probability
 from tactile_manip.perception.pose import PoseParams, angle_from_image, wrap_axial
-from tactile_manip.perception.reconstruct import Reconstruction, Reconstructor, out_of_range
-from tactile_manip.types import AngleEstimate, TactileReading
+from tactile_manip.perception.reconstruct import (READING_LIMIT_UT, ModelFileError, Reconstruction, Reconstructor,
+                                                   out_of_range)
+from tactile_manip.types import IMPLAUSIBLE_READING, AngleEstimate, TactileReading
 
 T = TypeVar("T")
 ANGLE_SOURCES = ("auto", "image", "head", "likelier")
 NO_CONTACT_FIELD = "no contact field"  # the reason of a reading whose field is below the estimator's min_field_ut
+#: with a chip flagged saturated, the (calibrated) confidence is at most this times the fraction of chips without:
+#: below every ``min_confidence`` a shipped scene or behaviour acts on (0.3, 0.8)
+SATURATED_CONFIDENCE_CAP = 0.1
+#: (3,) uT: the largest change per axis (x, y, z) a baseline-subtracted MLX90393 reading can hold (its raw value
+#: and its no-contact baseline each lie within the chip's full scale)
+CHANGE_LIMIT_UT = 2.0 * READING_LIMIT_UT
+#: uT, per board layout: a reading with a |value| at or beyond this is implausible for a model that stores no
+#: bound of its own (``input.plausible_field_ut`` in its metadata). SuperMag board, 2000 uT: simulated presses of
+#: rods and bars (the objects of every angle figure, the calibration and the trials) on drawn sensors at 2-15 N
+#: peak at 1179 uT (2300 presses), and at 1748 uT at the strongest corner of the randomisation ranges (0.055 T,
+#: 0.8 mm gap, the softest skin, 15 N); one chip set to 2000-5000 uT in a rod's press turned the angle head's
+#: answer by 55-85 deg at confidence 0.95-1.0. Of 4738 presses drawn as the training and test sets are, 56 reach
+#: it: 51 pressed through the whole skin (flagged bottomed out: the elastic model ends there and the image
+#: model's training drops them) and 5 sharp tips at 2-3 N right above one chip.
+PLAUSIBLE_FIELD_UT: dict[str, float] = {"supermag-4x4": 2000.0}
 
 if TYPE_CHECKING:  # the sensors layer is only needed for type hints here
     from tactile_manip.sensors.base import TactileSensor
@@ -154,6 +183,11 @@ class TactilePoseEstimator:
                              f"estimator's come from {self.angle_source!r}: fit one for it (`tactile-manip "
                              "calibrate`) or give angle_source to match")
         self._tolerance_rad = math.radians(calibration.tolerance_deg if calibration is not None else 5.0)
+        #: (channels,) uT: a reading with a |value| at or beyond its channel's limit is implausible (no answer)
+        self.plausible_limits_ut = plausible_limits_ut(
+            _model_metadata(reconstructor), channels=int(reconstructor.input_shape[-1]),
+            board_layout=reconstructor.board_layout, magnetic_ut=reconstructor.magnetic_ut)
+        self._plausible_ut = float(self.plausible_limits_ut.min())  # below it, one comparison says "plausible"
 
     @property
     def min_contact_area_mm2(self) -> float:
@@ -166,8 +200,15 @@ class TactilePoseEstimator:
         """The reconstructor's name (e.g. "supermag", "bilinear")."""
         return self.reconstructor.name
 
+    def implausible(self, field_ut: np.ndarray) -> str:
+        """Why the reading(s) ``field_ut`` (..., R, C, 3) uT are implausible for this estimator (a |value| at or
+        beyond :attr:`plausible_limits_ut`, or NaN), "" when they are not."""
+        return implausible_field(field_ut, self.plausible_limits_ut, magnetic_ut=self.reconstructor.magnetic_ut)
+
     def estimate(self, reading: TactileReading | np.ndarray) -> AngleEstimate:
-        """Angle of the contact in one reading (R, C, 3), microtesla, baseline-subtracted.
+        """Angle of the contact in one reading (R, C, 3), microtesla, baseline-subtracted. An implausible reading
+        (a |value| at or beyond :attr:`plausible_limits_ut`) gives no answer: ``plausible`` False, ``defined``
+        False, confidence 0.0 (see the module docstring).
 
         Raises:
             ValueError: wrong shape, or NaN / infinite values in the reading (from the reconstructor).
@@ -205,23 +246,31 @@ class TactilePoseEstimator:
         return [self._pose(f, _saturated(r), _dated(r), rec, t0, t1) for r, f, rec in zip(readings, fields, recs)]
 
     def _pose(self, field: np.ndarray, saturated: np.ndarray | None, reading: TactileReading | None,
-              rec: Reconstruction, t0: float, t1: float, *, image: bool = False):
+              rec: Reconstruction, t0: float, t1: float, *, image: bool = False, why_implausible: str | None = None):
         """Post-processing and PCA of ``rec``, reconstructed from ``field`` (R, C, 3) uT between ``t0`` and
         ``t1``; ``saturated`` (R, C, 3) flags from the sensor or None; ``reading`` (the newest frame, or None)
-        dates the estimate. Escalates a low-confidence estimate when the estimator has an escalation. Returns
-        the estimate, or with ``image`` the estimate and the reconstruction it came from."""
+        dates the estimate; ``why_implausible``: why the readings behind ``field`` are implausible ("" when they are
+        not; None: judge ``field`` itself). Escalates a low-confidence estimate when the estimator has an
+        escalation. Returns the estimate, or with ``image`` the estimate and the reconstruction it came from."""
         flags = out_of_range(field)
         if saturated is not None:
             flags |= np.asarray(saturated, dtype=bool)
-        contact = bool(np.max(np.abs(field)) >= self.min_field_ut)  # the reconstructor has refused NaN already
-        est = self._angle(rec, flags, contact, field)
+        peak_ut = float(np.max(np.abs(field)))  # the reconstructor has refused NaN already
+        contact = peak_ut >= self.min_field_ut
+        if why_implausible is None:
+            why_implausible = self.implausible(field) if peak_ut >= self._plausible_ut else ""
+        if why_implausible:  # no answer: nothing to escalate
+            est = AngleEstimate(0.0, 0.0, False, reason=IMPLAUSIBLE_READING, plausible=False,
+                                implausible_reason=why_implausible)
+        else:
+            est = self._angle(rec, flags, contact, field)
         t2 = time.perf_counter()
         timings = {"reconstruct": t1 - t0, "pose": t2 - t1, "total": t2 - t0}
         # the head reads the reading, not the image: another reconstruction of the same reading cannot change its
         # angle, so only an angle that came from the image escalates (on the head's route: where the head stood
         # aside, a chip flagged or an image without contact)
         if (self.escalation is not None and contact and est.confidence < self.escalate_below
-                and est.source == "image"):
+                and est.source == "image" and est.plausible):
             rec = self.escalation.reconstruct(field)
             est = replace(self._angle(rec, flags, contact, field), escalated=True)
             timings["escalate"] = time.perf_counter() - t2
@@ -252,6 +301,8 @@ class TactilePoseEstimator:
             est = self._with_head(est, field)
         if est.defined and self.calibration is not None:
             est = replace(est, confidence=float(self.calibration(est.confidence)))
+        if flags.any():  # after the calibration, which was fitted on readings without a railed chip
+            est = replace(est, confidence=min(est.confidence, SATURATED_CONFIDENCE_CAP * _unsaturated_fraction(flags)))
         return est
 
     def _with_head(self, est: AngleEstimate, field: np.ndarray) -> AngleEstimate:
@@ -286,7 +337,9 @@ class TactilePoseEstimator:
         t0 = time.perf_counter()
         mean = np.mean(stacked, axis=0)
         rec = self.reconstructor.reconstruct(mean)
-        return self._pose(mean, np.logical_or.reduce(flags), _dated(readings[-1]), rec, t0, time.perf_counter())
+        # an implausible frame makes the mean implausible (NaN and inf were refused with the mean)
+        return self._pose(mean, np.logical_or.reduce(flags), _dated(readings[-1]), rec, t0, time.perf_counter(),
+                          why_implausible=self.implausible(stacked))
 
     def read(self, sensor: TactileSensor, *, frames: int = 1, timeout_s: float = 0.1) -> AngleEstimate:
         """Estimate from the next ``frames`` new frames of ``sensor`` (frames that arrived before the call are
@@ -354,6 +407,65 @@ def _fresh_frames(sensor: TactileSensor, frames: int, timeout_s: float) -> list[
         if reading.t_host_s >= start_s:
             readings.append(reading)
     return readings
+
+
+def plausible_limits_ut(metadata: Mapping[str, Any], *, channels: int, board_layout: str,
+                        magnetic_ut: bool = True) -> np.ndarray:
+    """(channels,) uT: a reading with a |value| at or beyond its channel's limit is implausible for a model.
+
+    The bound is the model's own where its metadata stores one (``input.plausible_field_ut``, uT), else its board
+    layout's (:data:`PLAUSIBLE_FIELD_UT`), else none; for MLX90393 fields in uT (``magnetic_ut``) it never exceeds
+    what the chip can report as a change (:data:`CHANGE_LIMIT_UT`, per axis x, y, z).
+
+    Raises:
+        ModelFileError: a stored bound that is not a positive number.
+    """
+    stored = metadata.get("input", {}).get("plausible_field_ut") if isinstance(metadata.get("input"), dict) else None
+    if stored is None:
+        bound = PLAUSIBLE_FIELD_UT.get(board_layout, math.inf) if magnetic_ut else math.inf
+    elif isinstance(stored, (int, float)) and not isinstance(stored, bool) and stored > 0:
+        bound = float(stored)
+    else:
+        raise ModelFileError(f"metadata field input.plausible_field_ut is {stored!r}, not a positive number of uT; "
+                             "export the model again with `tactile-manip export`")
+    if not magnetic_ut:
+        return np.full(channels, bound)
+    change = CHANGE_LIMIT_UT if channels == 3 else np.full(channels, CHANGE_LIMIT_UT.max())
+    return np.minimum(change, bound)
+
+
+def implausible_field(field_ut: np.ndarray, limits_ut: np.ndarray, *, magnetic_ut: bool = True) -> str:
+    """Why the reading ``field_ut`` (..., R, C, A) is implausible: its first channel at or beyond its limit in
+    ``limits_ut`` (A,) (from :func:`plausible_limits_ut`), or NaN, and how many more; "" when none is.
+    ``magnetic_ut``: the reading holds MLX90393 fields in uT (whose change limit the sentence may name)."""
+    f = np.asarray(field_ut, dtype=np.float64)
+    with np.errstate(invalid="ignore"):
+        bad = ~(np.abs(f) < limits_ut)  # NaN fails the comparison: implausible too
+    count = int(np.count_nonzero(bad))
+    if count == 0:
+        return ""
+    *_, row, col, axis = (int(i) for i in np.argwhere(bad)[0])
+    value, limit = float(f[tuple(np.argwhere(bad)[0])]), float(limits_ut[axis])
+    xyz = f.shape[-1] == 3
+    if magnetic_ut and xyz and abs(value) >= CHANGE_LIMIT_UT[axis]:
+        limit, what = float(CHANGE_LIMIT_UT[axis]), "more than a baseline-subtracted MLX90393 reading can hold"
+    else:
+        what = "far beyond the field of a press, which the model was not made for"
+    more = f" (and {count - 1} more channel{'s' * (count > 2)})" if count > 1 else ""
+    unit = " uT" if magnetic_ut else ""
+    return (f"chip ({row}, {col}) reads {value:.4g}{unit} along {'xyz'[axis] if xyz else f'channel {axis}'}{more}, "
+            f"at or beyond {limit:.5g}{unit}: {what}")
+
+
+def _model_metadata(reconstructor: Reconstructor) -> Mapping[str, Any]:
+    """The metadata of the model file behind ``reconstructor`` (through wrappers such as the symmetrized one),
+    or {} for a reconstructor without one (the interpolation baselines)."""
+    while reconstructor is not None:
+        metadata = getattr(reconstructor, "metadata", None)
+        if isinstance(metadata, Mapping):
+            return metadata
+        reconstructor = getattr(reconstructor, "inner", None)
+    return {}
 
 
 def _unsaturated_fraction(saturated: np.ndarray) -> float:

@@ -26,10 +26,10 @@ from typing import Any
 import numpy as np
 from scipy import ndimage
 
-from tactile_manip.errors import TactileManipError
 from tactile_manip.sim.chip import full_scale_ut
 from tactile_manip.sim.params import ChipParams
 from tactile_manip.perception.angle_head import AngleHead, open_angle_head
+from tactile_manip.perception.model_metadata import ModelFileError, check_metadata
 from tactile_manip.perception.one_reading import open_one_reading
 from tactile_manip.perception.onnx_session import session_options
 from tactile_manip.extras import require
@@ -56,10 +56,6 @@ def _limit_for(shape: tuple[int, ...]) -> np.ndarray | float:
     """The per-axis limit for readings of ``shape`` (the largest one when the last axis is not x, y, z)."""
     return READING_LIMIT_UT if shape and shape[-1] == 3 else float(READING_LIMIT_UT.max())
 DEFAULT_BOARD_LAYOUT = "supermag-4x4"  # the board every shipped model was trained on (sensors/layout.py)
-
-
-class ModelFileError(TactileManipError, ValueError):
-    """A model file is missing, unreadable, not ours, or does not match the readings."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -174,6 +170,9 @@ class OnnxReconstructor(Reconstructor):
         if samples < 1:
             raise ValueError(f"samples must be >= 1, got {samples}")
         self.metadata = read_metadata(self.path)
+        if self.metadata.get("kind", "image") != "image":
+            raise ModelFileError(f"{self.path}: a {self.metadata['kind']} model, not an image model: load it with "
+                                 "tactile_manip.perception.contact.ContactEstimator (evaluate takes either)")
         self.samples = samples
         self._rng = np.random.default_rng(seed)
         options = session_options(ort, threads=threads)
@@ -181,6 +180,7 @@ class OnnxReconstructor(Reconstructor):
             self.session = ort.InferenceSession(str(self.path), sess_options=options, providers=list(providers))
         except Exception as e:  # onnxruntime raises its own exception types
             raise ModelFileError(f"{self.path}: onnxruntime cannot load it: {e}") from e
+        check_metadata(self.metadata, self.session, path=self.path)  # types, shapes, board layout
         shape = self.metadata["input"]["shape"]
         self.input_shape = (int(shape[1]), int(shape[2]), int(shape[3]))
         out = self.metadata["output"]
@@ -284,7 +284,9 @@ def _describe(tensors: dict) -> str:
 
 
 def read_metadata(path: str | Path) -> dict[str, Any]:
-    """The ``tactile_manip`` metadata of an exported model, validated. Raises :class:`ModelFileError`."""
+    """The ``tactile_manip`` metadata of an exported model, validated in itself
+    (:func:`~tactile_manip.perception.model_metadata.check_metadata`; the loaders compare it with the graph).
+    Raises :class:`ModelFileError`."""
     path = Path(path)
     if not path.is_file():
         raise ModelFileError(f"model file not found: {path} (export one with `tactile-manip export`, or use "
@@ -321,9 +323,10 @@ def _parse_metadata(path: Path, raw: str | None) -> dict[str, Any]:
         meta = json.loads(raw)
     except json.JSONDecodeError as e:
         raise ModelFileError(f"{path}: tactile_manip metadata is not valid JSON: {e}") from e
-    if meta.get("format_version") != SUPPORTED_FORMAT:
-        raise ModelFileError(f"{path}: model format {meta.get('format_version')!r}, this code reads "
-                             f"{SUPPORTED_FORMAT}")
+    if not isinstance(meta, dict) or meta.get("format_version") != SUPPORTED_FORMAT:
+        version = meta.get("format_version") if isinstance(meta, dict) else None
+        raise ModelFileError(f"{path}: model format {version!r}, this code reads {SUPPORTED_FORMAT}")
+    check_metadata(meta, path=path)  # the metadata alone; the loaders check it against the graph too
     return meta
 
 

@@ -135,17 +135,22 @@ class Scan:
         skipped_bytes: bytes between intact records that belong to no intact record (damage in the middle).
         damaged_records: places where damage was skipped (each one or more lost records).
         truncated_bytes: bytes after the last intact record (a crash's torn tail; 0 for a clean file).
+        places: ``(byte offset, bytes)`` of each damaged place, in file order (offset -1 where a reader skipped
+            an intact record that failed to decode).
     """
 
     records: list[tuple[bytes, float, bytes]] = field(default_factory=list)
     skipped_bytes: int = 0
     damaged_records: int = 0
     truncated_bytes: int = 0
+    places: list[tuple[int, int]] = field(default_factory=list)
 
-    def skip(self, nbytes: int) -> None:
-        """Count one more damaged place of ``nbytes`` (also used by readers for a record that fails to decode)."""
+    def skip(self, nbytes: int, at: int = -1) -> None:
+        """Count one more damaged place of ``nbytes`` at byte offset ``at`` (also used by readers for a record that
+        fails to decode, whose offset they do not know: -1)."""
         self.skipped_bytes += nbytes
         self.damaged_records += 1
+        self.places.append((at, nbytes))
 
 
 def scan_records(data: bytes, pos: int, record: struct.Struct, tags: Collection[bytes]) -> Scan:
@@ -162,7 +167,7 @@ def scan_records(data: bytes, pos: int, record: struct.Struct, tags: Collection[
             nxt = _next_intact(data, pos + 1, record, tags)
             if nxt is None:
                 break
-            scan.skip(nxt - pos)
+            scan.skip(nxt - pos, at=pos)
             pos = nxt
             continue
         tag, _, t_host = record.unpack_from(data, pos)

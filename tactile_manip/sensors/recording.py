@@ -98,6 +98,8 @@ class Recording:
         saturated_mask: (N, R, C, 3) bool saturation of those formats, else None (derived from counts).
         skipped_bytes: bytes of damaged records in the middle that were skipped (0 for an undamaged file).
         damaged_records: places where damage was skipped (each one or more lost records).
+        damage: ``(byte offset, bytes)`` of each damaged place (offset -1: an intact record that is no frame).
+        frame_record_bytes: bytes of one frame record on disk (the median of the intact ones; 0 without frames).
     """
 
     path: Path
@@ -115,9 +117,18 @@ class Recording:
     saturated_mask: np.ndarray | None = None
     skipped_bytes: int = 0
     damaged_records: int = 0
+    damage: tuple[tuple[int, int], ...] = ()
+    frame_record_bytes: int = 0
 
     def __len__(self) -> int:
         return len(self.seq)
+
+    @property
+    def frames_lost(self) -> int:
+        """About how many frames the damaged places and the torn tail held: their bytes over one frame record's
+        (0 for an undamaged file; health and event records in the damage count as frames)."""
+        lost = self.skipped_bytes + self.truncated_bytes
+        return 0 if not lost or not self.frame_record_bytes else max(1, round(lost / self.frame_record_bytes))
 
     @property
     def scale(self) -> CountScale:
@@ -155,16 +166,18 @@ def read_recording(path: str | Path) -> Recording:
     header, pos = _read_header(data, path)
     decode = _record_decoder(header, path)
     scan = scan_records(data, pos, RECORD, (TAG_FRAME, TAG_HEALTH, TAG_EVENT))
-    frames, health, events = [], [], []
+    frames, health, events, sizes = [], [], [], []
     for tag, t_host, payload in scan.records:
         try:
             if tag == TAG_FRAME:
                 frames.append((t_host, decode(payload)))
+                sizes.append(RECORD.size + len(payload) + CRC32.size)
             elif tag in (TAG_HEALTH, TAG_EVENT):  # other tags: a newer writer's records, skipped
                 (health if tag == TAG_HEALTH else events).append({"t_host_s": t_host, **json.loads(payload)})
         except (ProtocolError, ValueError, TypeError):  # intact on disk but not a frame / JSON object: skip it
             scan.skip(RECORD.size + len(payload) + CRC32.size)
-    return _assemble(path, header, frames, health, events, scan)
+    rec = _assemble(path, header, frames, health, events, scan)
+    return dataclasses.replace(rec, damage=tuple(scan.places), frame_record_bytes=int(np.median(sizes)) if sizes else 0)
 
 
 def _read_header(data: bytes, path: Path) -> tuple[dict[str, Any], int]:

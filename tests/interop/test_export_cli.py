@@ -35,15 +35,16 @@ def test_a_trial_run_exports_to_a_lerobot_dataset(trial_run, tmp_path, capsys) -
     assert _leftovers(tmp_path) == []
 
 
-def test_an_existing_output_is_refused_without_force_and_replaced_whole_with_it(recording, tmp_path, capsys) -> None:
+def test_an_earlier_export_is_refused_without_force_and_replaced_whole_with_it(recording, make_recording, tmp_path,
+                                                                              capsys) -> None:
     out = tmp_path / "DS"
-    out.mkdir()
-    (out / "mine.txt").write_text("keep")
+    short = make_recording(tmp_path / "short.tmrec", seconds=1.0)
+    assert main(["export", str(short), "--format", "lerobot", "--out", str(out)]) == 0
     assert main(["export", str(recording), "--format", "lerobot", "--out", str(out)]) == 2
     assert "exists; pass --force" in _error_line(capsys)
-    assert [p.name for p in out.iterdir()] == ["mine.txt"]
+    assert json.loads((out / "meta" / "info.json").read_text())["total_frames"] == 125
     assert main(["export", str(recording), "--format", "lerobot", "--out", str(out), "--force"]) == 0
-    assert not (out / "mine.txt").exists() and (out / "meta" / "info.json").is_file()
+    assert json.loads((out / "meta" / "info.json").read_text())["total_frames"] == 1250
     assert _leftovers(tmp_path) == []
 
 
@@ -59,10 +60,12 @@ def test_a_failure_while_writing_leaves_nothing_under_the_final_name(recording, 
     assert main(["export", str(recording), "--format", "lerobot", "--out", str(out)]) == 2
     assert "No space left on device" in _error_line(capsys)
     assert not out.exists() and _leftovers(tmp_path) == []
-    out.mkdir()
-    (out / "old.txt").write_text("old")
+    monkeypatch.undo()
+    assert main(["export", str(recording), "--format", "lerobot", "--out", str(out)]) == 0
+    before = {p: p.read_bytes() for p in out.rglob("*") if p.is_file()}
+    monkeypatch.setattr(lerobot, "_write_episodes", disk_full)
     assert main(["export", str(recording), "--format", "lerobot", "--out", str(out), "--force"]) == 2
-    assert [p.name for p in out.iterdir()] == ["old.txt"] and _leftovers(tmp_path) == []
+    assert {p: p.read_bytes() for p in out.rglob("*") if p.is_file()} == before and _leftovers(tmp_path) == []
 
 
 def test_a_damaged_source_exports_what_is_intact_and_lists_what_was_skipped(trial_run, tmp_path, capsys) -> None:

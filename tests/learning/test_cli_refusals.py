@@ -68,9 +68,13 @@ def test_export_refuses_to_replace_a_model_without_force(run, capsys):
     assert_one_line_error(capsys.readouterr().err, "export", "exists; pass --force")
     assert model.read_bytes() == before
     copy = run / "copy.onnx"
-    copy.write_bytes(b"an older model")
+    copy.write_bytes(b"an older model")            # not a model export wrote: --force does not replace it
+    assert main(["export", "--checkpoint", str(run / "run" / "best.pt"), "--out", str(copy), "--force"]) == 2
+    assert_one_line_error(capsys.readouterr().err, "export", "is not an ONNX model written by tactile-manip export")
+    assert copy.read_bytes() == b"an older model"
+    copy.write_bytes(before)                        # an earlier export: --force replaces it
     assert main(["export", "--checkpoint", str(run / "run" / "best.pt"), "--out", str(copy), "--force"]) == 0
-    assert copy.read_bytes() != b"an older model" and not (run / "copy.onnx.partial").exists()
+    assert not (run / "copy.onnx.partial").exists()
 
 
 def _torch_dict(path):

@@ -115,10 +115,12 @@ def test_no_contact_field_stays_no_contact_whatever_the_head_says() -> None:
 
 
 def test_a_saturated_chip_leaves_the_angle_to_the_image() -> None:
+    from tactile_manip.types import TactileReading
+
     head = FakeHead(0.5, 1e4)
-    reading = _reading()
-    reading[0, 0, 2] = 1e5   # beyond the chip's range: clamped and flagged
-    est = TactilePoseEstimator(Stripe(0.2, head=head)).estimate(reading)
+    reading, flags = _reading(), np.zeros((4, 4, 3), bool)
+    flags[0, 0, 2] = True    # at the ADC rail (a value beyond the chip's range is implausible: no answer at all)
+    est = TactilePoseEstimator(Stripe(0.2, head=head)).estimate(TactileReading(reading, reading, flags, t_host_s=0.0))
     assert est.saturated_chips == 1 and est.source == "image" and head.calls == 0
     assert est.angle_rad == pytest.approx(0.2, abs=0.02)
 

@@ -149,7 +149,8 @@ def test_a_stalled_sensor_raises_instead_of_returning_stale_estimates(supermag, 
 
 def test_saturated_chips_lower_the_confidence(supermag, pair) -> None:
     """A flagged chip hands the angle to the image (the head was trained on sound readings), whose confidence
-    it lowers by the unsaturated fraction of chips."""
+    it caps at SATURATED_CONFIDENCE_CAP times the unsaturated fraction of chips."""
+    from tactile_manip.perception.estimator import SATURATED_CONFIDENCE_CAP
     from tactile_manip.types import TactileReading
 
     field = _rod_field(pair, 25.0).astype(np.float32)
@@ -160,10 +161,10 @@ def test_saturated_chips_lower_the_confidence(supermag, pair) -> None:
     flags[1, 2, 2] = flags[2, 2, 0] = True                  # two chips with an axis at the rail
     railed = supermag.estimate(TactileReading(field, field, flags, t_host_s=0.0))
     assert railed.source == "image" and railed.angle_rad == clean.angle_rad
-    assert railed.confidence == pytest.approx(clean.confidence * 14 / 16)
+    assert railed.confidence == pytest.approx(min(clean.confidence, SATURATED_CONFIDENCE_CAP) * 14 / 16)
     frames = supermag.estimate_frames([TactileReading(field, field, np.zeros_like(flags), t_host_s=0.0),
                                        TactileReading(field, field, flags, t_host_s=0.0)])
-    assert frames.confidence == pytest.approx(clean.confidence * 14 / 16, rel=1e-6)
+    assert frames.confidence == pytest.approx(min(clean.confidence, SATURATED_CONFIDENCE_CAP) * 14 / 16, rel=1e-6)
 
 
 def test_a_reading_without_a_contact_field_is_no_contact_whatever_the_model_draws(supermag) -> None:
