@@ -21,8 +21,9 @@ def add_serial_options(p: argparse.ArgumentParser, source: argparse._MutuallyExc
     g.add_argument("--baud", type=int, default=921600, help="baud rate (default 921600)")
     g.add_argument("--wire-format", choices=WIRE_FORMATS, default="supermag",
                    help="the board's bytes: supermag (firmware/, default) or anyskin (ReSkin/AnySkin binary sketch)")
-    g.add_argument("--layout", default="",
-                   help="board layout (supermag-4x4, anyskin-5); default: the wire format's own board")
+    g.add_argument("--board", "--layout", dest="layout", default="", metavar="NAME|FILE",
+                   help="the board: a shipped board (supermag-4x4, anyskin-5, eflesh), generic:N or a board file "
+                        "(.toml); default: the wire format's own board (--layout is the same option)")
     g.add_argument("--dtr", choices=("low", "high"), default="low",
                    help="DTR level while open: low for ESP32 boards behind a USB bridge (default), high for "
                         "native-USB boards such as the SAMD21 on AnySkin, which only write once DTR is high")

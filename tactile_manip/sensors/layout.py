@@ -6,18 +6,11 @@ the pad frame). A board's firmware sends its chips in its own order, each chip i
 rotation about the pad normal, and turns a ``(n_chips, 3)`` frame into a reading. Cells no chip feeds stay 0
 and are False in :attr:`BoardLayout.mask`.
 
-Two layouts ship (:data:`LAYOUTS`):
-
-- ``supermag-4x4``: 16 chips at 5 mm pitch, chip ``i`` at cell ``(i // 4, i % 4)``, axes already in the pad
-  frame (what ``firmware/`` sends), x, y in {-7.5, -2.5, 2.5, 7.5} mm. The default; its conversion is a
-  reshape, so the SuperMag pipeline does no extra work.
-- ``anyskin-5``: the five-chip cross of the ReSkin/AnySkin boards in a (3, 3, 3) reading. The firmware order
-  is centre, left, right, up, down (as the published AnySkin visualiser draws them); they feed cells
-  (1, 1), (1, 0), (1, 2), (0, 1), (2, 1), the four corners are unused (0, masked). Each chip's axes are
-  turned into the pad frame by the in-plane angle the visualiser applies to that chip (-90, -90, 180, 90,
-  0 degrees in its y-down screen axes, i.e. 90, 90, 180, -90, 0 degrees counter-clockwise in the pad's
-  y-up frame). The pitch (``ANYSKIN_PITCH_MM``) is an estimate of the board, not a datasheet figure:
-  measure yours and build a layout with :func:`cross_layout` if it differs.
+Layouts come from board files (:mod:`tactile_manip.boards`): :func:`get_layout` takes a shipped board's name
+(``supermag-4x4``, the default, whose conversion is a reshape, so the SuperMag pipeline does no extra work;
+``anyskin-5``, the five-chip cross of the ReSkin/AnySkin boards in a (3, 3, 3) reading with its corners unused;
+``eflesh``, that board under the eFlesh cube), ``generic:N`` (N chips in a (1, N) reading, no geometry) or the
+path of a user's board file. :data:`LAYOUTS` holds the shipped ones by name.
 """
 
 from __future__ import annotations
@@ -26,23 +19,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-ANYSKIN_PITCH_MM = 7.0  # centre-to-neighbour chip distance of the 5X board (estimate, see the module docstring)
+from tactile_manip.boards import Board, ChipSpec, board_names, load_board
 
+ANYSKIN_PITCH_MM = 7.0  # centre-to-neighbour chip distance of the 5X board (an estimate: boards/anyskin-5.toml)
 
-@dataclass(frozen=True)
-class ChipPlacement:
-    """One chip of a board, in firmware order.
-
-    Attributes:
-        cell: (row, col) of the reading this chip feeds.
-        position_mm: (x, y) of the chip centre in the pad frame, mm.
-        rotation_deg: counter-clockwise angle about the pad normal from the chip's axes to the pad's axes, deg
-            (a field along the chip's +x reads along pad direction (cos, sin) of this angle).
-    """
-
-    cell: tuple[int, int]
-    position_mm: tuple[float, float]
-    rotation_deg: float = 0.0
+#: One chip of a board, in firmware order: its reading ``cell`` (row, col), ``position_mm`` (x, y) in the pad
+#: frame, and its axes in the pad's (``axes``, or the counter-clockwise ``rotation_deg`` about the pad normal:
+#: a field along the chip's +x reads along pad direction (cos, sin) of this angle).
+ChipPlacement = ChipSpec
 
 
 @dataclass(frozen=True, eq=False)
@@ -76,15 +60,11 @@ class BoardLayout:
         if len(set(cells)) != len(cells):
             raise ValueError(f"BoardLayout {self.name!r}: two chips feed the same cell")
         index = np.array([r * cols + c for r, c in cells], dtype=np.intp)
-        angles = np.deg2rad([c.rotation_deg for c in self.chips])
-        cos, sin = np.cos(angles), np.sin(angles)
-        rot = np.zeros((len(self.chips), 3, 3))
-        rot[:, 0, 0], rot[:, 0, 1], rot[:, 1, 0], rot[:, 1, 1], rot[:, 2, 2] = cos, -sin, sin, cos, 1.0
-        rot[np.abs(rot) < 1e-12] = 0.0  # exact zeros for right angles, so saturation maps channel to channel
+        rot = np.stack([c.matrix() for c in self.chips])  # exact zeros at right angles (saturation maps cleanly)
         object.__setattr__(self, "_index", index)
         object.__setattr__(self, "_rot", rot.astype(np.float32))
         identity = len(self.chips) == rows * cols and bool((index == np.arange(rows * cols)).all()) \
-            and not angles.any()
+            and bool((rot == np.eye(3)).all())
         object.__setattr__(self, "_identity", identity)
 
     @property
@@ -163,6 +143,11 @@ class BoardLayout:
         return out.reshape(self.grid)
 
 
+def layout_from_board(board: Board) -> BoardLayout:
+    """The layout of a board (its chips onto its reading grid)."""
+    return BoardLayout(name=board.name, grid=board.grid, chips=board.chips, pitch_mm=board.pitch_mm)
+
+
 def grid_layout(name: str, *, rows: int, cols: int, pitch_mm: float) -> BoardLayout:
     """Chips row-major over a rows x cols grid centred on the pad, axes along the pad's (the SuperMag board)."""
     chips = tuple(ChipPlacement(cell=(r, c),
@@ -180,15 +165,18 @@ def cross_layout(name: str, *, pitch_mm: float,
     return BoardLayout(name=name, grid=(3, 3), chips=chips, pitch_mm=pitch_mm)
 
 
-SUPERMAG_4X4 = grid_layout("supermag-4x4", rows=4, cols=4, pitch_mm=5.0)
-ANYSKIN_5 = cross_layout("anyskin-5", pitch_mm=ANYSKIN_PITCH_MM)
-LAYOUTS: dict[str, BoardLayout] = {layout.name: layout for layout in (SUPERMAG_4X4, ANYSKIN_5)}
+LAYOUTS: dict[str, BoardLayout] = {name: layout_from_board(load_board(name)) for name in board_names()}
+SUPERMAG_4X4 = LAYOUTS["supermag-4x4"]
+ANYSKIN_5 = LAYOUTS["anyskin-5"]
 DEFAULT_LAYOUT = SUPERMAG_4X4.name
 
 
 def get_layout(name: str) -> BoardLayout:
-    """The shipped layout of this name; ValueError naming the known ones."""
-    try:
+    """The layout of the board ``name`` names: a shipped board, ``generic:N`` or a board file's path.
+
+    Raises:
+        ValueError (a :class:`~tactile_manip.errors.ConfigError`): an unknown board or a bad board file, named.
+    """
+    if name in LAYOUTS:
         return LAYOUTS[name]
-    except KeyError:
-        raise ValueError(f"unknown board layout {name!r}; known layouts: {', '.join(LAYOUTS)}") from None
+    return layout_from_board(load_board(name))

@@ -61,7 +61,7 @@ def test_check_port_fails_without_opening_where_connect_would_fail_for_certain(t
 def test_the_cli_offers_every_wire_format_and_refuses_a_bad_layout(tmp_path, capsys):
     assert serial_options.WIRE_FORMATS == tuple(WIRE_FORMATS)
     assert main(["record", "--port", "/dev/null-x", "--layout", "hexagon", "--out", str(tmp_path / "r")]) == 2
-    assert_one_line_error(capsys.readouterr().err, "record", "known layouts: supermag-4x4, anyskin-5")
+    assert_one_line_error(capsys.readouterr().err, "record", "unknown board 'hexagon'; known boards: anyskin-5")
 
 
 def test_dtr_and_rts_levels_reach_the_port(monkeypatch):

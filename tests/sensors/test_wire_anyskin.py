@@ -76,7 +76,7 @@ def test_the_format_table_names_importable_decoders():
         assert make_decoder(name, n_chips=n, chip=ChipParams()).name == name
     with pytest.raises(ValueError, match="known formats: supermag, anyskin"):
         make_decoder("reskin-ascii", n_chips=5, chip=ChipParams())
-    assert set(LAYOUTS) == {"supermag-4x4", "anyskin-5"} and ANYSKIN_5.n_chips == N_CHIPS
+    assert set(LAYOUTS) == {"supermag-4x4", "anyskin-5", "eflesh"} and ANYSKIN_5.n_chips == N_CHIPS
 
 
 @settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
