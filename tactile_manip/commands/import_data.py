@@ -54,6 +54,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                        help="the board of the readings: a shipped board (anyskin-5: 5 chips in a cross on 3x3 cells; "
                             "eflesh; supermag-4x4), generic:N (N chips, no geometry) or a board file (.toml); "
                             "--layout is the same option")
+    probe.add_argument("--labelled", type=int, default=None, metavar="K",
+                       help="keep the labels of K training presses drawn at random (with --seed); the other training "
+                            "rows stay as unlabelled readings (split 'unlabelled'); validation and test keep theirs")
     probe.add_argument("--tolerance-s", type=float, default=None,
                        help="largest sensor-to-label time difference matched, s (default 3 median label periods)")
     probe.add_argument("--match", choices=("nearest", "linear"), default="nearest",
@@ -73,7 +76,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     sp.add_argument("--test-fraction", type=float, default=None,
                     help="share of samples (or groups) for test (default 0.1; probe logs 0.2: the last rows of each "
                          "run)")
-    sp.add_argument("--seed", type=int, default=0, help="seed of the random split")
+    sp.add_argument("--seed", type=int, default=0, help="seed of the random split, and of --labelled's draw")
     units = p.add_argument_group("what the numbers mean")
     units.add_argument("--channel-kind", choices=("magnetic_vector", "scalar"),
                        help="magnetic_vector (3 channels x, y, z in the pad frame: turned by the pad's symmetries) "
@@ -96,7 +99,7 @@ def run(args: argparse.Namespace) -> int:
     out = check_output_file(dataset_path(args.out), force=args.force)  # the file written, before reading anything
     if args.readings_csv or args.labels_csv:
         return _run_probe_logs(args, out)
-    probe_only = [f"--{k.replace('_', '-')}" for k in ("label_columns", "targets", "contact", "held_out_run")
+    probe_only = [f"--{k.replace('_', '-')}" for k in ("label_columns", "targets", "contact", "held_out_run", "labelled")
                   if getattr(args, k) is not None]
     if probe_only:
         raise ValueError(f"{', '.join(probe_only)} go with probe logs (--readings-csv and --labels-csv)")
@@ -145,6 +148,7 @@ def _run_probe_logs(args: argparse.Namespace, out) -> int:
         match=args.match, split=split, test_fraction=_or(args.test_fraction, 0.2),
         val_fraction=_or(args.val_fraction, 0.0), held_out_run=args.held_out_run,
         run_names=_names(args.run_names, "--run-names"), time_offset_s=args.time_offset_s, baseline_s=args.baseline_s,
+        labelled=args.labelled, seed=args.seed,
         provenance={"source": "tactile-manip import", "inputs": {"readings_csv": args.readings_csv,
                                                                  "labels_csv": args.labels_csv}})
     for line in probe_summary(data):
@@ -152,8 +156,13 @@ def _run_probe_logs(args: argparse.Namespace, out) -> int:
     path = save_dataset(out, data)
     d = data.describe()
     units = ", ".join(f"{n} [{u}]" for n, u in d["targets"].items())
-    print(f"wrote {path}: {d['samples']} labelled presses in {len(data.provenance['runs'])} run(s) "
-          f"({d['splits']['train']} train / {d['splits']['val']} val / {d['splits']['test']} test), targets {units}, "
+    held = (f", {d['splits']['unlabelled']} more training presses without their labels (--labelled "
+            f"{data.provenance['labelled']['presses']}, seed {data.provenance['labelled']['seed']})"
+            if "labelled" in data.provenance else "")
+    print(f"wrote {path}: {d['samples']} {'presses' if held else 'labelled presses'} in "
+          f"{len(data.provenance['runs'])} run(s) "
+          f"({d['splits']['train']} train / {d['splits']['val']} val / {d['splits']['test']} test{held}), "
+          f"targets {units}, "
           f"layout {data.provenance['layout']} ({d['grid'][0]}x{d['grid'][1]} cells), fingerprint {d['fingerprint']}")
     return 0
 

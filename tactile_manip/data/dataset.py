@@ -7,7 +7,7 @@ Shapes (N samples):
 - ``targets`` (N, K) float32 or None, named by ``target_names`` (K,) with their unit as suffix (``x_mm``,
   ``y_mm``, ``depth_mm``, ``force_n``, ``shear_x_n``, ``shear_y_n``, ``in_contact`` 0/1; see
   :mod:`tactile_manip.data.targets`): labelled presses. A dataset holds images, targets or both;
-- ``split`` (N,) str in ``SPLITS``;
+- ``split`` (N,) str in ``SPLITS`` (``unlabelled``: readings of the training part whose targets are NaN);
 - ``object_index`` (N,) int16 into ``object_names`` (K,) str, optional: what was pressed (per-object tables,
   training-object filters);
 - ``groups`` (N,) int64, optional: samples that belong together (one contact, one participant, one recorded
@@ -33,7 +33,9 @@ from tactile_manip.data.spec import ChannelSpec, ImageSpec
 from tactile_manip.data.targets import check_target_names, check_targets, target_unit
 from tactile_manip.errors import DatasetError
 
-SPLITS = ("train", "val", "test")
+SPLITS = ("train", "val", "test", "unlabelled")
+#: the split of training-part readings whose labels were held back (``import --labelled K``): their targets are NaN
+UNLABELLED = "unlabelled"
 # the per-sample arrays the fingerprint hashes, in this order (each whole, then the next); then the target names
 FINGERPRINT_ARRAYS = ("readings", "images", "split", "object_index", "groups", "targets")
 
@@ -81,7 +83,8 @@ class PairedDataset:
         else:
             names = check_target_names(self.target_names)
             object.__setattr__(self, "target_names", names)
-            object.__setattr__(self, "targets", check_targets(self.targets, names, n))
+            object.__setattr__(self, "targets", check_targets(self.targets, names, n,
+                                                              unlabelled=np.asarray(self.split) == UNLABELLED))
         if self.split.shape != (n,):
             raise DatasetError(f"split: expected shape ({n},), got {self.split.shape}")
         if (self.object_index is None) != (self.object_names is None):
@@ -177,7 +180,8 @@ class PairedDataset:
 
     # --- selection -----------------------------------------------------------------------------------------
     def indices(self, split: str, objects: tuple[str, ...] | list[str] = ()) -> np.ndarray:
-        """Sample indices of ``split`` ('train', 'val' or 'test'), ascending; only of ``objects`` (names) if given."""
+        """Sample indices of ``split`` ('train', 'val', 'test' or 'unlabelled': training-part readings without
+        labels), ascending; only of ``objects`` (names) if given."""
         if split not in SPLITS:
             raise ValueError(f"split must be one of {SPLITS}, got {split!r}")
         idx = np.flatnonzero(self.split == split)

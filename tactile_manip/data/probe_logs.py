@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from tactile_manip.data.dataset import PairedDataset
+from tactile_manip.data.dataset import UNLABELLED, PairedDataset
 from tactile_manip.data.spec import ChannelSpec
 from tactile_manip.data.streams import (TIME_COLUMN, Comparison, LabelStream, ReadingStream, board_layout,
                                         label_stream, parse_comparison, reading_stream)
@@ -46,7 +46,8 @@ def from_probe_logs(readings: Sequence[ReadingStream], labels: Sequence[LabelStr
                     test_fraction: float = 0.2,
                     val_fraction: float = 0.0, held_out_run: int | str | None = None,
                     run_names: Sequence[str] | None = None, time_offset_s: float = 0.0,
-                    baseline_s: float | None = None, provenance: dict[str, Any] | None = None) -> PairedDataset:
+                    baseline_s: float | None = None, labelled: int | None = None, seed: int = 0,
+                    provenance: dict[str, Any] | None = None) -> PairedDataset:
     """A targets-only :class:`PairedDataset` of labelled presses, one run (group) per pair of streams.
 
     Args:
@@ -74,6 +75,10 @@ def from_probe_logs(readings: Sequence[ReadingStream], labels: Sequence[LabelStr
         time_offset_s: added to every sensor time (to put both streams on one clock).
         baseline_s: subtract from each run's readings the mean of its first ``baseline_s`` seconds (pad free
             then); None keeps readings as given (probe-log CSVs are usually baseline-subtracted already).
+        labelled: keep the labels of this many training rows, drawn at random with ``seed`` from all runs' training
+            rows (a rig owner's handful of labelled presses); the other training rows become the ``unlabelled``
+            split: their readings stay, their targets and label columns are NaN. Validation and test rows keep
+            their labels. None keeps every label.
 
     Raises:
         DatasetError: one line naming the run, file or column and what is wrong.
@@ -108,11 +113,36 @@ def from_probe_logs(readings: Sequence[ReadingStream], labels: Sequence[LabelStr
     extras = {"time_s": np.concatenate([r.time_s for r in runs])}
     for col in sorted(set.intersection(*[set(r.labels) for r in runs]) - {TIME_COLUMN}):
         extras[f"label_{col}"] = np.concatenate([r.labels[col] for r in runs]).astype(np.float32)
+    targets = np.concatenate([r.targets for r in runs]).astype(np.float32)
+    if labelled is not None:
+        split_arr, prov["labelled"] = hold_back_labels(split_arr, targets, extras, labelled, seed)
     return PairedDataset(readings=np.concatenate([r.readings for r in runs]), images=None, split=split_arr,
                          channels=ChannelSpec(), groups=np.concatenate([np.full(len(r), i, np.int64)
                                                                        for i, r in enumerate(runs)]),
-                         extras=extras, provenance=prov, targets=np.concatenate([r.targets for r in runs]),
-                         target_names=plan.names)
+                         extras=extras, provenance=prov, targets=targets, target_names=plan.names)
+
+
+def hold_back_labels(split: np.ndarray, targets: np.ndarray, extras: dict[str, np.ndarray], labelled: int,
+                     seed: int) -> tuple[np.ndarray, dict[str, Any]]:
+    """Keep the labels of ``labelled`` training rows drawn at random with ``seed``; the other training rows become
+    ``unlabelled``, with NaN in ``targets`` and every ``label_*`` extra (changed in place). Returns the new split
+    and what the provenance records.
+
+    Raises:
+        DatasetError: ``labelled`` is not a whole number from 0 to the number of training rows.
+    """
+    train = np.flatnonzero(split == "train")
+    if isinstance(labelled, bool) or not isinstance(labelled, (int, np.integer)) or not 0 <= labelled <= len(train):
+        raise DatasetError(f"--labelled {labelled}: keep labels on 0 to {len(train)} presses (the training rows); "
+                           f"got {labelled}")
+    keep = np.random.default_rng(seed).choice(train, size=int(labelled), replace=False)
+    hide = np.setdiff1d(train, keep)
+    out = split.astype(f"U{len(UNLABELLED)}")
+    out[hide] = UNLABELLED
+    targets[hide] = np.nan
+    for name in [k for k in extras if k.startswith("label_")]:
+        extras[name][hide] = np.nan
+    return out, {"presses": int(labelled), "seed": int(seed), "of_training_rows": int(len(train))}
 
 
 class _TargetPlan:

@@ -59,8 +59,10 @@ def check_target_names(names: Sequence[str]) -> tuple[str, ...]:
     return out
 
 
-def check_targets(targets: np.ndarray, names: tuple[str, ...], n: int) -> np.ndarray:
-    """(n, K) float32 targets after checking shape, finiteness and the 0/1 contact flag."""
+def check_targets(targets: np.ndarray, names: tuple[str, ...], n: int,
+                  unlabelled: np.ndarray | None = None) -> np.ndarray:
+    """(n, K) float32 targets after checking shape, finiteness and the 0/1 contact flag; rows flagged in
+    ``unlabelled`` (n,) bool hold NaN (their labels were held back) and are not checked."""
     t = np.asarray(targets)
     if t.ndim != 2 or t.shape != (n, len(names)):
         raise DatasetError(f"targets: expected shape ({n}, {len(names)}) for {list(names)}, got {t.shape}")
@@ -68,11 +70,15 @@ def check_targets(targets: np.ndarray, names: tuple[str, ...], n: int) -> np.nda
         raise DatasetError(f"targets: expected real numbers, got dtype {t.dtype}")
     t = t.astype(np.float32, copy=False)
     bad = ~np.isfinite(t)
+    if unlabelled is not None and unlabelled.any():
+        bad[unlabelled] = False
     if bad.any():
         row, col = (int(i) for i in np.argwhere(bad)[0])
         raise DatasetError(f"targets: {int(bad.sum())} NaN or infinite values (first: {names[col]!r} of sample {row})")
     if CONTACT_FLAG in names:
         flag = t[:, names.index(CONTACT_FLAG)]
+        if unlabelled is not None:
+            flag = flag[~unlabelled]
         if not np.isin(flag, (0.0, 1.0)).all():
             raise DatasetError(f"targets: {CONTACT_FLAG!r} must be 0 or 1, got values such as "
                                f"{sorted(set(flag[~np.isin(flag, (0.0, 1.0))].tolist()))[:3]}")
