@@ -7,7 +7,7 @@ Shapes (N samples):
 - ``targets`` (N, K) float32 or None, named by ``target_names`` (K,) with their unit as suffix (``x_mm``,
   ``y_mm``, ``depth_mm``, ``force_n``, ``shear_x_n``, ``shear_y_n``, ``in_contact`` 0/1; see
   :mod:`tactile_manip.data.targets`): labelled presses. A dataset holds images, targets or both;
-- ``split`` (N,) str in ``SPLITS`` (``unlabelled``: readings of the training part whose targets are NaN);
+- ``split`` (N,) str in ``SPLITS``, or ``unlabelled`` (readings of the training part whose targets are NaN);
 - ``object_index`` (N,) int16 into ``object_names`` (K,) str, optional: what was pressed (per-object tables,
   training-object filters);
 - ``groups`` (N,) int64, optional: samples that belong together (one contact, one participant, one recorded
@@ -33,7 +33,7 @@ from tactile_manip.data.spec import ChannelSpec, ImageSpec
 from tactile_manip.data.targets import check_target_names, check_targets, target_unit
 from tactile_manip.errors import DatasetError
 
-SPLITS = ("train", "val", "test", "unlabelled")
+SPLITS = ("train", "val", "test")
 #: the split of training-part readings whose labels were held back (``import --labelled K``): their targets are NaN
 UNLABELLED = "unlabelled"
 # the per-sample arrays the fingerprint hashes, in this order (each whole, then the next); then the target names
@@ -179,11 +179,17 @@ class PairedDataset:
         return self.extras[name]
 
     # --- selection -----------------------------------------------------------------------------------------
+    def _split_counts(self) -> dict[str, int]:
+        """Samples per split; ``unlabelled`` only where a dataset has such rows."""
+        counts = {s: int(np.sum(self.split == s)) for s in SPLITS}
+        unlabelled = int(np.sum(self.split == UNLABELLED))
+        return {**counts, UNLABELLED: unlabelled} if unlabelled else counts
+
     def indices(self, split: str, objects: tuple[str, ...] | list[str] = ()) -> np.ndarray:
         """Sample indices of ``split`` ('train', 'val', 'test' or 'unlabelled': training-part readings without
         labels), ascending; only of ``objects`` (names) if given."""
-        if split not in SPLITS:
-            raise ValueError(f"split must be one of {SPLITS}, got {split!r}")
+        if split not in (*SPLITS, UNLABELLED):
+            raise ValueError(f"split must be one of {(*SPLITS, UNLABELLED)}, got {split!r}")
         idx = np.flatnonzero(self.split == split)
         if len(objects):
             known = [] if self.object_names is None else self.object_names.tolist()
@@ -233,7 +239,7 @@ class PairedDataset:
                 "image_shape": list(self.image_shape) if self.has_images else None,
                 "image": self.image.to_dict() if self.has_images else None,
                 "targets": self.target_units() if self.has_targets else None,
-                "splits": {s: int(np.sum(self.split == s)) for s in SPLITS}, "fingerprint": self.fingerprint(),
+                "splits": self._split_counts(), "fingerprint": self.fingerprint(),
                 "source": self.provenance.get("source", "unknown")}
 
 
