@@ -27,6 +27,8 @@ def _heavy_modules_after(code: str) -> list[str]:
 @pytest.mark.parametrize("code", [
     "import tactile_manip",
     "import tactile_manip.sim.pair",
+    "import tactile_manip.boards; tactile_manip.boards.load_board('eflesh')",
+    "import tactile_manip.sim.board_press, tactile_manip.sim.magnets",
     "import tactile_manip.sim.dataset",
     "import tactile_manip.sensors",
     "import tactile_manip.collection.camera, tactile_manip.collection.camera_opencv, tactile_manip.collection.camera_sim, "
