@@ -1,5 +1,10 @@
 """``tactile-manip simulate``: generate a dataset from a config: readings, depth images (unless the config
-says ``images = false``) and contact targets (centre of pressure, depth, force, contact flag)."""
+says ``images = false``) and contact targets (centre of pressure, depth, force, contact flag).
+
+``tactile-manip simulate --board NAME|FILE --presses N --out D.npz`` instead presses a probe tip on any board
+whose file describes its magnetic body and layer (:mod:`tactile_manip.sim.board_dataset`): a dataset of labelled
+presses as a probe rig records them (targets x, y, depth, force), for ``train --config
+configs/train/contact.toml``. A board without them (``generic:N``) is refused in one line."""
 
 from __future__ import annotations
 
@@ -28,6 +33,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "(extra 'ray')")
     p.add_argument("--block-size", type=int, default=None,
                    help="presses per Ray task (default 32); only with --ray")
+    probe = p.add_argument_group("probe presses on any board (instead of --config)")
+    probe.add_argument("--board", default=None, metavar="NAME|FILE",
+                       help="press a probe on this board (a shipped board, or a board file with [body] and [layer]): "
+                            "labelled presses as a probe rig records them, without images")
+    probe.add_argument("--presses", type=int, default=2000, help="with --board: how many presses (default 2000)")
+    probe.add_argument("--tip", choices=("sphere", "flat"), default="sphere", help="with --board: the probe's tip")
+    probe.add_argument("--tip-diameter-mm", type=float, default=6.0, help="with --board: its diameter, mm (6)")
+    probe.add_argument("--max-force-n", type=float, default=15.0,
+                       help="with --board: forces are drawn log-uniformly from 0.5 N to this (15)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -39,6 +53,8 @@ def run(args: argparse.Namespace) -> int:
     from tactile_manip.sim.dataset import generate, load_dataset_config
     from tactile_manip.data import SPLITS, dataset_path, save_dataset
 
+    if args.board is not None:
+        return _simulate_board(args)
     if args.shard_size is not None and args.shard_size < 1:
         raise ValueError(f"--shard-size must be >= 1, got {args.shard_size}")
     out = (_check_shard_folder(args.out, force=args.force) if args.shard_size else  # checked before the work
@@ -114,6 +130,36 @@ def _physics_notes(data, *, thickness_mm: float) -> list[str]:
                      f"up to {deepest.max():.3g} mm): the elastic layer model does not hold there; lower "
                      "poses.force_n or use blunter objects")
     return notes
+
+
+def _simulate_board(args: argparse.Namespace) -> int:
+    """``--board``: probe presses on any simulatable board, checked before any press."""
+    from tqdm import tqdm
+
+    from tactile_manip.boards import load_board
+    from tactile_manip.data import SPLITS, dataset_path, save_dataset
+    from tactile_manip.outputs import check_output_file
+    from tactile_manip.sim.board_dataset import ProbePlan, probe_press_dataset
+
+    other = [flag for flag, given in (("--config", args.config != DEFAULT_CONFIG), ("--ray", args.ray is not None),
+                                      ("--shard-size", args.shard_size is not None), ("--scale", args.scale != 1.0),
+                                      ("--block-size", args.block_size is not None)) if given]
+    if other:
+        raise ValueError(f"--board presses a probe on one board; {', '.join(other)} belong to a dataset config")
+    out = check_output_file(dataset_path(args.out), force=args.force)
+    board = load_board(args.board)
+    board.require_simulation()
+    plan = ProbePlan(tip=args.tip, tip_diameter_mm=args.tip_diameter_mm, max_force_n=args.max_force_n)
+    if not 1 <= args.presses <= 1_000_000:
+        raise ValueError(f"--presses must be from 1 to 1000000, got {args.presses}")
+    with tqdm(total=args.presses, unit="press", desc=f"pressing {board.name}") as bar:
+        data = probe_press_dataset(board, args.presses, plan=plan, seed=0 if args.seed is None else args.seed,
+                                   progress=bar.update)
+    path = save_dataset(out, data)
+    counts = ", ".join(f"{s} {len(data.indices(s))}" for s in SPLITS)
+    print(f"wrote {path}: {len(data)} probe presses of board {board.name} ({counts}), "
+          f"{data.provenance['generation_seconds']:.1f} s; targets {', '.join(data.target_names)}")
+    return 0
 
 
 def _check_shard_folder(path: str, *, force: bool):
