@@ -31,26 +31,33 @@ from tactile_manip.version import __version__
 
 # name -> (module, one-line help)
 COMMANDS: dict[str, tuple[str, str]] = {
-    "demo": ("tactile_manip.commands.demo", "press the paper's objects on the simulated sensor pair"),
-    "simulate": ("tactile_manip.commands.simulate", "generate a paired dataset from a config"),
+    "demo": ("tactile_manip.commands.demo", "press the paper's objects and unseen rods in simulation; table and PNGs"),
+    "simulate": ("tactile_manip.commands.simulate",
+                 "make a simulated dataset: readings and depth images, or probe presses on any board"),
     "import": ("tactile_manip.commands.import_data",
-               "make a dataset from plain arrays (.npy, .npz, HDF5) or from a probe rig's logs (labelled presses)"),
-    "show": ("tactile_manip.commands.show", "render a sample (depth image and 4x4x3 field) to PNG"),
-    "params": ("tactile_manip.commands.params", "list every simulator parameter with source and range"),
-    "train": ("tactile_manip.commands.train", "train a SuperMag CVAE on a paired dataset"),
+               "make a dataset from your own arrays or from a probe rig's sensor and label logs"),
+    "show": ("tactile_manip.commands.show", "draw a dataset sample or one simulated press as a PNG"),
+    "params": ("tactile_manip.commands.params", "list the simulator's parameters: default, unit, range, source"),
+    "train": ("tactile_manip.commands.train",
+              "train a model on a dataset: depth images, contact position and force, or the angle"),
     "export": ("tactile_manip.commands.export",
-               "convert a trial run, recording or pair log to LeRobot, Rerun or MCAP; or a checkpoint to ONNX"),
-    "evaluate": ("tactile_manip.commands.evaluate", "reproduce SuperMag's Table I on the unseen test objects"),
-    "emulate": ("tactile_manip.commands.emulate", "emulate the sensor board's firmware on a pseudo-terminal"),
-    "record": ("tactile_manip.commands.record", "record a sensor's frames and health to a crash-safe file"),
+               "convert a trial run, recording or pair log to LeRobot, Rerun or MCAP; a trained model to ONNX"),
+    "evaluate": ("tactile_manip.commands.evaluate",
+                 "score models against baselines on test presses: depth images and angles, or contact"),
+    "emulate": ("tactile_manip.commands.emulate",
+                "serve a simulated sensor board on a pseudo-terminal, to try the tools without hardware"),
+    "record": ("tactile_manip.commands.record", "record a sensor's frames to a file that survives a crash"),
     "find-port": ("tactile_manip.commands.find_port", "list serial ports that may be the sensor board"),
-    "view": ("tactile_manip.commands.view", "show the 4x4x3 field of a sensor live (or save a snapshot)"),
-    "trials": ("tactile_manip.commands.trials", "run grasp-estimate-reorient trials per method and report"),
+    "view": ("tactile_manip.commands.view",
+             "watch a sensor's field live (board or simulation) or replay a recording; or stream it to Rerun"),
+    "trials": ("tactile_manip.commands.trials",
+               "run grasp-estimate-reorient trials (simulated or on an FR3) per method and report"),
     "calibrate": ("tactile_manip.commands.calibrate",
-                  "fit a model's confidence to P(angle within tolerance) on held-out presses, with a reliability plot"),
-    "score": ("tactile_manip.commands.score", "re-score a saved trial run at another tolerance (no re-run)"),
-    "collect": ("tactile_manip.commands.collect", "calibrate the VBTS and record synchronized MBTS/VBTS pairs"),
-    "bench": ("tactile_manip.commands.bench", "speed vs error of every method and runtime on this machine"),
+                  "calibrate a model's confidence to the chance its angle is within tolerance"),
+    "score": ("tactile_manip.commands.score", "re-score a saved trial run at another tolerance, without re-running"),
+    "collect": ("tactile_manip.commands.collect",
+                "collect training data from real sensors: calibrate the VBTS, record paired presses"),
+    "bench": ("tactile_manip.commands.bench", "measure speed against error of every method and runtime here"),
 }
 
 
@@ -143,7 +150,10 @@ class _SigtermRaises:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(prog="tactile-manip", description=__doc__.splitlines()[0])
+    parser = _Parser(prog="tactile-manip", description=(
+        "Turn a magnetic tactile sensor's coarse readings into depth images, in-hand angles and contact "
+        "estimates: simulate or record a sensor, make datasets, train and evaluate models, and run "
+        "grasp-and-reorient trials with an FR3 arm, simulated or real."))
     parser.add_argument("--version", action=_Version)
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True, parser_class=_Parser)
     for name, (module, help_text) in COMMANDS.items():
