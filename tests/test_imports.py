@@ -1,16 +1,24 @@
-"""Importing the package and the simulator stays cheap: no heavy or optional package is pulled in
-(docs/design.md, Layers).
+"""Importing the package and the simulator stays cheap: no heavy or optional package is pulled in, and the
+sensors and perception layers do not reach up into the simulator (docs/design.md, Layers).
 
-Each check runs in a fresh interpreter, since this test process has long since imported everything.
+Each runtime check runs in a fresh interpreter, since this test process has long since imported everything.
 """
 
 from __future__ import annotations
 
+import ast
 import json
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
+
+import tactile_manip
+
+PACKAGE = Path(tactile_manip.__file__).parent
+# the sensors modules that drive the simulator: the simulated sensor, the firmware emulator and its presses
+SIMULATOR_DRIVEN = ("sensors/simulated.py", "sensors/emulator.py", "sensors/contacts.py")
 
 HEAVY = ("torch", "onnxruntime", "roboticstoolbox", "franky", "serial", "trimesh", "matplotlib", "cv2", "sklearn")
 
@@ -53,3 +61,52 @@ def test_import_pulls_in_no_heavy_package(code):
 def test_probe_sees_a_heavy_import():
     """The probe itself works: an import of matplotlib (a core dependency) is reported."""
     assert _heavy_modules_after("import tactile_manip.plots; tactile_manip.plots._pyplot()") == ["matplotlib"]
+
+
+def _imported_modules(path: Path) -> set[str]:
+    """Every module ``path`` imports, anywhere in the file (also inside functions), as dotted absolute names."""
+    package = ".".join(("tactile_manip", *path.relative_to(PACKAGE).parent.parts))
+    names = set()
+    for node in ast.walk(ast.parse(path.read_text(), filename=str(path))):
+        if isinstance(node, ast.Import):
+            names.update(alias.name for alias in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            base = package.rsplit(".", node.level - 1)[0] if node.level else ""
+            module = ".".join(p for p in (base, node.module or "") if p)
+            names.add(module)
+            names.update(f"{module}.{alias.name}" for alias in node.names)  # `from tactile_manip import sim`
+    return names
+
+
+def _sim_imports(folder: str, *, skip: tuple[str, ...] = ()) -> dict[str, list[str]]:
+    offenders = {}
+    for path in sorted((PACKAGE / folder).rglob("*.py")):
+        where = path.relative_to(PACKAGE).as_posix()
+        found = sorted(n for n in _imported_modules(path) if n.split(".")[:2] == ["tactile_manip", "sim"])
+        if found and where not in skip:
+            offenders[where] = found
+    return offenders
+
+
+def test_sensors_import_nothing_from_the_simulator():
+    """Chip specs come from the core (tactile_manip.chips); only the modules that drive the simulator import it."""
+    assert _sim_imports("sensors", skip=SIMULATOR_DRIVEN) == {}
+
+
+def test_perception_imports_nothing_from_the_simulator():
+    assert _sim_imports("perception") == {}
+
+
+def test_the_import_scan_sees_the_simulator_driven_modules():
+    """The scan itself works: the simulated sensor does import the simulator."""
+    assert "sensors/simulated.py" in _sim_imports("sensors")
+
+
+def test_drivers_and_perception_load_no_simulator_module():
+    code = ("import json, sys\nimport tactile_manip.sensors, tactile_manip.sensors.serial_sensor, "
+            "tactile_manip.sensors.replay, tactile_manip.sensors.recording, tactile_manip.sensors.wire.anyskin, "
+            "tactile_manip.perception, tactile_manip.perception.reconstruct\n"
+            "print(json.dumps(sorted(m for m in sys.modules if m.split('.')[:2] == ['tactile_manip', 'sim'])))")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert json.loads(done.stdout.strip().splitlines()[-1]) == []

@@ -6,7 +6,7 @@ These dataclasses mirror the tables of a board file (``tactile_manip/boards/*.to
 - ``[board]``: name, reading grid, pitch, where the figures come from;
 - ``[[chips]]`` (or ``[chip_grid]``): each chip in the order its firmware sends them, with its reading cell,
   its position in the pad frame (mm) and the map of its axes onto the pad's;
-- ``[chip]``: the magnetometer's LSB sizes, output rail and rate;
+- ``[chip]``: the magnetometer's LSB sizes, output rail and rate (:class:`~tactile_manip.chips.ChipModelSpec`);
 - ``[wire]``: the wire format of the serial backend and the baud rate;
 - ``[body]``: the magnetic body, a magnetised layer or discrete magnets (``[[body.magnets]]``, cylinders
   and cuboids), optional;
@@ -27,6 +27,8 @@ from dataclasses import dataclass, field
 from typing import Literal
 
 import numpy as np
+
+from tactile_manip.chips import ChipModelSpec
 
 # the pad axis each signed name stands for (a chip's axis map is three of these)
 AXIS_VECTORS: dict[str, tuple[float, float, float]] = {
@@ -116,34 +118,6 @@ class ChipGridSpec:
         r0, c0 = (self.rows - 1) / 2, (self.cols - 1) / 2
         return tuple(ChipSpec(cell=(r, c), position_mm=((c - c0) * self.pitch_mm, (r0 - r) * self.pitch_mm))
                      for r in range(self.rows) for c in range(self.cols))
-
-
-@dataclass(frozen=True)
-class ChipModelSpec:
-    """The magnetometer at the board's settings (default: MLX90393 at ReSkin's gain and resolution)."""
-
-    model: str = "MLX90393"
-    lsb_xy_ut: float = 0.200        # x and y sensitivity, uT per LSB
-    lsb_z_ut: float = 0.323         # z sensitivity, uT per LSB
-    saturation_counts: int = 32767  # output rail, LSB
-    rate_hz: float = 125.0          # frames per second the firmware sends
-    noise_xy_ut: float = 1.5        # RMS noise of x and y, uT (what a press of the simulated board adds)
-    noise_z_ut: float = 2.5         # RMS noise of z, uT
-
-    def __post_init__(self) -> None:
-        for name in ("lsb_xy_ut", "lsb_z_ut", "rate_hz"):
-            _finite(f"chip.{name}", getattr(self, name), low=0.0, high=1e4)
-        for name in ("noise_xy_ut", "noise_z_ut"):
-            _finite(f"chip.{name}", getattr(self, name), low=0.0, high=1e4, low_open=False)
-        if not isinstance(self.saturation_counts, int) or not 0 < self.saturation_counts < 1 << 31:
-            raise ValueError(f"chip.saturation_counts must be an integer from 1 to 2**31 - 1, "
-                             f"got {self.saturation_counts!r}")
-
-    @property
-    def full_scale_ut(self) -> tuple[float, float, float]:
-        """The largest |field| each axis reports before its rail, uT."""
-        xy = self.saturation_counts * self.lsb_xy_ut
-        return (xy, xy, self.saturation_counts * self.lsb_z_ut)
 
 
 @dataclass(frozen=True)

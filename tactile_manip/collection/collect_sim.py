@@ -111,7 +111,7 @@ class SimulatedRig:
             self._thread = threading.Thread(target=self.emulator.run, args=(self._stop,), daemon=True,
                                             name="rig-emulator")
             self._thread.start()
-            self.sensor = SerialSensor(SerialSensorConfig(port=path, chip=self.pair.params.chip))
+            self.sensor = SerialSensor(SerialSensorConfig(port=path, chip=self.pair.params.chip.spec()))
             self.sensor.connect()
             self.start_host_s = self._stream_origin()
             self.camera.play(self.presses, start_host_s=self.start_host_s)

@@ -47,16 +47,16 @@ def add_depth(episodes: list[Episode], model: str) -> dict[str, Any]:
 
 
 def _recording_baseline(e: Episode, fields: np.ndarray) -> np.ndarray:
+    from tactile_manip.chips import ChipModelSpec
     from tactile_manip.errors import CalibrationError
     from tactile_manip.sensors.baseline import baseline_from_frames, noise_thresholds_ut
     from tactile_manip.sensors.config import BaselineConfig
-    from tactile_manip.sim.params import ChipParams
 
     chip = e.meta.get("chip") or {}
     known = {k: chip[k] for k in ("lsb_xy_ut", "lsb_z_ut", "saturation_counts", "noise_xy_ut", "noise_z_ut")
              if k in chip}
     first = fields[:BASELINE_FRAMES]
-    thresholds = noise_thresholds_ut(BaselineConfig(), ChipParams(**known))
+    thresholds = noise_thresholds_ut(BaselineConfig(), ChipModelSpec(**known))
     try:
         baseline = baseline_from_frames(first, np.zeros(first.shape, bool), thresholds, source=str(e.meta.get("file")))
     except CalibrationError as err:

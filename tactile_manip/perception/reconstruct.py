@@ -26,8 +26,7 @@ from typing import Any
 import numpy as np
 from scipy import ndimage
 
-from tactile_manip.sim.chip import full_scale_ut
-from tactile_manip.sim.params import ChipParams
+from tactile_manip.chips import MLX90393, full_scale_ut
 from tactile_manip.perception.angle_head import AngleHead, open_angle_head
 from tactile_manip.perception.model_metadata import ModelFileError, check_metadata
 from tactile_manip.perception.one_reading import open_one_reading
@@ -37,7 +36,7 @@ from tactile_manip.extras import require
 METADATA_KEY = "tactile_manip"
 SUPPORTED_FORMAT = 1
 # (3,) uT: the MLX90393's full scale per axis (x, y, z) at ReSkin's settings; no reading can exceed it
-READING_LIMIT_UT = full_scale_ut(ChipParams())
+READING_LIMIT_UT = full_scale_ut(MLX90393)
 
 
 def out_of_range(field_ut: np.ndarray) -> np.ndarray:

@@ -9,8 +9,13 @@
   :mod:`~tactile_manip.sensors.emulator`: the firmware emulator on a pty; :mod:`~tactile_manip.sensors.recording`:
   crash-safe recordings.
 
-Importing this package does not import pyserial or matplotlib. See ``docs/sensors.md``.
+Importing this package does not import pyserial or matplotlib, nor the simulator: :class:`SimulatedSensor` and
+the press timeline (:class:`ContactTimeline`, :class:`Press`, :func:`parse_press`) drive it and load it when
+first named. See ``docs/sensors.md``.
 """
+
+import importlib
+from typing import Any
 
 from tactile_manip.sensors.array import SensorArray
 from tactile_manip.sensors.base import FrameSubscription, SensorFrame, SensorHealth, TactileSensor
@@ -24,12 +29,10 @@ from tactile_manip.sensors.config import (
     SimulatedSensorConfig,
     make_sensor,
 )
-from tactile_manip.sensors.contacts import ContactTimeline, Press, parse_press
 from tactile_manip.sensors.layout import LAYOUTS, BoardLayout, ChipPlacement, get_layout
 from tactile_manip.sensors.recording import Recorder, Recording, RecordingWriter, read_recording
 from tactile_manip.sensors.replay import ReplaySensor
 from tactile_manip.sensors.serial_sensor import SerialSensor
-from tactile_manip.sensors.simulated import SimulatedSensor
 
 __all__ = [
     "BACKENDS",
@@ -60,3 +63,17 @@ __all__ = [
     "parse_press",
     "read_recording",
 ]
+
+# what drives the simulator, imported on first use so the drivers and recordings stay free of it
+_SIMULATOR_DRIVEN = {
+    "ContactTimeline": "tactile_manip.sensors.contacts",
+    "Press": "tactile_manip.sensors.contacts",
+    "parse_press": "tactile_manip.sensors.contacts",
+    "SimulatedSensor": "tactile_manip.sensors.simulated",
+}
+
+
+def __getattr__(name: str) -> Any:
+    if name in _SIMULATOR_DRIVEN:
+        return getattr(importlib.import_module(_SIMULATOR_DRIVEN[name]), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

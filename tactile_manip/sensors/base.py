@@ -20,12 +20,12 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from tactile_manip.checks import check_array
+from tactile_manip.chips import ChipSettings
 from tactile_manip.errors import SensorDisconnectedError, SensorError, SensorTimeoutError
 from tactile_manip.sensors.baseline import Baseline, baseline_from_frames, noise_thresholds_ut
 from tactile_manip.sensors.config import BaselineConfig, DriftConfig
 from tactile_manip.sensors.drift import BaselineState
 from tactile_manip.sensors.layout import SUPERMAG_4X4, BoardLayout
-from tactile_manip.sim.params import ChipParams
 from tactile_manip.types import TactileReading
 
 RATE_WINDOW_S = 1.0  # the measured rate is taken over the last second of frames
@@ -137,7 +137,7 @@ class TactileSensor(abc.ABC):
       (a serial backend reconnects).
     """
 
-    def __init__(self, *, source: str, chip: ChipParams, buffer_frames: int, baseline: BaselineConfig,
+    def __init__(self, *, source: str, chip: ChipSettings, buffer_frames: int, baseline: BaselineConfig,
                  layout: BoardLayout = SUPERMAG_4X4, drift: DriftConfig | None = None) -> None:
         self._source = source
         self._chip = chip
@@ -185,7 +185,7 @@ class TactileSensor(abc.ABC):
         return self._source
 
     @property
-    def chip(self) -> ChipParams:
+    def chip(self) -> ChipSettings:
         """Chip settings (LSBs, rail, rated noise) used to convert and to judge baselines."""
         return self._chip
 

@@ -14,9 +14,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from tactile_manip.chips import ChipSettings
 from tactile_manip.errors import CalibrationError
 from tactile_manip.sensors.config import BaselineConfig
-from tactile_manip.sim.params import ChipParams
 
 AXES = "xyz"
 
@@ -40,7 +40,7 @@ class Baseline:
     temperature_c: np.ndarray | None = None
 
 
-def noise_thresholds_ut(config: BaselineConfig, chip: ChipParams) -> np.ndarray:
+def noise_thresholds_ut(config: BaselineConfig, chip: ChipSettings) -> np.ndarray:
     """Per-axis std threshold (3,) in uT: ``max_noise_ut`` if set, else ``noise_factor`` x the rated noise."""
     if config.max_noise_ut is not None:
         return np.full(3, config.max_noise_ut)

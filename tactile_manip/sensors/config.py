@@ -12,7 +12,7 @@ import importlib
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, ClassVar, Literal
 
-from tactile_manip.sim.params import ChipParams
+from tactile_manip.chips import ChipModelSpec, as_chip_spec
 
 if TYPE_CHECKING:
     from tactile_manip.sensors.base import TactileSensor
@@ -106,7 +106,7 @@ class SerialSensorConfig:
     reconnect_min_s: float = 0.05      # first back-off delay, s
     reconnect_max_s: float = 2.0       # back-off ceiling, s
     buffer_frames: int = 512           # ring buffer length, frames (~4 s at 125 Hz)
-    chip: ChipParams = field(default_factory=ChipParams)  # LSBs and rail for counts -> uT, rated noise
+    chip: ChipModelSpec = field(default_factory=ChipModelSpec)  # LSBs and rail for counts -> uT, rated noise
     baseline: BaselineConfig = field(default_factory=BaselineConfig)
     drift: DriftConfig = field(default_factory=DriftConfig)
 
@@ -126,6 +126,8 @@ class SerialSensorConfig:
                              f"got {self.wire_format!r}")
         if not self.layout:
             object.__setattr__(self, "layout", DEFAULT_LAYOUTS[self.wire_format])
+        # a chip given as the simulator's ChipParams keeps only its hardware part, what the driver reads
+        object.__setattr__(self, "chip", as_chip_spec(self.chip))
         try:
             n_chips = get_layout(self.layout).n_chips
         except ValueError as e:

@@ -27,6 +27,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from tactile_manip.chips import ChipSettings
 from tactile_manip.errors import ProtocolError
 
 SYNC = b"\xaa\x55"
@@ -246,15 +247,15 @@ class Unwrapper:
 
 
 class CountScale:
-    """Raw counts to microtesla for one chip setting (``ChipParams`` LSBs and rail)."""
+    """Raw counts to microtesla for one chip setting (LSBs and rail)."""
 
     def __init__(self, lsb_xy_ut: float, lsb_z_ut: float, saturation_counts: int = 32767) -> None:
         self.lsb_ut = np.array([lsb_xy_ut, lsb_xy_ut, lsb_z_ut], dtype=np.float32)
         self.saturation_counts = int(saturation_counts)
 
     @classmethod
-    def from_chip(cls, chip) -> CountScale:
-        """From a :class:`tactile_manip.sim.params.ChipParams` (or anything with the same three fields)."""
+    def from_chip(cls, chip: ChipSettings) -> CountScale:
+        """From a chip's settings (:class:`~tactile_manip.chips.ChipSettings`: LSBs and rail)."""
         return cls(chip.lsb_xy_ut, chip.lsb_z_ut, chip.saturation_counts)
 
     def to_ut(self, counts: np.ndarray) -> np.ndarray:

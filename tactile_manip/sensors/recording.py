@@ -31,6 +31,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from tactile_manip.chips import ChipModelSpec
 from tactile_manip.errors import ProtocolError, RecordingError, SensorTimeoutError
 from tactile_manip.sensors.protocol import (
     TEMPERATURE_LSB_C,
@@ -44,7 +45,6 @@ from tactile_manip.sensors.framed_file import (CRC32, TAG_EVENT, FramedWriter, S
                                                scan_records)
 from tactile_manip.sensors.layout import DEFAULT_LAYOUT, get_layout
 from tactile_manip.sensors.wire import make_decoder
-from tactile_manip.sim.params import ChipParams
 
 if TYPE_CHECKING:
     from tactile_manip.sensors.base import SensorFrame, SensorHealth, TactileSensor
@@ -192,7 +192,7 @@ def _record_decoder(header: dict[str, Any], path: Path) -> Callable[[bytes], Any
     try:
         layout = get_layout(header.get("layout", ""))
         chip = header.get("chip", {})
-        params = ChipParams(**{k: chip[k] for k in ("lsb_xy_ut", "lsb_z_ut", "saturation_counts") if k in chip})
+        params = ChipModelSpec(**{k: chip[k] for k in ("lsb_xy_ut", "lsb_z_ut", "saturation_counts") if k in chip})
         return make_decoder(fmt, n_chips=layout.n_chips, chip=params).decode_record
     except ValueError as e:
         raise RecordingError(f"{path}: cannot read its frames: {e}") from None

@@ -16,12 +16,12 @@ from typing import Any
 
 import numpy as np
 
+from tactile_manip.chips import MLX90393, ChipModelSpec
 from tactile_manip.errors import RecordingError, SensorTimeoutError
 from tactile_manip.sensors.base import TactileSensor
 from tactile_manip.sensors.config import ReplaySensorConfig
 from tactile_manip.sensors.layout import get_layout
 from tactile_manip.sensors.recording import Recording, read_recording
-from tactile_manip.sim.params import ChipParams
 from tactile_manip.types import TactileReading
 
 
@@ -32,7 +32,7 @@ class ReplaySensor(TactileSensor):
     """
 
     def __init__(self, config: ReplaySensorConfig) -> None:
-        super().__init__(source=config.path, chip=ChipParams(), buffer_frames=config.buffer_frames,
+        super().__init__(source=config.path, chip=MLX90393, buffer_frames=config.buffer_frames,
                          baseline=config.baseline)
         self.config = config
         self.recording: Recording | None = None
@@ -55,8 +55,8 @@ class ReplaySensor(TactileSensor):
         if len(rec) == 0:
             raise RecordingError(f"{self.config.path} holds no frame to replay")
         chip = rec.header.get("chip", {})
-        known = {f.name for f in dataclasses.fields(ChipParams)}
-        self._chip = dataclasses.replace(ChipParams(), **{k: v for k, v in chip.items() if k in known})
+        known = {f.name for f in dataclasses.fields(ChipModelSpec)}
+        self._chip = dataclasses.replace(MLX90393, **{k: v for k, v in chip.items() if k in known})
         try:
             self._layout = get_layout(rec.layout_name)
         except ValueError as e:

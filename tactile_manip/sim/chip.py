@@ -36,15 +36,6 @@ def chip_positions_mm(*, pitch_mm: float, thickness_mm: float, gap_mm: float) ->
     return pos
 
 
-def full_scale_ut(params: ChipParams) -> np.ndarray:
-    """The largest field each axis can report, uT: (3,) ``saturation_counts x LSB`` for (x, y, z).
-
-    At the defaults (int16 rail, 0.200 / 0.323 uT/LSB) that is 6553 uT (x, y) and 10584 uT (z); a value
-    beyond it did not come from the chip.
-    """
-    return params.saturation_counts * np.array([params.lsb_xy_ut, params.lsb_xy_ut, params.lsb_z_ut])
-
-
 def _rotations(axes: np.ndarray, angles_rad: np.ndarray) -> np.ndarray:
     """Rotation matrices (..., 3, 3) from unit axes (..., 3) and angles (...,) by Rodrigues' formula."""
     k = np.zeros(axes.shape + (3,))

@@ -23,6 +23,8 @@ from typing import Any, Literal
 
 import numpy as np
 
+from tactile_manip.chips import MLX90393, ChipModelSpec, as_chip_spec
+
 _INF = math.inf
 
 
@@ -134,17 +136,21 @@ class MagnetParams(_Validated):
 
 @dataclass(frozen=True)
 class ChipParams(_Validated):
-    """MLX90393 magnetometer array at ReSkin's settings."""
+    """MLX90393 magnetometer array at ReSkin's settings, as the simulator draws it.
+
+    The datasheet figures (LSB sizes, rail, rate, rated noise) default to :data:`tactile_manip.chips.MLX90393`;
+    pitch, Earth field, drift and misalignment are the simulation's own. :meth:`spec` is the hardware part.
+    """
 
     pitch_mm: float = param(5.0, unit="mm", source="SuperMag Sec. III-B: 4x4 array at 5 mm pitch")
-    lsb_xy_ut: float = param(0.200, unit="uT/LSB",
+    lsb_xy_ut: float = param(MLX90393.lsb_xy_ut, unit="uT/LSB",
                              source="MLX90393 datasheet sensitivity table at ReSkin's gain/resolution")
-    lsb_z_ut: float = param(0.323, unit="uT/LSB",
+    lsb_z_ut: float = param(MLX90393.lsb_z_ut, unit="uT/LSB",
                             source="MLX90393 datasheet sensitivity table at ReSkin's gain/resolution")
-    noise_xy_ut: float = param(1.5, unit="uT", rand=(1.5, 15.0), log=True, limits=(-1e-12, 1e4),
+    noise_xy_ut: float = param(MLX90393.noise_xy_ut, unit="uT", rand=(1.5, 15.0), log=True, limits=(-1e-12, 1e4),
                                source="MLX90393 datasheet RMS noise; up to 10-17 uT in idle eFlesh "
                                       "recordings")
-    noise_z_ut: float = param(2.5, unit="uT", rand=(2.5, 15.0), log=True, limits=(-1e-12, 1e4),
+    noise_z_ut: float = param(MLX90393.noise_z_ut, unit="uT", rand=(2.5, 15.0), log=True, limits=(-1e-12, 1e4),
                               source="MLX90393 datasheet RMS noise; up to 10-17 uT in idle eFlesh "
                                      "recordings")
     earth_field_ut: float = param(50.0, unit="uT", rand=(25.0, 65.0), limits=(-1e-12, 1e4),
@@ -153,9 +159,13 @@ class ChipParams(_Validated):
                             source="per-press baseline drift (temperature, hysteresis; docs/design.md)")
     rotation_deg: float = param(0.0, unit="deg", rand=(0.0, 3.0), limits=(-1e-12, 45.0),
                                 source="RMS mounting misalignment of each chip; 0 = ideal board")
-    saturation_counts: int = param(32767, unit="LSB", limits=(0, 1 << 31),
+    saturation_counts: int = param(MLX90393.saturation_counts, unit="LSB", limits=(0, 1 << 31),
                                    source="signed 16-bit output register of the MLX90393")
-    rate_hz: float = param(125.0, unit="Hz", source="SuperMag Sec. III-B: 125 Hz")
+    rate_hz: float = param(MLX90393.rate_hz, unit="Hz", source="SuperMag Sec. III-B: 125 Hz")
+
+    def spec(self) -> ChipModelSpec:
+        """The hardware part (LSB sizes, rail, rate, rated noise) as the core chip spec, for the drivers."""
+        return as_chip_spec(self)
 
 
 @dataclass(frozen=True)

@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import importlib
 
+from tactile_manip.chips import ChipSettings
 from tactile_manip.sensors.wire.base import ChipFrame, WireDecoder, WireStats
-from tactile_manip.sim.params import ChipParams
 
 WIRE_FORMATS: dict[str, str] = {
     "supermag": "tactile_manip.sensors.wire.supermag:SuperMagDecoder",
@@ -20,7 +20,7 @@ WIRE_FORMATS: dict[str, str] = {
 DEFAULT_LAYOUTS: dict[str, str] = {"supermag": "supermag-4x4", "anyskin": "anyskin-5"}
 
 
-def make_decoder(name: str, *, n_chips: int, chip: ChipParams) -> WireDecoder:
+def make_decoder(name: str, *, n_chips: int, chip: ChipSettings) -> WireDecoder:
     """A fresh decoder of the format ``name`` for ``n_chips`` chips; ValueError naming the known formats."""
     if name not in WIRE_FORMATS:
         raise ValueError(f"unknown wire format {name!r}; known formats: {', '.join(WIRE_FORMATS)}")

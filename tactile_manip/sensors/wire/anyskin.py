@@ -19,10 +19,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from tactile_manip.chips import MLX90393, ChipSettings, full_scale_ut
 from tactile_manip.errors import ProtocolError
 from tactile_manip.sensors.wire.base import ChipFrame, WireDecoder
-from tactile_manip.sim.chip import full_scale_ut
-from tactile_manip.sim.params import ChipParams
 
 EOL = b"\r\n"
 CHIP_BYTES = 16                    # t, x, y, z as float32
@@ -52,10 +51,10 @@ class AnySkinDecoder(WireDecoder):
     seq_bits = None
     clock_bits = None
 
-    def __init__(self, *, n_chips: int = 5, chip: ChipParams | None = None) -> None:
+    def __init__(self, *, n_chips: int = 5, chip: ChipSettings | None = None) -> None:
         if n_chips < 1:
             raise ValueError(f"n_chips must be >= 1, got {n_chips}")
-        super().__init__(n_chips=n_chips, chip=chip or ChipParams())
+        super().__init__(n_chips=n_chips, chip=chip or MLX90393)
         self._len = frame_length(n_chips)
         self._buf = bytearray()
         self._synced = False

@@ -13,8 +13,8 @@ from typing import ClassVar, NamedTuple
 
 import numpy as np
 
+from tactile_manip.chips import ChipSettings
 from tactile_manip.sensors.protocol import DecoderStats as WireStats
-from tactile_manip.sim.params import ChipParams
 
 __all__ = ["ChipFrame", "WireDecoder", "WireStats"]
 
@@ -53,7 +53,7 @@ class WireDecoder(abc.ABC):
     seq_bits: ClassVar[int | None]    # width of the wire's frame counter, None when it has none
     clock_bits: ClassVar[int | None]  # width of the wire's device clock (us), None when it has none
 
-    def __init__(self, *, n_chips: int, chip: ChipParams) -> None:
+    def __init__(self, *, n_chips: int, chip: ChipSettings) -> None:
         self.n_chips = n_chips
         self.chip = chip
         self.stats = WireStats()

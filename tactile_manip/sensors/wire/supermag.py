@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from tactile_manip.chips import MLX90393, ChipSettings
 from tactile_manip.sensors.protocol import (
     N_CHIPS,
     TEMPERATURE_LSB_C,
@@ -18,7 +19,6 @@ from tactile_manip.sensors.protocol import (
     decode_frame,
 )
 from tactile_manip.sensors.wire.base import ChipFrame, WireDecoder
-from tactile_manip.sim.params import ChipParams
 
 
 class SuperMagDecoder(WireDecoder):
@@ -28,10 +28,10 @@ class SuperMagDecoder(WireDecoder):
     seq_bits = 16
     clock_bits = 32
 
-    def __init__(self, *, n_chips: int = N_CHIPS, chip: ChipParams | None = None) -> None:
+    def __init__(self, *, n_chips: int = N_CHIPS, chip: ChipSettings | None = None) -> None:
         if n_chips != N_CHIPS:
             raise ValueError(f"the supermag wire format carries {N_CHIPS} chips, the board layout has {n_chips}")
-        super().__init__(n_chips=n_chips, chip=chip or ChipParams())
+        super().__init__(n_chips=n_chips, chip=chip or MLX90393)
         self._frames = FrameDecoder()
         self.stats = self._frames.stats  # the codec's counters, shared
         self._scale = CountScale.from_chip(self.chip)
