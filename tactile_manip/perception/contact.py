@@ -316,7 +316,11 @@ class ContactEstimator:
         """The reading as float32 (R, C, A), its largest |value| (uT) and why it is implausible ("" when it is
         not); ValueError for a wrong shape or a NaN or infinite value. One reduction decides for a plausible
         reading: NaN and inf carry through the maximum, and a peak below every limit is plausible."""
-        arr = np.asarray(field_ut, dtype=np.float32)
+        if getattr(field_ut, "dtype", None) == np.float32:
+            arr = np.asarray(field_ut)
+        else:
+            with np.errstate(over="ignore"):  # a float64 beyond float32's range is judged below, not warned about
+                arr = np.asarray(field_ut, dtype=np.float32)
         if arr.shape != self.input_shape:
             raise ValueError(f"expected a reading of shape {self.input_shape} (rows, cols, axes) for "
                              f"{self.path.name}, got {arr.shape}")

@@ -329,3 +329,10 @@ def test_railed_chips_in_a_plausible_press_are_never_confident(pose, press, flag
     assert est.plausible and est.saturated_chips == int(saturated.any(axis=-1).sum())
     if saturated.any():
         assert est.confidence <= SATURATED_CONFIDENCE_CAP * (1.0 - est.saturated_chips / 16)
+
+
+@pytest.mark.filterwarnings("error::RuntimeWarning")
+def test_a_float64_reading_beyond_float32_is_judged_without_an_overflow_warning(contact, pose) -> None:
+    reading = np.full((4, 4, 3), 1e300)
+    assert_no_contact_answer(contact.estimate(reading))
+    assert_no_angle_answer(pose.estimate(reading))
