@@ -38,19 +38,8 @@ def cel(kc: np.ndarray, p: np.ndarray, c: np.ndarray, s: np.ndarray) -> np.ndarr
     cc = np.where(positive, c, (c - s) / g)
     ss = np.where(positive, s / pp, -q / (g * g * pp) + cc * pp)
     em = np.ones_like(k)
-    f = cc
-    cc = cc + ss / pp
-    g = k / pp
-    ss = 2.0 * (ss + f * g)
-    pp = g + pp
-    g = em
-    em = k + em
-    kk = k
     for _ in range(_CEL_MAX_ITERATIONS):
-        if np.all(np.abs(g - k) <= g * _CEL_TOLERANCE):
-            break
-        k = 2.0 * np.sqrt(kk)
-        kk = k * em
+        kk = k * em  # the first pass: k itself
         f = cc
         cc = cc + ss / pp
         g = kk / pp
@@ -58,6 +47,9 @@ def cel(kc: np.ndarray, p: np.ndarray, c: np.ndarray, s: np.ndarray) -> np.ndarr
         pp = g + pp
         g = em
         em = k + em
+        if np.all(np.abs(g - k) <= g * _CEL_TOLERANCE):
+            break
+        k = 2.0 * np.sqrt(kk)
     return (np.pi / 2.0) * (ss + cc * em) / (em * (em + pp))
 
 
