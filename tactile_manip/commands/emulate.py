@@ -26,8 +26,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--rate-hz", type=float, default=125.0, help="frame rate, Hz (default 125)")
     p.add_argument("--seed", type=int, default=0, help="seed of the chip noise and the faults")
     p.add_argument("--temperature", action="store_true", help="also send chip temperatures (flags bit 0)")
-    p.add_argument("--wire-format", choices=("supermag", "anyskin"), default="supermag",
-                   help="the bytes: our frames (default) or the ReSkin/AnySkin binary sketch's (5 chips, CRLF)")
+    p.add_argument("--wire-format", choices=("supermag", "anyskin"), default=None,
+                   help="the bytes: our frames (the default) or the ReSkin/AnySkin binary sketch's (float32 per chip, "
+                        "CRLF); default: the board's")
+    p.add_argument("--board", "--layout", dest="layout", default="", metavar="NAME|FILE",
+                   help="the board whose chips the frames carry (anyskin-5, eflesh, or a board file of that wire "
+                        "format), read at its chips' places from the simulated pad; default: the wire format's own")
     p.add_argument("--frames", type=int, default=None, help="stop after this many frames")
     p.add_argument("--duration-s", type=float, default=None, help="stop after this long, s")
     p.add_argument("--linger-s", type=float, default=0.5, help="keep the port open after the last frame, s")
@@ -57,9 +61,14 @@ def run(args: argparse.Namespace) -> int:
 
     if args.linger_s < 0:
         raise ValueError(f"--linger-s must be >= 0, got {args.linger_s}")
+    wire_format = args.wire_format
+    if wire_format is None:
+        from tactile_manip.boards import load_board
+
+        wire_format = load_board(args.layout).wire.format if args.layout else "supermag"
     config = EmulatorConfig(rate_hz=args.rate_hz, seed=args.seed, temperature=args.temperature, link=args.link,
                             frames=args.frames, duration_s=args.duration_s, clock=args.clock, period_s=args.period_s,
-                            wire_format=args.wire_format)
+                            wire_format=wire_format, board=args.layout)
     faults = FaultConfig(bit_flip_rate=args.bit_flip_rate, drop_byte_rate=args.drop_byte_rate,
                          truncate_rate=args.truncate_rate, stalls=tuple(args.stall),
                          disconnects=tuple(args.disconnect))

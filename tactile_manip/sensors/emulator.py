@@ -41,7 +41,7 @@ import numpy as np
 
 from tactile_manip.outputs import OutputPathError, check_writable_parent
 from tactile_manip.sensors.contacts import ContactTimeline, Press
-from tactile_manip.sensors.layout import ANYSKIN_5, BoardLayout
+from tactile_manip.sensors.layout import ANYSKIN_5, BoardLayout, get_layout
 from tactile_manip.sensors.protocol import encode_frame
 from tactile_manip.sensors.wire.anyskin import pack_frame
 from tactile_manip.sim.pair import SensorPair
@@ -90,10 +90,18 @@ class EmulatorConfig:
     clock: Literal["device", "host"] = "device"  # t_mcu_us: time on the schedule, or host monotonic at write
     period_s: float | None = None          # repeat the press script with this period, s
     wire_format: Literal["supermag", "anyskin"] = "supermag"  # the bytes: our frames or the AnySkin sketch's
+    board: str = ""  # the board whose chips the AnySkin frames carry (a name or a board file; "": anyskin-5)
 
     def __post_init__(self) -> None:
         if self.wire_format not in ("supermag", "anyskin"):
             raise ValueError(f"EmulatorConfig.wire_format must be 'supermag' or 'anyskin', got {self.wire_format!r}")
+        if self.board and self.wire_format == "supermag" and self.board != "supermag-4x4":
+            raise ValueError(f"EmulatorConfig.board {self.board!r}: the supermag wire format carries the 16 chips of "
+                             "supermag-4x4; give --wire-format anyskin for another board")
+        layout = frame_layout(self) if self.wire_format == "anyskin" else None
+        if layout is not None and np.isnan(layout.positions_mm()[layout.mask]).any():
+            raise ValueError(f"EmulatorConfig.board {self.board!r} has no chip positions to read the simulated pad "
+                             "at; describe the board in a board file (docs/your_board.md)")
         if not self.rate_hz > 0:
             raise ValueError(f"EmulatorConfig.rate_hz must be > 0, got {self.rate_hz}")
         if self.clock not in ("device", "host"):
@@ -123,6 +131,11 @@ class EmulatorReport:
     last_seq: int = -1
 
 
+def frame_layout(config: EmulatorConfig) -> BoardLayout:
+    """The layout whose chips an AnySkin-format frame of ``config`` carries (its board, else anyskin-5)."""
+    return get_layout(config.board) if config.board else ANYSKIN_5
+
+
 def anyskin_frame(field_4x4_ut: np.ndarray, layout: BoardLayout, rng: np.random.Generator) -> bytes:
     """An AnySkin sketch frame of ``layout``'s chips from a (4, 4, 3) pad field at 5 mm pitch (interpolated)."""
     pos = layout.positions_mm()                              # (rows, cols, 2), NaN where no chip
@@ -150,6 +163,7 @@ class FirmwareEmulator:
     def __init__(self, config: EmulatorConfig | None = None, *, presses: Sequence[Press] = (),
                  faults: FaultConfig | None = None, pair: SensorPair | None = None) -> None:
         self.config = config or EmulatorConfig()
+        self._layout = frame_layout(self.config)  # the chips an AnySkin frame carries
         self.faults = faults or FaultConfig()
         if self.faults.disconnects and not self.config.link:
             raise ValueError("disconnects need a link path (EmulatorConfig.link / --link PATH): a pty cannot "
@@ -235,7 +249,7 @@ class FirmwareEmulator:
         change = self._timeline.change_at(t_rel_s) if self._timeline is not None else 0.0
         measured = self.pair.chips.measure(self.pair.baseline_field_ut + change, noise_rng)
         if self.config.wire_format == "anyskin":
-            return anyskin_frame(measured.raw_ut, ANYSKIN_5, noise_rng)
+            return anyskin_frame(measured.raw_ut, self._layout, noise_rng)
         counts = measured.counts
         temps = None
         if self.config.temperature:

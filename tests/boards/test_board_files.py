@@ -225,3 +225,19 @@ def test_the_wire_formats_a_board_may_name_are_the_serial_backends():
     assert set(WIRE_FORMAT_NAMES) == set(WIRE_FORMATS)
     for name in board_names():
         assert load_board(name).wire.format in WIRE_FORMATS
+
+
+def test_the_emulator_streams_a_boards_chips_and_refuses_what_it_cannot(tmp_path, capsys):
+    from tactile_manip.sensors.emulator import EmulatorConfig, FirmwareEmulator
+    from tactile_manip.sensors.wire import make_decoder
+
+    emulator = FirmwareEmulator(EmulatorConfig(wire_format="anyskin", board="eflesh"))
+    decoder = make_decoder("anyskin", n_chips=5, chip=load_board("eflesh").chip)
+    frames = decoder.feed(emulator.frame_bytes(0, 0.0, np.random.default_rng(0)) * 3)
+    assert frames and frames[-1].field_ut.shape == (5, 3)
+    with pytest.raises(ValueError, match="has no chip positions"):
+        EmulatorConfig(wire_format="anyskin", board="generic:5")
+    with pytest.raises(ValueError, match="supermag wire format carries the 16 chips"):
+        EmulatorConfig(wire_format="supermag", board="eflesh")
+    assert main(["emulate", "--board", "generic:5", "--frames", "1"]) == 2
+    assert_one_line_error(capsys.readouterr().err, "emulate", "has no chip positions")
