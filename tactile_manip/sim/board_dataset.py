@@ -68,7 +68,6 @@ def probe_press_dataset(board: Board, presses: int, *, plan: ProbePlan = ProbePl
     rng = np.random.default_rng(seed)
     skin = BoardSkin(board)
     baseline = skin.baseline_ut()
-    turns = np.stack([c.matrix() for c in board.chips])            # chip axes -> pad axes
     cells = [c.cell for c in board.chips]
     readings = np.zeros((presses, *board.shape), np.float32)
     targets = {name: np.zeros(presses) for name in ("x_mm", "y_mm", "depth_mm", "force_n")}
@@ -87,7 +86,7 @@ def probe_press_dataset(board: Board, presses: int, *, plan: ProbePlan = ProbePl
                                   f"{plan.min_force_n:g}-{plan.max_force_n:g} N went through board {board.name}'s "
                                   f"{board.layer.thickness_mm:g} mm layer: lower the force or widen the tip")
         frame = readings_with_chip(result.reading_ut, board, rng, baseline_ut=baseline)
-        pad = np.einsum("nij,nj->ni", turns, frame.reading_ut)
+        pad = skin.to_pad_axes(frame.reading_ut)
         for (r, c), value in zip(cells, pad):
             readings[i, r, c] = value
         saturated[i] = frame.saturated.any()
