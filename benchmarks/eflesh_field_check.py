@@ -5,7 +5,9 @@
 
 For the shipped ``eflesh`` board file (four N52 discs in the TPU cube over the five-chip board) the closed-form
 field of the magnets at rest, in each chip's axes (firmware order centre, left, right, up, down), is set beside
-the median of the first 200 rows of each run's raw ``sensor.csv`` (the probe is off the cube there). The z
+each run's no-contact field: the baseline its publishers subtracted (``sensor.csv`` minus
+``sensor_post_baselines.csv``, its median over the run; it moves by 13-60 uT rms within a run). Raw rows are no
+measure of it: every row of the spatial run is a press, and the normal run's first rows hold a 3.4 kgf one. The z
 components follow from the magnets' place in the board file; x and y depend on placement tolerances of the
 magnets and chips and are listed only. Then one force-controlled press (a 6 mm sphere, 3 N, at the centre) is
 timed: the median of ``--presses`` presses after one warm-up (which fills the kernel caches).
@@ -29,15 +31,16 @@ from tactile_manip.sim.board_press import press
 from tactile_manip.sim.board_skin import BoardSkin
 
 CHIPS = ("centre", "left", "right", "up", "down")
-IDLE_ROWS = 200
 DEFAULT_DATA = Path(os.environ.get("TACTILE_MANIP_EFLESH_DIR", Path(__file__).resolve().parents[2] / "shared"
                                    / "data" / "eflesh_dev"))
 
 
 def idle_field_ut(run: Path) -> np.ndarray:
-    """(5, 3) median raw field of a run's first ``IDLE_ROWS`` rows, chip axes, uT."""
-    rows = np.loadtxt(run / "sensor.csv", delimiter=",", max_rows=IDLE_ROWS)
-    return np.median(rows[:, 1:16], axis=0).reshape(5, 3)
+    """(5, 3) a run's no-contact field, chip axes, uT: the median of the baseline its publishers subtracted
+    (raw ``sensor.csv`` minus ``sensor_post_baselines.csv``)."""
+    raw = np.loadtxt(run / "sensor.csv", delimiter=",")[:, 1:16]
+    subtracted = np.loadtxt(run / "sensor_post_baselines.csv", delimiter=",")[:, 1:16]
+    return np.median(raw - subtracted, axis=0).reshape(5, 3)
 
 
 def press_time_ms(skin: BoardSkin, presses: int) -> dict[str, float]:
@@ -84,7 +87,7 @@ def main(argv: list[str] | None = None) -> int:
     skin = BoardSkin(load_board("eflesh"))
     sim = skin.baseline_ut()
     report: dict[str, Any] = {
-        "board": "eflesh", "idle_rows": IDLE_ROWS,
+        "board": "eflesh", "real": "median of sensor.csv - sensor_post_baselines.csv",
         "sim_ut": {name: sim[i].round(1).tolist() for i, name in enumerate(CHIPS)},
         "real_ut": {run.name: {name: v.round(1).tolist() for name, v in zip(CHIPS, idle_field_ut(run))}
                     for run in runs},

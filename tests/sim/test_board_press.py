@@ -171,9 +171,11 @@ def test_chip_model_quantises_adds_noise_and_saturates():
 
 def test_eflesh_no_contact_field_matches_the_real_runs(eflesh, eflesh_dir):
     sim = eflesh.baseline_ut()
-    print("\nchip axes, uT: simulated (x, y, z) | real (x, y, z), median of the first 200 rows")
+    print("\nchip axes, uT: simulated (x, y, z) | real (x, y, z), the publishers' baseline (raw - subtracted)")
     for run in sorted(eflesh_dir.glob("*_2025*")):
-        real = np.median(np.loadtxt(run / "sensor.csv", delimiter=",", max_rows=200)[:, 1:], axis=0).reshape(5, 3)
+        raw = np.loadtxt(run / "sensor.csv", delimiter=",")[:, 1:]
+        real = np.median(raw - np.loadtxt(run / "sensor_post_baselines.csv", delimiter=",")[:, 1:], axis=0)
+        real = real.reshape(5, 3)
         print(run.name)
         for i, name in enumerate(("centre", "left", "right", "up", "down")):
             print(f"  {name:6s} " + " ".join(f"{v:7.0f}" for v in sim[i]) + " | "
