@@ -171,6 +171,13 @@ def _run_contact(args: argparse.Namespace) -> int:
         for bar in bars:
             bar.close()
     rmse = ", ".join(f"{k} {v:.3g}" for k, v in summary["val_rmse"].items())
+    pseudo = summary.get("pseudo_labels")
+    if pseudo:
+        loo = ", ".join(f"{k} {v:.3g} ({m})" for k, v, m in zip(summary["targets"], pseudo["loo_rmse"],
+                                                               pseudo["methods"]))
+        print(f"{pseudo['unlabelled']} unlabelled presses labelled from {pseudo['labelled']} on the map of the "
+              f"readings; leave-one-out RMSE on the labelled: {loo}")
+        rmse += " against those labels"
     print(f"validation RMSE {rmse} ({summary['val_samples']} samples; {summary['train_seconds'] / 60:.1f} min); "
           f"wrote {args.out}/best.pt, history.json")
     return 0

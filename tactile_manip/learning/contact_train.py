@@ -38,6 +38,7 @@ import torch
 
 from tactile_manip.config import check_ranges, to_dict
 from tactile_manip.data import PairedDataset, load_datasets
+from tactile_manip.data.dataset import UNLABELLED
 from tactile_manip.errors import ConfigError, DatasetError
 from tactile_manip.learning.contact_model import (ContactModel, ContactModelConfig, GaussianMLP, count_parameters,
                                                   frame_features)
@@ -76,6 +77,9 @@ class ContactTrainConfig:
     sigma_map: bool = True        # then map it so that holds wherever the sigma lies (needs 80+ val samples)
     redraw_noise: bool = False    # each epoch reads the training presses through new chip drift and noise
                                   # (simulated datasets, one frame of context: tactile_manip.learning.noise)
+    unlabelled: Literal["ignore", "manifold"] = "ignore"  # the dataset's unlabelled training presses: left out,
+                                  # or labelled from the labelled ones on the map of the readings (.fewlabel)
+    manifold_neighbours: int = 20  # neighbours per reading in that map
     seed: int = 0
     threads: int = 0              # torch CPU threads (0: torch's default)
 
@@ -85,8 +89,8 @@ class ContactTrainConfig:
             raise ValueError(f"nll_beta must be in [0, 1], got {self.nll_beta}")
         if not 0 < self.val_fraction < 1:
             raise ValueError(f"val_fraction must be in (0, 1), got {self.val_fraction}")
-        check_ranges(self, {"context_max_gap_s": (0.0, 3600.0), "threads": THREADS_RANGE},
-                     units={"context_max_gap_s": "s"})
+        check_ranges(self, {"context_max_gap_s": (0.0, 3600.0), "threads": THREADS_RANGE,
+                            "manifold_neighbours": (3, 200)}, units={"context_max_gap_s": "s"})
         if self.redraw_noise and self.context_frames != 1:
             raise ValueError(f"redraw_noise draws the noise of one frame; it needs context_frames = 1, got "
                              f"{self.context_frames}")
@@ -113,9 +117,13 @@ def dataset_windows(data: PairedDataset, cfg: ContactTrainConfig | dict) -> np.n
     return context_windows(data.readings, frames=frames, max_gap_s=gap, time_s=time_s, groups=data.groups)
 
 
-def split_indices(data: PairedDataset, val_fraction: float) -> tuple[np.ndarray, np.ndarray]:
-    """Training and validation sample indices: the val split, or each run's last training samples in time."""
+def split_indices(data: PairedDataset, val_fraction: float, *, unlabelled: bool = False
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """Training and validation sample indices: the val split, or each run's last training samples in time
+    (``unlabelled``: the unlabelled training presses count as training samples)."""
     train, val = data.indices("train"), data.indices("val")
+    if unlabelled:
+        train = np.sort(np.concatenate([train, data.indices(UNLABELLED)]))
     if len(val):
         return train, val
     groups = np.zeros(len(data), np.int64) if data.groups is None else data.groups
@@ -155,11 +163,13 @@ def train_contact(cfg: ContactTrainConfig, data_paths: list[str | Path], out: st
     names = chosen_targets(data, cfg)
     check_training_rows(data, data_name(data_paths))
     check_finite_readings(data, np.arange(len(data)), data_name(data_paths))  # any row may be a context frame
-    train_idx, val_idx = split_indices(data, cfg.val_fraction)
+    labels = np.stack([data.target(n) for n in names], axis=1)
+    pseudo = _pseudo_labels(data, labels, cfg) if cfg.unlabelled == "manifold" else None
+    train_idx, val_idx = split_indices(data, cfg.val_fraction, unlabelled=pseudo is not None)
     if len(train_idx) < 2:
         raise DatasetError(f"{len(train_idx)} training sample(s): too few to train on")
     windows = torch.from_numpy(dataset_windows(data, cfg))
-    targets = torch.from_numpy(np.stack([data.target(n) for n in names], axis=1).astype(np.float32))
+    targets = torch.from_numpy(labels.astype(np.float32))
     mcfg = cfg.model_config(tuple(data.readings.shape[1:]), len(names))
     torch.manual_seed(cfg.seed)
     model = ContactModel(mcfg)
@@ -186,11 +196,14 @@ def train_contact(cfg: ContactTrainConfig, data_paths: list[str | Path], out: st
         curves.append(curve)
     model.eval()
     sigma_maps: dict[str, dict[str, Any]] = {}
+    val_rmse = _rmse_per_target(model, windows[val_idx], targets[val_idx], names)
     if cfg.calibrate_sigma:
         fit_sigma_scale(model, windows[val_idx], targets[val_idx])
-        if cfg.sigma_map and len(val_idx) >= 2 * SIGMA_MAP_RUN:
+        if pseudo is not None:  # validated against labels of the map: widened by those labels' own error
+            wider = widening(val_rmse, pseudo["loo_rmse"], names)
+            model.sigma_scale.mul_(torch.tensor(wider, dtype=torch.float32))
+        elif cfg.sigma_map and len(val_idx) >= 2 * SIGMA_MAP_RUN:
             sigma_maps = fit_sigma_maps(model, windows[val_idx], targets[val_idx], names)
-    val_rmse = _rmse_per_target(model, windows[val_idx], targets[val_idx], names)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     summary = {"kind": KIND, "train_config": to_dict(cfg), "model_config": to_dict(mcfg), "targets": names,
@@ -198,16 +211,38 @@ def train_contact(cfg: ContactTrainConfig, data_paths: list[str | Path], out: st
                "parameters": count_parameters(model), "train_samples": int(len(train_idx)),
                "val_samples": int(len(val_idx)), "val_rmse": val_rmse,
                "best_epochs": [c["best_epoch"] for c in curves], "train_seconds": round(time.perf_counter() - start, 1),
-               "data_fingerprint": data.fingerprint(), "members": curves}
+               "data_fingerprint": data.fingerprint(), "members": curves, "pseudo_labels": pseudo}
     payload = {"kind": KIND, "model": model.state_dict(), "model_config": to_dict(mcfg), "train_config": to_dict(cfg),
                "input": _input_record(data, cfg), "targets": names, "sigma_calibration": sigma_maps,
                "data": {"fingerprint": data.fingerprint(), "samples": len(data), "provenance_source":
-                        data.provenance.get("source"), "val_rmse": val_rmse}}
+                        data.provenance.get("source"), "val_rmse": val_rmse, "pseudo_labels": pseudo}}
     tmp = out / "best.pt.partial"
     torch.save(payload, tmp)
     tmp.replace(out / "best.pt")
     (out / "history.json").write_text(json.dumps(summary, indent=1))
     return summary
+
+
+def _pseudo_labels(data: PairedDataset, labels: np.ndarray, cfg: ContactTrainConfig) -> dict[str, Any] | None:
+    """Fill ``labels`` (N, K) in place on the unlabelled training presses from the labelled ones
+    (:func:`~tactile_manip.learning.fewlabel.pseudo_labels`); what was done, or None where nothing is unlabelled."""
+    from tactile_manip.learning.fewlabel import pseudo_labels
+
+    hidden = data.indices(UNLABELLED)
+    if not len(hidden):
+        return None
+    rows = np.sort(np.concatenate([data.indices("train"), hidden]))
+    labelled = np.isin(rows, data.indices("train"))
+    found = pseudo_labels(data.readings[rows], labels[rows], labelled, neighbours=cfg.manifold_neighbours)
+    labels[rows] = found.values
+    return {"labelled": int(labelled.sum()), "unlabelled": int(len(hidden)),
+            "loo_rmse": [float(v) for v in found.loo_rmse], "methods": list(found.methods)}
+
+
+def widening(val_rmse: dict[str, float], loo_rmse: list[float], names: list[str]) -> list[float]:
+    """Per target, the factor that takes an error against map labels to one against the truth, the two errors
+    taken as independent: sqrt(1 + (label error / network error)^2)."""
+    return [math.sqrt(1.0 + (loo / max(val_rmse[n], 1e-12)) ** 2) for n, loo in zip(names, loo_rmse)]
 
 
 def _input_record(data: PairedDataset, cfg: ContactTrainConfig) -> dict[str, Any]:

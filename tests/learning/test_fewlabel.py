@@ -1,0 +1,140 @@
+"""Labels for unlabelled presses from a handful of labelled ones, on the map of the readings."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+
+from tactile_manip.errors import DatasetError
+from tactile_manip.learning.fewlabel import MIN_LABELLED, isomap, pseudo_labels
+
+
+def _knn_rmse(x, y, lab, k=5):
+    """RMSE on the unlabelled rows of a k-nearest-neighbour mean over the labelled rows (the few-label baseline)."""
+    xl, yl = x[lab], y[lab]
+    d = ((x[~lab][:, None] - xl[None]) ** 2).sum(-1)
+    near = np.argsort(d, axis=1)[:, :k]
+    return float(np.sqrt(np.mean(np.sum((yl[near].mean(1) - y[~lab]) ** 2, axis=-1))))
+
+
+def _labelled_mask(n, k, seed=0):
+    lab = np.zeros(n, bool)
+    lab[np.random.default_rng(seed).choice(n, k, replace=False)] = True
+    return lab
+
+
+def test_25_labels_place_the_other_presses_far_better_than_a_knn_on_them(labelled_presses) -> None:
+    data = labelled_presses(900)
+    x = data.readings.reshape(len(data), -1)
+    xy = data.targets[:, :2].astype(np.float64)
+    lab = _labelled_mask(len(data), 25)
+    found = pseudo_labels(data.readings, xy, lab)
+    err = np.sqrt(np.mean(np.sum((found.values[~lab] - xy[~lab]) ** 2, axis=1)))
+    knn = _knn_rmse((x - x.mean(0)) / np.maximum(x.std(0), 1e-9), xy, lab)   # on standardised readings
+    assert err < 0.5 * knn, (err, knn, found.methods)
+    assert all("map" in m for m in found.methods)          # position comes from the map, not the field norm
+    np.testing.assert_array_equal(found.values[lab], xy[lab])  # labels are kept
+    assert found.loo_rmse.shape == (2,) and np.all(found.loo_rmse > 0)
+
+
+def test_a_force_at_one_place_is_fitted_on_the_field_norm() -> None:
+    rng = np.random.default_rng(1)
+    force = rng.uniform(0, 30, 800)
+    direction = rng.normal(size=15)
+    readings = (np.sqrt(force)[:, None] * 100 * direction / np.linalg.norm(direction)
+                + rng.normal(0, 0.5, (800, 15)))
+    lab = _labelled_mask(800, 25, seed=2)
+    found = pseudo_labels(readings, force[:, None], lab)
+    assert found.methods[0].startswith("field norm")
+    assert np.sqrt(np.mean((found.values[~lab, 0] - force[~lab]) ** 2)) < 1.0
+
+
+def test_the_map_of_a_flat_sheet_is_that_sheet_up_to_a_turn() -> None:
+    rng = np.random.default_rng(3)
+    uv = rng.uniform(0, 10, (600, 2))
+    sheet = np.stack([uv[:, 0], uv[:, 1], np.zeros(600)], 1) @ np.linalg.qr(rng.normal(size=(3, 3)))[0]
+    coords = isomap(sheet, 12)[:, :2]
+    a = np.hstack([coords, np.ones((600, 1))])
+    fit = np.linalg.lstsq(a, uv, rcond=None)[0]
+    assert np.sqrt(np.mean((a @ fit - uv) ** 2)) < 0.3   # an affine map recovers the sheet's coordinates
+
+
+def test_too_few_labels_and_non_finite_input_are_refused() -> None:
+    rng = np.random.default_rng(0)
+    x, y = rng.normal(size=(100, 6)), rng.normal(size=(100, 1))
+    with pytest.raises(DatasetError, match=f"at least {MIN_LABELLED}"):
+        pseudo_labels(x, y, _labelled_mask(100, MIN_LABELLED - 1))
+    lab = _labelled_mask(100, 10)
+    bad = y.copy()
+    bad[np.flatnonzero(lab)[0]] = np.nan
+    with pytest.raises(DatasetError, match="labelled press has a NaN"):
+        pseudo_labels(x, bad, lab)
+    bad = x.copy()
+    bad[3, 2] = np.inf
+    with pytest.raises(DatasetError, match="reading is NaN or infinite"):
+        pseudo_labels(bad, y, lab)
+    with pytest.raises(DatasetError, match="more than 20"):
+        pseudo_labels(x[:15], y[:15], lab[:15] | (np.arange(15) < 6))
+
+
+def _hide_labels(data, keep: int):
+    """``data`` with all but ``keep`` of its training rows turned into unlabelled rows (NaN targets)."""
+    from tactile_manip.data.dataset import UNLABELLED
+
+    train = np.flatnonzero(data.split == "train")
+    hide = np.setdiff1d(train, np.random.default_rng(0).choice(train, keep, replace=False))
+    split = data.split.astype("U10")
+    split[hide] = UNLABELLED
+    targets = data.targets.copy()
+    targets[hide] = np.nan
+    return dataclasses.replace(data, split=split, targets=targets)
+
+
+@pytest.fixture(scope="module")
+def few_label_runs(tmp_path_factory, labelled_presses):
+    """(dataset, summary with unlabelled = "manifold", summary with "ignore") of a tiny network on 30 labels."""
+    pytest.importorskip("torch", reason="training needs torch")
+    from tactile_manip.data import save_dataset
+    from tactile_manip.learning.contact_train import ContactTrainConfig, train_contact
+
+    root = tmp_path_factory.mktemp("fewlabel")
+    save_dataset(root / "few.npz", _hide_labels(labelled_presses(700), 30))
+    base = ContactTrainConfig(targets=["x_mm", "y_mm"], hidden=32, members=1, epochs=30, patience=30, batch_size=64,
+                              lr=5e-3, threads=1)
+    manifold = train_contact(dataclasses.replace(base, unlabelled="manifold"), [root / "few.npz"], root / "m")
+    ignore = train_contact(base, [root / "few.npz"], root / "i")
+    return root, manifold, ignore
+
+
+def test_manifold_training_learns_from_every_training_row_and_records_the_labelling(few_label_runs) -> None:
+    root, manifold, ignore = few_label_runs
+    pseudo = manifold["pseudo_labels"]
+    assert pseudo["labelled"] == 30 and pseudo["unlabelled"] == 560 - 30
+    assert manifold["train_samples"] + manifold["val_samples"] == 560
+    assert ignore["pseudo_labels"] is None
+    assert ignore["train_samples"] + ignore["val_samples"] == 30   # "ignore" leaves the unlabelled rows out
+    assert json.loads((root / "m" / "history.json").read_text())["pseudo_labels"] == pseudo
+    assert manifold["sigma_calibration"] == {}   # no sigma map is fitted to labels of the map
+
+
+def test_sigma_is_widened_by_the_labels_own_leave_one_out_error(few_label_runs) -> None:
+    from tactile_manip.learning.contact_train import widening
+
+    _, manifold, _ = few_label_runs
+    loo = manifold["pseudo_labels"]["loo_rmse"]
+    factors = widening(manifold["val_rmse"], loo, manifold["targets"])
+    assert all(f > 1 for f in factors)
+    assert widening({"a": 3.0}, [4.0], ["a"]) == pytest.approx([5.0 / 3.0])
+
+
+def test_the_few_label_recipe_is_the_contact_recipe_with_the_unlabelled_presses_mapped() -> None:
+    from tactile_manip.config import load_config
+    from tactile_manip.learning.contact_train import ContactTrainConfig
+
+    few = load_config("configs/train/contact_fewlabel.toml", ContactTrainConfig)
+    full = load_config("configs/train/contact.toml", ContactTrainConfig)
+    assert few.unlabelled == "manifold" and full.unlabelled == "ignore"
+    assert dataclasses.replace(few, unlabelled="ignore", threads=full.threads) == full
