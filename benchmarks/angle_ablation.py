@@ -1,7 +1,8 @@
 """What each route to a bar's angle buys, per force band and per bar, on single frames of unseen bars.
 
     python -m benchmarks.angle_ablation --data data/rods_test.npz \\
-        --model fast=models/supermag_fast.onnx --model robust=models/supermag_robust.onnx \\
+        --model fast=experiments/model_variants/supermag_fast.onnx \\
+        --model robust=experiments/model_variants/supermag_robust.onnx \\
         --model default=models/supermag.onnx --bound benchmarks/results/angle_information_rods_test.json
 
 For every ``--model`` the presses of elongated objects in the dataset's test split (rods and flat bars; single
@@ -9,8 +10,8 @@ frames, as recorded) go through :class:`~tactile_manip.perception.TactilePoseEst
 (the principal axis of the reconstruction), and, for a model file with an angle head, the estimator's default
 (the head's angle, its confidence calibrated), the head's raw output, and "likelier", whichever of image and
 head is the more likely within 5 deg (the image's probability from the calibration of the same image graphs,
-``models/supermag_robust.calibration.json``). Beside them: the principal axis of the true (simulated) depth image, what the image route would
-get from a perfect reconstruction, and with ``--bound`` (the JSON of ``benchmarks.angle_information`` on the
+``experiments/model_variants/supermag_robust.calibration.json``). Beside them: the principal axis of the true
+(simulated) depth image, what the image route would get from a perfect reconstruction, and with ``--bound`` (the JSON of ``benchmarks.angle_information`` on the
 same dataset) the share an efficient estimator would reach per band (Cramer-Rao, pose and sensor unknown).
 Reported: share within 5 and 2 deg, median error, within 5 deg per force band and per object; and the head's
 reliability (the probability its concentration gives against the share observed). Prints markdown, writes

@@ -35,7 +35,7 @@ from benchmarks.bench_pose import rod_readings  # noqa: E402
 from tactile_manip.perception.onnx_session import session_options  # noqa: E402
 from tactile_manip.perception.reconstruct import OnnxReconstructor, read_metadata  # noqa: E402
 
-SHIPPED = "models/supermag_fast.onnx"
+SHIPPED = "experiments/model_variants/supermag_fast.onnx"
 
 
 def node_profile(path: str | Path, readings: np.ndarray, folder: Path) -> dict[str, Any]:

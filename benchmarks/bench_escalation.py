@@ -92,7 +92,7 @@ def markdown(r: dict[str, Any]) -> str:
 
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--model", type=Path, default=ROOT / "models" / "supermag_fast.onnx")
+    p.add_argument("--model", type=Path, default=ROOT / "experiments" / "model_variants" / "supermag_fast.onnx")
     p.add_argument("--data", type=Path, default=ROOT / "data" / "robust.npz")
     p.add_argument("--levels", default="0,0.5,0.8,0.9,0.95,1", help="confidence levels, comma-separated")
     p.add_argument("--samples", type=int, default=8, help="prior samples of the 'samples' escalation")

@@ -25,8 +25,8 @@ import numpy as np
 from benchmarks._common import machine_info, publish
 from tactile_manip.perception.reconstruct import OnnxReconstructor, read_metadata
 
-SHIPPED = Path("models/supermag_fast.onnx")
-PREVIOUS = Path("models/supermag_compact.onnx")  # shipped before it: the accuracy reference
+SHIPPED = Path("experiments/model_variants/supermag_fast.onnx")
+PREVIOUS = Path("experiments/model_variants/supermag_compact.onnx")  # shipped before it: the accuracy reference
 PAPER_RUN = Path("runs/paper/best.pt")
 PERIOD_MS = 8.0  # the sensor's 125 Hz frame period
 

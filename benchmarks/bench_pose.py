@@ -148,10 +148,10 @@ def main() -> None:
     parser.add_argument("--slow-calls", type=int, default=40, help="calls at most for the untrained models")
     parser.add_argument("--out", default="benchmarks/results/pose.json")
     args = parser.parse_args()
-    shipped = load_reconstructor("models/supermag_fast.onnx", threads=1)
+    shipped = load_reconstructor("experiments/model_variants/supermag_fast.onnx", threads=1)
     methods = {"supermag_fast": shipped, "supermag_fast_sym": SymmetrizedReconstructor(shipped),
                # the model shipped before it: slower, the accuracy reference the fast one had to match
-               "supermag_compact": load_reconstructor("models/supermag_compact.onnx", threads=1),
+               "supermag_compact": load_reconstructor("experiments/model_variants/supermag_compact.onnx", threads=1),
                "bilinear_16px": load_reconstructor("bilinear", output_px=16),
                "bilinear_200px": load_reconstructor("bilinear")}
     for spec in args.method:

@@ -160,7 +160,7 @@ def markdown(report: dict[str, Any]) -> str:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--model", default="models/supermag_fast.onnx")
+    parser.add_argument("--model", default="experiments/model_variants/supermag_fast.onnx")
     parser.add_argument("--readings", type=int, default=300)
     parser.add_argument("--rounds", type=int, default=2)
     parser.add_argument("--out", default="benchmarks/results/session_options.json")

@@ -105,7 +105,7 @@ def markdown(report: dict[str, Any]) -> str:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--model", default="models/supermag_fast.onnx")
+    parser.add_argument("--model", default="experiments/model_variants/supermag_fast.onnx")
     parser.add_argument("--data", default="data/supermag.npz")
     parser.add_argument("--split", default="test")
     parser.add_argument("--out", default="benchmarks/results/pose_parity.json")

@@ -134,7 +134,8 @@ def markdown(report: dict[str, Any]) -> str:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--model", default="models/supermag_robust.onnx", help="the image route to compare with")
+    parser.add_argument("--model", default="experiments/model_variants/supermag_robust.onnx",
+                        help="the image route to compare with")
     parser.add_argument("--epochs", type=int, default=300)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--out", default="benchmarks/results/direct_angle.json")

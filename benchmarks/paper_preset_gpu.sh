@@ -21,6 +21,6 @@ cp runs/paper_gpu/history.json runs/paper_gpu/loss.png "$out"/
 tm export --checkpoint runs/paper_gpu/best.pt --out runs/paper_gpu/model.onnx --data data/supermag.npz
 tm evaluate --data data/supermag.npz --threads 4 --out "$out/eval" \
     --model "SuperMag paper preset ($epochs ep, GPU)=runs/paper_gpu/model.onnx" \
-    --model "SuperMag compact, shipped (32 ep)=models/supermag_compact.onnx"
+    --model "SuperMag compact, shipped (32 ep)=experiments/model_variants/supermag_compact.onnx"
 python3 -m benchmarks.bench_gpu --out "$out/gpu.json"
 echo done

@@ -40,10 +40,11 @@ ABLATIONS = {"data/robust.npz": "docs/results/angle_head/ablation_robust.json", 
 SINGLE_FRAMES = ("docs/results/robust/fast_vs_compact/single_frame.json",  # evaluate on data/robust.npz
                  "docs/results/robust/robust_b48/single_frame.json")
 INFORMATION = "docs/results/robust/information/angle_information.json"  # python -m benchmarks.angle_information
+FEWLABEL = "docs/results/contact/fewlabel_k.json"  # python -m benchmarks.fewlabel_k
 CALIBRATIONS = {"supermag": "models/supermag.calibration.reliability.json",
-                "supermag_fast": "models/supermag_fast.calibration.reliability.json",
-                "supermag_robust": "models/supermag_robust.calibration.reliability.json",
-                "supermag_compact": "models/supermag_compact.calibration.reliability.json"}
+                "supermag_fast": "experiments/model_variants/supermag_fast.calibration.reliability.json",
+                "supermag_robust": "experiments/model_variants/supermag_robust.calibration.reliability.json",
+                "supermag_compact": "experiments/model_variants/supermag_compact.calibration.reliability.json"}
 
 # the evaluation's method names -> the model file behind them (None: an interpolation baseline)
 EVAL_MODELS = {
@@ -78,6 +79,7 @@ METHODS = {  # trial method names -> what they do
     "supermag": "one pass per reading",
     "supermag_sym": "symmetry-averaged (8 passes)",
     "supermag_esc": "one pass; symmetry-averaged again below calibrated confidence 0.5",
+    "paper_route": "the paper's route: the image's principal axis, no angle head",
     "bilinear": "bilinear 4x4 -> 16x16 (the paper's baseline)",
     "fast": "one pass per reading",
     "compact": "one pass per reading",
@@ -96,7 +98,7 @@ class TrialRun:
 
 MAIN_JOB = TrialRun("main job: `configs/scenes/reorient_sim.toml`, 100 presentations of 6 unseen rods, 10-11 N",
                     "docs/results/supermag/reorient_sim/summary.json",
-                    {"supermag": "supermag", "supermag_sym": "supermag", "bilinear": None})
+                    {"supermag": "supermag", "supermag_sym": "supermag", "paper_route": "supermag", "bilinear": None})
 MAIN_JOB_FAST = TrialRun(MAIN_JOB.scene, "docs/results/trials_fast/reorient_sim/summary.json",
                          {"supermag": "supermag_fast", "supermag_sym": "supermag_fast", "bilinear": None})
 ROBUST_SCENE = TrialRun("robust scene: `configs/scenes/reorient_robust.toml`, 300 presentations, 2-15 N, a drawn "
@@ -268,6 +270,8 @@ def headline(root: Path, doc: str) -> list[str]:
          f"(bound {_pct(bound['all'])})", _pct(head["within_5"]), _pct(bl_single["within_5_deg"]), ablation],
         [f"main job: {main['supermag'].n} reorientations within 5 deg (6 unseen rods, 10-11 N)",
          trials(main["supermag"]), trials(main["bilinear"]), runs],
+        ["main job, the paper's own route on the default model (image, outliers removed, Gaussian filter, PCA)",
+         trials(main["paper_route"]), trials(main["bilinear"]), runs],
         [f"robust scene: {robust['supermag'].n} reorientations within 5 deg (2-15 N, a drawn sensor per trial)",
          trials(robust["supermag"]), trials(robust["bilinear"]), _link("trials", _readable(ROBUST_SCENE.summary,
                                                                                              root), doc)],
@@ -409,10 +413,27 @@ def robust(root: Path, doc: str) -> list[str]:
     return lines
 
 
+def fewlabel(root: Path, doc: str) -> list[str]:
+    """Contact error against the number of labelled presses, the few-label recipe beside kNN and MLP."""
+    report = _json(root, FEWLABEL)
+    lines = [f"Test RMSE on the eFlesh development runs, chronological 80/20, mean over seeds "
+             f"{', '.join(str(s) for s in report['seeds'])} (K = all: one run). From "
+             f"{_link(Path(FEWLABEL).name, FEWLABEL, doc)}; the plot beside it is "
+             f"{_link(Path(FEWLABEL).with_suffix('.png').name, str(Path(FEWLABEL).with_suffix('.png')), doc)}.", ""]
+    for run, rows in report["runs"].items():
+        unit = "2-D position, mm" if run.startswith("spatial") else "normal force, N"
+        table = [[k, *(f"{row['mean'][m]:.3f}" for m in ("ours", "kNN", "MLP")),
+                  f"{row['mean']['ours'] / row['mean']['kNN']:.2f}"] for k, row in rows.items()]
+        lines += [f"## `{run}`: {unit}", "", *_table(["labelled presses K", "few-label recipe", "kNN (k = 5)",
+                                                        "plain MLP", "recipe / kNN"], table), ""]
+    return lines[:-1]
+
+
 TABLES = {"headline.md": ("Headline results", headline), "models.md": ("Models", models),
           "trials.md": ("Reorientation trials", trials_table), "latency.md": ("Speed against error", latency),
           "robust.md": ("Beyond the paper's protocol", robust),
-          "angle.md": ("The default model's angle on single frames", angle)}
+          "angle.md": ("The default model's angle on single frames", angle),
+          "fewlabel.md": ("Contact from a handful of labelled presses", fewlabel)}
 
 
 def render(root: Path = ROOT) -> dict[str, str]:

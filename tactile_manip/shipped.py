@@ -1,16 +1,20 @@
-"""The models shipped in the source checkout's ``models/`` folder, found from the package, not the working folder.
+"""The models kept in the source checkout, found from the package, not the working folder.
 
     from tactile_manip.shipped import shipped_model
     model = load_reconstructor(shipped_model())            # models/supermag.onnx, the default
-    fast = load_reconstructor(shipped_model("fast"))       # a reference model of the bench
+    fast = load_reconstructor(shipped_model("fast"))       # experiments/model_variants/supermag_fast.onnx
 
 The default, ``supermag`` (``models/supermag.onnx``), is the one model every shipped scene, task, example and
 doc uses: the image graphs of the decoder trained on the paper's protocol and on 2-15 N presses of drawn
 sensors, with an angle head inside (the contact's axis read straight from the reading, from which
-:class:`~tactile_manip.perception.estimator.TactilePoseEstimator` takes the angle by default). The others are kept only as
-references for ``tactile-manip bench`` and the published results: ``fast`` (the same decoder trained on the
-paper's protocol only), ``robust`` (the default's image graphs without the angle head) and ``compact`` (the
-larger decoder shipped before them, the accuracy reference).
+:class:`~tactile_manip.perception.estimator.TactilePoseEstimator` takes the angle by default). ``models/``
+holds it and the contact model only.
+
+The others are research records in ``experiments/model_variants/``, kept only as references for
+``tactile-manip bench`` and the published results: ``fast`` (the same decoder trained on the paper's protocol
+only), ``robust`` (the default's image graphs without the angle head) and ``compact`` (the larger decoder
+shipped before them, the accuracy reference). Each sits there with its card, training config, calibration and
+training history.
 
 The models live beside the package in a source checkout (``pip install -e .``); a wheel does not carry them.
 """
@@ -19,7 +23,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-# name -> file in models/
+# name -> file name: the default in models/, the references in experiments/model_variants/
 SHIPPED_MODELS: dict[str, str] = {
     "supermag": "supermag.onnx",  # the default: every scene, task, example and doc
     "fast": "supermag_fast.onnx",  # bench reference: the decoder trained on the paper's protocol only
@@ -30,23 +34,41 @@ DEFAULT_MODEL = "supermag"
 REFERENCE_MODELS: tuple[str, ...] = ("fast", "robust", "compact")  # kept for the bench, not for tasks
 
 
+def _checkout() -> Path:
+    """The source checkout's root (the folder above the package's own)."""
+    return Path(__file__).resolve().parent.parent
+
+
 def models_dir() -> Path:
-    """The checkout's ``models/`` folder (the folder above the package's own)."""
-    return Path(__file__).resolve().parent.parent / "models"
+    """The checkout's ``models/`` folder: the default model (and the contact model)."""
+    return _checkout() / "models"
+
+
+def variants_dir() -> Path:
+    """The checkout's ``experiments/model_variants/`` folder: the reference models kept for the bench."""
+    return _checkout() / "experiments" / "model_variants"
+
+
+def model_folder(name: str) -> Path:
+    """The folder that holds the shipped model ``name``: ``models/`` for the default, else
+    ``experiments/model_variants/``."""
+    return models_dir() if name == DEFAULT_MODEL else variants_dir()
 
 
 def shipped_model(name: str = DEFAULT_MODEL) -> Path:
-    """Absolute path of a shipped model file: ``"supermag"`` (the default), or a bench reference (``"fast"``,
-    ``"robust"``, ``"compact"``).
+    """Absolute path of a shipped model file: ``"supermag"`` (the default, in ``models/``), or a bench reference
+    (``"fast"``, ``"robust"``, ``"compact"``, in ``experiments/model_variants/``).
 
     Raises:
         ValueError: ``name`` is not a shipped model.
-        FileNotFoundError: the package runs outside a source checkout, so no ``models/`` folder is beside it.
+        FileNotFoundError: the package runs outside a source checkout, so the model's folder is not beside it.
     """
     if name not in SHIPPED_MODELS:
         raise ValueError(f"unknown shipped model {name!r}: expected one of {', '.join(SHIPPED_MODELS)}")
-    path = models_dir() / SHIPPED_MODELS[name]
+    path = model_folder(name) / SHIPPED_MODELS[name]
     if not path.is_file():
-        raise FileNotFoundError(f"shipped model not found: {path} (the models are in the source checkout's "
-                                "models/ folder: clone the repository and `pip install -e .` from it)")
+        where = ("the default model is in the source checkout's models/ folder" if name == DEFAULT_MODEL else
+                 "the reference models are in the source checkout's experiments/model_variants/ folder")
+        raise FileNotFoundError(f"shipped model not found: {path} ({where}: clone the repository and "
+                                "`pip install -e .` from it)")
     return path

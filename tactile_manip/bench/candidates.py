@@ -50,8 +50,10 @@ class ModelEntry:
 
 DECODER_CANDIDATES = "configs/train/decoder_*.toml"  # faster decoders, timed untrained until trained
 SHIPPED_MODEL = "models/supermag.onnx"  # the default model: the robust image graphs with an angle head inside
-FAST_MODEL = "models/supermag_fast.onnx"  # a reference model, kept for the bench
-FAST_RECIPE = "models/supermag_fast.train.toml"  # the training config copied beside it
+FAST_MODEL = "experiments/model_variants/supermag_fast.onnx"  # a reference model, kept for the bench
+FAST_RECIPE = "experiments/model_variants/supermag_fast.train.toml"  # the training config copied beside it
+COMPACT_MODEL = "experiments/model_variants/supermag_compact.onnx"  # the accuracy reference, kept for the bench
+ROBUST_MODEL = "experiments/model_variants/supermag_robust.onnx"  # the default's image graphs, without its head
 FAST_CONFIGS = "configs/train/fast*.toml"  # the fast decoder on the full recipe: measured when trained, else skipped
 
 
@@ -82,8 +84,8 @@ def default_models(root: str | Path = ".") -> list[ModelEntry]:
                        runtimes=("ort-1",)) for c in sorted(r.glob(FAST_CONFIGS)) if _recipe(c) != recipe]
     return [ModelEntry("supermag", r / SHIPPED_MODEL, symmetrized=True),
             ModelEntry("fast", r / FAST_MODEL, r / "runs/fast_b48/best.pt", symmetrized=True),
-            ModelEntry("compact", r / "models/supermag_compact.onnx", r / "runs/compact/best.pt", symmetrized=True),
-            ModelEntry("robust", r / "models/supermag_robust.onnx", r / "runs/robust_b48/best.pt", runtimes=("ort-1",)),
+            ModelEntry("compact", r / COMPACT_MODEL, r / "runs/compact/best.pt", symmetrized=True),
+            ModelEntry("robust", r / ROBUST_MODEL, r / "runs/robust_b48/best.pt", runtimes=("ort-1",)),
             ModelEntry("small_8ep", r / "runs/variant_small/model.onnx", r / "runs/variant_small/best.pt"),
             ModelEntry("compact_8ep", r / "runs/table1_full/model.onnx", r / "runs/table1_full/best.pt"),
             ModelEntry("large_8ep", r / "runs/variant_large/model.onnx", r / "runs/variant_large/best.pt"),

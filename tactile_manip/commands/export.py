@@ -239,7 +239,7 @@ def _attach_angle_head(args: argparse.Namespace) -> int:
 
     if args.attach_to is None:
         raise ValueError(f"{args.checkpoint} is an angle head: give the pose model to attach it to with --attach-to "
-                         "MODEL.onnx (e.g. models/supermag_robust.onnx)")
+                         "MODEL.onnx (e.g. experiments/model_variants/supermag_robust.onnx)")
     given = [f"--{n.replace('_', '-')}" for n in ("metrics", "pixel_mm", "card", "history", "table", "latency")
              if getattr(args, n) is not None]
     if given:

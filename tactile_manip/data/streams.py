@@ -120,7 +120,7 @@ def read_reading_stream(path: str | Path) -> tuple[np.ndarray, np.ndarray, dict]
 
 def board_layout(layout: Any):
     """A ``BoardLayout`` from its name (or itself); DatasetError naming the known layouts."""
-    from tactile_manip.sensors.layout import BoardLayout, get_layout
+    from tactile_manip.boards.layout import BoardLayout, get_layout
 
     if isinstance(layout, BoardLayout):
         return layout

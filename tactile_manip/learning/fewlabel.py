@@ -9,12 +9,15 @@ choosing for each target among a few small models by leave-one-out error on thos
 
 - an affine map of the 2 or 3 leading map coordinates;
 - the affine map plus a Gaussian-kernel ridge correction (three widths);
-- a polynomial (degree 1-3) of the reading's field norm, which follows depth and force at a fixed place.
+- a polynomial (degree 1-3) of the reading's field norm, which follows depth and force at a fixed place, alone
+  or with an affine term in the next one or two coordinates of the reading's map (what the norm misses: at one
+  place, the elastomer's loading history).
 
-Two maps are tried: one of the reading's direction (the unit vector of all channels: the press position, whatever
-its depth) and one of the standardised reading. The chosen fits label every unlabelled training row
-(:func:`pseudo_labels`); the contact network then trains on them (``unlabelled = "manifold"`` in a contact
-training config). The leave-one-out RMSE of the chosen fit travels with the labels: the network's sigma is
+Three maps are tried: two of the reading's direction (the unit vector of all channels: the press position,
+whatever its depth), one with each graph edge measured in units of the local spacing of the readings (as if the
+presses were spread evenly over the pad), and one of the standardised reading. The chosen fits label every
+unlabelled training row (:func:`pseudo_labels`); the contact network then trains on them
+(``unlabelled = "manifold"`` in a contact training config). The leave-one-out RMSE of the chosen fit travels with the labels: the network's sigma is
 widened by it, since the network cannot be more exact than the labels it learnt from.
 """
 
@@ -68,7 +71,8 @@ def pseudo_labels(readings: np.ndarray, targets: np.ndarray, labelled: np.ndarra
     norm = np.linalg.norm(x, axis=1)
     direction = x / np.maximum(norm, 1e-12)[:, None]
     standard = (x - x.mean(axis=0)) / x.std(axis=0)
-    maps = {"direction": isomap(direction, neighbours), "reading": isomap(standard, neighbours)}
+    maps = {"direction": isomap(direction, neighbours), "reading": isomap(standard, neighbours),
+            "direction (even)": isomap(direction, neighbours, even=True)}
     values = np.empty((len(x), y.shape[1]))
     loo = np.empty(y.shape[1])
     methods = []
@@ -85,10 +89,11 @@ def pseudo_labels(readings: np.ndarray, targets: np.ndarray, labelled: np.ndarra
     return PseudoLabels(values=values, loo_rmse=loo, methods=tuple(methods))
 
 
-def isomap(points: np.ndarray, neighbours: int, dims: int = MAP_DIMS) -> np.ndarray:
+def isomap(points: np.ndarray, neighbours: int, dims: int = MAP_DIMS, *, even: bool = False) -> np.ndarray:
     """Isomap coordinates (N, dims) of ``points`` (N, D): shortest paths over the ``neighbours``-nearest graph
     from up to ``LANDMARKS`` evenly spaced landmark points, laid out by landmark classical scaling. Parts of the
-    graph that no path joins are joined at the largest distance found."""
+    graph that no path joins are joined at the largest distance found. ``even``: each edge is measured in units
+    of its ends' distances to their farthest neighbour, as if the points were spread evenly over the surface."""
     from scipy.sparse import csr_matrix
     from scipy.sparse.csgraph import shortest_path
     from scipy.spatial import cKDTree
@@ -96,6 +101,9 @@ def isomap(points: np.ndarray, neighbours: int, dims: int = MAP_DIMS) -> np.ndar
     n = len(points)
     dist, idx = cKDTree(points).query(points, k=neighbours + 1)
     rows = np.repeat(np.arange(n), neighbours)
+    if even:
+        reach = np.maximum(dist[:, -1], 1e-12)
+        dist = dist / np.sqrt(reach[:, None] * reach[idx])
     graph = csr_matrix((dist[:, 1:].ravel() + 1e-12, (rows, idx[:, 1:].ravel())), shape=(n, n))
     graph = graph.maximum(graph.T)
     marks = np.unique(np.linspace(0, n - 1, min(n, LANDMARKS)).round().astype(int))
@@ -123,8 +131,13 @@ def _candidates(maps: dict[str, np.ndarray], norm: np.ndarray) -> Iterator[tuple
         for gamma in RBF_WIDTHS:
             yield f"{name} map, affine + kernel {gamma:g}", _affine_kernel(z[:, :2], gamma)
     scaled = norm / norm.std()
+    reading = maps["reading"] / maps["reading"].std(axis=0)
     for degree in (1, 2, 3):
-        yield f"field norm, degree {degree}", _affine(np.stack([scaled ** p for p in range(1, degree + 1)], axis=1))
+        powers = np.stack([scaled ** p for p in range(1, degree + 1)], axis=1)
+        yield f"field norm, degree {degree}", _affine(powers)
+        for more in (1, 2):  # and what the norm misses (the loading history at one place): the map's next axes
+            yield f"field norm, degree {degree}, + reading map {more}", _affine(np.hstack([powers,
+                                                                                        reading[:, 1:1 + more]]))
 
 
 def _design(z: np.ndarray) -> np.ndarray:

@@ -143,7 +143,9 @@ def build_estimators(scene: TrialScene, scene_path: Path | None = None) -> dict[
         model = target not in ("bilinear", "bicubic")
         calibration = load_calibration_beside(target) if model and spec.calibrated else None
         params = PoseParams()  # the estimator's pose parameters, which the calibration must have been fitted with
-        route = "head" if base.angle_head is not None else "image"  # the estimator's default ("auto")
+        route = spec.angle_source
+        if route == "auto":
+            route = "head" if base.angle_head is not None else "image"
         if calibration is not None and not calibration.fits(prior_samples=spec.samples, symmetrized=spec.symmetrize,
                                                             aperture=params.aperture, route=route):
             calibration = None  # fitted for another estimator: its map would not give this one's probability
@@ -155,7 +157,7 @@ def build_estimators(scene: TrialScene, scene_path: Path | None = None) -> dict[
             if spec.symmetrize:
                 escalation = SymmetrizedReconstructor(escalation, spread=True)
         out[spec.name] = TactilePoseEstimator(reconstructor, params, calibration=calibration, escalation=escalation,
-                                              escalate_below=spec.escalate_below)
+                                              escalate_below=spec.escalate_below, angle_source=spec.angle_source)
     return out
 
 

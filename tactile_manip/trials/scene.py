@@ -15,6 +15,7 @@ from typing import Any, Literal
 from tactile_manip.behaviours.reorient import ReorientConfig
 from tactile_manip.checks import check_finite_scalar
 from tactile_manip.config import load_config
+from tactile_manip.perception.estimator import ANGLE_SOURCES
 from tactile_manip.robot.safety import SafetyLimits
 from tactile_manip.sensors.config import SerialSensorConfig, SimulatedSensorConfig
 from tactile_manip.sim.shapes import check_shape_arguments
@@ -42,6 +43,10 @@ class MethodSpec:
         escalation: the extra inference: "symmetry" (the reading's 8 symmetric copies averaged) or "samples"
             (``escalation_samples`` prior samples, their spread lowering the confidence).
         escalation_samples: prior samples per reading of the "samples" escalation.
+        angle_source: where the angle comes from: "auto" (the model's angle head when its file has one, else the
+            image), "image" (the paper's route: the reconstruction's outliers removed, Gaussian-filtered, its
+            principal axis by PCA), "head" (the angle head) or "likelier" (whichever of the two is the more
+            likely); see :class:`~tactile_manip.perception.estimator.TactilePoseEstimator`.
     """
 
     name: str
@@ -54,6 +59,7 @@ class MethodSpec:
     escalate_below: float = 0.0
     escalation: str = "symmetry"
     escalation_samples: int = 8
+    angle_source: str = "auto"
 
     def __post_init__(self) -> None:
         if not self.name or not self.name.replace("_", "").replace("-", "").isalnum():
@@ -64,6 +70,9 @@ class MethodSpec:
         if not (math.isfinite(self.escalate_below) and 0.0 <= self.escalate_below <= 1.0):
             raise ValueError(f"method {self.name}: escalate_below must be a confidence in [0, 1], got "
                              f"{self.escalate_below}")
+        if self.angle_source not in ANGLE_SOURCES:
+            raise ValueError(f"method {self.name}: angle_source must be one of {', '.join(ANGLE_SOURCES)}, got "
+                             f"{self.angle_source!r}")
         if self.escalation not in ("symmetry", "samples"):
             raise ValueError(f"method {self.name}: escalation must be 'symmetry' or 'samples', got {self.escalation!r}")
         if self.escalate_below > 0 and self.escalation == "symmetry" and self.symmetrize:
@@ -210,6 +219,7 @@ class TrialScene:
     methods: list[MethodSpec] = field(default_factory=lambda: [
         MethodSpec("supermag", "models/supermag.onnx"),
         MethodSpec("supermag_sym", "models/supermag.onnx", symmetrize=True),
+        MethodSpec("paper_route", "models/supermag.onnx", angle_source="image"),
         MethodSpec("bilinear", "bilinear", output_px=16)])
     presentation: PresentationConfig = field(default_factory=PresentationConfig)
     robot: RobotConfig = field(default_factory=RobotConfig)

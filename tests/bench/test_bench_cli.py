@@ -11,7 +11,7 @@ from checks import assert_one_line_error
 from tactile_manip.cli import main
 
 ROOT = Path(__file__).resolve().parents[2]
-SHIPPED = ROOT / "models" / "supermag_compact.onnx"
+SHIPPED = ROOT / "experiments" / "model_variants" / "supermag_compact.onnx"
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
 

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -22,8 +21,9 @@ from tactile_manip.learning.angle_train import (AngleTrainConfig, axis_labels, i
 from tactile_manip.learning.export import ExportError  # noqa: E402
 from tactile_manip.perception import load_reconstructor, wrap_axial  # noqa: E402
 from tactile_manip.perception.symmetry import transform_reading  # noqa: E402
+from tactile_manip.shipped import shipped_model  # noqa: E402
 
-BASE = Path(__file__).resolve().parents[2] / "models" / "supermag_robust.onnx"
+BASE = shipped_model("robust")
 
 
 def _bar_readings(angle_rad: np.ndarray, rng: np.random.Generator, noise_ut: float | np.ndarray = 1.0

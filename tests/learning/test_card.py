@@ -1,15 +1,15 @@
 """The model card names where the training data came from."""
 
 import json
-from pathlib import Path
 
 import pytest
 
 from tactile_manip.learning.card import model_card
 from tactile_manip.perception.reconstruct import read_metadata
+from tactile_manip.shipped import shipped_model
 
 # a reference model shipped with its training history (the default model's image graphs are the robust one's)
-SHIPPED_MODEL = Path(__file__).resolve().parents[2] / "models" / "supermag_fast.onnx"
+SHIPPED_MODEL = shipped_model("fast")
 
 
 @pytest.fixture(scope="module")

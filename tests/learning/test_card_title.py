@@ -7,7 +7,7 @@ import pytest
 
 from tactile_manip.learning.card import model_card
 from tactile_manip.perception.reconstruct import read_metadata
-from tactile_manip.shipped import REFERENCE_MODELS, SHIPPED_MODELS, models_dir, shipped_model
+from tactile_manip.shipped import REFERENCE_MODELS, SHIPPED_MODELS, shipped_model
 
 pytest.importorskip("onnx", reason="reading the shipped model's metadata needs onnx (extra 'train')")
 
@@ -24,7 +24,7 @@ def test_card_title_names_the_model():
 
 def test_shipped_cards_have_their_own_titles():
     files = [SHIPPED_MODELS[n] for n in REFERENCE_MODELS]  # the cards of the models trained on their own
-    titles = [(models_dir() / Path(f).with_suffix(".md")).read_text().splitlines()[0] for f in files]
+    titles = [shipped_model(n).with_suffix(".md").read_text().splitlines()[0] for n in REFERENCE_MODELS]
     assert len(set(titles)) == len(titles), titles
     for file, title in zip(files, titles):
         assert f"`{Path(file).stem}`" in title

@@ -11,6 +11,7 @@ import pytest
 
 from tactile_manip.perception.one_reading import ONE_READING_KEY, remove_from
 from tactile_manip.perception.reconstruct import ModelFileError, OnnxReconstructor
+from tactile_manip.shipped import shipped_model
 
 onnx = pytest.importorskip("onnx")
 
@@ -113,7 +114,6 @@ def test_a_one_reading_graph_that_does_not_belong_to_its_file_is_refused(onnx_4x
 
 def test_shipped_models_carry_their_one_reading_graph() -> None:
     pytest.importorskip("onnxruntime")
-    models = Path(__file__).resolve().parents[2] / "models"
-    for name in ("supermag", "supermag_fast", "supermag_robust"):
-        assert OnnxReconstructor(models / f"{name}.onnx").one_reading, name
+    for name in ("supermag", "fast", "robust"):
+        assert OnnxReconstructor(shipped_model(name)).one_reading, name
 

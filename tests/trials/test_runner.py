@@ -314,3 +314,15 @@ def test_a_model_whose_graph_does_not_match_its_metadata_stops_the_run_before_th
     with pytest.raises(ModelFileError, match="does not match its tactile_manip metadata"):
         run_trials(scene, tmp_path / "run", progress=False)
     assert not (tmp_path / "run" / "trials.jsonl").exists()  # no trial ran, not even for the good method
+
+
+def test_a_method_names_where_its_angle_comes_from_and_the_main_job_runs_the_papers_route() -> None:
+    scene = _scene(methods=[MethodSpec("supermag", MODEL), MethodSpec("paper_route", MODEL, angle_source="image")])
+    est = build_estimators(scene)
+    assert est["supermag"].angle_head is not None and est["supermag"].angle_source == "head"  # "auto": the head
+    assert est["paper_route"].angle_head is None and est["paper_route"].angle_source == "image"
+    main = {m.name: m for m in load_scene(REPO / "configs" / "scenes" / "reorient_sim.toml").methods}
+    assert main["paper_route"].angle_source == "image"
+    assert main["paper_route"].reconstructor == main["supermag"].reconstructor
+    with pytest.raises(ValueError, match="angle_source must be one of auto, image, head, likelier"):
+        MethodSpec("x", MODEL, angle_source="pca")
