@@ -65,27 +65,35 @@ def _recipe(path: Path) -> dict:
         return tomllib.load(f)
 
 
-def default_models(root: str | Path = ".") -> list[ModelEntry]:
+def default_models(root: str | Path = ".", *, research: bool = False) -> list[ModelEntry]:
     """The default model (``supermag``: its image graphs and angle head on onnxruntime; no torch row, the
-    checkpoint holds the image decoder only), the reference models kept for the bench (``fast``, trained on
+    checkpoint holds the image decoder only) and the reference models kept for the bench (``fast``, trained on
     the paper's protocol only; ``compact``, the accuracy reference; ``robust``, the default's image graphs
-    without its head, on one thread: the fast model's graph), the
-    size variants on one 8-epoch recipe, the paper preset, the other full-recipe runs of
-    ``configs/train/fast*.toml`` (``runs/<stem>/``, as ``<stem>_full``, on one thread, skipped when not
-    trained; the fast model's own recipe is ``fast``), and the decoder candidates of
-    ``configs/train/decoder_*.toml`` (their run's export when trained, else an untrained export timed on one
-    thread) (paths under ``root``)."""
+    without its head, on one thread: the fast model's graph), paths under ``root``.
+
+    With ``research`` also the study's training runs under ``root/runs/`` (each skipped with a note when it was
+    not trained there): the torch rows of the reference models from their checkpoints, the size variants on one
+    8-epoch recipe, the paper preset, the other full-recipe runs of ``configs/train/fast*.toml``
+    (``runs/<stem>/``, as ``<stem>_full``, on one thread; the fast model's own recipe is ``fast``), and the
+    decoder candidates of ``configs/train/decoder_*.toml`` (their run's export when trained, else an untrained
+    export timed on one thread): how the published speed reports were made."""
     r = Path(root)
+    shipped = [ModelEntry("supermag", r / SHIPPED_MODEL, symmetrized=True),
+               ModelEntry("fast", r / FAST_MODEL, r / "runs/fast_b48/best.pt" if research else None,
+                          symmetrized=True),
+               ModelEntry("compact", r / COMPACT_MODEL, r / "runs/compact/best.pt" if research else None,
+                          symmetrized=True),
+               ModelEntry("robust", r / ROBUST_MODEL, r / "runs/robust_b48/best.pt" if research else None,
+                          runtimes=("ort-1",))]
+    if not research:
+        return shipped
     candidates = [ModelEntry(c.stem, r / "runs" / c.stem / "model.onnx", r / "runs" / c.stem / "best.pt",
                              untrained_preset=str(c), runtimes=("ort-1",)) for c in sorted(r.glob(DECODER_CANDIDATES))]
     fast_recipe = r / FAST_RECIPE
     recipe = _recipe(fast_recipe) if fast_recipe.is_file() else None
     fast = [ModelEntry(f"{c.stem}_full", r / "runs" / c.stem / "model.onnx", r / "runs" / c.stem / "best.pt",
                        runtimes=("ort-1",)) for c in sorted(r.glob(FAST_CONFIGS)) if _recipe(c) != recipe]
-    return [ModelEntry("supermag", r / SHIPPED_MODEL, symmetrized=True),
-            ModelEntry("fast", r / FAST_MODEL, r / "runs/fast_b48/best.pt", symmetrized=True),
-            ModelEntry("compact", r / COMPACT_MODEL, r / "runs/compact/best.pt", symmetrized=True),
-            ModelEntry("robust", r / ROBUST_MODEL, r / "runs/robust_b48/best.pt", runtimes=("ort-1",)),
+    return [*shipped,
             ModelEntry("small_8ep", r / "runs/variant_small/model.onnx", r / "runs/variant_small/best.pt"),
             ModelEntry("compact_8ep", r / "runs/table1_full/model.onnx", r / "runs/table1_full/best.pt"),
             ModelEntry("large_8ep", r / "runs/variant_large/model.onnx", r / "runs/variant_large/best.pt"),

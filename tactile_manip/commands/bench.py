@@ -1,7 +1,8 @@
 """``tactile-manip bench``: speed against error of every method on this machine, in one report.
 
-Runs the baselines and every model file it finds (the default model, one pass and symmetry-averaged; the
-reference models kept for the bench; the small, compact and large presets on one 8-epoch recipe; the paper preset) on onnxruntime with 1 thread and
+Runs the baselines and the shipped models (the default model, one pass and symmetry-averaged; the reference
+models kept for the bench; with ``--research`` also the study's training runs: the small, compact and large
+presets on one 8-epoch recipe, the paper preset, the decoder candidates) on onnxruntime with 1 thread and
 all threads, on a dynamically int8-quantised copy, and in torch eager from the checkpoint, through the same
 readings. Writes ``OUT/report.md``, ``report.json`` and ``pareto.png`` and prints the table. Missing model
 files are skipped with a note.
@@ -34,6 +35,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--per-object", type=int, default=None,
                    help="readings per test object (default: all of the test split; quick 3)")
     p.add_argument("--root", default=".", help="repository root the default model paths are under (default: .)")
+    p.add_argument("--research", action="store_true",
+                   help="also the study's training runs under ROOT/runs/ (size variants, paper preset, decoder "
+                        "candidates, torch rows from checkpoints): how the published speed reports were made")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -50,7 +54,7 @@ def run(args: argparse.Namespace) -> int:
         settings = dataclasses.replace(settings, trials=args.trials)
     if args.per_object is not None:
         settings = dataclasses.replace(settings, per_object=args.per_object)
-    models = default_models(args.root) + [parse_model_spec(s) for s in args.model]
+    models = default_models(args.root, research=args.research) + [parse_model_spec(s) for s in args.model]
     runtimes = _split(args.runtimes) or list(RUNTIMES)
     report = run_bench(settings=settings, models=models, runtimes=runtimes, data_path=args.data,
                        dataset_config=args.dataset_config, scene_path=args.scene, methods=_split(args.methods),

@@ -159,13 +159,24 @@ def test_pose_table_compares_each_runtime_with_the_paper_preset_on_the_same_runt
     assert lines[4].endswith("| 1% | - |")
 
 
+def test_without_research_the_bench_measures_the_shipped_models_and_no_training_runs() -> None:
+    from pathlib import Path
+
+    from tactile_manip.bench.candidates import default_models
+
+    root = Path(__file__).resolve().parents[2]
+    entries = default_models(root)
+    assert [e.name for e in entries] == ["supermag", "fast", "compact", "robust"]
+    assert all(e.path.is_file() and e.checkpoint is None for e in entries)   # nothing under runs/
+
+
 def test_default_models_include_the_decoder_candidates_on_one_thread_only(tiny_model, tmp_path) -> None:
     from pathlib import Path
 
     from tactile_manip.bench.candidates import ModelEntry, default_models, model_candidates
 
     root = Path(__file__).resolve().parents[2]
-    entries = {e.name: e for e in default_models(root)}
+    entries = {e.name: e for e in default_models(root, research=True)}
     configs = sorted(p.stem for p in (root / "configs" / "train").glob("decoder_*.toml"))
     assert configs and all(entries[c].runtimes == ("ort-1",) for c in configs)
     assert entries[configs[0]].untrained_preset.endswith(f"{configs[0]}.toml")  # timed untrained until trained
