@@ -101,6 +101,9 @@ MAIN_JOB = TrialRun("main job: `configs/scenes/reorient_sim.toml`, 100 presentat
                     {"supermag": "supermag", "supermag_sym": "supermag", "paper_route": "supermag", "bilinear": None})
 MAIN_JOB_FAST = TrialRun(MAIN_JOB.scene, "docs/results/trials_fast/reorient_sim/summary.json",
                          {"supermag": "supermag_fast", "supermag_sym": "supermag_fast", "bilinear": None})
+PLACE_SCENE = TrialRun("placing: `configs/scenes/place_sim.toml` (`task = \"place\"`), 60 presentations, within 5 deg "
+                       "and 1 mm of the slot", "docs/results/supermag/place_sim/summary.json",
+                       {"supermag": "supermag", "supermag_sym": "supermag", "bilinear": None})
 ROBUST_SCENE = TrialRun("robust scene: `configs/scenes/reorient_robust.toml`, 300 presentations, 2-15 N, a drawn "
                         "sensor per trial, calibrated re-grasp below 0.8",
                         "docs/results/supermag/reorient_robust/summary.json",
@@ -111,6 +114,7 @@ ROBUST_SCENE_FAST = TrialRun(ROBUST_SCENE.scene, "docs/results/robust/fast_vs_co
                              {"supermag": "supermag_fast", "supermag_esc": "supermag_fast", "bilinear": None})
 TRIAL_RUNS = (
     MAIN_JOB,
+    PLACE_SCENE,
     MAIN_JOB_FAST,
     TrialRun("study: `tasks/reorient_study.toml`, 300 presentations of the same rods, another seed",
              "docs/results/trials_fast/reorient_study/summary.json",
@@ -129,7 +133,8 @@ TRIAL_RUNS = (
     TrialRun("the paper's experiment: `tasks/paper_experiment.toml`, 3 rods x 2 angles (the paper: 6/6 against 1/6)",
              "docs/results/trials_fast/paper_experiment/summary.json",
              {"supermag": "supermag_fast", "supermag_sym": "supermag_fast", "bilinear": None}),
-    TrialRun("slot insertion: `tasks/slot_insertion.py`, 60 presentations, within 5 deg and 1 mm of the slot",
+    TrialRun("slot insertion: 60 presentations, within 5 deg and 1 mm of the slot (`tasks/slot_insertion.py` of that "
+             "time; now `configs/scenes/place_sim.toml`)",
              "docs/results/trials_fast/slot_insertion/summary.md",
              {"supermag": "supermag_fast", "supermag_sym": "supermag_fast", "bilinear": None}),
 )

@@ -107,6 +107,18 @@ def place_in_slot(arm: Arm, gripper: Gripper, sensor: TactileSensor, estimator: 
     return result
 
 
+def draw_slot(base_T_pad: np.ndarray, seed: int, clearance_m: float) -> Slot:
+    """A slot in the pad plane of ``base_T_pad`` (4, 4), 4-6 cm beyond the pad centre along -pad y, at a random
+    angle about the pad normal and up to 1 cm to either side, drawn from ``seed``."""
+    import math
+
+    rng = np.random.default_rng([seed, 1])
+    angle = rng.uniform(-math.pi / 2, math.pi / 2)
+    axis = base_T_pad[:3, :3] @ np.array([math.cos(angle), math.sin(angle), 0.0])
+    centre_pad = np.array([rng.uniform(-0.01, 0.01), -rng.uniform(0.04, 0.06), 0.0, 1.0])
+    return Slot(centre_base_m=(base_T_pad @ centre_pad)[:3], axis_base=axis, clearance_m=clearance_m)
+
+
 def slot_errors(base_T_object: np.ndarray, slot: Slot, base_T_pad: np.ndarray) -> tuple[float, float]:
     """(axial angle rod - slot in the pad plane, rad; distance from the slot centre to the rod axis, m)."""
     axis = base_T_object[:3, 0] / np.linalg.norm(base_T_object[:3, 0])

@@ -27,7 +27,8 @@ from typing import Any
 OUTCOMES = ("done", "abstained", "grasp_failed", "sensor_stale", "ik_failed", "arm_fault", "safety_refused",
             "unmeasured", "error")
 RECORD_VERSION = 1
-OPTIONAL_FIELDS = ("estimated_grip_force_n", "estimated_grip_force_sigma_n")  # left out of a line when None
+OPTIONAL_FIELDS = ("estimated_grip_force_n", "estimated_grip_force_sigma_n", "task", "lateral_error_mm",
+                   "clearance_mm")  # left out of a line when None
 
 
 @dataclass
@@ -55,6 +56,10 @@ class TrialRecord:
             step, N (None without a contact model, or when the trial ended before it; the line then leaves it
             out). The behaviour's commanded force is ``extra["commanded_force_n"]``.
         estimated_grip_force_sigma_n: its sigma (one standard deviation of the model's estimate), N.
+        task: the behaviour the trial ran: "reorient" or "place" (None in lines written before trials named it:
+            reorient).
+        lateral_error_mm: placing: distance from the slot's centre to the rod's true axis, mm (None otherwise).
+        clearance_mm: placing: the slot's clearance; a placement succeeds only with the lateral error within it.
         timings_s: named durations of the trial's phases, s.
         extra: backend- or task-specific values (JSON-serialisable).
     """
@@ -77,6 +82,9 @@ class TrialRecord:
     detail: str = ""
     estimated_grip_force_n: float | None = None
     estimated_grip_force_sigma_n: float | None = None
+    task: str | None = None
+    lateral_error_mm: float | None = None
+    clearance_mm: float | None = None
     timings_s: dict[str, float] = field(default_factory=dict)
     extra: dict[str, Any] = field(default_factory=dict)
     version: int = RECORD_VERSION
@@ -90,8 +98,16 @@ class TrialRecord:
             raise ValueError("estimated_grip_force_n and estimated_grip_force_sigma_n come together (both or neither)")
 
     def succeeded(self, tolerance_rad: float) -> bool:
-        """Whether the trial is a success at ``tolerance_rad`` (done, and |error| <= tolerance)."""
-        return self.outcome == "done" and abs(float(self.error_rad)) <= tolerance_rad
+        """Whether the trial is a success at ``tolerance_rad`` (done, |error| <= tolerance, and a placement's
+        lateral error within the slot's clearance)."""
+        return self.outcome == "done" and abs(float(self.error_rad)) <= tolerance_rad and self.within_clearance
+
+    @property
+    def within_clearance(self) -> bool:
+        """A placement's lateral error within the slot's clearance (True for a trial that places nothing)."""
+        if self.clearance_mm is None:
+            return True
+        return self.lateral_error_mm is not None and self.lateral_error_mm <= self.clearance_mm
 
     def to_dict(self) -> dict[str, Any]:
         """Plain dict for JSON (tuples become lists; the grip force is left out when there is none, so such a

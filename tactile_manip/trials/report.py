@@ -43,7 +43,7 @@ def tolerance_tag(tolerance_rad: float) -> str:
 
 def write_report(run_dir: str | Path, records: Sequence[TrialRecord], tolerance_rad: float, *,
                  title: str = "Reorientation trials", tag: str = "",
-                 run_info: Mapping[str, Any] | None = None) -> RunSummary:
+                 run_info: Mapping[str, Any] | None = None, task: str | None = None) -> RunSummary:
     """Score ``records`` at ``tolerance_rad`` and write the report files (module docstring) to ``run_dir``.
 
     Args:
@@ -54,6 +54,8 @@ def write_report(run_dir: str | Path, records: Sequence[TrialRecord], tolerance_
         tag: appended to every file stem (see :func:`tolerance_tag`); empty for the run's own report.
         run_info: the run's ``run.json`` (id, config hash, code version), copied into the summary; its config
             also says whether the cell was simulated (then the grip force is scored against the applied force).
+        task: the behaviour the trials ran ("reorient", "place"), named in the summary (default: the records'
+            own, where they name one, else "reorient").
 
     Returns:
         The RunSummary the files show.
@@ -63,12 +65,15 @@ def write_report(run_dir: str | Path, records: Sequence[TrialRecord], tolerance_
     out.mkdir(parents=True, exist_ok=True)
     run = {k: run_info[k] for k in RUN_KEYS if k in run_info} if run_info else {}
     grip = grip_force_summary(records, applied=_simulated(run_info))
-    doc = {"title": title, "run": run, "tolerance_rad": tolerance_rad, **summary.to_dict()}
+    task = task or next((r.task for r in records if r.task), "reorient")
+    doc = {"title": title, "task": task, "run": run, "tolerance_rad": tolerance_rad, **summary.to_dict()}
     if grip:
         doc["grip_force"] = {m: asdict(s) for m, s in grip.items()}
     (out / f"summary{tag}.json").write_text(json.dumps(doc, indent=2) + "\n", encoding="utf-8")
-    (out / f"summary{tag}.md").write_text(markdown_summary(summary, title=title, run_info=run, grip_force=grip),
-                                          encoding="utf-8")
+    text = markdown_summary(summary, title=title, run_info=run, grip_force=grip)
+    if task == "place":
+        text = _placement_section(text, records)
+    (out / f"summary{tag}.md").write_text(text, encoding="utf-8")
     plot_errors(out / f"errors{tag}.png", records, tolerance_rad, title=title)
     plot_success_vs_tolerance(out / f"success_vs_tolerance{tag}.png", records, tolerance_rad, title=title)
     return summary
@@ -79,6 +84,22 @@ def _simulated(run_info: Mapping[str, Any] | None) -> bool:
     config = (run_info or {}).get("config")
     robot = config.get("robot") if isinstance(config, Mapping) else None
     return isinstance(robot, Mapping) and robot.get("backend") == "twin"
+
+
+def _placement_section(text: str, records: Sequence[TrialRecord]) -> str:
+    """The summary of a "place" run: success also needs the lateral error within the slot's clearance; the
+    lateral error per method."""
+    clearance = next((r.clearance_mm for r in records if r.clearance_mm is not None), None)
+    text = text.replace("Success: outcome `done` and |final - target| <=",
+                        f"Success: outcome `done`, the rod's axis within {clearance:g} mm (the slot's clearance) of "
+                        "the slot's centre, and |rod - slot axis| <=", 1)
+    rows = []
+    for method in dict.fromkeys(r.method for r in records):
+        lateral = [r.lateral_error_mm for r in records if r.method == method and r.lateral_error_mm is not None]
+        rows.append([method, str(len(lateral)), *(f"{np.percentile(lateral, q):.2f}" if lateral else "-"
+                                                  for q in (50, 95))])
+    return text.rstrip("\n") + "\n\n## Lateral error (placed rods)\n\n" + "\n".join(
+        _table(["method", "placed", "median (mm)", "p95 (mm)"], rows)) + "\n"
 
 
 def markdown_summary(summary: RunSummary, *, title: str = "Reorientation trials",

@@ -15,6 +15,7 @@ skips the pairs already there, so a killed run loses no completed trial and can 
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import math
 import time
 from collections.abc import Callable, Iterator
@@ -24,6 +25,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from tactile_manip.behaviours.place import PlaceResult
 from tactile_manip.behaviours.reorient import ReorientResult
 from tactile_manip.errors import ConfigError
 from tactile_manip.extras import require
@@ -35,7 +37,7 @@ from tactile_manip.perception.symmetry import SymmetrizedReconstructor
 from tactile_manip.robot.frames import hand_T_finger_pad, rotation_about, transform
 from tactile_manip.sensors.config import SimulatedSensorConfig
 from tactile_manip.trials.record import TrialRecord
-from tactile_manip.trials.scene import MethodSpec, TrialObject, TrialScene
+from tactile_manip.trials.scene import TASK_TITLES, MethodSpec, TrialObject, TrialScene
 
 if TYPE_CHECKING:
     from tactile_manip.perception.contact import ContactEstimator
@@ -264,7 +266,19 @@ class SimulatedCell:
         from tactile_manip.trials.operator import run_reorientation
 
         with self.presented(p, arm_fault=arm_fault, sensor_stall=sensor_stall) as (obj, truth):
+            if self.scene.task == "place":
+                return self._place(p, estimator, obj, truth)
             return run_reorientation(self, estimator, obj.width_m, truth, observer, contact)
+
+    def _place(self, p: Presentation, estimator: TactilePoseEstimator, obj, truth: WorldTruth) -> PlaceResult:
+        """The "place" task: a slot drawn from the presentation's seed, the rod put into it."""
+        from tactile_manip.behaviours.place import draw_slot, place_in_slot
+        from tactile_manip.robot.frames import hand_T_pad
+
+        base_T_pad = self.arm.state().base_T_hand @ hand_T_pad()  # the fingers' mid-plane before the grasp
+        slot = draw_slot(base_T_pad, p.seed, self.scene.place.clearance_mm * 1e-3)
+        return place_in_slot(self.arm, self.gripper, self.sensor, estimator, slot, object_width_m=obj.width_m,
+                             config=self.scene.behaviour, truth=truth)
 
     def _ready_for_trial(self) -> None:
         """Trial boundary: clear any fault (and an armed but unused fault injection), open, go home."""
@@ -312,6 +326,26 @@ def make_record(p: Presentation, method: str, target_rad: float, result: Reorien
                **({} if commanded_force_n is None else {"commanded_force_n": float(commanded_force_n)})},
         estimated_grip_force_n=_rounded(None if grip is None else grip.force_n),
         estimated_grip_force_sigma_n=_rounded(None if grip is None else grip.force_sigma_n))
+
+
+def make_place_record(p: Presentation, method: str, result: PlaceResult, *, clearance_mm: float) -> TrialRecord:
+    """The log line of one placement: ``error_rad`` is the rod's axial angle to the slot, ``lateral_error_mm``
+    the distance from the slot's centre to its axis (a placement without a measured pose is "unmeasured")."""
+    est = result.estimate
+    outcome, detail = result.outcome, result.detail
+    if outcome == "done" and (result.angle_error_rad is None or result.lateral_error_m is None):
+        outcome, detail = "unmeasured", "the rod's final pose was not measured"
+    return TrialRecord(
+        trial=p.trial, seed=p.seed, method=method, object=p.obj.display_name, true_angle_rad=p.angle_rad,
+        offset_mm=p.offset_mm, target_angle_rad=0.0,
+        estimated_angle_rad=est.angle_rad if est is not None and est.defined else None,
+        confidence=est.confidence if est is not None else 0.0, defined=bool(est is not None and est.defined),
+        error_rad=result.angle_error_rad if outcome == "done" else None, outcome=outcome, detail=detail,
+        task="place",
+        lateral_error_mm=_rounded(None if result.lateral_error_m is None else result.lateral_error_m * 1e3),
+        clearance_mm=float(clearance_mm), timings_s={k: round(v, 6) for k, v in result.timings_s.items()},
+        extra={"force_n": round(p.force_n, 4), **_sensor_extra(p),
+               "escalated": bool(est is not None and est.escalated)})
 
 
 def _rounded(value: float | None) -> float | None:
@@ -378,9 +412,14 @@ def run_scene(scene: TrialScene, write: Callable[[TrialRecord], None], *, estima
                     result = cell.run_one(p, estimators[method], arm_fault=i in faults.arm_fault_trials,
                                           sensor_stall=i in faults.sensor_stall_trials, **kwargs)
             except Exception as exc:  # noqa: BLE001 - a broken trial is recorded, the run goes on
-                result = ReorientResult(outcome="error", detail=f"{type(exc).__name__}: {exc}")
+                failed = PlaceResult if scene.task == "place" else ReorientResult
+                result = failed(outcome="error", detail=f"{type(exc).__name__}: {exc}")
             result.timings_s.setdefault("trial", time.perf_counter() - t0)
-            record = make_record(p, method, target, result, commanded_force_n=scene.behaviour.force_n)
+            if isinstance(result, PlaceResult):
+                record = make_place_record(p, method, result, clearance_mm=scene.place.clearance_mm)
+            else:
+                record = make_record(p, method, target, result, commanded_force_n=scene.behaviour.force_n)
+                record = dataclasses.replace(record, task=scene.task)
             write(record)
             if trial_observer is not None:
                 trial_observer.trial_finished(record)
@@ -433,7 +472,8 @@ def run_trials(scene: TrialScene, out_dir: str | Path, *, scene_path: str | Path
     skip = completed_keys(out / "trials.jsonl") if resume and (out / "trials.jsonl").exists() else set()
     with TrialLog(out, config=to_dict(scene), resume=resume) as log:
         run_scene(scene, log.append, estimators=estimators, skip=skip, progress=progress, cell=cell,
-                  trial_observer=trial_observer, frames_dir=out / "frames" if frames else None, contact=contact)
+                  trial_observer=trial_observer, contact=contact,
+                  frames_dir=out / "frames" if frames and scene.task == "reorient" else None)
     tolerance = math.radians(scene.tolerance_deg if tolerance_deg is None else tolerance_deg)
-    return write_report(out, read_trials(out / "trials.jsonl"), tolerance, title=f"Reorientation trials: {scene.name}",
-                        run_info=read_run_info(out))
+    return write_report(out, read_trials(out / "trials.jsonl"), tolerance,
+                        title=f"{TASK_TITLES[scene.task]}: {scene.name}", run_info=read_run_info(out), task=scene.task)

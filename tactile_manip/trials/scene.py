@@ -191,6 +191,22 @@ class FaultPlan:
     sensor_stall_trials: list[int] = field(default_factory=list)
 
 
+TASKS = ("reorient", "place")
+TASK_TITLES = {"reorient": "Reorientation trials", "place": "Slot placement trials"}
+
+
+@dataclass(frozen=True)
+class PlaceConfig:
+    """The slot of the "place" task: drawn per presentation in the pad plane, 4-6 cm beyond the pad centre along
+    -pad y, at a random angle; a placement succeeds with the rod within ``tolerance_deg`` of the slot's axis and
+    its axis within ``clearance_mm`` of the slot's centre."""
+
+    clearance_mm: float = 1.0
+
+    def __post_init__(self) -> None:
+        check_finite_scalar("place.clearance_mm", self.clearance_mm, low=0.0, low_open=True, high=50.0)
+
+
 @dataclass(frozen=True)
 class TrialScene:
     """Everything ``tactile-manip trials`` needs (see ``configs/scenes/reorient_sim.toml``).
@@ -209,6 +225,10 @@ class TrialScene:
             models are, e.g. ``models/contact_supermag.onnx``): each trial then logs the grip force the model
             estimates at the estimate step (``estimated_grip_force_n``); "" for none. A model of another
             board layout than the sensor's is refused before the first trial.
+        task: the behaviour each trial runs: "reorient" (grasp, estimate the in-hand angle, turn the rod to
+            ``target_deg``) or "place" (grasp, estimate angle and contact centroid, put the rod into a slot
+            drawn per presentation; :mod:`tactile_manip.behaviours.place`). The summary names it.
+        place: the slot of the "place" task.
     """
 
     name: str = "reorient"
@@ -227,8 +247,15 @@ class TrialScene:
     behaviour: ReorientConfig = field(default_factory=ReorientConfig)
     faults: FaultPlan = field(default_factory=FaultPlan)
     contact_model: str = ""
+    task: Literal["reorient", "place"] = "reorient"
+    place: PlaceConfig = field(default_factory=PlaceConfig)
 
     def __post_init__(self) -> None:
+        if self.task not in TASKS:
+            raise ValueError(f"task must be one of {', '.join(TASKS)}, got {self.task!r}")
+        if self.task == "place" and self.robot.backend != "twin":
+            raise ValueError("task = \"place\" runs in the simulated cell only (robot.backend = \"twin\"): the "
+                             "slot is a world feature the twin knows")
         if isinstance(self.trials, bool) or self.trials < 1:
             raise ValueError(f"trials must be a positive integer, got {self.trials!r}")
         check_finite_scalar("tolerance_deg", self.tolerance_deg, low=0.0, low_open=True, high=90.0)

@@ -326,3 +326,33 @@ def test_a_method_names_where_its_angle_comes_from_and_the_main_job_runs_the_pap
     assert main["paper_route"].reconstructor == main["supermag"].reconstructor
     with pytest.raises(ValueError, match="angle_source must be one of auto, image, head, likelier"):
         MethodSpec("x", MODEL, angle_source="pca")
+
+
+def test_the_place_task_runs_through_the_runner_and_its_success_needs_the_slot_clearance(tmp_path) -> None:
+    from tactile_manip.trials.scene import PlaceConfig
+
+    scene = _scene(trials=3, task="place", place=PlaceConfig(clearance_mm=1.0),
+                   methods=[MethodSpec("supermag", MODEL), MethodSpec("bilinear", "bilinear", output_px=16)])
+    summary = run_trials(scene, tmp_path / "run", progress=False)
+    records = read_trials(tmp_path / "run" / "trials.jsonl")
+    assert {r.task for r in records} == {"place"} and len(records) == 6
+    for r in records:
+        assert r.outcome == "done" and r.clearance_mm == 1.0 and r.lateral_error_mm is not None
+        assert r.succeeded(math.radians(5.0)) == (abs(r.error_rad) <= math.radians(5.0) and r.lateral_error_mm <= 1.0)
+    ours = [r for r in records if r.method == "supermag"]
+    assert all(r.lateral_error_mm < 0.5 for r in ours)            # the centroid puts the axis onto the slot
+    doc = json.loads((tmp_path / "run" / "summary.json").read_text())
+    assert doc["task"] == "place" and doc["title"].startswith("Slot placement trials")
+    assert summary.methods["supermag"].successes == sum(r.succeeded(math.radians(5.0)) for r in ours)
+    assert "## Lateral error (placed rods)" in (tmp_path / "run" / "summary.md").read_text()
+
+
+def test_a_reorientation_run_names_its_task_and_a_bad_task_is_refused(tmp_path) -> None:
+    run_trials(_scene(trials=1, methods=[MethodSpec("bilinear", "bilinear", output_px=16)]), tmp_path / "r",
+               progress=False)
+    assert json.loads((tmp_path / "r" / "summary.json").read_text())["task"] == "reorient"
+    assert {r.task for r in read_trials(tmp_path / "r" / "trials.jsonl")} == {"reorient"}
+    with pytest.raises(ValueError, match="task must be one of reorient, place"):
+        _scene(task="insert")
+    with pytest.raises(ValueError, match="simulated cell only"):
+        _scene(task="place", robot=RobotConfig(backend="franky", host="172.16.0.2"))
