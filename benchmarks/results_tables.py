@@ -81,6 +81,7 @@ METHODS = {  # trial method names -> what they do
     "supermag_esc": "one pass; symmetry-averaged again below calibrated confidence 0.5",
     "paper_route": "the paper's route: the image's principal axis, no angle head",
     "bilinear": "bilinear 4x4 -> 16x16 (the paper's baseline)",
+    "blind": "no tactile input: the rod taken along the pad's x axis",
     "fast": "one pass per reading",
     "compact": "one pass per reading",
     "robust": "one pass per reading",
@@ -98,12 +99,13 @@ class TrialRun:
 
 MAIN_JOB = TrialRun("main job: `configs/scenes/reorient_sim.toml`, 100 presentations of 6 unseen rods, 10-11 N",
                     "docs/results/supermag/reorient_sim/summary.json",
-                    {"supermag": "supermag", "supermag_sym": "supermag", "paper_route": "supermag", "bilinear": None})
+                    {"supermag": "supermag", "supermag_sym": "supermag", "paper_route": "supermag", "bilinear": None,
+                     "blind": None})
 MAIN_JOB_FAST = TrialRun(MAIN_JOB.scene, "docs/results/trials_fast/reorient_sim/summary.json",
                          {"supermag": "supermag_fast", "supermag_sym": "supermag_fast", "bilinear": None})
 PLACE_SCENE = TrialRun("placing: `configs/scenes/place_sim.toml` (`task = \"place\"`), 60 presentations, within 5 deg "
                        "and 1 mm of the slot", "docs/results/supermag/place_sim/summary.json",
-                       {"supermag": "supermag", "supermag_sym": "supermag", "bilinear": None})
+                       {"supermag": "supermag", "supermag_sym": "supermag", "bilinear": None, "blind": None})
 ROBUST_SCENE = TrialRun("robust scene: `configs/scenes/reorient_robust.toml`, 300 presentations, 2-15 N, a drawn "
                         "sensor per trial, calibrated re-grasp below 0.8",
                         "docs/results/supermag/reorient_robust/summary.json",

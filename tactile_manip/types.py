@@ -63,8 +63,9 @@ class AngleEstimate:
             not measured.
         escalated: the first pass was below the estimator's ``escalate_below`` and this estimate comes from its
             ``escalation`` reconstructor (extra inference: prior samples, symmetry averaging).
-        source: where the angle comes from: "image" (the principal axis of the reconstructed image) or "head"
-            (the model's angle head, read straight from the reading, where it was the more likely).
+        source: where the angle comes from: "prior" (a method without tactile input, which answers the pad's x
+            axis: :mod:`tactile_manip.trials.blind`), "image" (the principal axis of the reconstructed image) or
+            "head" (the model's angle head, read straight from the reading, where it was the more likely).
         plausible: False when the reading holds a value beyond what the chip can report as a change, or far
             beyond the field of a press the model was made for (2000 uT on the SuperMag board: see
             :mod:`tactile_manip.perception.estimator`); the estimate is then no answer: ``defined`` False,

@@ -36,6 +36,7 @@ from tactile_manip.perception.confidence import load_calibration_beside
 from tactile_manip.perception.symmetry import SymmetrizedReconstructor
 from tactile_manip.robot.frames import hand_T_finger_pad, rotation_about, transform
 from tactile_manip.sensors.config import SimulatedSensorConfig
+from tactile_manip.trials.blind import BLIND, BlindEstimator
 from tactile_manip.trials.record import TrialRecord
 from tactile_manip.trials.scene import TASK_TITLES, MethodSpec, TrialObject, TrialScene
 
@@ -135,6 +136,9 @@ def build_estimators(scene: TrialScene, scene_path: Path | None = None) -> dict[
     """One estimator per method (models are loaded once, before the first trial)."""
     out = {}
     for spec in scene.methods:
+        if spec.reconstructor == BLIND:  # the baseline without tactile input
+            out[spec.name] = BlindEstimator()
+            continue
         target = resolve_model_path(spec, scene_path)
         if target in ("bilinear", "bicubic"):
             kwargs = {"output_px": spec.output_px} if spec.output_px else {}

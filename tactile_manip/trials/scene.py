@@ -27,7 +27,8 @@ class MethodSpec:
 
     Attributes:
         name: label in the logs and plots, e.g. "supermag".
-        reconstructor: "bilinear", "bicubic" or a path to an exported .onnx model (relative paths are
+        reconstructor: "bilinear", "bicubic", "blind" (no tactile input: the baseline every task is scored
+            against, :mod:`tactile_manip.trials.blind`) or a path to an exported .onnx model (relative paths are
             resolved against the working directory, then against the scene file's repository).
         output_px: baselines only: square output size (16 = the paper's 4x4 -> 16x16 trial baseline; 0 keeps
             the shipped 200x200).
@@ -240,7 +241,8 @@ class TrialScene:
         MethodSpec("supermag", "models/supermag.onnx"),
         MethodSpec("supermag_sym", "models/supermag.onnx", symmetrize=True),
         MethodSpec("paper_route", "models/supermag.onnx", angle_source="image"),
-        MethodSpec("bilinear", "bilinear", output_px=16)])
+        MethodSpec("bilinear", "bilinear", output_px=16),
+        MethodSpec("blind", "blind")])
     presentation: PresentationConfig = field(default_factory=PresentationConfig)
     robot: RobotConfig = field(default_factory=RobotConfig)
     sensor: SimulatedSensorConfig | SerialSensorConfig = field(default_factory=SimulatedSensorConfig)

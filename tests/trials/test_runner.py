@@ -356,3 +356,17 @@ def test_a_reorientation_run_names_its_task_and_a_bad_task_is_refused(tmp_path) 
         _scene(task="insert")
     with pytest.raises(ValueError, match="simulated cell only"):
         _scene(task="place", robot=RobotConfig(backend="franky", host="172.16.0.2"))
+
+
+def test_the_blind_baseline_reads_the_sensor_and_answers_the_prior(tmp_path) -> None:
+    scene = _scene(trials=3, methods=[MethodSpec("blind", "blind")])
+    est = build_estimators(scene)["blind"]
+    assert est.calibration is None and est.angle_head is None
+    records = _run(scene)
+    assert [r.method for r in records] == ["blind"] * 3
+    for r in records:  # the rod taken along the pad's x axis: the error is the presented angle itself
+        assert r.defined and r.estimated_angle_rad == 0.0 and r.confidence == 1.0
+        assert r.outcome == "done" and abs(r.error_rad) == pytest.approx(abs(r.true_angle_rad), abs=math.radians(1))
+    main = {m.name: m.reconstructor for m in load_scene(REPO / "configs" / "scenes" / "reorient_sim.toml").methods}
+    place = {m.name: m.reconstructor for m in load_scene(REPO / "configs" / "scenes" / "place_sim.toml").methods}
+    assert main["blind"] == place["blind"] == "blind"
