@@ -1,5 +1,6 @@
-"""Importing the package and the simulator stays cheap: no heavy or optional package is pulled in, and the
-sensors and perception layers do not reach up into the simulator (docs/design.md, Layers).
+"""Importing the package and the simulator stays cheap: no heavy or optional package is pulled in, the
+sensors and perception layers do not reach up into the simulator, the data layer does not reach up into the
+sensors, and the wire formats and log files sit below every layer but the core (docs/design.md, Layers).
 
 Each runtime check runs in a fresh interpreter, since this test process has long since imported everything.
 """
@@ -20,6 +21,10 @@ PACKAGE = Path(tactile_manip.__file__).parent
 # the sensors modules that drive the simulator: the simulated sensor, the firmware emulator and its presses
 SIMULATOR_DRIVEN = ("sensors/simulated.py", "sensors/emulator.py", "sensors/contacts.py")
 
+# what the byte formats (tactile_manip.wire, tactile_manip.logs) never import: every layer above the core
+ABOVE_THE_FORMATS = ("data", "sim", "sensors", "collection", "perception", "robot", "behaviours", "trials", "learning",
+                     "bench", "interop", "commands", "cli")
+
 HEAVY = ("torch", "onnxruntime", "roboticstoolbox", "franky", "serial", "trimesh", "matplotlib", "cv2", "sklearn")
 
 
@@ -39,6 +44,7 @@ def _heavy_modules_after(code: str) -> list[str]:
     "import tactile_manip.sim.board_press, tactile_manip.sim.magnets",
     "import tactile_manip.sim.dataset",
     "import tactile_manip.sensors",
+    "import tactile_manip.logs.recording, tactile_manip.wire",
     "import tactile_manip.collection.camera, tactile_manip.collection.camera_opencv, tactile_manip.collection.camera_sim, "
     "tactile_manip.collection.vbts_calibration, tactile_manip.collection.collect, tactile_manip.collection.collect_sim",
     "import tactile_manip.perception.reconstruct, tactile_manip.perception.pose, tactile_manip.perception.metrics",
@@ -107,6 +113,57 @@ def test_drivers_and_perception_load_no_simulator_module():
             "tactile_manip.sensors.replay, tactile_manip.sensors.recording, tactile_manip.sensors.wire.anyskin, "
             "tactile_manip.perception, tactile_manip.perception.reconstruct\n"
             "print(json.dumps(sorted(m for m in sys.modules if m.split('.')[:2] == ['tactile_manip', 'sim'])))")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert json.loads(done.stdout.strip().splitlines()[-1]) == []
+
+
+def _layer_imports(folder: str, layers: tuple[str, ...]) -> dict[str, list[str]]:
+    """The modules of ``folder`` (anywhere in each file) that import one of ``layers`` (folders of the package)."""
+    offenders = {}
+    for path in sorted((PACKAGE / folder).rglob("*.py")):
+        found = sorted(n for n in _imported_modules(path)
+                       if n.split(".")[:2] in [["tactile_manip", layer] for layer in layers])
+        if found:
+            offenders[path.relative_to(PACKAGE).as_posix()] = found
+    return offenders
+
+
+def test_data_imports_nothing_from_the_sensors():
+    """The data layer reads recordings through tactile_manip.logs, never through the sensors layer above it."""
+    assert _layer_imports("data", ("sensors",)) == {}
+
+
+@pytest.mark.parametrize("folder", ["wire", "logs"])
+def test_wire_formats_and_logs_import_no_upper_layer(folder):
+    assert _layer_imports(folder, ABOVE_THE_FORMATS) == {}
+
+
+def test_the_layer_scan_sees_imports_inside_functions():
+    """The scan itself works: the sensors' recorder imports the log format, and the data layer names
+    tactile_manip.logs inside a function (read_reading_stream)."""
+    assert "sensors/recording.py" in _layer_imports("sensors", ("logs",))
+    assert "data/streams.py" in _layer_imports("data", ("logs",))
+
+
+def test_data_reads_a_recording_without_loading_the_sensors(tmp_path):
+    """At run time too: writing a recording with the log format and reading it through the data layer loads no
+    module of tactile_manip.sensors."""
+    path = tmp_path / "idle.tmrec"
+    code = ("import json, sys\nimport numpy as np\n"
+            "from tactile_manip.chips import MLX90393\n"
+            "from tactile_manip.data.streams import read_reading_stream\n"
+            "from tactile_manip.logs.recording import RecordingWriter\n"
+            "from tactile_manip.wire.protocol import encode_frame\n"
+            "chip = {'lsb_xy_ut': MLX90393.lsb_xy_ut, 'lsb_z_ut': MLX90393.lsb_z_ut, "
+            "'saturation_counts': MLX90393.saturation_counts}\n"
+            f"with RecordingWriter({str(path)!r}, {{'source': 'test', 'chip': chip}}) as out:\n"
+            "    for k in range(3):\n"
+            "        wire = encode_frame(np.full((4, 4, 3), k, np.int16), seq=k, t_mcu_us=8000 * k)\n"
+            "        out.write_frame(k / 125, wire)\n"
+            f"t, values, info = read_reading_stream({str(path)!r})\n"
+            "assert values.shape == (3, 4, 4, 3) and info['frames'] == 3, (values.shape, info)\n"
+            "print(json.dumps(sorted(m for m in sys.modules if m.split('.')[:2] == ['tactile_manip', 'sensors'])))")
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr
     assert json.loads(done.stdout.strip().splitlines()[-1]) == []

@@ -36,7 +36,7 @@ AXIS_VECTORS: dict[str, tuple[float, float, float]] = {
     "+z": (0.0, 0.0, 1.0), "-z": (0.0, 0.0, -1.0),
 }
 MAX_CHIPS = 1024  # more chips than any magnetic-skin board carries: a bigger count is a typing error
-WIRE_FORMAT_NAMES = ("supermag", "anyskin")  # sensors.wire.WIRE_FORMATS holds their decoders
+WIRE_FORMAT_NAMES = ("supermag", "anyskin")  # wire.WIRE_FORMATS holds their decoders
 
 
 def _finite(where: str, value: float, *, low: float | None = None, high: float | None = None,

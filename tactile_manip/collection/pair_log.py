@@ -30,8 +30,8 @@ from typing import Any
 import numpy as np
 
 from tactile_manip.errors import RecordingError
-from tactile_manip.sensors.framed_file import (CRC32, TAG_EVENT, FramedWriter, json_default, read_header,
-                                               scan_records)
+from tactile_manip.logs.framed_file import (CRC32, TAG_EVENT, FramedWriter, json_default, read_header,
+                                            scan_records)
 from tactile_manip.data import DEPTH_SCALE_MM, SPLITS, PairedDataset, depth_image_spec
 from tactile_manip.version import code_version
 

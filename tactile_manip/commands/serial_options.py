@@ -10,7 +10,7 @@ if TYPE_CHECKING:
 
 PORT_HINT = ("name the board's serial port (`tactile-manip find-port` lists them), "
              "or pass --sim for the simulated sensor")
-WIRE_FORMATS = ("supermag", "anyskin")  # mirrors tactile_manip.sensors.wire.WIRE_FORMATS (checked in the tests)
+WIRE_FORMATS = ("supermag", "anyskin")  # mirrors tactile_manip.wire.WIRE_FORMATS (checked in the tests)
 
 
 def add_serial_options(p: argparse.ArgumentParser, source: argparse._MutuallyExclusiveGroup) -> None:

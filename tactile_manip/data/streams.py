@@ -100,7 +100,7 @@ def read_reading_stream(path: str | Path) -> tuple[np.ndarray, np.ndarray, dict]
     path = Path(path)
     if path.suffix == RECORDING_SUFFIX:
         from tactile_manip.errors import RecordingError
-        from tactile_manip.sensors.recording import read_recording
+        from tactile_manip.logs.recording import read_recording
 
         try:
             rec = read_recording(path)

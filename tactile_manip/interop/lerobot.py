@@ -382,7 +382,7 @@ def _jsonable(stats: dict[str, dict[str, np.ndarray]]) -> dict[str, dict[str, li
 
 def _tactile_meta(episodes: list[Episode], grid: tuple[int, int], s: _Streams,
                   source_info: dict[str, Any] | None) -> dict[str, Any]:
-    from tactile_manip.sensors.framed_file import json_default
+    from tactile_manip.logs.framed_file import json_default
     from tactile_manip.version import code_version
 
     layout_name = next((e.meta.get("layout") for e in episodes if e.meta.get("layout")), None)

@@ -63,7 +63,7 @@ def read_source(path: str | Path) -> Source:
         SourceError: the path is missing or none of the three, or no episode in it is intact.
     """
     from tactile_manip.collection.pair_log import MAGIC as PAIRS_MAGIC
-    from tactile_manip.sensors.recording import MAGIC as RECORDING_MAGIC
+    from tactile_manip.logs.recording import MAGIC as RECORDING_MAGIC
 
     path = Path(path)
     if path.is_dir():
@@ -179,7 +179,7 @@ def _trial_episode(index: int, r, frames, tolerance_rad: float, phases: tuple[st
 # ---------------------------------------------------------------------------------------------- recordings
 
 def _read_recording(path: Path) -> Source:
-    from tactile_manip.sensors.recording import read_recording
+    from tactile_manip.logs.recording import read_recording
 
     rec = read_recording(path)
     skipped = []

@@ -3,11 +3,14 @@
 - :class:`TactileSensor`: the contract (connect, ``read_latest``, ``wait_new``, ``window``, baseline, health);
 - backends :class:`SerialSensor` (pyserial, imported on connect), :class:`SimulatedSensor`,
   :class:`ReplaySensor`, each built from its config dataclass or by :func:`make_sensor`;
-- :mod:`~tactile_manip.sensors.protocol`: the SuperMag wire codec; :mod:`~tactile_manip.sensors.wire`: the
-  wire formats of the serial backend (supermag, anyskin); :mod:`~tactile_manip.sensors.layout`: board layouts;
-  :mod:`~tactile_manip.sensors.drift`: baseline tracking, temperature, stray fields;
-  :mod:`~tactile_manip.sensors.emulator`: the firmware emulator on a pty; :mod:`~tactile_manip.sensors.recording`:
-  crash-safe recordings.
+- :mod:`~tactile_manip.sensors.layout`: board layouts; :mod:`~tactile_manip.sensors.drift`: baseline tracking,
+  temperature, stray fields; :mod:`~tactile_manip.sensors.emulator`: the firmware emulator on a pty;
+  :mod:`~tactile_manip.sensors.recording`: recording a live sensor to a crash-safe file.
+
+The wire formats the serial backend decodes (the SuperMag codec, supermag and anyskin decoders) live below this
+layer in :mod:`tactile_manip.wire`, and the recording file format and its reader in
+:mod:`tactile_manip.logs.recording`; ``sensors.protocol``, ``sensors.wire`` and ``sensors.framed_file`` name the
+same objects.
 
 Importing this package does not import pyserial or matplotlib, nor the simulator: :class:`SimulatedSensor` and
 the press timeline (:class:`ContactTimeline`, :class:`Press`, :func:`parse_press`) drive it and load it when
@@ -17,6 +20,7 @@ first named. See ``docs/sensors.md``.
 import importlib
 from typing import Any
 
+from tactile_manip.logs.recording import Recording, RecordingWriter, read_recording
 from tactile_manip.sensors.array import SensorArray
 from tactile_manip.sensors.base import FrameSubscription, SensorFrame, SensorHealth, TactileSensor
 from tactile_manip.sensors.baseline import Baseline
@@ -30,7 +34,7 @@ from tactile_manip.sensors.config import (
     make_sensor,
 )
 from tactile_manip.sensors.layout import LAYOUTS, BoardLayout, ChipPlacement, get_layout
-from tactile_manip.sensors.recording import Recorder, Recording, RecordingWriter, read_recording
+from tactile_manip.sensors.recording import Recorder
 from tactile_manip.sensors.replay import ReplaySensor
 from tactile_manip.sensors.serial_sensor import SerialSensor
 

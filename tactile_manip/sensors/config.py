@@ -112,7 +112,7 @@ class SerialSensorConfig:
 
     def __post_init__(self) -> None:
         from tactile_manip.sensors.layout import get_layout
-        from tactile_manip.sensors.wire import DEFAULT_LAYOUTS, WIRE_FORMATS
+        from tactile_manip.wire import DEFAULT_LAYOUTS, WIRE_FORMATS
 
         for name in ("port", "serial_number"):
             if not isinstance(getattr(self, name), str):

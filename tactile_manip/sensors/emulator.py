@@ -19,7 +19,7 @@ and counted (as a USB bridge does), so a missing reader never stalls the schedul
 reader on the same machine measure the write-to-read latency.
 
 ``wire_format="anyskin"`` streams the ReSkin/AnySkin binary sketch's bytes instead (five chips, float32
-t, x, y, z each, then CRLF; :mod:`tactile_manip.sensors.wire.anyskin`): the simulator models the SuperMag pad,
+t, x, y, z each, then CRLF; :mod:`tactile_manip.wire.anyskin`): the simulator models the SuperMag pad,
 so each chip of the ``anyskin-5`` cross gets the simulated field interpolated (bilinearly, over the 4x4
 chips) at its position and turned into its own axes, and a temperature of 25 degC with 0.1 degC noise.
 
@@ -42,8 +42,8 @@ import numpy as np
 from tactile_manip.outputs import OutputPathError, check_writable_parent
 from tactile_manip.sensors.contacts import ContactTimeline, Press
 from tactile_manip.sensors.layout import ANYSKIN_5, BoardLayout, get_layout
-from tactile_manip.sensors.protocol import encode_frame
-from tactile_manip.sensors.wire.anyskin import pack_frame
+from tactile_manip.wire.protocol import encode_frame
+from tactile_manip.wire.anyskin import pack_frame
 from tactile_manip.sim.pair import SensorPair
 
 REBASE_LATE_S = 0.25  # a tick this late restarts the schedule instead of bursting to catch up

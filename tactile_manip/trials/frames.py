@@ -1,7 +1,7 @@
 """Per-frame streams of a trial: every sensor frame with the arm, gripper, estimate and phase at that moment.
 
 One file per (trial, method): ``RUN_DIR/frames/<method>-<trial:04d>.tmframes``, an append-only framed file
-(``tactile_manip.sensors.framed_file``) that survives a crash as the trial log does::
+(``tactile_manip.logs.framed_file``) that survives a crash as the trial log does::
 
     line 1   b"tactile_manip trial frames\\n"
     line 2   one JSON object + b"\\n": format version, trial, method, seed, object, rate_hz, grid, target, ...
@@ -39,7 +39,7 @@ from typing import Any
 import numpy as np
 
 from tactile_manip.errors import RecordingError, RobotError, SensorError
-from tactile_manip.sensors.framed_file import CRC32, TAG_EVENT, FramedWriter, read_header, scan_records
+from tactile_manip.logs.framed_file import CRC32, TAG_EVENT, FramedWriter, read_header, scan_records
 
 MAGIC = b"tactile_manip trial frames\n"
 FORMAT_VERSION = 1

@@ -1,31 +1,8 @@
-"""Wire formats of the serial backend: one decoder per format, chosen by name (docs/design.md, Wire protocol).
-
-:data:`WIRE_FORMATS` maps a name to its ``"module:Class"``; :func:`make_decoder` imports only the chosen one.
-
-- ``supermag`` (default): our binary frames with sequence, device clock, status and CRC (``firmware/``);
-- ``anyskin``: the published ReSkin/AnySkin binary burst sketch (float32 t, x, y, z per chip, then CRLF).
+"""The wire formats under their former path: the decoders live in :mod:`tactile_manip.wire` (below the sensors
+layer, so the recording reader and the data layer use them without the sensors), and this package and its
+modules (``base``, ``anyskin``, ``supermag``) name the same objects.
 """
 
-from __future__ import annotations
-
-import importlib
-
-from tactile_manip.chips import ChipSettings
-from tactile_manip.sensors.wire.base import ChipFrame, WireDecoder, WireStats
-
-WIRE_FORMATS: dict[str, str] = {
-    "supermag": "tactile_manip.sensors.wire.supermag:SuperMagDecoder",
-    "anyskin": "tactile_manip.sensors.wire.anyskin:AnySkinDecoder",
-}
-DEFAULT_LAYOUTS: dict[str, str] = {"supermag": "supermag-4x4", "anyskin": "anyskin-5"}
-
-
-def make_decoder(name: str, *, n_chips: int, chip: ChipSettings) -> WireDecoder:
-    """A fresh decoder of the format ``name`` for ``n_chips`` chips; ValueError naming the known formats."""
-    if name not in WIRE_FORMATS:
-        raise ValueError(f"unknown wire format {name!r}; known formats: {', '.join(WIRE_FORMATS)}")
-    module, _, cls = WIRE_FORMATS[name].partition(":")
-    return getattr(importlib.import_module(module), cls)(n_chips=n_chips, chip=chip)
-
+from tactile_manip.wire import DEFAULT_LAYOUTS, WIRE_FORMATS, ChipFrame, WireDecoder, WireStats, make_decoder
 
 __all__ = ["DEFAULT_LAYOUTS", "WIRE_FORMATS", "ChipFrame", "WireDecoder", "WireStats", "make_decoder"]
