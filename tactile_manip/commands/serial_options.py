@@ -11,6 +11,7 @@ if TYPE_CHECKING:
 PORT_HINT = ("name the board's serial port (`tactile-manip find-port` lists them), "
              "or pass --sim for the simulated sensor")
 WIRE_FORMATS = ("supermag", "anyskin")  # mirrors tactile_manip.wire.WIRE_FORMATS (checked in the tests)
+DEFAULT_WIRE_FORMAT, DEFAULT_BAUD = "supermag", 921600  # without --board: the SuperMag firmware's
 
 
 def add_serial_options(p: argparse.ArgumentParser, source: argparse._MutuallyExclusiveGroup) -> None:
@@ -18,9 +19,11 @@ def add_serial_options(p: argparse.ArgumentParser, source: argparse._MutuallyExc
     source.add_argument("--serial-number", metavar="SN",
                         help="the board's USB serial number instead of --port (kept across replugs; see find-port)")
     g = p.add_argument_group("serial port")
-    g.add_argument("--baud", type=int, default=921600, help="baud rate (default 921600)")
-    g.add_argument("--wire-format", choices=WIRE_FORMATS, default="supermag",
-                   help="the board's bytes: supermag (firmware/, default) or anyskin (ReSkin/AnySkin binary sketch)")
+    g.add_argument("--baud", type=int, default=None,
+                   help="baud rate (default: the --board file's [wire] baudrate, else 921600)")
+    g.add_argument("--wire-format", choices=WIRE_FORMATS, default=None,
+                   help="the board's bytes: supermag (firmware/) or anyskin (ReSkin/AnySkin binary sketch); default: "
+                        "the --board file's [wire] format, else supermag")
     g.add_argument("--board", "--layout", dest="layout", default="", metavar="NAME|FILE",
                    help="the board: a shipped board (supermag-4x4, anyskin-5, eflesh), generic:N or a board file "
                         "(.toml); default: the wire format's own board (--layout is the same option)")
@@ -39,6 +42,12 @@ def serial_config(args: argparse.Namespace) -> SerialSensorConfig:
     for flag, value in (("--port", args.port), ("--serial-number", args.serial_number)):
         if value is not None:
             check_nonblank(flag, value, hint=PORT_HINT)
-    return SerialSensorConfig(port=args.port or "", serial_number=args.serial_number or "", baudrate=args.baud,
-                              wire_format=args.wire_format, layout=args.layout, dtr=args.dtr == "high",
-                              rts=args.rts == "high")
+    wire_format, baud = args.wire_format, args.baud
+    if args.layout and (wire_format is None or baud is None):  # the board file says how its frames travel
+        from tactile_manip.boards import load_board
+
+        wire = load_board(args.layout).wire
+        wire_format, baud = wire_format or wire.format, baud or wire.baudrate
+    return SerialSensorConfig(port=args.port or "", serial_number=args.serial_number or "",
+                              baudrate=baud or DEFAULT_BAUD, wire_format=wire_format or DEFAULT_WIRE_FORMAT,
+                              layout=args.layout, dtr=args.dtr == "high", rts=args.rts == "high")

@@ -76,3 +76,22 @@ def test_dtr_and_rts_levels_reach_the_port(monkeypatch):
         sensor = SerialSensor(SerialSensorConfig(port="/dev/ttyACM0", dtr=dtr, rts=rts))
         sensor._open_port(fake)  # noqa: SLF001 - the settings applied before open(), without a device
         assert opened == {"dtr": dtr, "rts": rts, "port": "/dev/ttyACM0", "exclusive": True}
+
+
+def test_a_board_file_sets_the_wire_format_and_baud_unless_they_are_given():
+    import argparse
+
+    def config(*flags):
+        p = argparse.ArgumentParser()
+        source = p.add_mutually_exclusive_group()
+        source.add_argument("--port")
+        serial_options.add_serial_options(p, source)
+        return serial_options.serial_config(p.parse_args(["--port", "/dev/x", *flags]))
+
+    assert (config().wire_format, config().baudrate) == ("supermag", 921600)   # the SuperMag firmware's
+    eflesh = config("--board", "eflesh")
+    assert (eflesh.wire_format, eflesh.baudrate, eflesh.layout) == ("anyskin", 115200, "eflesh")
+    assert config("--board", "generic:10").wire_format == "anyskin"
+    assert config("--layout", "anyskin-5").baudrate == 115200
+    given = config("--board", "eflesh", "--baud", "230400", "--wire-format", "anyskin")
+    assert (given.wire_format, given.baudrate) == ("anyskin", 230400)
