@@ -26,6 +26,7 @@ DEFAULT_PORT = 9876          # Rerun's own default gRPC port
 LOCALHOST = "127.0.0.1"
 START_TIMEOUT_S = 20.0       # a cold viewer or server takes a few seconds to listen
 STOP_TIMEOUT_S = 5.0         # a server asked to stop is killed after this long
+FLUSH_TIMEOUT_S = 10.0       # the last data of a live stream waits this long at most on exit
 NO_DISPLAY = "no display (DISPLAY and WAYLAND_DISPLAY are unset): use --save F.rrd or --serve"
 _WINDOWS = sys.platform == "win32"
 
@@ -90,7 +91,7 @@ class LiveSink:
 
     def close(self) -> None:
         try:
-            self.recording.flush()
+            flush_within(self.recording, FLUSH_TIMEOUT_S, self.notes)
             self.recording.disconnect()
         finally:
             if self.process is not None and self.stop_process:
@@ -144,6 +145,18 @@ def open_live(*, save: str | Path | None = None, spawn: bool = False, serve: boo
     if bind not in (LOCALHOST, "::1"):
         sink.notes.append(f"warning: listening on {bind} port {port}, reachable from other machines")
     return sink
+
+
+def flush_within(recording, timeout_s: float, notes: list[str]) -> None:
+    """Flush ``recording``, waiting at most ``timeout_s`` (rerun-sdk 0.24 has no timeout and waits for good): a
+    stream interrupted mid-send (Ctrl-C, a stopped viewer) must not hold the command's exit; what was not sent
+    in time is noted in ``notes``."""
+    try:
+        recording.flush(timeout_sec=timeout_s)
+    except TypeError:  # an SDK without the timeout
+        recording.flush()
+    except Exception as e:  # noqa: BLE001 - rerun raises its own error when the timeout is reached
+        notes.append(f"rerun: the last data was not flushed within {timeout_s:g} s ({type(e).__name__}: {e})")
 
 
 def _start(cmd: list[str]) -> subprocess.Popen:

@@ -213,3 +213,24 @@ def test_spawn_checks_no_display_off_linux(monkeypatch):
     monkeypatch.setenv("WAYLAND_DISPLAY", "wayland-0")
     assert display_problem() is None
 
+
+
+def test_a_flush_that_does_not_finish_in_time_is_noted_and_does_not_hold_the_exit():
+    from tactile_manip.interop.rerun_sink import flush_within
+
+    class Stuck:  # a stream interrupted mid-send: rerun raises once the timeout is reached
+        def flush(self, *, timeout_sec):
+            raise RuntimeError(f"flush timed out after {timeout_sec} s")
+
+    class Old:  # rerun-sdk 0.24: no timeout, a blocking flush
+        flushed = 0
+
+        def flush(self):
+            self.flushed += 1
+
+    notes: list[str] = []
+    flush_within(Stuck(), 0.5, notes)
+    assert notes == ["rerun: the last data was not flushed within 0.5 s (RuntimeError: flush timed out after 0.5 s)"]
+    old = Old()
+    flush_within(old, 0.5, notes)
+    assert old.flushed == 1 and len(notes) == 1
