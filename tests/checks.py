@@ -1,4 +1,5 @@
-"""Assertions shared by the test layers: the CLI's one-line errors, the estimate contract; the torch skip reason.
+"""Assertions and helpers shared by the test layers: the CLI's one-line errors, the estimate contract, Ctrl-C for a
+command under test; the torch skip reason.
 
 Import them as ``from checks import ...`` (``tests/`` is on ``sys.path``: see ``pythonpath`` in pyproject.toml).
 """
@@ -61,3 +62,12 @@ def assert_sane_estimate(est) -> None:
     else:
         assert est.reason, est
         assert est.angle_rad == 0.0 and est.confidence == 0.0, est
+
+
+def ctrl_c_as_in_a_terminal() -> None:
+    """``preexec_fn`` of a command a test sends Ctrl-C: a test run started in the background (``cmd &`` in a
+    script) hands its children SIGINT ignored, and Python then never raises KeyboardInterrupt; this gives the
+    command SIGINT as a terminal would."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_DFL)

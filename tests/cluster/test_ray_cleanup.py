@@ -10,6 +10,7 @@ import time
 from pathlib import Path
 
 import pytest
+from checks import ctrl_c_as_in_a_terminal
 
 if importlib.util.find_spec("ray") is None:
     pytest.skip("the 'ray' extra is not installed", allow_module_level=True)
@@ -64,7 +65,8 @@ def test_no_process_of_the_session_outlives_the_command(tmp_path, sig):
     log = tmp_path / "stderr.txt"
     with log.open("wb") as stderr:  # a file, not a pipe: a full pipe would stall the command
         proc = subprocess.Popen(cmd, cwd=REPO, stdout=subprocess.DEVNULL, stderr=stderr,
-                                start_new_session=True)  # a process group of its own, as a shell gives a job
+                                start_new_session=True,  # a process group of its own, as a shell gives a job
+                                preexec_fn=ctrl_c_as_in_a_terminal)
     cli = psutil.Process(proc.pid)
     seen: dict = {}
     try:

@@ -12,7 +12,7 @@ import time
 from pathlib import Path
 
 import pytest
-from checks import assert_one_line_error
+from checks import assert_one_line_error, ctrl_c_as_in_a_terminal
 
 pytest.importorskip("rerun", reason="the Rerun sinks need rerun-sdk (extra 'viz')")
 
@@ -61,16 +61,10 @@ def _assert_nothing_left(port: int, host: str = "127.0.0.1") -> None:
     assert not left, f"rerun processes {left} of the command were still running"
 
 
-def _ctrl_c_as_in_a_terminal() -> None:
-    """A test run started in the background (``cmd &`` in a script) hands its children SIGINT ignored, and
-    Python then never raises KeyboardInterrupt: the command gets Ctrl-C as it would in a terminal."""
-    signal.signal(signal.SIGINT, signal.SIG_DFL)
-
-
 def _cli(*argv: str) -> subprocess.Popen:
     return subprocess.Popen([sys.executable, "-m", "tactile_manip.cli", *argv], cwd=REPO, stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True,
-                            preexec_fn=None if sys.platform == "win32" else _ctrl_c_as_in_a_terminal)
+                            preexec_fn=None if sys.platform == "win32" else ctrl_c_as_in_a_terminal)
 
 
 def _wait_serving(proc: subprocess.Popen, port: int, timeout_s: float = 60.0) -> None:
