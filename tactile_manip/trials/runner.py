@@ -15,7 +15,6 @@ skips the pairs already there, so a killed run loses no completed trial and can 
 from __future__ import annotations
 
 import contextlib
-import dataclasses
 import math
 import time
 from collections.abc import Callable, Iterator
@@ -305,11 +304,11 @@ class WorldTruth:
 
 
 def make_record(p: Presentation, method: str, target_rad: float, result: ReorientResult, *,
-                commanded_force_n: float | None = None) -> TrialRecord:
+                commanded_force_n: float | None = None, task: str | None = "reorient") -> TrialRecord:
     """The log line of one trial (a correction without a measured final angle is "unmeasured").
 
     ``commanded_force_n``: the behaviour's grasp force, logged as ``extra["commanded_force_n"]`` beside the
-    grip force a contact model estimated (``result.contact``).
+    grip force a contact model estimated (``result.contact``); ``task``: the scene's task, named in the line.
     """
     est = result.estimate
     grip = result.contact
@@ -329,7 +328,7 @@ def make_record(p: Presentation, method: str, target_rad: float, result: Reorien
                "estimate_timings_s": dict(est.timings_s) if est is not None else {},
                **({} if commanded_force_n is None else {"commanded_force_n": float(commanded_force_n)})},
         estimated_grip_force_n=_rounded(None if grip is None else grip.force_n),
-        estimated_grip_force_sigma_n=_rounded(None if grip is None else grip.force_sigma_n))
+        estimated_grip_force_sigma_n=_rounded(None if grip is None else grip.force_sigma_n), task=task)
 
 
 def make_place_record(p: Presentation, method: str, result: PlaceResult, *, clearance_mm: float) -> TrialRecord:
@@ -422,8 +421,8 @@ def run_scene(scene: TrialScene, write: Callable[[TrialRecord], None], *, estima
             if isinstance(result, PlaceResult):
                 record = make_place_record(p, method, result, clearance_mm=scene.place.clearance_mm)
             else:
-                record = make_record(p, method, target, result, commanded_force_n=scene.behaviour.force_n)
-                record = dataclasses.replace(record, task=scene.task)
+                record = make_record(p, method, target, result, commanded_force_n=scene.behaviour.force_n,
+                                     task=scene.task)
             write(record)
             if trial_observer is not None:
                 trial_observer.trial_finished(record)
