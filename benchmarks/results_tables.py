@@ -80,6 +80,7 @@ METHODS = {  # trial method names -> what they do
     "supermag_sym": "symmetry-averaged (8 passes)",
     "supermag_esc": "one pass; symmetry-averaged again below calibrated confidence 0.5",
     "paper_route": "the paper's route: the image's principal axis, no angle head",
+    "supermag_rods": "one pass per reading; force and position from a contact model of the six rods",
     "bilinear": "bilinear 4x4 -> 16x16 (the paper's baseline)",
     "blind": "no tactile input: the rod taken along the pad's x axis",
     "fast": "one pass per reading",
@@ -106,6 +107,10 @@ MAIN_JOB_FAST = TrialRun(MAIN_JOB.scene, "docs/results/trials_fast/reorient_sim/
 PLACE_SCENE = TrialRun("placing: `configs/scenes/place_sim.toml` (`task = \"place\"`), 60 presentations, within 5 deg "
                        "and 1 mm of the slot", "docs/results/supermag/place_sim/summary.json",
                        {"supermag": "supermag", "supermag_sym": "supermag", "bilinear": None, "blind": None})
+GRIP_SCENE = TrialRun("gripping: `configs/scenes/grip_sim.toml` (`task = \"grip\"`), 60 presentations, the force "
+                      "felt within 1.5 N of 8 N, the axis within 0.5 mm of the pad centre, the in-hand angle within 5 deg",
+                      "docs/results/supermag/grip_sim/summary.json",
+                      {"supermag": "supermag", "supermag_rods": "supermag", "blind": None})
 ROBUST_SCENE = TrialRun("robust scene: `configs/scenes/reorient_robust.toml`, 300 presentations, 2-15 N, a drawn "
                         "sensor per trial, calibrated re-grasp below 0.8",
                         "docs/results/supermag/reorient_robust/summary.json",
@@ -117,6 +122,7 @@ ROBUST_SCENE_FAST = TrialRun(ROBUST_SCENE.scene, "docs/results/robust/fast_vs_co
 TRIAL_RUNS = (
     MAIN_JOB,
     PLACE_SCENE,
+    GRIP_SCENE,
     MAIN_JOB_FAST,
     TrialRun("study: `tasks/reorient_study.toml`, 300 presentations of the same rods, another seed",
              "docs/results/trials_fast/reorient_study/summary.json",
@@ -337,8 +343,8 @@ def models(root: Path, doc: str) -> list[str]:
 
 def trials_table(root: Path, doc: str) -> list[str]:
     """Every committed trial run, one table per scene, one row per method and model."""
-    lines: list[str] = ["Success: the final angle within 5 deg of the target. Runs of one scene with the same "
-                        "methods share their seeds (paired).", ""]
+    lines: list[str] = ["Success: the final angle within 5 deg of the target, and what else the scene's heading names. "
+                        "Runs of one scene with the same methods share their seeds (paired).", ""]
     for scene in dict.fromkeys(run.scene for run in TRIAL_RUNS):
         rows = []
         for run in (r for r in TRIAL_RUNS if r.scene == scene):

@@ -17,7 +17,8 @@ def test_shipped_model_resolves_from_any_folder(name, tmp_path, monkeypatch):
 
 def test_default_is_the_supermag_model_and_the_others_are_bench_references():
     assert shipped_model().name == "supermag.onnx" == SHIPPED_MODELS[DEFAULT_MODEL]
-    assert set(REFERENCE_MODELS) == set(SHIPPED_MODELS) - {DEFAULT_MODEL} == {"fast", "robust", "compact"}
+    assert set(REFERENCE_MODELS) == set(SHIPPED_MODELS) - {DEFAULT_MODEL, "contact"} == {"fast", "robust", "compact"}
+    assert shipped_model("contact") == models_dir() / "contact_supermag.onnx"
 
 
 def test_the_default_model_carries_an_angle_head():
@@ -41,7 +42,7 @@ def test_models_holds_the_shipped_models_only_and_the_references_are_research_re
 
 def test_unknown_name_is_refused():
     with pytest.raises(ValueError,
-                       match="unknown shipped model 'tiny': expected one of supermag, fast, robust, compact"):
+                       match="unknown shipped model 'tiny': expected one of supermag, contact, fast, robust, compact"):
         shipped_model("tiny")
 
 

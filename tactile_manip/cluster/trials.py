@@ -27,7 +27,7 @@ _WORKER: dict[str, Any] = {}
 def run_trial_block(scene: TrialScene, scene_path: str | None, trials: list[int], methods: list[str],
                     frames_dir: str | None) -> list[TrialRecord]:
     """Run ``methods`` on each presentation in ``trials`` in this process's cell; the records in run order."""
-    from tactile_manip.trials.runner import build_contact_estimator, build_estimators, make_cell, run_scene
+    from tactile_manip.trials.runner import build_contact_estimators, build_estimators, make_cell, run_scene
 
     key = (repr(scene), scene_path)
     if _WORKER.get("key") != key:  # the cell and the models are built once per worker and scene
@@ -35,7 +35,7 @@ def run_trial_block(scene: TrialScene, scene_path: str | None, trials: list[int]
         where = Path(scene_path) if scene_path else None
         cell = make_cell(scene)
         _WORKER.update(key=key, estimators=build_estimators(scene, where), cell=cell,
-                       contact=build_contact_estimator(scene, where, layout=cell.sensor.layout.name))
+                       contact=build_contact_estimators(scene, where, layout=cell.sensor.layout.name))
     wanted = set(trials)
     skip = {(i, m) for i in range(scene.trials) for m in _WORKER["estimators"] if i not in wanted or m not in methods}
     records: list[TrialRecord] = []
@@ -52,7 +52,7 @@ def run_trials_on_ray(scene: TrialScene, out_dir: str | Path, *, scene_path: str
     from tactile_manip.config import to_dict
     from tactile_manip.trials.log import TrialLog, completed_keys, read_run_info, read_trials
     from tactile_manip.trials.report import write_report
-    from tactile_manip.trials.runner import build_contact_estimator, build_estimators, make_cell
+    from tactile_manip.trials.runner import build_contact_estimators, build_estimators, make_cell
 
     if block_trials < 1:
         raise ValueError(f"--block-trials must be >= 1, got {block_trials}")
@@ -60,14 +60,14 @@ def run_trials_on_ray(scene: TrialScene, out_dir: str | Path, *, scene_path: str
     scene_file = str(Path(scene_path).resolve()) if scene_path is not None else None
     estimators = build_estimators(scene, Path(scene_file) if scene_file else None)  # a bad scene fails here
     cell = make_cell(scene)
-    build_contact_estimator(scene, Path(scene_file) if scene_file else None, layout=cell.sensor.layout.name)
+    build_contact_estimators(scene, Path(scene_file) if scene_file else None, layout=cell.sensor.layout.name)
     methods = list(estimators)
     skip = completed_keys(out / "trials.jsonl") if resume and (out / "trials.jsonl").exists() else set()
     todo = [i for i in range(scene.trials) if any((i, m) not in skip for m in methods)]
     blocks = [todo[k:k + block_trials] for k in range(0, len(todo), block_trials)]
     with ray_session(address, num_cpus=num_cpus) as ray, TrialLog(out, config=to_dict(scene), resume=resume) as log:
         _run_blocks(ray, scene, scene_file, blocks, methods, log, skip,
-                    frames_dir=str(out / "frames") if frames else None, progress=progress)
+                    frames_dir=str(out / "frames") if frames and scene.task == "reorient" else None, progress=progress)
     tolerance = math.radians(scene.tolerance_deg)
     return write_report(out, read_trials(out / "trials.jsonl"), tolerance, title=f"Reorientation trials: {scene.name}",
                         run_info=read_run_info(out))

@@ -10,6 +10,7 @@
                             ContactEstimator("models/contact_supermag.onnx"))
     est = both.estimate(field_ut)        # -> TactileEstimate
     est.angle.angle_rad, est.position_mm, est.contact.force_n
+    est = both.read(sensor, frames=4)    # the mean of the sensor's next 4 frames (one static contact)
     for est in both.stream(sensor):      # one TactileEstimate per new frame
         ...
 
@@ -39,8 +40,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from tactile_manip.perception.contact import ContactEstimator, ContactState
-from tactile_manip.perception.estimator import (NO_CONTACT_FIELD, StreamStats, TactilePoseEstimator,
-                                                 stream_estimates)
+from tactile_manip.perception.estimator import (NO_CONTACT_FIELD, StreamStats, TactilePoseEstimator, _field,
+                                                 _fresh_frames, stream_estimates)
 from tactile_manip.perception.pose import ISOTROPIC_REASON
 from tactile_manip.types import AngleEstimate, TactileReading
 
@@ -132,6 +133,37 @@ class TactileEstimator:
         return TactileEstimate(angle=angle, contact=contact,
                                position_mm=fused_position_mm(angle, contact, self.image_position_weight,
                                                              self.pose.min_contact_area_mm2))
+
+    def estimate_frames(self, readings) -> TactileEstimate:
+        """Angle, contact and position from the mean of consecutive readings of one static contact (less chip
+        noise). The contact model reads the mean as one reading with no context before it (its history is
+        reset), so an earlier grasp never leaks into this one."""
+        if len(readings) == 0:
+            raise ValueError("estimate_frames needs at least one reading")
+        fields = [np.asarray(_field(r)) for r in readings]
+        if len({f.shape for f in fields}) != 1:
+            raise ValueError(f"readings of different shapes cannot be averaged: {sorted({f.shape for f in fields})}")
+        last = readings[-1]
+        self.contact.reset()
+        contact = self.contact.estimate(np.mean(np.stack(fields).astype(np.float64), axis=0),
+                                        t_s=last.t_host_s if isinstance(last, TactileReading) else None)
+        angle = self.pose.estimate_frames(readings)
+        return TactileEstimate(angle=angle, contact=contact,
+                               position_mm=fused_position_mm(angle, contact, self.image_position_weight,
+                                                             self.pose.min_contact_area_mm2))
+
+    def read(self, sensor: TactileSensor, *, frames: int = 1, timeout_s: float = 0.1) -> TactileEstimate:
+        """Estimate from the next ``frames`` new frames of ``sensor`` (:meth:`estimate_frames`; frames that
+        arrived before the call are not used).
+
+        Raises:
+            SensorTimeoutError: a frame did not arrive within ``timeout_s`` (a stalled sensor).
+        """
+        if isinstance(frames, bool) or not isinstance(frames, int) or frames < 1:
+            raise ValueError(f"frames must be a positive integer, got {frames!r}")
+        self.pose.reconstructor.check_layout(sensor.layout.name)
+        self.contact.check_layout(sensor.layout.name)
+        return self.estimate_frames(_fresh_frames(sensor, frames, timeout_s))
 
     def stream(self, sensor: TactileSensor, *, timeout_s: float = 0.1, max_estimates: int | None = None,
                stats: StreamStats | None = None) -> Iterator[TactileEstimate]:

@@ -209,7 +209,7 @@ class TwinGripper(Gripper):
         obj, hand_T_object = found
         duration_s = self._move_fingers(obj.width_m, speed_m_s)
         success = width - eps_in <= obj.width_m <= width + eps_out
-        if success and self.world.held is not obj:
+        if success:  # a grasp of the object already held keeps its place and sets the new force
             centred = hand_T_object.copy()
             centred[1, 3] = 0.0  # the coupled fingers centre the object along the closing axis
             self.world.hold(obj, centred, force)

@@ -51,7 +51,8 @@ def grip_force_summary(records: Iterable[TrialRecord], *, applied: bool = False)
     """Per method (in order of first appearance), the records that carry an estimated grip force; methods
     without one are left out (an empty dict for a run without a contact model).
 
-    ``applied``: also score against ``extra["force_n"]``, the force a simulated cell applied (a real cell
+    ``applied``: also score against the force a simulated cell applied (``extra["applied_force_n"]`` where a
+    grip logs it, else ``extra["force_n"]``) (a real cell
     logs the presentation's drawn force there, which nobody applied: leave it False for real runs).
     """
     by_method: dict[str, list[TrialRecord]] = {}
@@ -69,7 +70,7 @@ def _summary(method: str, recs: list[TrialRecord], applied: bool) -> GripForceSu
     err = est[known] - commanded[known]
     out = {"commanded_n": _mean(commanded[known]), "error_mean_n": _mean(err), "rmse_vs_commanded_n": _rms(err)}
     if applied:
-        truth = np.array([r.extra.get("force_n", math.nan) for r in recs], np.float64)
+        truth = np.array([_applied(r) for r in recs], np.float64)
         has = np.isfinite(truth)
         miss = est[has] - truth[has]
         out.update(applied=int(has.sum()), rmse_vs_applied_n=_rms(miss),
@@ -94,11 +95,19 @@ def markdown_lines(summary: dict[str, GripForceSummary]) -> list[str]:
         if applied:
             row += [_n(s.rmse_vs_applied_n), "-" if s.within_1_sigma is None else f"{100 * s.within_1_sigma:.0f} %"]
         rows.append(row)
-    note = ("estimated by the scene's contact model at the estimate step; error = estimate - commanded"
+    note = ("estimated by the method's contact model (the scene's unless the method names its own) at the estimate "
+            "step; error = estimate - commanded"
             + ("; applied: the force the simulated cell applied" if applied else ""))
     return ["", "## Estimated grip force", "", note + ".", "",
             "| " + " | ".join(header) + " |", "|" + "---|" * len(header),
             *("| " + " | ".join(row) + " |" for row in rows)]
+
+
+def _applied(r: TrialRecord) -> float:
+    """The force the simulated cell applied at the estimate: a grip logs it after its corrections
+    (``applied_force_n``), the other tasks apply the presentation's force throughout."""
+    value = r.extra.get("applied_force_n", r.extra.get("force_n"))
+    return math.nan if value is None else float(value)
 
 
 def _mean(x: np.ndarray) -> float | None:

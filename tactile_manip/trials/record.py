@@ -1,4 +1,4 @@
-"""One reorientation trial as it is logged: a flat, JSON-serialisable record (one line per trial).
+"""One trial as it is logged: a flat, JSON-serialisable record (one line per trial).
 
 Outcomes (``outcome``) say what happened; ``success`` is derived from ``outcome`` and ``error_rad`` at a
 tolerance, so a run can be re-scored at another tolerance without re-running it (``tactile-manip score``).
@@ -28,7 +28,7 @@ OUTCOMES = ("done", "abstained", "grasp_failed", "sensor_stale", "ik_failed", "a
             "unmeasured", "error")
 RECORD_VERSION = 1
 OPTIONAL_FIELDS = ("estimated_grip_force_n", "estimated_grip_force_sigma_n", "task", "lateral_error_mm",
-                   "clearance_mm")  # left out of a line when None
+                   "clearance_mm", "force_error_n", "force_tolerance_n")  # left out of a line when None
 
 
 @dataclass
@@ -56,10 +56,14 @@ class TrialRecord:
             step, N (None without a contact model, or when the trial ended before it; the line then leaves it
             out). The behaviour's commanded force is ``extra["commanded_force_n"]``.
         estimated_grip_force_sigma_n: its sigma (one standard deviation of the model's estimate), N.
-        task: the behaviour the trial ran: "reorient" or "place" (None in lines written before trials named it:
-            reorient).
-        lateral_error_mm: placing: distance from the slot's centre to the rod's true axis, mm (None otherwise).
-        clearance_mm: placing: the slot's clearance; a placement succeeds only with the lateral error within it.
+        task: the behaviour the trial ran: "reorient", "place" or "grip" (None in lines written before trials
+            named it: reorient).
+        lateral_error_mm: distance from the task's target point to the rod's true axis, mm: the slot's centre
+            when placing, the pad centre when gripping (None for a task without one).
+        clearance_mm: the lateral error a trial may have and still succeed: the slot's clearance when placing,
+            the centring tolerance when gripping.
+        force_error_n: gripping: the force the object felt at the end minus the target force, N (None otherwise).
+        force_tolerance_n: gripping: a grip succeeds only with |force_error_n| within it.
         timings_s: named durations of the trial's phases, s.
         extra: backend- or task-specific values (JSON-serialisable).
     """
@@ -85,6 +89,8 @@ class TrialRecord:
     task: str | None = None
     lateral_error_mm: float | None = None
     clearance_mm: float | None = None
+    force_error_n: float | None = None
+    force_tolerance_n: float | None = None
     timings_s: dict[str, float] = field(default_factory=dict)
     extra: dict[str, Any] = field(default_factory=dict)
     version: int = RECORD_VERSION
@@ -98,16 +104,24 @@ class TrialRecord:
             raise ValueError("estimated_grip_force_n and estimated_grip_force_sigma_n come together (both or neither)")
 
     def succeeded(self, tolerance_rad: float) -> bool:
-        """Whether the trial is a success at ``tolerance_rad`` (done, |error| <= tolerance, and a placement's
-        lateral error within the slot's clearance)."""
-        return self.outcome == "done" and abs(float(self.error_rad)) <= tolerance_rad and self.within_clearance
+        """Whether the trial is a success at ``tolerance_rad`` (done, |error| <= tolerance, the lateral error
+        within the clearance and the force within its tolerance where the task has them)."""
+        return (self.outcome == "done" and abs(float(self.error_rad)) <= tolerance_rad and self.within_clearance
+                and self.within_force)
 
     @property
     def within_clearance(self) -> bool:
-        """A placement's lateral error within the slot's clearance (True for a trial that places nothing)."""
+        """The lateral error within the clearance (True for a task without one)."""
         if self.clearance_mm is None:
             return True
         return self.lateral_error_mm is not None and self.lateral_error_mm <= self.clearance_mm
+
+    @property
+    def within_force(self) -> bool:
+        """A grip's force error within its tolerance (True for a task without one)."""
+        if self.force_tolerance_n is None:
+            return True
+        return self.force_error_n is not None and abs(self.force_error_n) <= self.force_tolerance_n
 
     def to_dict(self) -> dict[str, Any]:
         """Plain dict for JSON (tuples become lists; the grip force is left out when there is none, so such a

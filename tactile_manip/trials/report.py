@@ -4,8 +4,10 @@ Files, written to the given folder (``TAG`` is empty for the run's own report an
 ``_5deg``, when ``tactile-manip score`` re-scores a run, so reports at several tolerances sit side by side)::
 
     summary{TAG}.json                run info, tolerance, per-method results, paired comparisons, per object,
-                                     and with a contact model the estimated grip force per method ("grip_force",
-                                     :mod:`tactile_manip.trials.grip_force`)
+                                     with a contact model the estimated grip force per method ("grip_force",
+                                     :mod:`tactile_manip.trials.grip_force`), for "place" and "grip" runs the
+                                     lateral error ("lateral_error") and for "grip" runs the force the rod felt
+                                     against the target ("force_error")
     summary{TAG}.md                  the same as markdown tables
     errors{TAG}.png                  histogram of |error| (deg) per method over executed trials, tolerance line:
                                      a 0-10 deg zoom and the whole range on a log count axis
@@ -54,7 +56,7 @@ def write_report(run_dir: str | Path, records: Sequence[TrialRecord], tolerance_
         tag: appended to every file stem (see :func:`tolerance_tag`); empty for the run's own report.
         run_info: the run's ``run.json`` (id, config hash, code version), copied into the summary; its config
             also says whether the cell was simulated (then the grip force is scored against the applied force).
-        task: the behaviour the trials ran ("reorient", "place"), named in the summary (default: the records'
+        task: the behaviour the trials ran ("reorient", "place", "grip"), named in the summary (default: the records'
             own, where they name one, else "reorient").
 
     Returns:
@@ -69,10 +71,16 @@ def write_report(run_dir: str | Path, records: Sequence[TrialRecord], tolerance_
     doc = {"title": title, "task": task, "run": run, "tolerance_rad": tolerance_rad, **summary.to_dict()}
     if grip:
         doc["grip_force"] = {m: asdict(s) for m, s in grip.items()}
+    if task in ("place", "grip"):
+        doc["lateral_error"] = lateral_errors(records)
+    if task == "grip":
+        doc["force_error"] = force_errors(records)
     (out / f"summary{tag}.json").write_text(json.dumps(doc, indent=2) + "\n", encoding="utf-8")
     text = markdown_summary(summary, title=title, run_info=run, grip_force=grip)
-    if task == "place":
-        text = _placement_section(text, records)
+    if task in ("place", "grip"):
+        text = _lateral_section(text, records, task)
+    if task == "grip":
+        text = _force_section(text, records)
     (out / f"summary{tag}.md").write_text(text, encoding="utf-8")
     plot_errors(out / f"errors{tag}.png", records, tolerance_rad, title=title)
     plot_success_vs_tolerance(out / f"success_vs_tolerance{tag}.png", records, tolerance_rad, title=title)
@@ -86,20 +94,69 @@ def _simulated(run_info: Mapping[str, Any] | None) -> bool:
     return isinstance(robot, Mapping) and robot.get("backend") == "twin"
 
 
-def _placement_section(text: str, records: Sequence[TrialRecord]) -> str:
-    """The summary of a "place" run: success also needs the lateral error within the slot's clearance; the
+def lateral_errors(records: Sequence[TrialRecord]) -> dict[str, dict[str, Any]]:
+    """Per method, the lateral errors of a "place" or "grip" run (mm): how many trials measured one, median,
+    p95, and how many are within the clearance (None where a method measured none)."""
+    out = {}
+    for method in dict.fromkeys(r.method for r in records):
+        mine = [r for r in records if r.method == method and r.lateral_error_mm is not None]
+        lateral = [r.lateral_error_mm for r in mine]
+        out[method] = {"n": len(mine), "median_mm": _percentile(lateral, 50), "p95_mm": _percentile(lateral, 95),
+                       "within_clearance": sum(r.within_clearance for r in mine)}
+    return out
+
+
+def force_errors(records: Sequence[TrialRecord]) -> dict[str, dict[str, Any]]:
+    """Per method, the force the rod felt against the target in a "grip" run (N): how many grips measured it,
+    RMSE, median and p95 of |error|, mean error, how many are within the tolerance, and the mean number of force
+    corrections (None where a method measured none)."""
+    out = {}
+    for method in dict.fromkeys(r.method for r in records):
+        mine = [r for r in records if r.method == method and r.force_error_n is not None]
+        err = np.array([r.force_error_n for r in mine], np.float64)
+        out[method] = {"n": len(mine), "rmse_n": float(np.sqrt(np.mean(err ** 2))) if mine else None,
+                       "median_abs_n": _percentile(np.abs(err), 50), "p95_abs_n": _percentile(np.abs(err), 95),
+                       "mean_n": float(err.mean()) if mine else None, "within_tolerance": sum(r.within_force for r in mine),
+                       "mean_force_steps": float(np.mean([r.extra.get("force_steps", 0) for r in mine])) if mine else None}
+    return out
+
+
+def _percentile(values, q: float) -> float | None:
+    return float(np.percentile(values, q)) if len(values) else None
+
+
+def _lateral_section(text: str, records: Sequence[TrialRecord], task: str) -> str:
+    """The success rule of a "place" or "grip" run (the lateral error within the clearance as well), and the
     lateral error per method."""
     clearance = next((r.clearance_mm for r in records if r.clearance_mm is not None), None)
-    text = text.replace("Success: outcome `done` and |final - target| <=",
-                        f"Success: outcome `done`, the rod's axis within {clearance:g} mm (the slot's clearance) of "
-                        "the slot's centre, and |rod - slot axis| <=", 1)
-    rows = []
-    for method in dict.fromkeys(r.method for r in records):
-        lateral = [r.lateral_error_mm for r in records if r.method == method and r.lateral_error_mm is not None]
-        rows.append([method, str(len(lateral)), *(f"{np.percentile(lateral, q):.2f}" if lateral else "-"
-                                                  for q in (50, 95))])
-    return text.rstrip("\n") + "\n\n## Lateral error (placed rods)\n\n" + "\n".join(
-        _table(["method", "placed", "median (mm)", "p95 (mm)"], rows)) + "\n"
+    if task == "place":
+        rule = (f"Success: outcome `done`, the rod's axis within {clearance:g} mm (the slot's clearance) of the slot's "
+                "centre, and |rod - slot axis| <=")
+        heading, done = "Lateral error (placed rods)", "placed"
+    else:
+        force = next((r.force_tolerance_n for r in records if r.force_tolerance_n is not None), None)
+        rule = (f"Success: outcome `done`, the force the rod feels within {force:g} N of the target, the rod's axis "
+                f"within {clearance:g} mm of the pad centre, and |estimated - true in-hand angle| <=")
+        heading, done = "Centring: the rod's axis from the pad centre", "gripped"
+    text = text.replace("Success: outcome `done` and |final - target| <=", rule, 1)
+    rows = [[m, str(e["n"]), _n2(e["median_mm"]), _n2(e["p95_mm"]), f"{e['within_clearance']}/{e['n']}"]
+            for m, e in lateral_errors(records).items()]
+    return text.rstrip("\n") + f"\n\n## {heading}\n\n" + "\n".join(
+        _table(["method", done, "median (mm)", "p95 (mm)", "within the clearance"], rows)) + "\n"
+
+
+def _force_section(text: str, records: Sequence[TrialRecord]) -> str:
+    """A grip run's force the rod felt against the target, per method."""
+    rows = [[m, str(e["n"]), _n2(e["rmse_n"]), _n2(e["median_abs_n"]), _n2(e["p95_abs_n"]), _n2(e["mean_n"]),
+             f"{e['within_tolerance']}/{e['n']}", "-" if e["mean_force_steps"] is None else f"{e['mean_force_steps']:.1f}"]
+            for m, e in force_errors(records).items()]
+    return text.rstrip("\n") + "\n\n## Grip force: what the rod felt against the target\n\n" + "\n".join(
+        _table(["method", "gripped", "RMSE (N)", "median abs (N)", "p95 abs (N)", "mean (N)", "within tolerance",
+                "mean force steps"], rows)) + "\n"
+
+
+def _n2(x: float | None) -> str:
+    return "-" if x is None else f"{x:.2f}"
 
 
 def markdown_summary(summary: RunSummary, *, title: str = "Reorientation trials",

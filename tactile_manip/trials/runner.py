@@ -15,15 +15,17 @@ skips the pairs already there, so a killed run loses no completed trial and can 
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import math
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 
+from tactile_manip.behaviours.grip import GripConfig, GripResult
 from tactile_manip.behaviours.place import PlaceResult
 from tactile_manip.behaviours.reorient import ReorientResult
 from tactile_manip.errors import ConfigError
@@ -131,6 +133,21 @@ def build_contact_estimator(scene: TrialScene, scene_path: Path | None = None, *
     return contact
 
 
+def build_contact_estimators(scene: TrialScene, scene_path: Path | None = None, *,
+                             layout: str | None = None) -> dict[str, ContactEstimator | None]:
+    """Each method's contact model (its own ``contact_model``, else the scene's; None for a method with
+    neither), each file loaded once and checked as :func:`build_contact_estimator` checks the scene's."""
+    loaded: dict[str, ContactEstimator | None] = {}
+    out = {}
+    for spec in scene.methods:
+        name = spec.contact_model or scene.contact_model
+        if name not in loaded:
+            loaded[name] = build_contact_estimator(dataclasses.replace(scene, contact_model=name), scene_path,
+                                                   layout=layout)
+        out[spec.name] = loaded[name]
+    return out
+
+
 def build_estimators(scene: TrialScene, scene_path: Path | None = None) -> dict[str, TactilePoseEstimator]:
     """One estimator per method (models are loaded once, before the first trial)."""
     out = {}
@@ -193,8 +210,9 @@ class SimulatedCell:
         self._presentation: Presentation | None = None
         self._sensor_key: int | None = None      # seed of the drawn sensor in use (None: the nominal one)
         self._stall_after_grasp = False
+        self.applied_force_n: float | None = None  # the force the held object feels (None: nothing held)
         self.world.on_grasp.append(self._on_grasp)
-        self.world.on_release.append(lambda obj: self.sensor.clear_contact())
+        self.world.on_release.append(self._on_release)
 
     # -------------------------------------------------------------- wiring of the twin to the sensor
 
@@ -204,10 +222,22 @@ class SimulatedCell:
         pad_T_obj = np.linalg.inv(hand_T_finger_pad(obj.width_m)) @ hand_T_object
         yaw = math.atan2(pad_T_obj[1, 0], pad_T_obj[0, 0])
         pose = IndenterPose(x_mm=pad_T_obj[0, 3] * 1e3, y_mm=pad_T_obj[1, 3] * 1e3, yaw_rad=yaw)
-        force = self._presentation.force_n if self._presentation is not None else force_n
-        self.sensor.set_contact(obj.payload, pose, force)
+        self.applied_force_n = self.applied_force(force_n)
+        self.sensor.set_contact(obj.payload, pose, self.applied_force_n)
         if self._stall_after_grasp:
             self.sensor.stall()
+
+    def _on_release(self, obj) -> None:
+        self.applied_force_n = None
+        self.sensor.clear_contact()
+
+    def applied_force(self, commanded_n: float) -> float:
+        """The force the object feels when the gripper is commanded ``commanded_n``: the presentation's force
+        (drawn per trial) at the behaviour's force, in proportion to the command (the gripper's force control
+        error is a gain); the command itself outside a presentation."""
+        if self._presentation is None:
+            return float(commanded_n)
+        return self._presentation.force_n * float(commanded_n) / self.scene.behaviour.force_n
 
     # -------------------------------------------------------------- lifecycle
 
@@ -236,7 +266,7 @@ class SimulatedCell:
         if arm_fault:
             self.twin.inject_fault(kind="reflex", at_fraction=0.5)
         try:
-            yield obj, WorldTruth(self.world, obj)
+            yield obj, WorldTruth(self.world, obj, lambda: self.applied_force_n)
         finally:
             self._stall_after_grasp = False
             if self.sensor.stalled:
@@ -259,7 +289,8 @@ class SimulatedCell:
         self._sensor_key = key
 
     def run_one(self, p: Presentation, estimator: TactilePoseEstimator, *, arm_fault: bool = False,
-                sensor_stall: bool = False, observer=None, contact: ContactEstimator | None = None) -> ReorientResult:
+                sensor_stall: bool = False, observer=None,
+                contact: ContactEstimator | None = None) -> ReorientResult | PlaceResult | GripResult:
         """Present ``p``, run the reorientation behaviour with ``estimator``, release, reset.
 
         ``observer`` (a :class:`~tactile_manip.behaviours.reorient.PhaseObserver`) is told each phase, the
@@ -271,6 +302,8 @@ class SimulatedCell:
         with self.presented(p, arm_fault=arm_fault, sensor_stall=sensor_stall) as (obj, truth):
             if self.scene.task == "place":
                 return self._place(p, estimator, obj, truth)
+            if self.scene.task == "grip":
+                return self._grip(estimator, obj, truth, contact)
             return run_reorientation(self, estimator, obj.width_m, truth, observer, contact)
 
     def _place(self, p: Presentation, estimator: TactilePoseEstimator, obj, truth: WorldTruth) -> PlaceResult:
@@ -283,6 +316,19 @@ class SimulatedCell:
         return place_in_slot(self.arm, self.gripper, self.sensor, estimator, slot, object_width_m=obj.width_m,
                              config=self.scene.behaviour, truth=truth)
 
+    def _grip(self, estimator: TactilePoseEstimator, obj, truth: WorldTruth,
+              contact: ContactEstimator | None) -> GripResult:
+        """The "grip" task: the method's pose estimator and the scene's contact model as one estimator (the
+        closed loop); the blind baseline, or a scene without a contact model, grips open loop."""
+        from tactile_manip.behaviours.grip import grip_to_force
+        from tactile_manip.perception.contact_pose import TactileEstimator
+
+        tactile = estimator
+        if contact is not None and isinstance(estimator, TactilePoseEstimator):
+            tactile = TactileEstimator(estimator, contact)
+        return grip_to_force(self.arm, self.gripper, self.sensor, tactile, object_width_m=obj.width_m,
+                             config=self.scene.behaviour, grip=self.scene.grip, truth=truth)
+
     def _ready_for_trial(self) -> None:
         """Trial boundary: clear any fault (and an armed but unused fault injection), open, go home."""
         self.twin.recover()
@@ -293,8 +339,12 @@ class SimulatedCell:
 class WorldTruth:
     """Ground truth from the twin (for scoring): the object's pose and axis in the base frame."""
 
-    def __init__(self, world, obj) -> None:
-        self._world, self._obj = world, obj
+    def __init__(self, world, obj, force_n: Callable[[], float | None] | None = None) -> None:
+        self._world, self._obj, self._force_n = world, obj, force_n
+
+    def grip_force_n(self) -> float | None:
+        """The normal force the held object feels now, N (None when not held or unknown)."""
+        return None if self._force_n is None else self._force_n()
 
     def object_pose_base(self) -> np.ndarray:
         return self._world.object_pose(self._obj)
@@ -351,6 +401,38 @@ def make_place_record(p: Presentation, method: str, result: PlaceResult, *, clea
                "escalated": bool(est is not None and est.escalated)})
 
 
+def make_grip_record(p: Presentation, method: str, result: GripResult, *, grip: GripConfig,
+                     target_force_n: float) -> TrialRecord:
+    """The log line of one grip: ``error_rad`` is the estimated in-hand angle minus the true one,
+    ``lateral_error_mm`` the distance from the pad centre to the rod's axis, ``force_error_n`` the force the rod
+    felt minus the target (a grip without those measured is "unmeasured")."""
+    est = result.estimate
+    outcome, detail = result.outcome, result.detail
+    measured = None not in (result.angle_error_rad, result.centre_error_m, result.force_error_n)
+    if outcome == "done" and not measured:
+        outcome, detail = "unmeasured", "the final force or pose was not measured"
+    grip_state = result.contact
+    return TrialRecord(
+        trial=p.trial, seed=p.seed, method=method, object=p.obj.display_name, true_angle_rad=p.angle_rad,
+        offset_mm=p.offset_mm, target_angle_rad=0.0,
+        estimated_angle_rad=est.angle_rad if est is not None and est.defined else None,
+        confidence=est.confidence if est is not None else 0.0, defined=bool(est is not None and est.defined),
+        action="regrasp" if result.recentres or result.force_steps else "act",
+        regrasps=result.recentres + result.force_steps,
+        error_rad=result.angle_error_rad if outcome == "done" else None, outcome=outcome, detail=detail, task="grip",
+        lateral_error_mm=_rounded(None if result.centre_error_m is None else result.centre_error_m * 1e3),
+        clearance_mm=float(grip.centre_tolerance_mm), force_error_n=_rounded(result.force_error_n),
+        force_tolerance_n=float(grip.force_tolerance_n), timings_s={k: round(v, 6) for k, v in result.timings_s.items()},
+        extra={"force_n": round(p.force_n, 4), **_sensor_extra(p), "commanded_force_n": float(target_force_n),
+               "final_command_n": _rounded(result.commanded_force_n), "applied_force_n": _rounded(result.true_force_n),
+               "force_steps": result.force_steps, "recentres": result.recentres,
+               "position_mm": None if result.position_mm is None else [round(v, 4) for v in result.position_mm],
+               "escalated": bool(est is not None and est.escalated)},
+        estimated_grip_force_n=_rounded(None if grip_state is None or not grip_state.plausible else grip_state.force_n),
+        estimated_grip_force_sigma_n=_rounded(None if grip_state is None or not grip_state.plausible
+                                              else grip_state.force_sigma_n))
+
+
 def _rounded(value: float | None) -> float | None:
     return None if value is None else round(float(value), 4)
 
@@ -376,7 +458,7 @@ def make_cell(scene: TrialScene):
 def run_scene(scene: TrialScene, write: Callable[[TrialRecord], None], *, estimators: dict[str, TactilePoseEstimator],
               skip: set[tuple[int, str]] = frozenset(), progress: bool = True, cell=None,
               trial_observer=None, frames_dir: str | Path | None = None,
-              contact: ContactEstimator | None = None) -> int:
+              contact: ContactEstimator | Mapping[str, ContactEstimator | None] | None = None) -> int:
     """Run every (trial, method) of ``scene`` not in ``skip``; ``write`` each record.
 
     ``cell`` (default: built from ``scene.robot.backend``: :class:`SimulatedCell` for the twin,
@@ -386,8 +468,9 @@ def run_scene(scene: TrialScene, write: Callable[[TrialRecord], None], *, estima
     was written; it watches, it changes nothing.
     With ``frames_dir``, each trial's per-frame streams go to ``frames_dir/<method>-<trial>.tmframes``
     (:mod:`tactile_manip.trials.frames`; the cell also needs ``sensor``, ``arm`` and ``gripper``).
-    With ``contact`` (the scene's contact model, :func:`build_contact_estimator`), each record carries the grip
-    force it estimated at the estimate step.
+    With ``contact`` (the scene's contact model, :func:`build_contact_estimator`, or one per method,
+    :func:`build_contact_estimators`), each record carries the grip force it estimated at the estimate step (and
+    the "grip" task servoes on it).
 
     Returns the number of trials run. Outcomes other than "done" are recorded, never raised; only an
     interrupt (Ctrl-C) or a failure to build the cell stops the run.
@@ -410,16 +493,19 @@ def run_scene(scene: TrialScene, write: Callable[[TrialRecord], None], *, estima
             try:
                 with _frame_stream(cell, frames_dir, p, method, scene, code) as observer:
                     kwargs = {} if observer is None else {"observer": observer}
-                    if contact is not None:
-                        kwargs["contact"] = contact
+                    mine = contact.get(method) if isinstance(contact, Mapping) else contact
+                    if mine is not None:
+                        kwargs["contact"] = mine
                     result = cell.run_one(p, estimators[method], arm_fault=i in faults.arm_fault_trials,
                                           sensor_stall=i in faults.sensor_stall_trials, **kwargs)
             except Exception as exc:  # noqa: BLE001 - a broken trial is recorded, the run goes on
-                failed = PlaceResult if scene.task == "place" else ReorientResult
+                failed = {"place": PlaceResult, "grip": GripResult}.get(scene.task, ReorientResult)
                 result = failed(outcome="error", detail=f"{type(exc).__name__}: {exc}")
             result.timings_s.setdefault("trial", time.perf_counter() - t0)
             if isinstance(result, PlaceResult):
                 record = make_place_record(p, method, result, clearance_mm=scene.place.clearance_mm)
+            elif isinstance(result, GripResult):
+                record = make_grip_record(p, method, result, grip=scene.grip, target_force_n=scene.behaviour.force_n)
             else:
                 record = make_record(p, method, target, result, commanded_force_n=scene.behaviour.force_n,
                                      task=scene.task)
@@ -470,8 +556,8 @@ def run_trials(scene: TrialScene, out_dir: str | Path, *, scene_path: str | Path
     # every part the scene names is built before the run folder is made, so a bad scene leaves no folder behind
     estimators = build_estimators(scene, Path(scene_path) if scene_path is not None else None)
     cell = make_cell(scene)
-    contact = build_contact_estimator(scene, Path(scene_path) if scene_path is not None else None,
-                                      layout=cell.sensor.layout.name)
+    contact = build_contact_estimators(scene, Path(scene_path) if scene_path is not None else None,
+                                       layout=cell.sensor.layout.name)
     skip = completed_keys(out / "trials.jsonl") if resume and (out / "trials.jsonl").exists() else set()
     with TrialLog(out, config=to_dict(scene), resume=resume) as log:
         run_scene(scene, log.append, estimators=estimators, skip=skip, progress=progress, cell=cell,

@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
+from tactile_manip.behaviours.grip import GripConfig
 from tactile_manip.behaviours.reorient import ReorientConfig
 from tactile_manip.checks import check_finite_scalar
 from tactile_manip.config import load_config
@@ -48,6 +49,8 @@ class MethodSpec:
             image), "image" (the paper's route: the reconstruction's outliers removed, Gaussian-filtered, its
             principal axis by PCA), "head" (the angle head) or "likelier" (whichever of the two is the more
             likely); see :class:`~tactile_manip.perception.estimator.TactilePoseEstimator`.
+        contact_model: this method's contact model (an exported ``.onnx``), in place of the scene's
+            ``contact_model``; "" takes the scene's.
     """
 
     name: str
@@ -61,6 +64,7 @@ class MethodSpec:
     escalation: str = "symmetry"
     escalation_samples: int = 8
     angle_source: str = "auto"
+    contact_model: str = ""
 
     def __post_init__(self) -> None:
         if not self.name or not self.name.replace("_", "").replace("-", "").isalnum():
@@ -74,6 +78,9 @@ class MethodSpec:
         if self.angle_source not in ANGLE_SOURCES:
             raise ValueError(f"method {self.name}: angle_source must be one of {', '.join(ANGLE_SOURCES)}, got "
                              f"{self.angle_source!r}")
+        if self.contact_model and not self.contact_model.endswith(".onnx"):
+            raise ValueError(f"method {self.name}: contact_model must be an exported .onnx contact model or \"\" "
+                             f"(the scene's), got {self.contact_model!r}")
         if self.escalation not in ("symmetry", "samples"):
             raise ValueError(f"method {self.name}: escalation must be 'symmetry' or 'samples', got {self.escalation!r}")
         if self.escalate_below > 0 and self.escalation == "symmetry" and self.symmetrize:
@@ -192,8 +199,9 @@ class FaultPlan:
     sensor_stall_trials: list[int] = field(default_factory=list)
 
 
-TASKS = ("reorient", "place")
-TASK_TITLES = {"reorient": "Reorientation trials", "place": "Slot placement trials"}
+TASKS = ("reorient", "place", "grip")
+TASK_TITLES = {"reorient": "Reorientation trials", "place": "Slot placement trials",
+               "grip": "Grip-to-force trials"}
 
 
 @dataclass(frozen=True)
@@ -227,9 +235,13 @@ class TrialScene:
             estimates at the estimate step (``estimated_grip_force_n``); "" for none. A model of another
             board layout than the sensor's is refused before the first trial.
         task: the behaviour each trial runs: "reorient" (grasp, estimate the in-hand angle, turn the rod to
-            ``target_deg``) or "place" (grasp, estimate angle and contact centroid, put the rod into a slot
-            drawn per presentation; :mod:`tactile_manip.behaviours.place`). The summary names it.
+            ``target_deg``), "place" (grasp, estimate angle and contact centroid, put the rod into a slot
+            drawn per presentation; :mod:`tactile_manip.behaviours.place`) or "grip" (grasp at the
+            behaviour's ``force_n``, centre the rod on the pad and servo the grip force from the contact model;
+            :mod:`tactile_manip.behaviours.grip`). The summary names it.
         place: the slot of the "place" task.
+        grip: the tolerances and limits of the "grip" task (its target force is ``behaviour.force_n``; the
+            force the gripper really applies is the presentation's ``force_n`` scaled by command / target).
     """
 
     name: str = "reorient"
@@ -249,8 +261,9 @@ class TrialScene:
     behaviour: ReorientConfig = field(default_factory=ReorientConfig)
     faults: FaultPlan = field(default_factory=FaultPlan)
     contact_model: str = ""
-    task: Literal["reorient", "place"] = "reorient"
+    task: Literal["reorient", "place", "grip"] = "reorient"
     place: PlaceConfig = field(default_factory=PlaceConfig)
+    grip: GripConfig = field(default_factory=GripConfig)
 
     def __post_init__(self) -> None:
         if self.task not in TASKS:
@@ -258,6 +271,12 @@ class TrialScene:
         if self.task == "place" and self.robot.backend != "twin":
             raise ValueError("task = \"place\" runs in the simulated cell only (robot.backend = \"twin\"): the "
                              "slot is a world feature the twin knows")
+        if self.task == "grip" and self.robot.backend != "twin":
+            raise ValueError("task = \"grip\" runs in the simulated cell only (robot.backend = \"twin\"): it is "
+                             "scored on the force the object feels, which only the twin knows")
+        if self.task == "grip" and not self.contact_model and not any(m.contact_model for m in self.methods):
+            raise ValueError("task = \"grip\" needs a contact_model (the force and position it servoes on), e.g. "
+                             "contact_model = \"models/contact_supermag.onnx\"")
         if isinstance(self.trials, bool) or self.trials < 1:
             raise ValueError(f"trials must be a positive integer, got {self.trials!r}")
         check_finite_scalar("tolerance_deg", self.tolerance_deg, low=0.0, low_open=True, high=90.0)

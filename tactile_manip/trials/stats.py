@@ -166,7 +166,8 @@ def success_vs_tolerance(records: Iterable[TrialRecord], tolerances_rad: Sequenc
         _check_tolerance(float(t))
     out = {}
     for m, recs in _by_method(list(records)).items():
-        errors = np.sort([abs(r.error_rad) for r in recs.values() if r.outcome == "done" and r.within_clearance])
+        errors = np.sort([abs(r.error_rad) for r in recs.values() if r.outcome == "done" and r.within_clearance
+                          and r.within_force])
         out[m] = np.searchsorted(errors, tol, side="right") / len(recs)  # count of |error| <= t, over n
     return out
 

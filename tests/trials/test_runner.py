@@ -352,7 +352,7 @@ def test_a_reorientation_run_names_its_task_and_a_bad_task_is_refused(tmp_path) 
                progress=False)
     assert json.loads((tmp_path / "r" / "summary.json").read_text())["task"] == "reorient"
     assert {r.task for r in read_trials(tmp_path / "r" / "trials.jsonl")} == {"reorient"}
-    with pytest.raises(ValueError, match="task must be one of reorient, place"):
+    with pytest.raises(ValueError, match="task must be one of reorient, place, grip"):
         _scene(task="insert")
     with pytest.raises(ValueError, match="simulated cell only"):
         _scene(task="place", robot=RobotConfig(backend="franky", host="172.16.0.2"))
@@ -370,3 +370,44 @@ def test_the_blind_baseline_reads_the_sensor_and_answers_the_prior(tmp_path) -> 
     main = {m.name: m.reconstructor for m in load_scene(REPO / "configs" / "scenes" / "reorient_sim.toml").methods}
     place = {m.name: m.reconstructor for m in load_scene(REPO / "configs" / "scenes" / "place_sim.toml").methods}
     assert main["blind"] == place["blind"] == "blind"
+
+
+def test_the_grip_task_runs_through_the_runner_with_a_contact_model_per_method(tmp_path) -> None:
+    from tactile_manip.behaviours.grip import GripConfig
+    from tactile_manip.behaviours.reorient import ReorientConfig
+
+    contact = str(REPO / "models" / "contact_supermag.onnx")
+    scene = _scene(trials=3, task="grip", grip=GripConfig(force_tolerance_n=1.5, centre_tolerance_mm=0.5),
+                   behaviour=ReorientConfig(force_n=8.0),
+                   presentation=PresentationConfig(force_n=(5.0, 11.0), objects=THIN_RODS),
+                   methods=[MethodSpec("supermag", MODEL, contact_model=contact), MethodSpec("blind", "blind")])
+    summary = run_trials(scene, tmp_path / "run", progress=False)
+    records = read_trials(tmp_path / "run" / "trials.jsonl")
+    assert {r.task for r in records} == {"grip"} and len(records) == 6
+    for r in records:
+        assert r.outcome == "done" and r.force_tolerance_n == 1.5 and r.clearance_mm == 0.5
+        applied = r.extra["applied_force_n"]
+        assert r.force_error_n == pytest.approx(applied - 8.0, abs=1e-3)
+        # the force felt is the presentation's at the target command, in proportion to the last command
+        assert applied == pytest.approx(r.extra["force_n"] * r.extra["final_command_n"] / 8.0, rel=1e-3)
+        assert r.succeeded(math.radians(5.0)) == (abs(r.error_rad) <= math.radians(5.0)
+                                                  and r.lateral_error_mm <= 0.5 and abs(r.force_error_n) <= 1.5)
+    blind = [r for r in records if r.method == "blind"]
+    assert all(r.extra["final_command_n"] == 8.0 and r.estimated_grip_force_n is None for r in blind)
+    ours = [r for r in records if r.method == "supermag"]
+    assert all(r.estimated_grip_force_n is not None and r.lateral_error_mm < 0.5 for r in ours)  # centred
+    doc = json.loads((tmp_path / "run" / "summary.json").read_text())
+    assert doc["task"] == "grip" and doc["title"].startswith("Grip-to-force trials")
+    assert summary.methods["supermag"].successes == sum(r.succeeded(math.radians(5.0)) for r in ours)
+    text = (tmp_path / "run" / "summary.md").read_text()
+    assert "## Grip force: what the rod felt against the target" in text and "## Centring" in text
+
+
+def test_a_grip_scene_needs_a_contact_model_and_the_simulated_cell() -> None:
+    with pytest.raises(ValueError, match="needs a contact_model"):
+        _scene(task="grip")
+    with pytest.raises(ValueError, match="simulated cell only"):
+        _scene(task="grip", contact_model="models/contact_supermag.onnx",
+               robot=RobotConfig(backend="franky", host="172.16.0.2"))
+    with pytest.raises(ValueError, match="contact_model must be an exported .onnx"):
+        MethodSpec("x", MODEL, contact_model="contact.pt")
