@@ -78,8 +78,8 @@ def measure(estimator: TactilePoseEstimator, fields: np.ndarray, angles: np.ndar
         one_ms.append((t1 - t0) * 1e3)
         best_ms[i] = min(best_ms.get(i, math.inf), one_ms[-1])
         pair_ms.append((t2 - t1) * 1e3)
-        model_s.append(est.timings_s["reconstruct"])
-        post_s.append(est.timings_s["pose"])
+        model_s.append(est.timings_s.get("reconstruct", 0.0))  # 0 where the head answered (no image)
+        post_s.append(est.timings_s.get("pose", 0.0))
         total_s.append(est.timings_s["total"])
         if len(errors) < len(fields):
             errors.append(abs(math.degrees(wrap_axial(est.angle_rad - angles[i]))) if est.defined else 90.0)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -40,6 +41,40 @@ class TactileReading:
 IMPLAUSIBLE_READING = "implausible reading"
 
 
+class Deferred:
+    """A value measured only when first read (an image that was not decoded yet): subclasses give the value of
+    the field ``name`` from :meth:`resolve`."""
+
+    def resolve(self, name: str) -> Any:
+        raise NotImplementedError
+
+
+class _DeferredField:
+    """A dataclass field whose value may be a :class:`Deferred`, resolved (once) on first read.
+
+    The value lives in the instance's ``__dict__`` under ``_<name>``; assignment goes through :meth:`__set__`
+    (a frozen dataclass's ``__init__`` too), so the field stays frozen for its users.
+    """
+
+    def __init__(self, default: Any) -> None:
+        self.default = default
+
+    def __set_name__(self, owner: type, name: str) -> None:
+        self.name, self.slot = name, "_" + name
+
+    def __get__(self, obj: Any, owner: type | None = None) -> Any:
+        if obj is None:
+            return self.default  # the dataclass reads the default through the class
+        value = obj.__dict__[self.slot]
+        if isinstance(value, Deferred):  # measure it now, keep the value
+            value = value.resolve(self.name)
+            obj.__dict__[self.slot] = value
+        return value
+
+    def __set__(self, obj: Any, value: Any) -> None:
+        obj.__dict__[self.slot] = value
+
+
 @dataclass(frozen=True)
 class AngleEstimate:
     """In-plane orientation of a contact, as the pose pipeline reports it (an expected outcome, not an error).
@@ -51,8 +86,10 @@ class AngleEstimate:
             agreement of prior samples where those are available; 0.0 when ``defined`` is False.
         defined: False for an empty, too small or isotropic contact, or an implausible reading (then ``reason`` says
             which).
-        centroid_mm: contact centroid (x, y) in the pad frame, mm.
-        area_mm2: contact area, mm^2.
+        centroid_mm: contact centroid (x, y) in the pad frame, mm, measured on the reconstructed image. Where the
+            angle came from the angle head, the image is decoded only when this (or ``area_mm2``) is first read,
+            in one batch with every other such estimate of the same call.
+        area_mm2: contact area, mm^2 (measured on the image as ``centroid_mm`` is).
         reason: why the angle is undefined ("" when defined).
         saturated_chips: chips with an axis at the ADC rail or beyond the chip's range (clamped before the
             reconstruction); with any, the confidence is at most
@@ -77,8 +114,8 @@ class AngleEstimate:
     angle_rad: float
     confidence: float
     defined: bool
-    centroid_mm: tuple[float, float] = (0.0, 0.0)
-    area_mm2: float = 0.0
+    centroid_mm: tuple[float, float] = _DeferredField((0.0, 0.0))
+    area_mm2: float = _DeferredField(0.0)
     reason: str = ""
     saturated_chips: int = 0
     timings_s: dict[str, float] = field(default_factory=dict, compare=False)
@@ -86,3 +123,10 @@ class AngleEstimate:
     source: str = "image"
     plausible: bool = True
     implausible_reason: str = ""
+
+    def __getstate__(self) -> dict[str, Any]:
+        """The fields with every deferred one measured (a pickled or copied estimate holds values only)."""
+        state = dict(self.__dict__)
+        for name in ("centroid_mm", "area_mm2"):
+            state["_" + name] = getattr(self, name)
+        return state

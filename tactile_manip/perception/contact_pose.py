@@ -134,6 +134,29 @@ class TactileEstimator:
                                position_mm=fused_position_mm(angle, contact, self.image_position_weight,
                                                              self.pose.min_contact_area_mm2))
 
+    def estimate_many(self, readings) -> list[TactileEstimate]:
+        """Angle, contact and position of several pads' readings (each (R, C, 3) uT): the angles in one batched
+        run (:meth:`TactilePoseEstimator.estimate_many`, images deferred where the head answers), the contact
+        model on each reading alone (no context from another pad).
+
+        Raises:
+            ValueError: a contact model that reads frames before the newest (its context is one pad's history:
+                use one TactileEstimator per pad), or a bad reading (nothing is estimated).
+        """
+        if self.contact.context_frames != 1:
+            raise ValueError(f"{self.contact.path.name} reads {self.contact.context_frames} frames of one pad's "
+                             "history; estimate_many mixes pads: use one TactileEstimator per pad")
+        angles = self.pose.estimate_many(readings)  # checks every reading (shape, NaN) before estimating any
+        out = []
+        for reading, angle in zip(readings, angles):
+            self.contact.reset()
+            contact = self.contact.estimate(reading)
+            out.append(TactileEstimate(angle=angle, contact=contact,
+                                       position_mm=fused_position_mm(angle, contact, self.image_position_weight,
+                                                                     self.pose.min_contact_area_mm2)))
+        self.contact.reset()
+        return out
+
     def estimate_frames(self, readings) -> TactileEstimate:
         """Angle, contact and position from the mean of consecutive readings of one static contact (less chip
         noise). The contact model reads the mean as one reading with no context before it (its history is

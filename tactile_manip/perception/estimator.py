@@ -59,6 +59,7 @@ measurement; escalation goes through the same cap.
 from __future__ import annotations
 
 import math
+import threading
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, replace
@@ -71,7 +72,7 @@ from tactile_manip.perception.angle_head import within_probability
 from tactile_manip.perception.pose import PoseParams, angle_from_image, wrap_axial
 from tactile_manip.perception.reconstruct import (READING_LIMIT_UT, ModelFileError, Reconstruction, Reconstructor,
                                                    out_of_range)
-from tactile_manip.types import IMPLAUSIBLE_READING, AngleEstimate, TactileReading
+from tactile_manip.types import IMPLAUSIBLE_READING, AngleEstimate, Deferred, TactileReading
 
 T = TypeVar("T")
 ANGLE_SOURCES = ("auto", "image", "head", "likelier")
@@ -208,77 +209,147 @@ class TactilePoseEstimator:
     def estimate(self, reading: TactileReading | np.ndarray) -> AngleEstimate:
         """Angle of the contact in one reading (R, C, 3), microtesla, baseline-subtracted. An implausible reading
         (a |value| at or beyond :attr:`plausible_limits_ut`) gives no answer: ``plausible`` False, ``defined``
-        False, confidence 0.0 (see the module docstring).
+        False, confidence 0.0 (see the module docstring). Where the angle head answers, the image is decoded only
+        when the estimate's ``centroid_mm`` or ``area_mm2`` is first read.
 
         Raises:
             ValueError: wrong shape, or NaN / infinite values in the reading (from the reconstructor).
         """
-        return self.estimate_with_image(reading)[0]
+        t0 = time.perf_counter()
+        return self._estimates([_field(reading)], [_saturated(reading)], [_dated(reading)], t0)[0][0]
 
     def estimate_with_image(self, reading: TactileReading | np.ndarray) -> tuple[AngleEstimate, Reconstruction]:
-        """Like :meth:`estimate`, also returning the reconstruction (depth and spread) it used."""
+        """Like :meth:`estimate`, also returning the reconstruction (depth and spread): the image is decoded
+        now, whichever route the angle takes (for a display)."""
         t0 = time.perf_counter()
-        field = _field(reading)
-        rec = self.reconstructor.reconstruct(field)  # refuses NaN / inf, clamps values beyond the chip's range
-        return self._pose(field, _saturated(reading), _dated(reading), rec, t0, time.perf_counter(), image=True)
+        estimates, recs = self._estimates([_field(reading)], [_saturated(reading)], [_dated(reading)], t0,
+                                          images=True)
+        return estimates[0], recs[0]
 
     def estimate_many(self, readings: Sequence[TactileReading | np.ndarray]) -> list[AngleEstimate]:
-        """Angles of several readings (e.g. both pads of a gripper), reconstructed in one batched model run.
+        """Angles of several readings (e.g. the pads of a hand), in one batched model run per stage.
 
-        Each estimate equals what :meth:`estimate` returns for its reading (the same reconstruction and the
-        same post-processing; a single reading runs the model file's one-reading graph, which gave the batch
-        graph's images bit for bit on every reading checked); in ``timings_s``, "reconstruct" is the whole
-        batch's time and "total" runs from the call to that estimate's completion. An estimate that escalates
-        runs its escalation on its own reading, after the batch.
+        Each estimate equals what :meth:`estimate` returns for its reading. Where the angle head answers, one
+        batched run of the head gives every such pad's angle, and their images are decoded together, in one
+        batched run, only when a centroid or an area of one of them is first read. Readings whose angle comes
+        from the image (no head, a flagged chip, ``angle_source`` "image" or "likelier") are reconstructed in
+        one batched run. In ``timings_s``, "head" and "reconstruct" are the whole batch's time for its stage and
+        "total" runs from the call to that estimate's completion. An estimate that escalates runs its escalation
+        on its own reading, after the batch.
 
         Raises:
             ValueError: readings of different shapes, or any with NaN / infinite values (nothing is estimated).
         """
         t0 = time.perf_counter()
-        fields = [_field(r) for r in readings]
-        if not fields:
+        if len(readings) == 0:
             return []
+        return self._estimates([_field(r) for r in readings], [_saturated(r) for r in readings],
+                               [_dated(r) for r in readings], t0)[0]
+
+    @property
+    def defers_images(self) -> bool:
+        """Whether estimates whose angle the head gives leave their image undecoded until it is read (the head's
+        route on a deterministic reconstructor: one whose image of a reading is always the same)."""
+        return self.angle_source == "head" and getattr(self.reconstructor, "deterministic", False)
+
+    def _estimates(self, fields: list, saturated: list, dated: list, t0: float, *, why: list[str] | None = None,
+                   images: bool = False) -> tuple[list[AngleEstimate], list[Reconstruction] | None]:
+        """The estimates of readings ``fields`` (each (R, C, 3) uT) with their sensor flags (or None) and the
+        frames that date them (or None); ``why``: whether each is implausible, judged by the caller (None: judge
+        each field here). With ``images`` every image is decoded now and returned beside the estimates."""
         shapes = {np.shape(f) for f in fields}
         if len(shapes) != 1:
             raise ValueError(f"estimate_many: readings of different shapes: {sorted(shapes)}")
-        recs = self.reconstructor.reconstruct_many(np.stack(fields))
-        t1 = time.perf_counter()
-        return [self._pose(f, _saturated(r), _dated(r), rec, t0, t1) for r, f, rec in zip(readings, fields, recs)]
+        stack = np.stack([np.asarray(f, dtype=np.float64) for f in fields])
+        # refuses NaN / inf and wrong shapes before anything (a single reading's error names its own index)
+        checked = (self.reconstructor.checked(stack[0])[None] if len(stack) == 1
+                   else self.reconstructor.checked_many(stack))
+        flags = out_of_range(stack)
+        for i, sat in enumerate(saturated):
+            if sat is not None:
+                flags[i] |= np.asarray(sat, dtype=bool)
+        n = len(stack)
+        peaks = np.abs(stack).reshape(n, -1).max(axis=1)
+        flagged = flags.reshape(n, -1).any(axis=1)
+        out: list[AngleEstimate | None] = [None] * n
+        now, later = [], []  # readings whose image is needed now; those whose head answers
+        for i in range(n):
+            reason = why[i] if why is not None else (self.implausible(stack[i]) if peaks[i] >= self._plausible_ut
+                                                     else "")
+            if reason:  # no answer: nothing to escalate (an image only where the caller asked for it)
+                out[i] = AngleEstimate(0.0, 0.0, False, reason=IMPLAUSIBLE_READING, plausible=False,
+                                       implausible_reason=reason)
+                if images:
+                    now.append(i)
+            elif peaks[i] < self.min_field_ut and not images:
+                out[i] = AngleEstimate(0.0, 0.0, False, reason=NO_CONTACT_FIELD)
+            elif self.defers_images and not flagged[i] and not images and peaks[i] >= self.min_field_ut:
+                later.append(i)
+            else:
+                now.append(i)
+        timings: list[dict[str, float]] = [{} for _ in range(n)]
+        recs: list[Reconstruction | None] = [None] * n
+        if later:
+            t1 = time.perf_counter()
+            angles, kappas = self.angle_head.axes(checked[later])
+            p = within_probability(kappas, self._tolerance_rad)
+            if self.calibration is not None:
+                p = self.calibration(p)
+            pending = _PendingImages(self, checked[later])
+            head_s = time.perf_counter() - t1
+            for j, i in enumerate(later):
+                stat = _PendingStat(pending, j)
+                out[i] = AngleEstimate(float(wrap_axial(angles[j])), float(p[j]), True, centroid_mm=stat,
+                                       area_mm2=stat, source="head")
+                timings[i]["head"] = head_s
+        if now:
+            t1 = time.perf_counter()
+            made = self._reconstruct(checked[now])
+            t2 = time.perf_counter()
+            for i, rec in zip(now, made):
+                recs[i] = rec
+                t3 = time.perf_counter()
+                out[i] = self._image_estimate(rec, flags[i], bool(peaks[i] >= self.min_field_ut), stack[i],
+                                              out[i], timings[i])
+                timings[i].update(reconstruct=t2 - t1, pose=time.perf_counter() - t3)
+        deferred = set(later)
+        done = []
+        for i, est in enumerate(out):
+            timing = timings[i]
+            timing["total"] = time.perf_counter() - t0
+            if dated[i] is not None:
+                timing["age"] = time.monotonic() - dated[i].t_host_s
+            chips = int(flags[i].any(axis=-1).sum())
+            if i in deferred:  # no flagged chip; building it anew keeps the image deferred (replace would read it)
+                object.__setattr__(est, "timings_s", timing)
+                done.append(est)
+            else:
+                done.append(replace(est, saturated_chips=chips, timings_s=timing))
+        return done, (recs if images else None)
 
-    def _pose(self, field: np.ndarray, saturated: np.ndarray | None, reading: TactileReading | None,
-              rec: Reconstruction, t0: float, t1: float, *, image: bool = False, why_implausible: str | None = None):
-        """Post-processing and PCA of ``rec``, reconstructed from ``field`` (R, C, 3) uT between ``t0`` and
-        ``t1``; ``saturated`` (R, C, 3) flags from the sensor or None; ``reading`` (the newest frame, or None)
-        dates the estimate; ``why_implausible``: why the readings behind ``field`` are implausible ("" when they are
-        not; None: judge ``field`` itself). Escalates a low-confidence estimate when the estimator has an
-        escalation. Returns the estimate, or with ``image`` the estimate and the reconstruction it came from."""
-        flags = out_of_range(field)
-        if saturated is not None:
-            flags |= np.asarray(saturated, dtype=bool)
-        peak_ut = float(np.max(np.abs(field)))  # the reconstructor has refused NaN already
-        contact = peak_ut >= self.min_field_ut
-        if why_implausible is None:
-            why_implausible = self.implausible(field) if peak_ut >= self._plausible_ut else ""
-        if why_implausible:  # no answer: nothing to escalate
-            est = AngleEstimate(0.0, 0.0, False, reason=IMPLAUSIBLE_READING, plausible=False,
-                                implausible_reason=why_implausible)
-        else:
-            est = self._angle(rec, flags, contact, field)
-        t2 = time.perf_counter()
-        timings = {"reconstruct": t1 - t0, "pose": t2 - t1, "total": t2 - t0}
+    def _reconstruct(self, checked: np.ndarray) -> list[Reconstruction]:
+        """Reconstructions of checked readings (M, R, C, 3): one reading through the file's one-reading graph,
+        several in one batched run."""
+        if len(checked) == 1:
+            return [self.reconstructor.reconstruct(checked[0])]
+        return self.reconstructor.reconstruct_many(checked)
+
+    def _image_estimate(self, rec: Reconstruction, flags: np.ndarray, contact: bool, field: np.ndarray,
+                        given: AngleEstimate | None, timing: dict[str, float]) -> AngleEstimate:
+        """The estimate of a reading whose image was decoded (``given``: an answer already made without it, kept),
+        escalated when its confidence is low and the estimator has an escalation."""
+        if given is not None:
+            return given
+        est = self._angle(rec, flags, contact, field)
         # the head reads the reading, not the image: another reconstruction of the same reading cannot change its
         # angle, so only an angle that came from the image escalates (on the head's route: where the head stood
         # aside, a chip flagged or an image without contact)
         if (self.escalation is not None and contact and est.confidence < self.escalate_below
                 and est.source == "image" and est.plausible):
-            rec = self.escalation.reconstruct(field)
-            est = replace(self._angle(rec, flags, contact, field), escalated=True)
-            timings["escalate"] = time.perf_counter() - t2
-            timings["total"] = time.perf_counter() - t0
-        if reading is not None:
-            timings["age"] = time.monotonic() - reading.t_host_s
-        est = replace(est, saturated_chips=int(flags.any(axis=-1).sum()), timings_s=timings)
-        return (est, rec) if image else est
+            t0 = time.perf_counter()
+            est = replace(self._angle(self.escalation.reconstruct(field), flags, contact, field), escalated=True)
+            timing["escalate"] = time.perf_counter() - t0
+        return est
 
     def _angle(self, rec: Reconstruction, flags: np.ndarray, contact: bool,
                field: np.ndarray) -> AngleEstimate:
@@ -335,11 +406,10 @@ class TactilePoseEstimator:
         # a channel saturated (or out of range) in any frame is saturated in the mean
         flags = [r.saturated for r in readings if isinstance(r, TactileReading)] + list(out_of_range(stacked))
         t0 = time.perf_counter()
-        mean = np.mean(stacked, axis=0)
-        rec = self.reconstructor.reconstruct(mean)
         # an implausible frame makes the mean implausible (NaN and inf were refused with the mean)
-        return self._pose(mean, np.logical_or.reduce(flags), _dated(readings[-1]), rec, t0, time.perf_counter(),
-                          why_implausible=self.implausible(stacked))
+        why = self.implausible(stacked)
+        return self._estimates([np.mean(stacked, axis=0)], [np.logical_or.reduce(flags)], [_dated(readings[-1])], t0,
+                               why=[why])[0][0]
 
     def read(self, sensor: TactileSensor, *, frames: int = 1, timeout_s: float = 0.1) -> AngleEstimate:
         """Estimate from the next ``frames`` new frames of ``sensor`` (frames that arrived before the call are
@@ -384,6 +454,41 @@ def stream_estimates(sensor: TactileSensor, estimate: Callable[[TactileReading],
         stats.estimates += 1
         count += 1
         yield est
+
+
+class _PendingImages:
+    """The images of one call's estimates whose angle the head gave: decoded together, in one batched run, when
+    the first of them is read (thread-safe), and measured as the image route measures them."""
+
+    def __init__(self, estimator: TactilePoseEstimator, checked: np.ndarray) -> None:
+        self._estimator, self._checked = estimator, checked
+        self._stats: list[tuple[tuple[float, float], float]] | None = None
+        self._lock = threading.Lock()
+
+    def stats(self, index: int) -> tuple[tuple[float, float], float]:
+        """(centroid (x, y) mm, area mm^2) of the ``index``-th image."""
+        with self._lock:
+            if self._stats is None:
+                est = self._estimator
+                self._stats = []
+                for rec in est._reconstruct(self._checked):
+                    image = angle_from_image(rec.depth_mm, pixel_mm=est.reconstructor.pixel_mm, params=est.params)
+                    self._stats.append((image.centroid_mm, image.area_mm2))
+                self._checked = None
+        return self._stats[index]
+
+
+class _PendingStat(Deferred):
+    """The centroid or area of one pending image (:class:`_PendingImages`)."""
+
+    __slots__ = ("images", "index")
+
+    def __init__(self, images: _PendingImages, index: int) -> None:
+        self.images, self.index = images, index
+
+    def resolve(self, name: str) -> Any:
+        centroid, area = self.images.stats(self.index)
+        return centroid if name == "centroid_mm" else area
 
 
 def _field(reading: TactileReading | np.ndarray) -> np.ndarray:

@@ -77,6 +77,8 @@ class Reconstructor(abc.ABC):
 
     name: str = "reconstructor"
     angle_head: AngleHead | None = None
+    #: whether a reading's image is always the same (False where prior samples are drawn per call)
+    deterministic: bool = True
     board_layout: str = DEFAULT_BOARD_LAYOUT
     input_shape: tuple[int, int, int] = (4, 4, 3)
     output_shape: tuple[int, int] = (200, 200)
@@ -92,6 +94,10 @@ class Reconstructor(abc.ABC):
         """One reading (R, C, 3) as the model reads it: float32, clamped to the chip's range; refuses wrong
         shapes and NaN / infinite values (ValueError)."""
         return self._check(field_ut)
+
+    def checked_many(self, fields_ut: np.ndarray) -> np.ndarray:
+        """Readings (N, R, C, 3) as the model reads them (see :meth:`checked`)."""
+        return self._check(fields_ut, batch=True)
 
     def check_layout(self, layout: str) -> None:
         """Refuse readings of board layout ``layout`` unless it is the one this reconstructor was made for."""
@@ -173,6 +179,7 @@ class OnnxReconstructor(Reconstructor):
             raise ModelFileError(f"{self.path}: a {self.metadata['kind']} model, not an image model: load it with "
                                  "tactile_manip.perception.contact.ContactEstimator (evaluate takes either)")
         self.samples = samples
+        self.deterministic = samples == 1
         self._rng = np.random.default_rng(seed)
         options = session_options(ort, threads=threads)
         try:

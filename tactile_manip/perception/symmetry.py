@@ -71,6 +71,7 @@ class SymmetrizedReconstructor(Reconstructor):
         self.input_shape, self.output_shape, self.pixel_mm = inner.input_shape, inner.output_shape, inner.pixel_mm
         self.board_layout, self.magnetic_ut = inner.board_layout, inner.magnetic_ut
         self.angle_head = inner.angle_head
+        self.deterministic = inner.deterministic
         self.group = symmetry_group(self.input_shape, self.output_shape)
 
     def _run(self, fields_ut: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:

@@ -28,6 +28,8 @@ class FakeHead:
         return self.angle_rad, self.kappa
 
     def axes(self, fields_ut: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        assert fields_ut.dtype == np.float32 and fields_ut.shape[1:] == (4, 4, 3)
+        self.calls += 1
         return np.full(len(fields_ut), self.angle_rad), np.full(len(fields_ut), self.kappa)
 
 
@@ -130,10 +132,48 @@ class Empty(Stripe):
         return np.zeros((len(fields_ut), *self.output_shape), np.float32), None
 
 
-def test_an_image_without_any_contact_is_not_given_an_angle_by_the_head() -> None:
+def test_an_image_without_any_contact_is_not_given_an_angle_by_the_head_where_the_image_is_read_first() -> None:
     head = FakeHead(0.5, 1e4)
-    est = TactilePoseEstimator(Empty(head=head)).estimate(_reading())
+    rec = Empty(head=head)
+    rec.deterministic = False  # drawn per call: the image is decoded with the estimate, before the head is asked
+    est = TactilePoseEstimator(rec).estimate(_reading())
     assert not est.defined and est.reason == "empty contact" and head.calls == 0
+
+
+def test_where_the_image_is_deferred_the_head_answers_any_contact_field_and_the_image_tells_its_area() -> None:
+    head = FakeHead(0.5, 1e4)
+    estimator = TactilePoseEstimator(Empty(head=head))
+    assert estimator.defers_images
+    est = estimator.estimate(_reading())
+    assert est.defined and est.source == "head" and head.calls == 1
+    assert est.area_mm2 == 0.0  # decoded now: an image without contact has no area (and so no centroid to use)
+
+
+class Counting(Stripe):
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self.runs: list[int] = []
+
+    def _run(self, fields_ut: np.ndarray) -> tuple[np.ndarray, None]:
+        self.runs.append(len(fields_ut))
+        return super()._run(fields_ut)
+
+
+def test_the_images_of_a_call_are_decoded_once_together_and_only_when_read() -> None:
+    import pickle
+
+    rec = Counting(0.0, head=FakeHead(0.4, 50.0))
+    estimator = TactilePoseEstimator(rec)
+    many = estimator.estimate_many([_reading(), _reading(90.0), _reading(1.0), _reading(70.0)])
+    assert rec.runs == [] and [e.source for e in many] == ["head", "head", "image", "head"]
+    assert many[2].reason == "no contact field"
+    assert many[0].angle_rad == pytest.approx(0.4) and "head" in many[0].timings_s
+    centroid = many[3].centroid_mm                       # the first read decodes the call's three images at once
+    assert rec.runs == [3]
+    assert many[0].area_mm2 > 0 and many[1].centroid_mm == centroid and rec.runs == [3]
+    one = estimator.estimate(_reading(70.0))
+    assert one == many[3] and rec.runs == [3, 1]          # equality reads the deferred fields
+    assert pickle.loads(pickle.dumps(many[0])) == many[0]  # a copy holds the measured values
 
 
 def test_the_head_can_be_left_out_and_bad_readings_are_still_refused() -> None:

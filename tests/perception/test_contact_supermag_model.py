@@ -73,3 +73,28 @@ def test_with_the_pose_model_the_position_lies_between_the_image_and_the_model_a
     faint = both.estimate((press.field_ut * 0.1).astype(np.float32))
     assert faint.contact.in_contact and faint.angle.reason == "no contact field"
     assert faint.position_mm is None
+
+
+def test_several_pads_through_one_tactile_estimator_equal_each_pad_alone() -> None:
+    from tactile_manip.perception import TactilePoseEstimator, load_reconstructor
+    from tactile_manip.perception.contact_pose import TactileEstimator
+    from tactile_manip.sim.objects import IndenterPose
+    from tactile_manip.sim.pair import SensorPair
+    from tactile_manip.sim.shapes import make_indenter
+
+    both = TactileEstimator(TactilePoseEstimator(load_reconstructor(MODELS / "supermag.onnx")),
+                            ContactEstimator(MODEL))
+    pair, rng = SensorPair(), np.random.default_rng(3)
+    readings = [pair.press(make_indenter("cylinder", size_mm=s), IndenterPose(x_mm=x, yaw_rad=y), f, rng).field_ut
+                for s, x, y, f in ((3.0, 1.0, 0.3, 6.0), (6.0, -1.0, -1.2, 12.0), (4.0, 0.0, 1.5, 9.0))]
+    readings.append(np.zeros((4, 4, 3)))  # an empty pad
+    many = both.estimate_many(readings)
+    alone = [both.estimate(r) for r in readings]
+    assert [m.angle for m in many] == [a.angle for a in alone]
+    assert [(m.contact.force_n, m.position_mm) for m in many] == [(a.contact.force_n, a.position_mm) for a in alone]
+    assert many[3].position_mm is None and many[0].angle.source == "head"
+    with pytest.raises(ValueError, match="NaN"):
+        both.estimate_many([readings[0], np.full((4, 4, 3), np.nan)])
+    both.contact.context_frames = 3  # a model that reads a pad's history cannot serve several pads
+    with pytest.raises(ValueError, match="one TactileEstimator per pad"):
+        both.estimate_many(readings)
