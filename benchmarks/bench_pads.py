@@ -12,9 +12,10 @@ chip noise). For each pad count, on one thread, in interleaved calls so a busy m
   post-processed: the cost of the whole pipeline before the head);
 - per pad, the stages of the ``angle`` call (the head's batched run, the rest) and of the decode.
 
-Every call's estimates (those of the first pass) are checked against the single-pad ``estimate`` of each reading (angle, confidence,
-centroid and area equal); the angle error of each route is measured on every reading. Prints a markdown table
-and writes it beside the JSON (default ``benchmarks/results/pads.json`` and ``.md``). It measures; it asserts nothing but the equality.
+The estimates of every call of the first pass are checked against the single-pad ``estimate`` of each reading
+(angle, confidence, centroid and area equal); the angle error of each route is measured on every reading.
+Prints a markdown table and writes it beside the JSON (default ``benchmarks/results/pads.json`` and ``.md``).
+It measures; it asserts nothing but the equality.
 """
 
 from __future__ import annotations

@@ -33,7 +33,7 @@ TABLE1_MD = "models/eval/table.md"
 TABLE1_ROBUST = "docs/results/robust/robust_b48/table1.json"  # the same evaluation of the robust model
 NETWORK_LATENCY = "models/eval/latency.json"  # python -m benchmarks.bench_model
 BENCH = "docs/results/bench_2026-11-25_one_reading/report.json"  # tactile-manip bench
-BENCH_DEFAULT = "docs/results/bench_2026-11-27_default/report.json"  # tactile-manip bench of the default model
+BENCH_DEFAULT = "docs/results/bench_2026-11-28_default/report.json"  # tactile-manip bench of the default model
 ABLATIONS = {"data/robust.npz": "docs/results/angle_head/ablation_robust.json",  # python -m benchmarks.angle_ablation
              "data/rods_test.npz": "docs/results/angle_head/ablation_rods_test.json",
              "data/supermag.npz": "docs/results/angle_head/ablation_supermag.json"}
@@ -108,7 +108,8 @@ PLACE_SCENE = TrialRun("placing: `configs/scenes/place_sim.toml` (`task = \"plac
                        "and 1 mm of the slot", "docs/results/supermag/place_sim/summary.json",
                        {"supermag": "supermag", "supermag_sym": "supermag", "bilinear": None, "blind": None})
 GRIP_SCENE = TrialRun("gripping: `configs/scenes/grip_sim.toml` (`task = \"grip\"`), 60 presentations, the force "
-                      "felt within 1.5 N of 8 N, the axis within 0.5 mm of the pad centre, the in-hand angle within 5 deg",
+                      "felt within 1.5 N of 8 N, the axis within 0.5 mm of the pad centre, the in-hand angle "
+                      "within 5 deg",
                       "docs/results/supermag/grip_sim/summary.json",
                       {"supermag": "supermag", "supermag_rods": "supermag", "blind": None})
 ROBUST_SCENE = TrialRun("robust scene: `configs/scenes/reorient_robust.toml`, 300 presentations, 2-15 N, a drawn "

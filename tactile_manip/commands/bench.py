@@ -22,7 +22,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--model", action="append", default=[], metavar="NAME=PATH",
                    help="also measure this exported model (repeatable); its checkpoint is best.pt beside it")
     p.add_argument("--methods", default=None,
-                   help="comma-separated subset of methods, e.g. 'bilinear,compact' (default: all found)")
+                   help="comma-separated subset of methods (default: all found): the baselines bilinear and "
+                        "bicubic, the default model supermag and supermag_sym (averaged over the sensor's 8 "
+                        "symmetries), the references fast, fast_sym, robust, compact and compact_sym, and any "
+                        "--model NAME; e.g. 'bilinear,supermag'")
     p.add_argument("--runtimes", default=None,
                    help="comma-separated subset of ort-1,ort-all,ort-int8,torch for the models (default: all)")
     p.add_argument("--data", default="data/supermag.npz",

@@ -38,7 +38,7 @@ def _corners(text: str) -> tuple[tuple[float, float], ...]:
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     sub = p.add_subparsers(dest="action", metavar="ACTION", required=True)
-    cal = sub.add_parser("calibrate", help="ball-press calibration of the VBTS (lookup table + pad alignment)")
+    cal = _subcommand(sub, "calibrate", "ball-press calibration of the VBTS (lookup table + pad alignment)")
     src = cal.add_mutually_exclusive_group(required=True)
     src.add_argument("--sim", action="store_true", help="the simulated camera (known ground truth)")
     src.add_argument("--camera", help="OpenCV camera index or device path (needs the 'camera' extra)")
@@ -56,7 +56,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     cal.add_argument("--out", required=True, help="calibration file to write (.npz)")
     cal.add_argument("--force", action="store_true", help="overwrite an existing output file")
 
-    rec = sub.add_parser("run", help="record synchronized pairs and write a paired dataset")
+    rec = _subcommand(sub, "run", "record synchronized pairs and write a paired dataset")
     src = rec.add_mutually_exclusive_group(required=True)
     src.add_argument("--sim", action="store_true", help="emulated MBTS + simulated camera on one press script")
     src.add_argument("--port", help="serial port of the MBTS board (real rig; needs --camera)")
@@ -81,7 +81,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     rec.add_argument("--bit-flip-rate", type=float, default=0.0, help="--sim: MBTS frames with a flipped bit")
     rec.add_argument("--force", action="store_true", help="overwrite existing output files")
 
-    fin = sub.add_parser("finalize", help="write the dataset from pair logs (after a crash, or to merge sessions)")
+    fin = _subcommand(sub, "finalize", "write the dataset from pair logs (after a crash, or to merge sessions)")
     fin.add_argument("logs", nargs="+", help="pair logs (.tmpairs)")
     fin.add_argument("--out", required=True, help="dataset to write (.npz)")
     fin.add_argument("--test-objects", type=_csv, default=[], help="objects whose pairs form the test split")
@@ -298,3 +298,8 @@ def _finalize(args: argparse.Namespace) -> int:
     counts = ", ".join(f"{s} {len(data.indices(s))}" for s in SPLITS)
     print(f"wrote {path}: {len(data)} pairs from {len(logs)} log(s) ({counts})")
     return 0
+
+
+def _subcommand(sub, name: str, what: str) -> argparse.ArgumentParser:
+    """A subcommand whose one line shows in the list and heads its own --help."""
+    return sub.add_parser(name, help=what, description=what)

@@ -14,7 +14,10 @@ from typing import Any
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--config", required=True, help="training TOML (e.g. configs/train/compact.toml)")
+    p.add_argument("--config", required=True,
+                   help="training TOML: its `kind` says what it trains (e.g. configs/train/robust_b48.toml, the "
+                        "default model's image recipe; configs/train/angle_head.toml, its angle head; "
+                        "configs/train/contact.toml, a contact model)")
     p.add_argument("--data", required=True, nargs="+", action="extend",
                    help="paired dataset .npz or shard folder (tactile-manip simulate / collect / import); several "
                         "are trained on as one, each keeping its splits; shard folders are streamed")

@@ -116,8 +116,10 @@ def force_errors(records: Sequence[TrialRecord]) -> dict[str, dict[str, Any]]:
         err = np.array([r.force_error_n for r in mine], np.float64)
         out[method] = {"n": len(mine), "rmse_n": float(np.sqrt(np.mean(err ** 2))) if mine else None,
                        "median_abs_n": _percentile(np.abs(err), 50), "p95_abs_n": _percentile(np.abs(err), 95),
-                       "mean_n": float(err.mean()) if mine else None, "within_tolerance": sum(r.within_force for r in mine),
-                       "mean_force_steps": float(np.mean([r.extra.get("force_steps", 0) for r in mine])) if mine else None}
+                       "mean_n": float(err.mean()) if mine else None,
+                       "within_tolerance": sum(r.within_force for r in mine),
+                       "mean_force_steps": (float(np.mean([r.extra.get("force_steps", 0) for r in mine])) if mine
+                                            else None)}
     return out
 
 
@@ -148,7 +150,8 @@ def _lateral_section(text: str, records: Sequence[TrialRecord], task: str) -> st
 def _force_section(text: str, records: Sequence[TrialRecord]) -> str:
     """A grip run's force the rod felt against the target, per method."""
     rows = [[m, str(e["n"]), _n2(e["rmse_n"]), _n2(e["median_abs_n"]), _n2(e["p95_abs_n"]), _n2(e["mean_n"]),
-             f"{e['within_tolerance']}/{e['n']}", "-" if e["mean_force_steps"] is None else f"{e['mean_force_steps']:.1f}"]
+             f"{e['within_tolerance']}/{e['n']}",
+             "-" if e["mean_force_steps"] is None else f"{e['mean_force_steps']:.1f}"]
             for m, e in force_errors(records).items()]
     return text.rstrip("\n") + "\n\n## Grip force: what the rod felt against the target\n\n" + "\n".join(
         _table(["method", "gripped", "RMSE (N)", "median abs (N)", "p95 abs (N)", "mean (N)", "within tolerance",

@@ -422,7 +422,8 @@ def make_grip_record(p: Presentation, method: str, result: GripResult, *, grip: 
         error_rad=result.angle_error_rad if outcome == "done" else None, outcome=outcome, detail=detail, task="grip",
         lateral_error_mm=_rounded(None if result.centre_error_m is None else result.centre_error_m * 1e3),
         clearance_mm=float(grip.centre_tolerance_mm), force_error_n=_rounded(result.force_error_n),
-        force_tolerance_n=float(grip.force_tolerance_n), timings_s={k: round(v, 6) for k, v in result.timings_s.items()},
+        force_tolerance_n=float(grip.force_tolerance_n),
+        timings_s={k: round(v, 6) for k, v in result.timings_s.items()},
         extra={"force_n": round(p.force_n, 4), **_sensor_extra(p), "commanded_force_n": float(target_force_n),
                "final_command_n": _rounded(result.commanded_force_n), "applied_force_n": _rounded(result.true_force_n),
                "force_steps": result.force_steps, "recentres": result.recentres,
@@ -530,7 +531,8 @@ def _frame_stream(cell, frames_dir: str | Path | None, p: Presentation, method: 
         return contextlib.nullcontext()
     from tactile_manip.trials.frames import TrialFrameStream
 
-    header = {"code_version": code_version, "trial": p.trial, "method": method, "seed": p.seed, "object": p.obj.display_name, "scene": scene.name,
+    header = {"code_version": code_version, "trial": p.trial, "method": method, "seed": p.seed,
+              "object": p.obj.display_name, "scene": scene.name,
               "true_angle_rad": p.angle_rad, "offset_mm": list(p.offset_mm), "force_n": p.force_n}
     return TrialFrameStream(Path(frames_dir) / f"{method}-{p.trial:04d}.tmframes", sensor=cell.sensor, arm=cell.arm,
                             gripper=cell.gripper, header=header,
