@@ -29,7 +29,7 @@ from tactile_manip.cli import main as cli
 from tactile_manip.collection.camera_sim import SimulatedCamera, SimulatedCameraConfig
 from tactile_manip.collection.collect import CollectConfig, PairCollector
 from tactile_manip.collection.collect_sim import SimulatedRig, calibrate_simulated, random_presses
-from tactile_manip.sensors.emulator import FaultConfig
+from tactile_manip.sensors.simulated.emulator import FaultConfig
 from tactile_manip.collection.pair_log import dataset_from_pair_logs
 from tactile_manip.data import save_dataset
 from tactile_manip.extras import MissingExtraError, require

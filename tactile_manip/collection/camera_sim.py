@@ -25,7 +25,7 @@ import numpy as np
 
 from tactile_manip.checks import check_finite_scalar
 from tactile_manip.collection.camera import Camera
-from tactile_manip.sensors.contacts import Press
+from tactile_manip.sensors.simulated.contacts import Press
 from tactile_manip.collection.vbts import MIRRORS, PadAlignment, apply_homography
 from tactile_manip.sim.objects import Indenter, IndenterPose
 from tactile_manip.sim.pair import SensorPair

@@ -21,8 +21,8 @@ from tactile_manip.errors import SensorTimeoutError
 from tactile_manip.collection.camera_sim import SimulatedCamera, SimulatedCameraConfig, ball_indenter
 from tactile_manip.collection.force import ScriptForce
 from tactile_manip.sensors.config import SerialSensorConfig
-from tactile_manip.sensors.contacts import Press
-from tactile_manip.sensors.emulator import EmulatorConfig, FaultConfig, FirmwareEmulator
+from tactile_manip.sensors.simulated.contacts import Press
+from tactile_manip.sensors.simulated.emulator import EmulatorConfig, FaultConfig, FirmwareEmulator
 from tactile_manip.sensors.serial_sensor import SerialSensor
 from tactile_manip.collection.vbts import DepthParams
 from tactile_manip.collection.vbts_calibration import VbtsCalibration, calibrate_ball

@@ -18,7 +18,7 @@ import numpy as np
 
 from tactile_manip.checks import check_finite_scalar
 from tactile_manip.sensors.base import TactileSensor
-from tactile_manip.sensors.contacts import Press
+from tactile_manip.sensors.simulated.contacts import Press
 
 
 @dataclass(frozen=True)

@@ -233,7 +233,7 @@ def _record_sim(args, config, calibration, log_path: Path, progress):
     from tactile_manip.collection.camera_sim import SimulatedCameraConfig
     from tactile_manip.collection.collect import PairCollector
     from tactile_manip.collection.collect_sim import SimulatedRig, random_presses
-    from tactile_manip.sensors.emulator import FaultConfig
+    from tactile_manip.sensors.simulated.emulator import FaultConfig
 
     rng = np.random.default_rng(args.seed)
     presses = random_presses(args.objects, args.presses, rng=rng, lead_s=3.0)

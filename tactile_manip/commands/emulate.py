@@ -56,8 +56,8 @@ def run(args: argparse.Namespace) -> int:
     import sys
     import threading
 
-    from tactile_manip.sensors.contacts import parse_press
-    from tactile_manip.sensors.emulator import EmulatorConfig, FaultConfig, FirmwareEmulator
+    from tactile_manip.sensors.simulated.contacts import parse_press
+    from tactile_manip.sensors.simulated.emulator import EmulatorConfig, FaultConfig, FirmwareEmulator
 
     if args.linger_s < 0:
         raise ValueError(f"--linger-s must be >= 0, got {args.linger_s}")

@@ -4,7 +4,7 @@
 - backends :class:`SerialSensor` (pyserial, imported on connect), :class:`SimulatedSensor`,
   :class:`ReplaySensor`, each built from its config dataclass or by :func:`make_sensor`;
 - :mod:`~tactile_manip.sensors.layout`: board layouts; :mod:`~tactile_manip.sensors.drift`: baseline tracking,
-  temperature, stray fields; :mod:`~tactile_manip.sensors.emulator`: the firmware emulator on a pty;
+  temperature, stray fields; :mod:`~tactile_manip.sensors.simulated.emulator`: the firmware emulator on a pty;
   :mod:`~tactile_manip.sensors.recording`: recording a live sensor to a crash-safe file.
 
 The wire formats the serial backend decodes (the SuperMag codec, supermag and anyskin decoders) live below this
@@ -70,9 +70,9 @@ __all__ = [
 
 # what drives the simulator, imported on first use so the drivers and recordings stay free of it
 _SIMULATOR_DRIVEN = {
-    "ContactTimeline": "tactile_manip.sensors.contacts",
-    "Press": "tactile_manip.sensors.contacts",
-    "parse_press": "tactile_manip.sensors.contacts",
+    "ContactTimeline": "tactile_manip.sensors.simulated.contacts",
+    "Press": "tactile_manip.sensors.simulated.contacts",
+    "parse_press": "tactile_manip.sensors.simulated.contacts",
     "SimulatedSensor": "tactile_manip.sensors.simulated",
 }
 

@@ -228,7 +228,7 @@ def test_the_wire_formats_a_board_may_name_are_the_serial_backends():
 
 
 def test_the_emulator_streams_a_boards_chips_and_refuses_what_it_cannot(tmp_path, capsys):
-    from tactile_manip.sensors.emulator import EmulatorConfig, FirmwareEmulator
+    from tactile_manip.sensors.simulated.emulator import EmulatorConfig, FirmwareEmulator
     from tactile_manip.sensors.wire import make_decoder
 
     emulator = FirmwareEmulator(EmulatorConfig(wire_format="anyskin", board="eflesh"))

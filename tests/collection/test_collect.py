@@ -14,7 +14,7 @@ from tactile_manip.collection.camera import CameraTimeoutError
 from tactile_manip.collection.camera_sim import SimulatedCamera, SimulatedCameraConfig
 from tactile_manip.collection.collect import CollectConfig, PairCollector
 from tactile_manip.collection.force import FieldForce, FunctionForce, PressTrigger, ScriptForce
-from tactile_manip.sensors.contacts import Press
+from tactile_manip.sensors.simulated.contacts import Press
 from tactile_manip.collection.pair_log import dataset_from_pair_logs, read_pair_log
 from tactile_manip.data import load_dataset, save_dataset
 from tactile_manip.sim.objects import IndenterPose

@@ -22,7 +22,7 @@ def test_the_four_commands_are_registered():
 
 
 def test_sensor_modules_and_the_parser_stay_free_of_serial_and_matplotlib():
-    code = ("import sys, tactile_manip, tactile_manip.sensors, tactile_manip.sensors.emulator, tactile_manip.cli\n"
+    code = ("import sys, tactile_manip, tactile_manip.sensors, tactile_manip.sensors.simulated.emulator, tactile_manip.cli\n"
             "tactile_manip.cli.build_parser()\n"
             "print(sorted({m.split('.')[0] for m in sys.modules} & {'serial', 'matplotlib', 'torch'}))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
@@ -177,7 +177,7 @@ def test_emulate_link_never_replaces_a_file_it_did_not_create(tmp_path, capsys):
 def test_emulate_replaces_a_stale_pty_link_and_removes_only_its_own(tmp_path, capsys):
     import os
 
-    from tactile_manip.sensors.emulator import EmulatorConfig, FirmwareEmulator
+    from tactile_manip.sensors.simulated.emulator import EmulatorConfig, FirmwareEmulator
 
     link = tmp_path / "board"
     link.symlink_to("/dev/pts/987654")  # left behind by a killed emulator

@@ -9,7 +9,7 @@ import pytest
 
 from tactile_manip.errors import CalibrationError, SensorTimeoutError
 from tactile_manip.sensors import Press, SimulatedSensor, SimulatedSensorConfig
-from tactile_manip.sensors.contacts import ContactTimeline, parse_press
+from tactile_manip.sensors.simulated.contacts import ContactTimeline, parse_press
 from tactile_manip.sim.objects import IndenterPose
 from tactile_manip.sim.pair import SensorPair
 from tactile_manip.sim.shapes import make_indenter

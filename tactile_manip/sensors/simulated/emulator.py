@@ -3,7 +3,7 @@
 It opens a pty (``os.openpty``, slave in raw mode), and writes one wire frame per tick at 125 Hz on a
 monotonic schedule (sleep until the next deadline: no drift, no busy loop). The field is the simulated
 sensor's idle baseline plus, during scripted presses, their change precomputed before streaming
-(:mod:`tactile_manip.sensors.contacts`), with fresh chip noise each frame. Faults, each seeded:
+(:mod:`tactile_manip.sensors.simulated.contacts`), with fresh chip noise each frame. Faults, each seeded:
 
 - ``bit_flip_rate``, ``drop_byte_rate``, ``truncate_rate``: per-frame probabilities of one flipped bit, one
   missing byte, or the frame cut short; every frame touched is listed in ``EmulatorReport.corrupted_seqs``;
@@ -23,7 +23,7 @@ t, x, y, z each, then CRLF; :mod:`tactile_manip.wire.anyskin`): the simulator mo
 so each chip of the ``anyskin-5`` cross gets the simulated field interpolated (bilinearly, over the 4x4
 chips) at its position and turned into its own axes, and a temperature of 25 degC with 0.1 degC noise.
 
-Run it with ``tactile-manip emulate`` (or ``python -m tactile_manip.sensors.emulator``).
+Run it with ``tactile-manip emulate`` (or ``python -m tactile_manip.sensors.simulated.emulator``).
 """
 
 from __future__ import annotations
@@ -40,7 +40,7 @@ from typing import Literal
 import numpy as np
 
 from tactile_manip.outputs import OutputPathError, check_writable_parent
-from tactile_manip.sensors.contacts import ContactTimeline, Press
+from tactile_manip.sensors.simulated.contacts import ContactTimeline, Press
 from tactile_manip.sensors.layout import ANYSKIN_5, BoardLayout, get_layout
 from tactile_manip.wire.protocol import encode_frame
 from tactile_manip.wire.anyskin import pack_frame

@@ -21,7 +21,7 @@ import numpy as np
 from tactile_manip.checks import check_finite_scalar
 from tactile_manip.sensors.base import TactileSensor
 from tactile_manip.sensors.config import SimulatedSensorConfig
-from tactile_manip.sensors.contacts import ContactTimeline, Press
+from tactile_manip.sensors.simulated.contacts import ContactTimeline, Press
 from tactile_manip.sim.objects import Indenter, IndenterPose
 from tactile_manip.sim.pair import SensorPair
 
