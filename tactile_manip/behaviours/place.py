@@ -18,7 +18,7 @@ from typing import Protocol
 
 import numpy as np
 
-from tactile_manip.behaviours.reorient import ReorientConfig, _Abort, _grasp, _read
+from tactile_manip.behaviours.reorient import ReorientConfig, _Abort, _grasp, _read, split_estimator
 from tactile_manip.checks import check_array, check_finite_scalar
 from tactile_manip.errors import ArmFault, IKError, SafetyLimitError
 from tactile_manip.perception.estimator import TactilePoseEstimator
@@ -76,6 +76,7 @@ def place_in_slot(arm: Arm, gripper: Gripper, sensor: TactileSensor, estimator: 
     An undefined estimate aborts ("abstained"): without an axis there is nothing to align.
     """
     cfg = config or ReorientConfig()
+    estimator = split_estimator(estimator)[0]  # a TactileEstimator's pose estimator: the angle and the centroid
     result = PlaceResult(outcome="error")
     t0 = time.perf_counter()
     normal = (arm.state().base_T_hand @ hand_T_pad())[:3, 2]

@@ -143,6 +143,8 @@ def grasp_estimate_reorient(arm: Arm, gripper: Gripper, sensor: TactileSensor, e
     """Run the behaviour once on the object between the fingers (see the module docstring).
 
     Args:
+        estimator: a pose estimator, or a :class:`~tactile_manip.perception.contact_pose.TactileEstimator` (its
+            pose estimator gives the angle, its contact model the grip force, as ``contact`` would).
         object_width_m: nominal width of the object across the fingers, m.
         target_angle_rad: commanded final angle of the object's axis in the pad frame at grasp.
         truth: scores the final angle when given (``final_angle_rad`` and ``error_rad`` stay None otherwise).
@@ -158,6 +160,7 @@ def grasp_estimate_reorient(arm: Arm, gripper: Gripper, sensor: TactileSensor, e
     """
     cfg = config or ReorientConfig()
     observer = observer or _Silent()
+    estimator, contact = split_estimator(estimator, contact)
     if contact is not None:
         contact.check_layout(sensor.layout.name)
     target = float(wrap_axial(check_finite_scalar("target_angle_rad", target_angle_rad)))
@@ -197,6 +200,18 @@ def grasp_estimate_reorient(arm: Arm, gripper: Gripper, sensor: TactileSensor, e
             result.final_angle_rad = float(wrap_axial(angle_in_plane(np.asarray(axis, float), base_T_pad)))
             result.error_rad = float(wrap_axial(result.final_angle_rad - target))
     return result
+
+
+def split_estimator(estimator, contact: ContactEstimator | None = None):
+    """(pose estimator, contact model) of what a behaviour was given: a
+    :class:`~tactile_manip.perception.contact_pose.TactileEstimator` is both (a contact model given beside it
+    as well is refused: ValueError), anything else is the pose estimator, with ``contact`` as given."""
+    pose, model = getattr(estimator, "pose", None), getattr(estimator, "contact", None)
+    if pose is None or model is None:
+        return estimator, contact
+    if contact is not None and contact is not model:
+        raise ValueError("the estimator already holds a contact model: give contact= or a TactileEstimator, not both")
+    return pose, model
 
 
 def _close_on(gripper: Gripper, width_m: float, cfg: ReorientConfig, what: str) -> float:

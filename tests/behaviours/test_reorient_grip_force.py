@@ -76,3 +76,18 @@ def test_a_contact_model_of_another_board_is_refused_before_the_gripper_closes(c
             grasp_estimate_reorient(cell.arm, cell.gripper, cell.sensor, estimator, object_width_m=obj.width_m,
                                     target_angle_rad=0.0, truth=truth, contact=foreign)
         assert cell.gripper.state().width_m == open_width and np.array_equal(cell.arm.state().q_rad, q)
+
+
+def test_a_tactile_estimator_gives_both_the_angle_and_the_grip_force(cell) -> None:
+    from tactile_manip.perception.contact import ContactEstimator
+    from tactile_manip.perception.contact_pose import TactileEstimator
+
+    both = TactileEstimator(build_estimators(cell.scene)["bilinear"], ContactEstimator(CONTACT_MODEL))
+    with cell.presented(draw_presentation(cell.scene, 0)) as (obj, truth):
+        result = grasp_estimate_reorient(cell.arm, cell.gripper, cell.sensor, both, object_width_m=obj.width_m,
+                                         target_angle_rad=0.0, truth=truth)
+    assert result.outcome == "done" and result.contact is not None and result.estimate.defined
+    with cell.presented(draw_presentation(cell.scene, 1)) as (obj, truth):
+        with pytest.raises(ValueError, match="not both"):
+            grasp_estimate_reorient(cell.arm, cell.gripper, cell.sensor, both, object_width_m=obj.width_m,
+                                    target_angle_rad=0.0, contact=ContactEstimator(CONTACT_MODEL))
