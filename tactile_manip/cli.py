@@ -51,8 +51,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "view": ("tactile_manip.commands.view",
              "watch a sensor's field live (board or simulation) or replay a recording; or stream it to Rerun"),
     "trials": ("tactile_manip.commands.trials",
-               "run a scene's task (reorient the rod, or place it in a slot) per method on the same "
-               "presentations, simulated or on an FR3, and report"),
+               "run a scene's task (reorient the rod, place it in a slot, or grip it at a target force) per "
+               "method on the same presentations, simulated or on an FR3, and report"),
     "calibrate": ("tactile_manip.commands.calibrate",
                   "calibrate a model's confidence to the chance its angle is within tolerance"),
     "score": ("tactile_manip.commands.score", "re-score a saved trial run at another tolerance, without re-running"),
