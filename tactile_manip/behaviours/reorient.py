@@ -36,6 +36,7 @@ if TYPE_CHECKING:
     from tactile_manip.perception.contact import ContactEstimator, ContactState
 
 POLICIES = ("act", "regrasp", "abstain")
+NO_TURN_RAD = 1e-6  # a correction smaller than this is not made (0.00006 deg)
 
 
 @dataclass(frozen=True)
@@ -303,6 +304,8 @@ def _turn_about_pad_normal(arm: Arm, base_T_pad: np.ndarray, est: AngleEstimate,
     A rod is axial: turning by ``angle_rad - sign(angle_rad) * pi`` aligns it just as well, so when the turn
     has no joint path (or the safety layer refuses it) the other way round is tried before giving up.
     """
+    if abs(angle_rad) < NO_TURN_RAD:  # nothing to turn (a real arm's planner refuses a motion of zero length)
+        return 0.0
     centroid_pad_m = np.array([est.centroid_mm[0] * 1e-3, est.centroid_mm[1] * 1e-3, 0.0, 1.0])
     point = (base_T_pad @ centroid_pad_m)[:3]
     turns = [angle_rad, angle_rad - math.copysign(math.pi, angle_rad)] if angle_rad != 0 else [0.0]

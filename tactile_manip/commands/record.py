@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import argparse
 
-from tactile_manip.commands.serial_options import add_serial_options, serial_config
+from tactile_manip.commands.serial_options import add_serial_options, check_sim_board, serial_config
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -44,6 +44,7 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError(f"--seconds must be > 0, got {args.seconds}")
     if args.press and not args.sim:
         raise ValueError("--press scripts the simulated sensor: use it with --sim")
+    check_sim_board(args)
     if args.sim:
         sensor = SimulatedSensor()
     else:  # an empty --port is refused by serial_config, never read as "no port" (that once recorded --sim)

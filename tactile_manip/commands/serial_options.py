@@ -33,6 +33,14 @@ def add_serial_options(p: argparse.ArgumentParser, source: argparse._MutuallyExc
     g.add_argument("--rts", choices=("low", "high"), default="low", help="RTS level while open (default low)")
 
 
+def check_sim_board(args: argparse.Namespace) -> None:
+    """Refuse ``--sim`` with another board than the SuperMag one it simulates (ValueError saying what does)."""
+    if getattr(args, "sim", False) and args.layout and args.layout != "supermag-4x4":
+        raise ValueError(f"--sim simulates the SuperMag board, not --board {args.layout}: serve that board's bytes "
+                         f"with `tactile-manip emulate --board {args.layout} --link PAD` and read them with "
+                         f"--port PAD --board {args.layout}")
+
+
 def serial_config(args: argparse.Namespace) -> SerialSensorConfig:
     """The SerialSensorConfig the options describe (ValueError naming a bad value; an empty --port or
     --serial-number is refused, never read as "no port")."""

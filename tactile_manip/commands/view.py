@@ -20,7 +20,7 @@ import sys
 import time
 
 from tactile_manip.commands.rerun_options import add_rerun_options, check_rerun_options
-from tactile_manip.commands.serial_options import add_serial_options, serial_config
+from tactile_manip.commands.serial_options import add_serial_options, check_sim_board, serial_config
 
 DEFAULT_SIM_PRESS = "letter_r,t=0.3,force=10,yaw=20,rise=0.4,hold=0.6"
 RANGE_FLOOR_UT = 20.0  # the colour and arrow scales never zoom in below this, so idle noise looks like noise
@@ -74,6 +74,7 @@ def run(args: argparse.Namespace) -> int:
     if args.port:
         require("serial", "viewing a serial port")
     _check_view_options(args)
+    check_sim_board(args)
     check_rerun_options(args)
     if args.rerun:
         plt = None

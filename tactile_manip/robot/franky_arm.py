@@ -265,7 +265,7 @@ class FrankyArm(FR3Arm):
         try:
             robot.move(motion)
             self._settle(robot)
-        except franky_errors(franky) as e:
+        except (*franky_errors(franky), RuntimeError) as e:  # its planner raises a plain RuntimeError
             raise self._record(arm_error(franky, e, action=action, host=self.config.host)) from e
 
     def _settle(self, robot: Any) -> None:

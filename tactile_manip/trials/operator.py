@@ -97,7 +97,7 @@ class OperatorCell:
 
             require("franky", "the real FR3 (robot.backend = 'franky')")
             config = FrankyConfig(host=scene.robot.host, relative_dynamics_factor=scene.robot.relative_dynamics_factor,
-                                  home_q_rad=scene.robot.home_q_rad)
+                                  home_q_rad=scene.robot.home_q_rad, enforce_realtime=scene.robot.enforce_realtime)
             arm = arm or SafeArm(FrankyArm(config), scene.robot.safety)
             gripper = gripper or FrankyGripper(config)
         self.arm, self.gripper, self.sensor = arm, gripper, sensor

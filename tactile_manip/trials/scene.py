@@ -162,6 +162,8 @@ class RobotConfig:
         backend: "twin" or "franky".
         host: franky only: the robot's address (FCI enabled).
         relative_dynamics_factor: franky only: fraction of the robot's velocity/acceleration/jerk limits.
+        enforce_realtime: franky only: refuse to move without a real-time (PREEMPT_RT) kernel, as a real FR3
+            wants; false to rehearse a scene against franky-sim on an ordinary machine.
         speed_factor: twin only: fraction of the joint velocity limits used for the modelled durations.
         home_q_rad: where each trial starts and the object is presented, rad. The default holds the hand
             pointing straight down with the pad normal along -x of the base (the fingers close along base x),
@@ -173,6 +175,7 @@ class RobotConfig:
     backend: Literal["twin", "franky"] = "twin"
     host: str = ""
     relative_dynamics_factor: float = 0.05
+    enforce_realtime: bool = True
     speed_factor: float = 0.1
     home_q_rad: tuple[float, float, float, float, float, float, float] = (
         0.0, -0.3, 0.0, -2.2, 0.0, 1.9, -math.pi / 4)

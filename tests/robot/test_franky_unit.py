@@ -378,6 +378,14 @@ def test_a_refused_command_is_a_robot_error_not_a_fault(fake_franky, franky_arm,
     assert not franky_arm.state().faulted
 
 
+def test_a_planner_failure_is_a_fault_naming_it(franky_arm):
+    """franky's motion planner raises a plain RuntimeError (seen on franky-sim for a zero-length Cartesian move)."""
+    _robot(franky_arm).move_error = RuntimeError("Motion planner failed with error code -111")
+    with pytest.raises(ArmFault, match="Motion planner failed with error code -111") as info:
+        franky_arm.move_joints(franky_arm.home_q_rad)
+    assert "recover()" in str(info.value) and franky_arm.state().faulted
+
+
 # --- gripper ------------------------------------------------------------------------------------------------
 
 @pytest.mark.parametrize("exc_name", ["GripperException", "CommandException", "NetworkException"])

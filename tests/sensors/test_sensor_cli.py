@@ -61,6 +61,15 @@ def test_record_the_simulated_sensor(tmp_path, capsys):
     assert_one_line_error(capsys.readouterr().err, "record", "--sim")
 
 
+@pytest.mark.parametrize("command", ["record", "view"])
+def test_sim_with_another_board_is_refused_naming_the_emulator(tmp_path, capsys, command):
+    out = tmp_path / "sim.tmrec"
+    extra = ["--out", str(out)] if command == "record" else ["--snapshot", str(tmp_path / "v.png")]
+    assert main([command, "--sim", "--board", "anyskin-5", "--seconds", "1", *extra]) == 2
+    assert_one_line_error(capsys.readouterr().err, command, "--sim simulates the SuperMag board", "emulate --board")
+    assert not out.exists() and not (tmp_path / "v.png").exists()
+
+
 def test_record_a_missing_port_is_a_one_line_error(tmp_path, capsys):
     assert main(["record", "--port", str(tmp_path / "ttyUSB9"), "--out", str(tmp_path / "r.tmrec")]) == 2
     assert_one_line_error(capsys.readouterr().err, "record", "find-port")
