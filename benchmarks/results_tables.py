@@ -15,7 +15,6 @@ import argparse
 import difflib
 import json
 import os
-import re
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path

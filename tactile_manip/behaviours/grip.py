@@ -36,9 +36,9 @@ from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
-from tactile_manip.behaviours.reorient import ReorientConfig, _Abort, _close_on, _grasp
+from tactile_manip.behaviours.reorient import ReorientConfig, _Abort, _close_on, _grasp, _move_hand
 from tactile_manip.checks import check_finite_scalar
-from tactile_manip.errors import ArmFault, GripperError, IKError, SafetyLimitError, SensorError
+from tactile_manip.errors import ArmFault, GripperError, SensorError
 from tactile_manip.perception.pose import wrap_axial
 from tactile_manip.robot.base import Arm, Gripper
 from tactile_manip.robot.frames import hand_T_finger_pad
@@ -189,14 +189,7 @@ def _centre(arm: Arm, gripper: Gripper, sensor: TactileSensor, estimator: Tactil
         base_T_pad = base_T_hand @ hand_T_finger_pad(width_m)
         target = base_T_hand.copy()
         target[:3, 3] += base_T_pad[:3, :2] @ (np.asarray(shift_mm) * 1e-3)
-        try:
-            arm.move_cartesian(target, speed_factor=cfg.speed_factor)
-        except IKError as exc:
-            raise _Abort("ik_failed", f"centring move: {exc}") from None
-        except SafetyLimitError as exc:
-            raise _Abort("safety_refused", f"centring move: {exc}") from None
-        except ArmFault as exc:
-            raise _Abort("arm_fault", f"centring move: {exc}") from None
+        _move_hand(arm, target, cfg, "centring move")
         _close_at(gripper, width_m, result.commanded_force_n, cfg, "centred grasp")
         est = _read_all(sensor, estimator, cfg)
     return est

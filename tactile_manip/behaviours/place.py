@@ -18,9 +18,8 @@ from typing import Protocol
 
 import numpy as np
 
-from tactile_manip.behaviours.reorient import ReorientConfig, _Abort, _grasp, _read, split_estimator
+from tactile_manip.behaviours.reorient import ReorientConfig, _Abort, _grasp, _move_hand, _read, split_estimator
 from tactile_manip.checks import check_array, check_finite_scalar
-from tactile_manip.errors import ArmFault, IKError, SafetyLimitError
 from tactile_manip.perception.estimator import TactilePoseEstimator
 from tactile_manip.perception.pose import wrap_axial
 from tactile_manip.robot.base import Arm, Gripper
@@ -94,10 +93,10 @@ def place_in_slot(arm: Arm, gripper: Gripper, sensor: TactileSensor, estimator: 
         axis_point = (base_T_pad @ np.array([est.centroid_mm[0] * 1e-3, est.centroid_mm[1] * 1e-3,
                                              width_m / 2, 1.0]))[:3]
         turn = float(wrap_axial(angle_in_plane(np.asarray(slot.axis_base, float), base_T_pad) - est.angle_rad))
-        _move(arm, rotate_pose_about(arm.state().base_T_hand, normal, axis_point, turn), cfg, "turn")
+        _move_hand(arm, rotate_pose_about(arm.state().base_T_hand, normal, axis_point, turn), cfg, "turn")
         shift = arm.state().base_T_hand.copy()
         shift[:3, 3] += np.asarray(slot.centre_base_m, float) - axis_point
-        _move(arm, shift, cfg, "approach")
+        _move_hand(arm, shift, cfg, "approach")
         result.outcome = "done"
     except _Abort as stop:
         result.outcome, result.detail = stop.outcome, stop.detail
@@ -128,15 +127,3 @@ def slot_errors(base_T_object: np.ndarray, slot: Slot, base_T_pad: np.ndarray) -
     offset = np.asarray(slot.centre_base_m, float) - base_T_object[:3, 3]
     lateral = float(np.linalg.norm(offset - np.dot(offset, axis) * axis))
     return angle, lateral
-
-
-def _move(arm: Arm, target: np.ndarray, cfg: ReorientConfig, what: str) -> None:
-    try:
-        arm.move_cartesian(target, speed_factor=cfg.speed_factor)
-    except IKError as exc:
-        raise _Abort("ik_failed", f"{what}: {exc}") from None
-    except SafetyLimitError as exc:
-        raise _Abort("safety_refused", f"{what}: {exc}") from None
-    except ArmFault as exc:
-        raise _Abort("arm_fault", f"{what}: {exc}") from None
-

@@ -203,6 +203,18 @@ def grasp_estimate_reorient(arm: Arm, gripper: Gripper, sensor: TactileSensor, e
     return result
 
 
+def _move_hand(arm: Arm, target: np.ndarray, cfg: ReorientConfig, what: str) -> None:
+    """A Cartesian move of the hand to ``target`` (4, 4); a refusal or a fault ends the behaviour as its outcome."""
+    try:
+        arm.move_cartesian(target, speed_factor=cfg.speed_factor)
+    except IKError as exc:
+        raise _Abort("ik_failed", f"{what}: {exc}") from None
+    except SafetyLimitError as exc:
+        raise _Abort("safety_refused", f"{what}: {exc}") from None
+    except ArmFault as exc:
+        raise _Abort("arm_fault", f"{what}: {exc}") from None
+
+
 def split_estimator(estimator, contact: ContactEstimator | None = None):
     """(pose estimator, contact model) of what a behaviour was given: a
     :class:`~tactile_manip.perception.contact_pose.TactileEstimator` is both (a contact model given beside it
