@@ -1,7 +1,8 @@
 """Where the network's time goes, node by node, and what decoder candidates would cost (untrained, timed only).
 
-    python -m benchmarks.bench_decoders                  # the shipped model and every configs/train/decoder_*.toml
-    python -m benchmarks.bench_decoders --config configs/train/decoder_s4.toml --rounds 3
+    python -m benchmarks.bench_decoders                  # the shipped model and every
+                                                         # experiments/decoder_candidates/decoder_*.toml
+    python -m benchmarks.bench_decoders --config experiments/decoder_candidates/decoder_s4.toml --rounds 3
 
 1. onnxruntime's profiler on the shipped model (one thread, ``--profile-calls`` readings): the median time of
    every node, summed by operator type and listed for the slowest nodes.
@@ -114,7 +115,7 @@ def markdown(report: dict[str, Any]) -> str:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--config", action="append", default=[], help="candidate training config (repeatable; "
-                        "default: configs/train/decoder_*.toml)")
+                        "default: experiments/decoder_candidates/decoder_*.toml)")
     parser.add_argument("--readings", type=int, default=120)
     parser.add_argument("--rounds", type=int, default=2)
     parser.add_argument("--profile-calls", type=int, default=200)
@@ -122,7 +123,7 @@ def main() -> None:
     args = parser.parse_args()
     from tactile_manip.learning.eager import export_untrained
 
-    configs = args.config or sorted(glob.glob("configs/train/decoder_*.toml"))
+    configs = args.config or sorted(glob.glob("experiments/decoder_candidates/decoder_*.toml"))
     fields, _ = rod_readings(args.readings, 0)
     with tempfile.TemporaryDirectory(prefix="bench-decoders-") as tmp:
         models = {"shipped": Path(SHIPPED)} | {Path(c).stem: export_untrained(c, Path(tmp) / "models") for c in configs}

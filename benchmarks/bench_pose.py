@@ -4,7 +4,8 @@
                                                            # bilinear 16x16 and 200x200, the paper preset
     python -m benchmarks.bench_pose --readings 300 --method mine=path/to/model.onnx
     python -m benchmarks.bench_pose --untrained fast=configs/train/candidate.toml   # latency of a config
-    python -m benchmarks.bench_pose --candidates           # also every configs/train/decoder_*.toml, untrained
+    python -m benchmarks.bench_pose --candidates           # also every experiments/decoder_candidates/decoder_*.toml,
+                                                           # untrained
 
 Readings are simulated presses of the six unseen rods (random in-hand angle, +-2 mm offset, 10-11 N, chip
 noise), the same for every method. Per method, on one thread: latency p50 / p99 of
@@ -143,7 +144,8 @@ def main() -> None:
     parser.add_argument("--untrained", action="append", default=[], metavar="NAME=PRESET|CONFIG.toml",
                         help="also time an untrained export of this preset or training config (latency only)")
     parser.add_argument("--candidates", action="store_true",
-                        help="also time every configs/train/decoder_*.toml (untrained) not given with --method")
+                        help="also time every experiments/decoder_candidates/decoder_*.toml (untrained) not given "
+                        "with --method")
     parser.add_argument("--no-paper", action="store_true", help="skip the paper preset (needs torch to export)")
     parser.add_argument("--slow-calls", type=int, default=40, help="calls at most for the untrained models")
     parser.add_argument("--out", default="benchmarks/results/pose.json")
@@ -159,7 +161,7 @@ def main() -> None:
         methods[name] = load_reconstructor(path, threads=1)
     untrained = dict(spec.partition("=")[::2] for spec in args.untrained)
     if args.candidates:
-        configs = sorted(Path("configs/train").glob("decoder_*.toml"))
+        configs = sorted(Path("experiments/decoder_candidates").glob("decoder_*.toml"))
         untrained |= {p.stem: str(p) for p in configs if p.stem not in methods}
     if not args.no_paper:
         untrained = {"paper": "paper", **untrained}

@@ -48,7 +48,7 @@ class ModelEntry:
     runtimes: tuple[str, ...] | None = None
 
 
-DECODER_CANDIDATES = "configs/train/decoder_*.toml"  # faster decoders, timed untrained until trained
+DECODER_CANDIDATES = "experiments/decoder_candidates/decoder_*.toml"  # faster decoders, timed untrained until trained
 SHIPPED_MODEL = "models/supermag.onnx"  # the default model: the robust image graphs with an angle head inside
 FAST_MODEL = "experiments/model_variants/supermag_fast.onnx"  # a reference model, kept for the bench
 FAST_RECIPE = "experiments/model_variants/supermag_fast.train.toml"  # the training config copied beside it
@@ -75,8 +75,8 @@ def default_models(root: str | Path = ".", *, research: bool = False) -> list[Mo
     not trained there): the torch rows of the reference models from their checkpoints, the size variants on one
     8-epoch recipe, the paper preset, the other full-recipe runs of ``configs/train/fast*.toml``
     (``runs/<stem>/``, as ``<stem>_full``, on one thread; the fast model's own recipe is ``fast``), and the
-    decoder candidates of ``configs/train/decoder_*.toml`` (their run's export when trained, else an untrained
-    export timed on one thread): how the published speed reports were made."""
+    decoder candidates of ``experiments/decoder_candidates/decoder_*.toml`` (their run's export when trained,
+    else an untrained export timed on one thread): how the published speed reports were made."""
     r = Path(root)
     shipped = [ModelEntry("supermag", r / SHIPPED_MODEL, symmetrized=True),
                ModelEntry("fast", r / FAST_MODEL, r / "runs/fast_b48/best.pt" if research else None,

@@ -177,7 +177,7 @@ def test_default_models_include_the_decoder_candidates_on_one_thread_only(tiny_m
 
     root = Path(__file__).resolve().parents[2]
     entries = {e.name: e for e in default_models(root, research=True)}
-    configs = sorted(p.stem for p in (root / "configs" / "train").glob("decoder_*.toml"))
+    configs = sorted(p.stem for p in (root / "experiments" / "decoder_candidates").glob("decoder_*.toml"))
     assert configs and all(entries[c].runtimes == ("ort-1",) for c in configs)
     assert entries[configs[0]].untrained_preset.endswith(f"{configs[0]}.toml")  # timed untrained until trained
     assert entries["fast"].runtimes is None and entries["compact"].runtimes is None
