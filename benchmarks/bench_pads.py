@@ -10,6 +10,8 @@ chip noise). For each pad count, on one thread, in interleaved calls so a busy m
 - ``angle + centroids``: the same call, then every pad's centroid read (the images decoded in one batched run);
 - ``image route``: an estimator with ``angle_source = "image"``, the paper's route (every image decoded and
   post-processed: the cost of the whole pipeline before the head);
+- ``angle + force``: a ``TactileEstimator`` of the same pose estimator and the shipped contact model, its
+  ``estimate_many`` (angles and contact states, each in one batched run; no position read);
 - per pad, the stages of the ``angle`` call (the head's batched run, the rest) and of the decode.
 
 The estimates of every call of the first pass are checked against the single-pad ``estimate`` of each reading
@@ -35,25 +37,29 @@ import numpy as np  # noqa: E402
 from benchmarks._common import machine_info, publish  # noqa: E402
 from benchmarks.bench_pose import PERIOD_MS, rod_readings  # noqa: E402
 from tactile_manip.perception import TactilePoseEstimator, load_reconstructor, wrap_axial  # noqa: E402
+from tactile_manip.perception.contact import ContactEstimator  # noqa: E402
+from tactile_manip.perception.contact_pose import TactileEstimator  # noqa: E402
 from tactile_manip.shipped import shipped_model  # noqa: E402
 
 PADS = (1, 2, 4, 8, 16)
 
 
-def measure(model: str, readings: int, repeats: int, seed: int) -> dict[str, Any]:
+def measure(model: str, contact: str, readings: int, repeats: int, seed: int) -> dict[str, Any]:
     rec = load_reconstructor(model, threads=1)
     fast = TactilePoseEstimator(rec)
     image = TactilePoseEstimator(rec, angle_source="image")
+    both = TactileEstimator(fast, ContactEstimator(contact, threads=1))
     fields, angles = rod_readings(readings, seed)
     single = [fast.estimate(f) for f in fields]  # the references every call's estimates must equal
-    rows: dict[int, dict[str, list[float]]] = {p: {k: [] for k in ("angle", "centroids", "image", "head", "decode")}
-                                               for p in PADS}
+    rows: dict[int, dict[str, list[float]]] = {
+        p: {k: [] for k in ("angle", "centroids", "image", "head", "decode", "force")} for p in PADS}
     mismatches = 0
     for p in PADS:  # warm-up of every batch size and route
         for start in range(3):
             idx = [(start + k) % readings for k in range(p)]
             [e.centroid_mm for e in fast.estimate_many(fields[idx])]
             image.estimate_many(fields[idx])
+            both.estimate_many(fields[idx])
     for rep in range(repeats):
         for start in range(0, readings, 1):
             for p in PADS:
@@ -67,12 +73,15 @@ def measure(model: str, readings: int, repeats: int, seed: int) -> dict[str, Any
                 t2 = time.perf_counter()
                 image.estimate_many(batch)
                 t3 = time.perf_counter()
+                both.estimate_many(batch)
+                t4 = time.perf_counter()
                 r = rows[p]
                 r["angle"].append((t1 - t0) * 1e3)
                 r["centroids"].append((t2 - t0) * 1e3)
                 r["image"].append((t3 - t2) * 1e3)
                 r["head"].append(many[0].timings_s.get("head", 0.0) * 1e3)
                 r["decode"].append((t2 - t1) * 1e3)
+                r["force"].append((t4 - t3) * 1e3)
                 if rep == 0:
                     mismatches += sum(_key(a) != _key(single[i]) for a, i in zip(many, idx))
     err_head = _errors(single, angles)
@@ -110,25 +119,29 @@ def markdown(report: dict[str, Any]) -> str:
              f"readings x {report['repeats']} passes; {m['cpu_model']}, {m['usable_cores']} cores, load average "
              f"{m.get('load_average')}; sensor period {PERIOD_MS:g} ms; every estimate equal to its single-pad "
              f"estimate: {res['equal_to_single_pad']}", "",
-             "| pads | angle p50 / p99 ms | per pad p50 ms | head's run p50 ms | angle + centroids p50 / p99 ms | "
-             "image route p50 / p99 ms |", "|---" * 6 + "|"]
+             "| pads | angle p50 / p99 ms | per pad p50 ms | head's run p50 ms | angle + force p50 / p99 ms | "
+             "angle + centroids p50 / p99 ms | image route p50 / p99 ms |", "|---" * 7 + "|"]
     for p, r in res["pads"].items():
         lines.append(f"| {p} | {r['angle_p50_ms']:.2f} / {r['angle_p99_ms']:.2f} | {r['angle_per_pad_p50_ms']:.3f} | "
-                     f"{r['head_p50_ms']:.2f} | {r['centroids_p50_ms']:.2f} / {r['centroids_p99_ms']:.2f} | "
+                     f"{r['head_p50_ms']:.2f} | {r['force_p50_ms']:.2f} / {r['force_p99_ms']:.2f} | "
+                     f"{r['centroids_p50_ms']:.2f} / {r['centroids_p99_ms']:.2f} | "
                      f"{r['image_p50_ms']:.2f} / {r['image_p99_ms']:.2f} |")
     lines += ["", "| route | angle error median deg | p95 deg | within 5 deg |", "|---|---|---|---|",
               f"| head (the default; images deferred) | {head['median_deg']:.2f} | {head['p95_deg']:.2f} | "
               f"{head['within_5deg']:.1%} |",
               f"| image (the paper's route) | {image['median_deg']:.2f} | {image['p95_deg']:.2f} | "
               f"{image['within_5deg']:.1%} |", "",
-              "angle: the call alone; angle + centroids: the call, then every pad's centroid read (the pads' images "
-              "decoded in one batched run); image route: every image decoded and post-processed."]
+              "angle: the call alone; angle + force: `TactileEstimator.estimate_many` with the shipped contact model "
+              "(angles and contact states, no position read); angle + centroids: the call, then every pad's "
+              "centroid read (the pads' images decoded in one batched run); image route: every image decoded and "
+              "post-processed."]
     return "\n".join(lines)
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--model", default=str(shipped_model()))
+    parser.add_argument("--contact", default=str(shipped_model("contact")), help="contact model of the same board")
     parser.add_argument("--readings", type=int, default=240)
     parser.add_argument("--repeats", type=int, default=3, help="passes over the readings")
     parser.add_argument("--seed", type=int, default=11)
@@ -136,9 +149,11 @@ def main() -> None:
     args = parser.parse_args()
     if args.readings < max(PADS) or args.repeats < 1:
         parser.error(f"--readings must be >= {max(PADS)} and --repeats >= 1")
-    results = measure(args.model, args.readings, args.repeats, args.seed)
+    results = measure(args.model, args.contact, args.readings, args.repeats, args.seed)
     model = os.path.relpath(args.model) if os.path.isabs(args.model) else args.model
-    report = {"machine": machine_info(), "model": model, "readings": args.readings, "repeats": args.repeats,
+    contact = os.path.relpath(args.contact) if os.path.isabs(args.contact) else args.contact
+    report = {"machine": machine_info(), "model": model, "contact": contact, "readings": args.readings,
+              "repeats": args.repeats,
               "seed": args.seed, "results": results}
     publish(report, args.out, markdown)
     Path(args.out).with_suffix(".md").write_text(markdown(report) + "\n")  # the table beside the JSON

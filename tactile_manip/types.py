@@ -49,7 +49,7 @@ class Deferred:
         raise NotImplementedError
 
 
-class _DeferredField:
+class DeferredField:
     """A dataclass field whose value may be a :class:`Deferred`, resolved (once) on first read.
 
     The value lives in the instance's ``__dict__`` under ``_<name>``; assignment goes through :meth:`__set__`
@@ -114,8 +114,8 @@ class AngleEstimate:
     angle_rad: float
     confidence: float
     defined: bool
-    centroid_mm: tuple[float, float] = _DeferredField((0.0, 0.0))
-    area_mm2: float = _DeferredField(0.0)
+    centroid_mm: tuple[float, float] = DeferredField((0.0, 0.0))
+    area_mm2: float = DeferredField(0.0)
     reason: str = ""
     saturated_chips: int = 0
     timings_s: dict[str, float] = field(default_factory=dict, compare=False)

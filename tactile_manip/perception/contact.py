@@ -57,7 +57,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -301,6 +301,35 @@ class ContactEstimator:
         self.session.run_with_iobinding(self._binding)                                # into _mean, _sigma
         return self._state(peak_ut, time.perf_counter() - t0)
 
+    def estimate_many(self, readings: Sequence[TactileReading | np.ndarray]) -> list[ContactState]:
+        """The contact in each of several pads' readings (each (R, C, 3) uT, baseline-subtracted), in one batched
+        run of the model; each state equals what :meth:`estimate` gives for its reading alone (no context).
+
+        Raises:
+            ValueError: a model that reads frames before the newest (its context is one pad's history: use one
+                estimator per pad), a wrong shape, or NaN / infinite values (nothing is estimated; the history
+                is unchanged).
+        """
+        if self.context_frames != 1:
+            raise ValueError(f"{self.path.name} reads {self.context_frames} frames of one pad's history; several "
+                             "pads' readings need one ContactEstimator each")
+        t0 = time.perf_counter()
+        checked = [self._check(r.field_ut if isinstance(r, TactileReading) else r) for r in readings]
+        run = [i for i, (_, _, why) in enumerate(checked) if not why]
+        mean = sigma = np.empty((0, len(self.target_names)), np.float32)
+        if run:
+            batch = np.stack([checked[i][0] for i in run])[:, None].astype(np.float32, copy=False)
+            mean, sigma = self.session.run(None, {"field_ut": batch})
+        latency = time.perf_counter() - t0
+        states: list[ContactState] = []
+        rows = {i: k for k, i in enumerate(run)}
+        for i, (_, peak_ut, why) in enumerate(checked):
+            if why:
+                states.append(self._implausible_state(peak_ut >= self.min_field_ut, None, why, latency, frames=0))
+            else:
+                states.append(self._state_of(mean[rows[i]].tolist(), sigma[rows[i]].tolist(), peak_ut, latency, 1))
+        return states
+
     def stream(self, sensor: TactileSensor, *, timeout_s: float = 0.1, max_estimates: int | None = None,
                stats: StreamStats | None = None) -> Iterator[ContactState]:
         """Yield one state per new frame of ``sensor``, always from the newest frame (stale ones are skipped,
@@ -337,14 +366,19 @@ class ContactEstimator:
 
     def _state(self, peak_ut: float, latency_s: float) -> ContactState:
         """The state of the outputs the last run left in ``_mean`` and ``_sigma``."""
-        mean, sigma = self._mean[0].tolist(), self._sigma[0].tolist()
+        return self._state_of(self._mean[0].tolist(), self._sigma[0].tolist(), peak_ut, latency_s,
+                              self._history.frames_used)
+
+    def _state_of(self, mean: list[float], sigma: list[float], peak_ut: float, latency_s: float,
+                  frames_used: int) -> ContactState:
+        """The state of one reading's outputs (one value and sigma per target), ``frames_used`` of context."""
         why = self._implausible_output(mean, sigma)
         if why:
             probability = None if self._flag is None else mean[self._flag]
             if probability is None or not math.isfinite(probability):  # the field rule, as without that output
                 return self._implausible_state(peak_ut >= self.min_field_ut, None, why, latency_s)
             probability = min(max(probability, 0.0), 1.0)
-            return self._implausible_state(probability > 0.5, probability, why, latency_s)
+            return self._implausible_state(probability > 0.5, probability, why, latency_s, frames=frames_used)
         for k, sigma_map in self.sigma_maps.items():
             sigma[k] = sigma_map.one(sigma[k])
         fields = self._blank.copy()
@@ -358,7 +392,7 @@ class ContactEstimator:
             fields["in_contact"] = peak_ut >= self.min_field_ut
         fields["values"] = dict(zip(self.target_names, mean))
         fields["sigmas"] = dict(zip(self.target_names, sigma))
-        fields["context_frames"] = self._history.frames_used
+        fields["context_frames"] = frames_used
         fields["latency_s"] = latency_s
         # the frozen dataclass's __init__ sets each of its 18 fields through object.__setattr__, which costs as
         # much as the rest of this method; the instance is the same (test_contact_estimator.py compares them)
@@ -376,10 +410,13 @@ class ContactEstimator:
         return ""
 
     def _implausible_state(self, in_contact: bool, probability: float | None, why: str,
-                           latency_s: float) -> ContactState:
-        """A state that is no answer (every quantity None), with its in-contact flag and why."""
+                           latency_s: float, *, frames: int | None = None) -> ContactState:
+        """A state that is no answer (every quantity None), with its in-contact flag and why; ``frames``: the
+        context the model read (default: the history's, where the model ran; 0 where it did not)."""
+        if frames is None:
+            frames = self._history.frames_used if probability is not None else 0
         return ContactState(in_contact=bool(in_contact), in_contact_probability=probability, values={}, sigmas={},
-                            context_frames=self._history.frames_used if probability is not None else 0,
+                            context_frames=frames if probability is not None else 0,
                             latency_s=latency_s, plausible=False, implausible_reason=why)
 
 

@@ -43,7 +43,7 @@ from tactile_manip.perception.contact import ContactEstimator, ContactState
 from tactile_manip.perception.estimator import (NO_CONTACT_FIELD, StreamStats, TactilePoseEstimator, _field,
                                                  _fresh_frames, stream_estimates)
 from tactile_manip.perception.pose import ISOTROPIC_REASON
-from tactile_manip.types import AngleEstimate, TactileReading
+from tactile_manip.types import AngleEstimate, Deferred, DeferredField, TactileReading
 
 if TYPE_CHECKING:
     from tactile_manip.sensors.base import TactileSensor
@@ -56,7 +56,11 @@ class TactileEstimate:
 
     angle: AngleEstimate
     contact: ContactState
-    position_mm: tuple[float, float] | None = None
+    position_mm: tuple[float, float] | None = DeferredField(None)  # of several pads: measured when first read
+
+    def __getstate__(self) -> dict:
+        """The fields with the position measured (a pickled or copied estimate holds values only)."""
+        return {**self.__dict__, "_position_mm": self.position_mm}
 
     @property
     def plausible(self) -> bool:
@@ -93,6 +97,20 @@ def fused_position_mm(angle: AngleEstimate, contact: ContactState, image_weight:
         return image or model
     return (image_weight * image[0] + (1.0 - image_weight) * model[0],
             image_weight * image[1] + (1.0 - image_weight) * model[1])
+
+
+class _LazyPosition(Deferred):
+    """The fused position of one pad of :meth:`TactileEstimator.estimate_many`, measured when first read (it
+    needs the pad's image, which is decoded only then)."""
+
+    __slots__ = ("estimator", "angle", "contact")
+
+    def __init__(self, estimator: TactileEstimator, angle: AngleEstimate, contact: ContactState) -> None:
+        self.estimator, self.angle, self.contact = estimator, angle, contact
+
+    def resolve(self, name: str) -> tuple[float, float] | None:
+        e = self.estimator
+        return fused_position_mm(self.angle, self.contact, e.image_position_weight, e.pose.min_contact_area_mm2)
 
 
 class TactileEstimator:
@@ -137,7 +155,8 @@ class TactileEstimator:
     def estimate_many(self, readings) -> list[TactileEstimate]:
         """Angle, contact and position of several pads' readings (each (R, C, 3) uT): the angles in one batched
         run (:meth:`TactilePoseEstimator.estimate_many`, images deferred where the head answers), the contact
-        model on each reading alone (no context from another pad).
+        states in another (:meth:`ContactEstimator.estimate_many`, each reading alone). A position is measured
+        on a pad's image only when it is read.
 
         Raises:
             ValueError: a contact model that reads frames before the newest (its context is one pad's history:
@@ -147,15 +166,9 @@ class TactileEstimator:
             raise ValueError(f"{self.contact.path.name} reads {self.contact.context_frames} frames of one pad's "
                              "history; estimate_many mixes pads: use one TactileEstimator per pad")
         angles = self.pose.estimate_many(readings)  # checks every reading (shape, NaN) before estimating any
-        out = []
-        for reading, angle in zip(readings, angles):
-            self.contact.reset()
-            contact = self.contact.estimate(reading)
-            out.append(TactileEstimate(angle=angle, contact=contact,
-                                       position_mm=fused_position_mm(angle, contact, self.image_position_weight,
-                                                                     self.pose.min_contact_area_mm2)))
-        self.contact.reset()
-        return out
+        contacts = self.contact.estimate_many(readings)
+        return [TactileEstimate(angle=a, contact=c, position_mm=_LazyPosition(self, a, c)) for a, c in
+                zip(angles, contacts)]
 
     def estimate_frames(self, readings) -> TactileEstimate:
         """Angle, contact and position from the mean of consecutive readings of one static contact (less chip

@@ -88,9 +88,11 @@ def test_an_unbounded_config_file_is_one_line_before_any_allocation(labelled_pre
 
 
 def test_every_shipped_training_config_still_loads():
+    """The recipes in configs/train, beside the shipped models, and those of the studies in experiments/."""
     loaders = {"contact": load_contact_config, "angle_head": load_angle_config}
-    files = sorted((ROOT / "configs" / "train").glob("*.toml")) + sorted((ROOT / "models").glob("*.train.toml"))
-    assert len(files) > 20
+    files = (sorted((ROOT / "configs" / "train").glob("*.toml")) + sorted((ROOT / "models").glob("*.train.toml"))
+             + sorted((ROOT / "experiments").glob("*/*.toml")))
+    assert len(files) > 30
     for path in files:
         kind = tomllib.loads(path.read_text()).get("kind", "cvae")
         loaders.get(kind, load_train_config)(path)
