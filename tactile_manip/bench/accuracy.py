@@ -131,7 +131,8 @@ def trial_success(scene, method: str, *, spec=None, reconstructor: Reconstructor
     """Run ``scene`` for one method (``spec``: a MethodSpec, as the trials command; or a ready
     ``reconstructor``) and score it at the scene's tolerance."""
     from tactile_manip.perception.estimator import TactilePoseEstimator
-    from tactile_manip.trials.runner import build_estimators, run_scene
+    from tactile_manip.trials.methods import build_estimators
+    from tactile_manip.trials.runner import run_scene
     from tactile_manip.trials.stats import summarise
 
     if spec is not None:

@@ -27,7 +27,9 @@ _WORKER: dict[str, Any] = {}
 def run_trial_block(scene: TrialScene, scene_path: str | None, trials: list[int], methods: list[str],
                     frames_dir: str | None) -> list[TrialRecord]:
     """Run ``methods`` on each presentation in ``trials`` in this process's cell; the records in run order."""
-    from tactile_manip.trials.runner import build_contact_estimators, build_estimators, make_cell, run_scene
+    from tactile_manip.trials.cells import make_cell
+    from tactile_manip.trials.methods import build_contact_estimators, build_estimators
+    from tactile_manip.trials.runner import run_scene
 
     key = (repr(scene), scene_path)
     if _WORKER.get("key") != key:  # the cell and the models are built once per worker and scene
@@ -52,7 +54,8 @@ def run_trials_on_ray(scene: TrialScene, out_dir: str | Path, *, scene_path: str
     from tactile_manip.config import to_dict
     from tactile_manip.trials.log import TrialLog, completed_keys, read_run_info, read_trials
     from tactile_manip.trials.report import write_report
-    from tactile_manip.trials.runner import build_contact_estimators, build_estimators, make_cell
+    from tactile_manip.trials.cells import make_cell
+    from tactile_manip.trials.methods import build_contact_estimators, build_estimators
 
     if block_trials < 1:
         raise ValueError(f"--block-trials must be >= 1, got {block_trials}")

@@ -134,7 +134,7 @@ class OperatorCell:
     def run_one(self, p, estimator: TactilePoseEstimator, *, arm_fault: bool = False,
                 sensor_stall: bool = False, observer=None, contact: ContactEstimator | None = None) -> ReorientResult:
         """Present ``p``, run the reorientation behaviour, ask for the measured final angle (``observer`` and
-        ``contact``: see :meth:`~tactile_manip.trials.runner.SimulatedCell.run_one`)."""
+        ``contact``: see :meth:`~tactile_manip.trials.cells.SimulatedCell.run_one`)."""
         if arm_fault or sensor_stall:
             raise ConfigError("injected faults exist only in simulation")
         with self.presented(p) as (obj, truth):

@@ -1,0 +1,114 @@
+"""A scene's methods made ready to run: each method's pose estimator (model, baseline or the blind one) and
+contact model, every file found and checked before the first trial."""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from tactile_manip.perception.estimator import TactilePoseEstimator
+from tactile_manip.perception.pose import PoseParams
+from tactile_manip.perception.reconstruct import load_reconstructor
+from tactile_manip.perception.confidence import load_calibration_beside
+from tactile_manip.perception.symmetry import SymmetrizedReconstructor
+from tactile_manip.trials.blind import BLIND, BlindEstimator
+from tactile_manip.trials.scene import MethodSpec, TrialScene
+
+if TYPE_CHECKING:
+    from tactile_manip.perception.contact import ContactEstimator
+
+
+def resolve_model_path(spec: MethodSpec, scene_path: Path | None) -> str:
+    """The reconstructor argument for ``spec``: a baseline name, or an existing model path."""
+    if spec.reconstructor in ("bilinear", "bicubic"):
+        return spec.reconstructor
+    return resolve_scene_path(spec.reconstructor, scene_path)
+
+
+def resolve_scene_path(name: str, scene_path: Path | None) -> str:
+    """A file a scene names: ``name`` if absolute, else the first that exists of the working directory's and
+    each folder above the scene file's; ``name`` itself when none does (the loader then names it missing)."""
+    path = Path(name)
+    candidates = [path] if path.is_absolute() else [Path.cwd() / path]
+    if scene_path is not None and not path.is_absolute():
+        candidates += [parent / path for parent in Path(scene_path).resolve().parents]
+    for candidate in candidates:
+        if candidate.exists():
+            return str(candidate)
+    return str(path)  # the loader raises the clear "missing model" error
+
+
+def build_contact_estimator(scene: TrialScene, scene_path: Path | None = None, *,
+                            layout: str | None = None) -> ContactEstimator | None:
+    """The scene's contact model on onnxruntime (None when the scene names none), found as the methods' models.
+
+    Raises:
+        ModelFileError: the file is missing, or not a contact model.
+        ValueError: the model estimates no normal force (``force_n``), or ``layout`` (the sensor's board
+            layout) is given and is not the model's.
+    """
+    if not scene.contact_model:
+        return None
+    from tactile_manip.perception.contact import ContactEstimator
+
+    contact = ContactEstimator(resolve_scene_path(scene.contact_model, scene_path))
+    if "force_n" not in contact.target_names:
+        raise ValueError(f"contact_model: {contact.path.name} estimates no grip force (its targets: "
+                         f"{', '.join(contact.target_names)}); name a model trained on force_n")
+    if layout is not None:
+        try:
+            contact.check_layout(layout)
+        except ValueError as e:
+            raise ValueError(f"contact_model: {e}") from None
+    return contact
+
+
+def build_contact_estimators(scene: TrialScene, scene_path: Path | None = None, *,
+                             layout: str | None = None) -> dict[str, ContactEstimator | None]:
+    """Each method's contact model (its own ``contact_model``, else the scene's; None for a method with
+    neither), each file loaded once and checked as :func:`build_contact_estimator` checks the scene's."""
+    loaded: dict[str, ContactEstimator | None] = {}
+    out = {}
+    for spec in scene.methods:
+        name = spec.contact_model or scene.contact_model
+        if name not in loaded:
+            loaded[name] = build_contact_estimator(dataclasses.replace(scene, contact_model=name), scene_path,
+                                                   layout=layout)
+        out[spec.name] = loaded[name]
+    return out
+
+
+def build_estimators(scene: TrialScene, scene_path: Path | None = None) -> dict[str, TactilePoseEstimator]:
+    """One estimator per method (models are loaded once, before the first trial)."""
+    out = {}
+    for spec in scene.methods:
+        if spec.reconstructor == BLIND:  # the baseline without tactile input
+            out[spec.name] = BlindEstimator()
+            continue
+        target = resolve_model_path(spec, scene_path)
+        if target in ("bilinear", "bicubic"):
+            kwargs = {"output_px": spec.output_px} if spec.output_px else {}
+        else:
+            kwargs = {"threads": spec.threads, "samples": spec.samples}
+        base = load_reconstructor(target, **kwargs)
+        reconstructor = SymmetrizedReconstructor(base) if spec.symmetrize else base
+        model = target not in ("bilinear", "bicubic")
+        calibration = load_calibration_beside(target) if model and spec.calibrated else None
+        params = PoseParams()  # the estimator's pose parameters, which the calibration must have been fitted with
+        route = spec.angle_source
+        if route == "auto":
+            route = "head" if base.angle_head is not None else "image"
+        if calibration is not None and not calibration.fits(prior_samples=spec.samples, symmetrized=spec.symmetrize,
+                                                            aperture=params.aperture, route=route):
+            calibration = None  # fitted for another estimator: its map would not give this one's probability
+        escalation = None
+        if spec.escalate_below > 0 and spec.escalation == "symmetry":
+            escalation = SymmetrizedReconstructor(base)
+        elif spec.escalate_below > 0:  # "samples" (MethodSpec refuses it for baselines)
+            escalation = load_reconstructor(target, threads=spec.threads, samples=spec.escalation_samples)
+            if spec.symmetrize:
+                escalation = SymmetrizedReconstructor(escalation, spread=True)
+        out[spec.name] = TactilePoseEstimator(reconstructor, params, calibration=calibration, escalation=escalation,
+                                              escalate_below=spec.escalate_below, angle_source=spec.angle_source)
+    return out
