@@ -154,3 +154,25 @@ def test_the_gripper_prior_weighs_an_unsure_reading_down(cell) -> None:
     gain = (1.0 + p.force_n / TARGET_N) / 2  # equal weights: the prior's gain 1 and the reading's
     assert result.force_steps == 1
     assert result.commanded_force_n == pytest.approx(TARGET_N / gain, rel=1e-6)
+
+
+def test_a_contact_state_that_is_no_answer_leaves_the_grip_as_commanded(cell) -> None:
+    """An implausible state has no force: the servo does not act on it (nor on a non-positive force)."""
+    class NoAnswer(OracleForce):
+        def __init__(self, cell, pose, state: ContactState) -> None:
+            super().__init__(cell, pose)
+            self.state = state
+
+        def read(self, sensor, *, frames: int = 1, timeout_s: float = 0.1) -> TactileEstimate:
+            est = super().read(sensor, frames=frames, timeout_s=timeout_s)
+            return TactileEstimate(angle=est.angle, contact=self.state, position_mm=est.position_mm)
+
+    p = _presentation_off_target(cell, 2.0)
+    for state in (ContactState(in_contact=True, plausible=False, implausible_reason="a chip beyond its range"),
+                  ContactState(in_contact=True, force_n=-0.3, force_sigma_n=0.5)):
+        estimator = NoAnswer(cell, build_estimators(cell.scene)["supermag"], state)
+        with cell.presented(p) as (obj, truth):
+            result = grip_to_force(cell.arm, cell.gripper, cell.sensor, estimator, object_width_m=obj.width_m,
+                                   config=cell.scene.behaviour, truth=truth)
+        assert result.outcome == "done" and result.force_steps == 0 and result.commanded_force_n == TARGET_N
+        assert result.force_error_n == pytest.approx(p.force_n - TARGET_N)

@@ -130,3 +130,26 @@ def test_the_contact_model_estimates_several_pads_in_one_run_as_each_alone() -> 
     est.context_frames = 3
     with pytest.raises(ValueError, match="one ContactEstimator each"):
         est.estimate_many(readings)
+
+
+def test_a_pads_position_is_measured_when_read_and_travels_as_a_value() -> None:
+    import pickle
+
+    from tactile_manip.perception import TactilePoseEstimator, load_reconstructor
+    from tactile_manip.perception.contact_pose import TactileEstimator
+    from tactile_manip.sim.objects import IndenterPose
+    from tactile_manip.sim.pair import SensorPair
+    from tactile_manip.sim.shapes import make_indenter
+
+    rec = load_reconstructor(MODELS / "supermag.onnx")
+    runs = []
+    run = rec._run
+    rec._run = lambda fields: runs.append(len(fields)) or run(fields)  # count the image decodes
+    both = TactileEstimator(TactilePoseEstimator(rec), ContactEstimator(MODEL))
+    press = SensorPair().press(make_indenter("cylinder", size_mm=6.0), IndenterPose(x_mm=1.0, yaw_rad=0.2), 8.0,
+                               np.random.default_rng(2))
+    many = both.estimate_many([press.field_ut, press.field_ut])
+    assert runs == []                                   # angles and forces only: no image decoded yet
+    copy = pickle.loads(pickle.dumps(many[1]))          # a copy measures the position first
+    assert runs == [2] and copy.position_mm == many[1].position_mm is not None
+    assert many[0].position_mm == many[1].position_mm and runs == [2]
