@@ -101,7 +101,7 @@ MAIN_JOB = TrialRun("main job: `configs/scenes/reorient_sim.toml`, 100 presentat
                     "docs/results/supermag/reorient_sim/summary.json",
                     {"supermag": "supermag", "supermag_sym": "supermag", "paper_route": "supermag", "bilinear": None,
                      "blind": None})
-MAIN_JOB_FAST = TrialRun(MAIN_JOB.scene, "docs/results/trials_fast/reorient_sim/summary.json",
+MAIN_JOB_FAST = TrialRun(MAIN_JOB.scene, "experiments/trials_fast/reorient_sim/summary.json",
                          {"supermag": "supermag_fast", "supermag_sym": "supermag_fast", "bilinear": None})
 PLACE_SCENE = TrialRun("placing: `configs/scenes/place_sim.toml` (`task = \"place\"`), 60 presentations, within 5 deg "
                        "and 1 mm of the slot", "docs/results/supermag/place_sim/summary.json",
@@ -125,10 +125,10 @@ TRIAL_RUNS = (
     GRIP_SCENE,
     MAIN_JOB_FAST,
     TrialRun("study: `tasks/reorient_study.toml`, 300 presentations of the same rods, another seed",
-             "docs/results/trials_fast/reorient_study/summary.json",
+             "experiments/trials_fast/reorient_study/summary.json",
              {"supermag": "supermag_fast", "supermag_sym": "supermag_fast", "bilinear": None}),
-    TrialRun("the main job's scene, 600 paired presentations (`docs/results/fast_model/compare_sim.toml`)",
-             "docs/results/fast_model/compare_sim_summary.md",
+    TrialRun("the main job's scene, 600 paired presentations (`experiments/fast_model/compare_sim.toml`)",
+             "experiments/fast_model/compare_sim_summary.md",
              {"fast": "supermag_fast", "compact": "supermag_compact"}),
     TrialRun("the main job's scene, 600 paired presentations (`docs/results/robust/robust_b48/compare_sim.toml`)",
              "docs/results/robust/robust_b48/trials_main_scene_vs_fast.md",
@@ -139,11 +139,11 @@ TRIAL_RUNS = (
     TrialRun(ROBUST_SCENE.scene, "docs/results/robust/fast_vs_compact/trials_compact.md",
              {"supermag": "supermag_compact", "supermag_esc": "supermag_compact", "bilinear": None}),
     TrialRun("the paper's experiment: `tasks/paper_experiment.toml`, 3 rods x 2 angles (the paper: 6/6 against 1/6)",
-             "docs/results/trials_fast/paper_experiment/summary.json",
+             "experiments/trials_fast/paper_experiment/summary.json",
              {"supermag": "supermag_fast", "supermag_sym": "supermag_fast", "bilinear": None}),
     TrialRun("slot insertion: 60 presentations, within 5 deg and 1 mm of the slot (`tasks/slot_insertion.py` of that "
              "time; now `configs/scenes/place_sim.toml`)",
-             "docs/results/trials_fast/slot_insertion/summary.md",
+             "experiments/trials_fast/slot_insertion/summary.md",
              {"supermag": "supermag_fast", "supermag_sym": "supermag_fast", "bilinear": None}),
 )
 
