@@ -3,8 +3,8 @@
     python -m benchmarks.angle_information                         # data/robust.npz: 600 unseen rods, 2-15 N
     python -m benchmarks.angle_information --data data/supermag.npz   # the paper's protocol, for comparison
     python -m benchmarks.angle_information --limit 60 --workers 1     # a quick look
-    python -m benchmarks.angle_information --report docs/results/robust/information/angle_information.json \
-        --compare docs/results/robust/robust_b48/single_frame.json --plot bound.png   # the bound beside models
+    python -m benchmarks.angle_information --report experiments/robust_training/information/angle_information.json \
+        --compare experiments/robust_training/robust_b48/single_frame.json --plot bound.png   # the bound beside models
 
 Each unseen-rod press of the dataset's test split is rebuilt from what the dataset recorded (its drawn sensor
 from the ``sensor_params`` extra, or the nominal sensor; its pose; its force; the rod), and the noise-free
