@@ -29,6 +29,7 @@ centre to the rod's axis, and the estimated in-hand angle against the true one.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
@@ -236,8 +237,6 @@ def _servo_force(gripper: Gripper, sensor: TactileSensor, estimator: TactileEsti
 
 def _close_at(gripper: Gripper, width_m: float, force_n: float, cfg: ReorientConfig, what: str) -> None:
     """Grasp at ``force_n`` (a held object keeps its place; the fingers' force changes)."""
-    import dataclasses
-
     _close_on(gripper, width_m, dataclasses.replace(cfg, force_n=force_n), what)
 
 
