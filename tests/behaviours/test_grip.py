@@ -58,13 +58,18 @@ def _presentation_off_target(cell, low_n: float):
     raise AssertionError("no such presentation")
 
 
+def _grip(cell, p, estimator, grip: GripConfig | None = None) -> GripResult:
+    """Present ``p`` and grip it with ``estimator``, scored on the cell's truth."""
+    with cell.presented(p) as (obj, truth):
+        return grip_to_force(cell.arm, cell.gripper, cell.sensor, estimator, object_width_m=obj.width_m,
+                             config=cell.scene.behaviour, grip=grip, truth=truth)
+
+
 def test_the_servo_brings_the_felt_force_to_the_target_and_centres_the_rod(cell) -> None:
     p = _presentation_off_target(cell, 2.0)
     oracle = OracleForce(cell, build_estimators(cell.scene)["supermag"])
     grip = GripConfig(force_tolerance_n=1.0, force_deadband_n=0.2, centre_tolerance_mm=0.3)
-    with cell.presented(p) as (obj, truth):
-        result = grip_to_force(cell.arm, cell.gripper, cell.sensor, oracle, object_width_m=obj.width_m,
-                               config=cell.scene.behaviour, grip=grip, truth=truth)
+    result = _grip(cell, p, oracle, grip)
     assert result.outcome == "done", result.detail
     assert abs(oracle.reads[0] - p.force_n) < 1e-9          # the first grasp felt the presentation's force
     assert result.force_steps >= 1 and abs(result.force_error_n) <= grip.force_deadband_n + 1e-9
@@ -76,9 +81,7 @@ def test_the_servo_brings_the_felt_force_to_the_target_and_centres_the_rod(cell)
 def test_without_a_contact_model_the_grip_stays_as_commanded(cell) -> None:
     p = _presentation_off_target(cell, 2.0)
     pose = build_estimators(cell.scene)["supermag"]
-    with cell.presented(p) as (obj, truth):
-        result = grip_to_force(cell.arm, cell.gripper, cell.sensor, pose, object_width_m=obj.width_m,
-                               config=cell.scene.behaviour, truth=truth)
+    result = _grip(cell, p, pose)
     assert result.outcome == "done" and result.force_steps == 0 and result.recentres == 0
     assert result.commanded_force_n == TARGET_N and result.contact is None
     assert result.force_error_n == pytest.approx(p.force_n - TARGET_N)
@@ -92,9 +95,7 @@ def test_the_shipped_contact_model_closes_the_loop(cell) -> None:
     both = TactileEstimator(build_estimators(cell.scene)["supermag"],
                             ContactEstimator(MODELS / "contact_supermag.onnx"))
     p = _presentation_off_target(cell, 2.0)
-    with cell.presented(p) as (obj, truth):
-        result = grip_to_force(cell.arm, cell.gripper, cell.sensor, both, object_width_m=obj.width_m,
-                               config=cell.scene.behaviour, truth=truth)
+    result = _grip(cell, p, both)
     assert result.outcome == "done", result.detail
     assert result.contact is not None and result.contact.plausible
     assert result.position_mm is not None
@@ -148,9 +149,7 @@ def test_the_gripper_prior_weighs_an_unsure_reading_down(cell) -> None:
     p = _presentation_off_target(cell, 2.0)
     unsure = Unsure(cell, build_estimators(cell.scene)["supermag"])
     grip = GripConfig(force_deadband_n=0.01, max_force_steps=1, command_sigma_n=2.0)
-    with cell.presented(p) as (obj, truth):
-        result = grip_to_force(cell.arm, cell.gripper, cell.sensor, unsure, object_width_m=obj.width_m,
-                               config=cell.scene.behaviour, grip=grip, truth=truth)
+    result = _grip(cell, p, unsure, grip)
     gain = (1.0 + p.force_n / TARGET_N) / 2  # equal weights: the prior's gain 1 and the reading's
     assert result.force_steps == 1
     assert result.commanded_force_n == pytest.approx(TARGET_N / gain, rel=1e-6)
@@ -171,8 +170,6 @@ def test_a_contact_state_that_is_no_answer_leaves_the_grip_as_commanded(cell) ->
     for state in (ContactState(in_contact=True, plausible=False, implausible_reason="a chip beyond its range"),
                   ContactState(in_contact=True, force_n=-0.3, force_sigma_n=0.5)):
         estimator = NoAnswer(cell, build_estimators(cell.scene)["supermag"], state)
-        with cell.presented(p) as (obj, truth):
-            result = grip_to_force(cell.arm, cell.gripper, cell.sensor, estimator, object_width_m=obj.width_m,
-                                   config=cell.scene.behaviour, truth=truth)
+        result = _grip(cell, p, estimator)
         assert result.outcome == "done" and result.force_steps == 0 and result.commanded_force_n == TARGET_N
         assert result.force_error_n == pytest.approx(p.force_n - TARGET_N)
