@@ -32,7 +32,7 @@ from tactile_manip.data import load_dataset
 from tactile_manip.perception import TactilePoseEstimator, load_reconstructor, wrap_axial
 from tactile_manip.perception.angle_head import within_probability
 from tactile_manip.perception.confidence import load_calibration_beside
-from tactile_manip.perception.evaluation import ELONGATED
+from tactile_manip.evaluation.images import ELONGATED
 from tactile_manip.perception.pose import angle_from_image
 from tactile_manip.shipped import shipped_model
 

@@ -29,7 +29,7 @@ from benchmarks._common import machine_info, publish  # noqa: E402
 from tactile_manip.data import load_dataset  # noqa: E402
 from tactile_manip.perception import TactilePoseEstimator, load_reconstructor  # noqa: E402
 from tactile_manip.perception.confidence import load_calibration_beside  # noqa: E402
-from tactile_manip.perception.evaluation import rod_estimates  # noqa: E402
+from tactile_manip.evaluation.images import rod_estimates  # noqa: E402
 from tactile_manip.perception.symmetry import SymmetrizedReconstructor  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -5,7 +5,7 @@
 
 Reconstructs every test-split reading (unseen objects) with the model, then runs
 :func:`~tactile_manip.perception.pose.angle_from_image` (on its C kernel, when built, and on its numpy path) and
-the full-image float64 :func:`~tactile_manip.perception.pose_reference.reference_angle_from_image` on each
+the full-image float64 :func:`~tactile_manip.evaluation.pose_reference.reference_angle_from_image` on each
 image, interleaved, and prints per path the largest differences (angle in degrees, confidence, centroid, area),
 the number of images whose defined flag or reason differ, and the post-processing time (p50 / p99, one thread). Writes
 benchmarks/results/pose_parity.json. The acceptance bar is a largest angle difference of
@@ -27,7 +27,7 @@ import numpy as np  # noqa: E402
 from benchmarks._common import machine_info, publish  # noqa: E402
 from tactile_manip.perception import load_reconstructor, pose_kernel, wrap_axial  # noqa: E402
 from tactile_manip.perception.pose import DEFAULT_THRESHOLD_MM, angle_from_image  # noqa: E402
-from tactile_manip.perception.pose_reference import reference_angle_from_image  # noqa: E402
+from tactile_manip.evaluation.pose_reference import reference_angle_from_image  # noqa: E402
 from tactile_manip.data import load_dataset  # noqa: E402
 
 ANGLE_BAR_DEG = 0.05

@@ -32,7 +32,7 @@ import numpy as np
 from benchmarks._common import machine_info, publish
 from tactile_manip.data import load_dataset
 from tactile_manip.perception import TactilePoseEstimator, load_reconstructor, wrap_axial
-from tactile_manip.perception.evaluation import rod_estimates
+from tactile_manip.evaluation.images import rod_estimates
 from tactile_manip.perception.pose import angle_from_image
 
 FORCE_BANDS_N = ((2.0, 5.0), (5.0, 8.0), (8.0, 11.0), (11.0, 15.0))

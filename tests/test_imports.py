@@ -1,6 +1,7 @@
 """Importing the package and the simulator stays cheap: no heavy or optional package is pulled in, the
-sensors and perception layers do not reach up into the simulator, the data layer does not reach up into the
-sensors, and the wire formats and log files sit below every layer but the core (docs/design.md, Layers).
+sensors and perception layers do not reach up into the simulator, the runtime (perception) does not reach up
+into its evaluation, the data layer does not reach up into the sensors, and the wire formats and log files sit
+below every layer but the core (docs/design.md, Layers).
 
 Each runtime check runs in a fresh interpreter, since this test process has long since imported everything.
 """
@@ -20,6 +21,13 @@ import tactile_manip
 PACKAGE = Path(tactile_manip.__file__).parent
 # the sensors package that drives the simulator: the simulated sensor, the firmware emulator and their presses
 SIMULATED = "sensors/simulated/"
+
+# the modules that moved from perception/ to evaluation/: the old name -> the new one. The old names stay
+# importable for users (each file is an alias of the new module); no code of the repository imports them.
+MOVED_TO_EVALUATION = {"evaluation": "images", "contact_evaluation": "contact", "contact_baselines": "contact_baselines",
+                       "metrics": "metrics", "pose_reference": "pose_reference"}
+ALIASES = tuple(f"perception/{old}.py" for old in MOVED_TO_EVALUATION)
+REPOSITORY = Path(__file__).resolve().parents[1]
 
 # what the byte formats (tactile_manip.wire, tactile_manip.logs) never import: every layer above the core
 ABOVE_THE_FORMATS = ("data", "sim", "sensors", "collection", "perception", "robot", "behaviours", "trials", "learning",
@@ -47,10 +55,15 @@ def _heavy_modules_after(code: str) -> list[str]:
     "import tactile_manip.logs.recording, tactile_manip.wire",
     "import tactile_manip.collection.camera, tactile_manip.collection.camera_opencv, tactile_manip.collection.camera_sim, "
     "tactile_manip.collection.vbts_calibration, tactile_manip.collection.collect, tactile_manip.collection.collect_sim",
-    "import tactile_manip.perception.reconstruct, tactile_manip.perception.pose, tactile_manip.perception.metrics",
+    "import tactile_manip.perception.reconstruct, tactile_manip.perception.pose",
     "import tactile_manip.perception",
-    "import tactile_manip.perception.contact, tactile_manip.perception.contact_pose, "
-    "tactile_manip.perception.contact_evaluation",
+    "import tactile_manip.perception.contact, tactile_manip.perception.contact_pose",
+    "import tactile_manip.evaluation",
+    # the image metrics are numpy and scipy only; the gallery imports matplotlib inside its function, and the
+    # contact baselines scikit-learn inside theirs
+    "import tactile_manip.evaluation.metrics",
+    "import tactile_manip.evaluation.images, tactile_manip.evaluation.contact, "
+    "tactile_manip.evaluation.contact_baselines, tactile_manip.evaluation.pose_reference",
     # applying a fitted confidence calibration is numpy only (fitting one imports scikit-learn)
     "from tactile_manip.perception.confidence import ConfidenceCalibration; "
     "ConfidenceCalibration((0.1, 0.9), (0.2, 0.8))(0.5)",
@@ -169,3 +182,69 @@ def test_data_reads_a_recording_without_loading_the_sensors(tmp_path):
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr
     assert json.loads(done.stdout.strip().splitlines()[-1]) == []
+
+
+def test_perception_imports_nothing_from_evaluation():
+    """The runtime (readings -> estimates) never depends on the code that scores it; only the alias files left at
+    the old module paths import tactile_manip.evaluation."""
+    found = _layer_imports("perception", ("evaluation",))
+    assert {where: names for where, names in found.items() if where not in ALIASES} == {}
+
+
+def test_the_evaluation_scan_sees_the_aliases():
+    """The scan itself works: each alias file at an old perception path imports its module of evaluation."""
+    found = _layer_imports("perception", ("evaluation",))
+    for old, new in MOVED_TO_EVALUATION.items():
+        assert f"tactile_manip.evaluation.{new}" in found[f"perception/{old}.py"]
+
+
+def test_perception_loads_no_evaluation_module():
+    code = ("import json, sys\nimport tactile_manip.perception, tactile_manip.perception.reconstruct, "
+            "tactile_manip.perception.pose, tactile_manip.perception.estimator, tactile_manip.perception.contact, "
+            "tactile_manip.perception.contact_pose, tactile_manip.perception.confidence, "
+            "tactile_manip.perception.symmetry, tactile_manip.perception.angle_head\n"
+            "print(json.dumps(sorted(m for m in sys.modules if m.split('.')[:2] == ['tactile_manip', 'evaluation'])))")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert json.loads(done.stdout.strip().splitlines()[-1]) == []
+
+
+@pytest.mark.parametrize("old", sorted(MOVED_TO_EVALUATION))
+def test_old_perception_paths_stay_importable(old):
+    """A user's `from tactile_manip.perception.<old> import ...` gets the very module of evaluation/."""
+    new = MOVED_TO_EVALUATION[old]
+    code = (f"import importlib\nimport tactile_manip.perception.{old} as alias\n"
+            f"import tactile_manip.evaluation.{new} as moved\n"
+            f"assert alias is moved, alias\n"
+            f"import tactile_manip.perception as package\nassert package.{old} is moved\n"
+            f"assert importlib.import_module('tactile_manip.perception.{old}') is moved")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+
+
+def _absolute_imports(path: Path) -> set[str]:
+    """Every module a script outside the package imports by its absolute name, as dotted names."""
+    names = set()
+    for node in ast.walk(ast.parse(path.read_text(), filename=str(path))):
+        if isinstance(node, ast.Import):
+            names.update(alias.name for alias in node.names)
+        elif isinstance(node, ast.ImportFrom) and not node.level and node.module:
+            names.add(node.module)
+            names.update(f"{node.module}.{alias.name}" for alias in node.names)
+    return names
+
+
+def test_no_code_imports_through_the_aliases():
+    """The old perception paths are for users: the package, tests, benchmarks, tasks and examples import the
+    evaluation modules by their new names."""
+    old_names = {f"tactile_manip.perception.{old}" for old in MOVED_TO_EVALUATION}
+    offenders = {}
+    for path in sorted(PACKAGE.rglob("*.py")):
+        where = path.relative_to(PACKAGE).as_posix()
+        if where not in ALIASES and _imported_modules(path) & old_names:
+            offenders[f"tactile_manip/{where}"] = sorted(_imported_modules(path) & old_names)
+    for folder in ("tests", "benchmarks", "tasks", "examples"):
+        for path in sorted((REPOSITORY / folder).rglob("*.py")):
+            if _absolute_imports(path) & old_names:
+                offenders[path.relative_to(REPOSITORY).as_posix()] = sorted(_absolute_imports(path) & old_names)
+    assert offenders == {}

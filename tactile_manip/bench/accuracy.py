@@ -3,7 +3,7 @@
 - Readings: the ``test`` split (unseen objects) of a paired dataset when the file is there, so the figures
   are those of ``tactile-manip evaluate``; otherwise the test objects of the dataset config, simulated here
   (``per_object`` presses of each).
-- Image metrics: :func:`tactile_manip.perception.evaluation.evaluate_methods` on those readings (PSNR and
+- Image metrics: :func:`tactile_manip.evaluation.images.evaluate_methods` on those readings (PSNR and
   SSIM with the 2 mm data range, FD-DCT, the PCA angle error on the rods against the true yaw).
 - Reorientation: :func:`tactile_manip.trials.runner.run_scene` on a fixed scene, one method at a time,
   scored by :func:`tactile_manip.trials.stats.summarise` at the scene's tolerance.
@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from tactile_manip.perception.evaluation import ELONGATED, evaluate_methods
+from tactile_manip.evaluation.images import ELONGATED, evaluate_methods
 from tactile_manip.perception.reconstruct import Reconstructor
 from tactile_manip.data import PairedDataset, load_dataset
 

@@ -109,10 +109,10 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _rods(data, option: str, path: str, split: str, estimator):
-    """:func:`~tactile_manip.perception.evaluation.rod_estimates` on ``split`` of ``data``, its errors naming the
+    """:func:`~tactile_manip.evaluation.images.rod_estimates` on ``split`` of ``data``, its errors naming the
     option, file and split."""
     from tactile_manip.errors import ConfigError
-    from tactile_manip.perception.evaluation import rod_estimates
+    from tactile_manip.evaluation.images import rod_estimates
 
     try:
         return rod_estimates(data, data.indices(split), estimator)

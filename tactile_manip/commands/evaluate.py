@@ -3,7 +3,7 @@
 On a dataset of labelled presses (targets, no images), or with contact models (``kind = "contact"`` in their
 metadata) on any dataset with targets, images or not, it evaluates contact models instead: RMSE and MAE per
 target, sigma calibration, per run and force band, against linear, kNN and MLP baselines fitted on the same
-split (:mod:`tactile_manip.perception.contact_evaluation`); it writes table.md, results.json and contact.png.
+split (:mod:`tactile_manip.evaluation.contact`); it writes table.md, results.json and contact.png.
 
 The interpolation baselines are fitted on the dataset's training split (``--baseline-objects`` narrows it to
 some objects: our Table I fits them on the paper's two training objects, as the shipped fit is); models are
@@ -44,7 +44,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from tactile_manip.perception.evaluation import evaluate_methods, gallery, markdown_table, write_report
+    from tactile_manip.evaluation.images import evaluate_methods, gallery, markdown_table, write_report
     from tactile_manip.perception.reconstruct import BASELINES, OnnxReconstructor
     from tactile_manip.data import load_dataset
     from tactile_manip.errors import DatasetError
@@ -156,7 +156,7 @@ def _run_contact(args: argparse.Namespace, data) -> int:
     """Contact models and baselines on a dataset of labelled presses (see the module docstring)."""
     from tactile_manip.errors import DatasetError
     from tactile_manip.perception.contact import ContactEstimator
-    from tactile_manip.perception.contact_evaluation import evaluate_contact, markdown_table, write_contact_report
+    from tactile_manip.evaluation.contact import evaluate_contact, markdown_table, write_contact_report
 
     unused = [f for f, v in (("--symmetrized", args.symmetrized), ("--inception-onnx", args.inception_onnx),
                              ("--baseline-channel", args.baseline_channel),

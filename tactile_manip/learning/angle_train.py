@@ -38,7 +38,7 @@ from tactile_manip.learning.angle_model import (AngleHead, AngleModelConfig, cou
 from tactile_manip.learning.noise import ChipNoise
 from tactile_manip.learning.schedule import check_schedule, optimise_step
 from tactile_manip.learning.train import THREADS_RANGE, check_finite_readings
-from tactile_manip.perception.evaluation import ELONGATED
+from tactile_manip.evaluation.images import ELONGATED
 from tactile_manip.perception.pose import angle_from_image, wrap_axial
 from tactile_manip.perception.symmetry import transform_reading
 

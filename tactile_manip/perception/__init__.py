@@ -1,4 +1,4 @@
-"""Perception: reconstructors (ONNX model and interpolation baselines), image metrics, and pose.
+"""Perception, the runtime (readings -> estimates): reconstructors (ONNX model and interpolation baselines), pose.
 
 The pose API users plug into their tasks::
 
@@ -11,7 +11,8 @@ and the contact API (``tactile_manip.perception.contact``; docs/contact_model.md
     contact = ContactEstimator("models/contact.onnx")
     state = contact.estimate(field_ut)          # (R, C, 3) uT -> ContactState: position, force, sigmas
 
-(numpy and scipy at import; onnxruntime only when an ONNX model is loaded.)
+(numpy and scipy at import; onnxruntime only when an ONNX model is loaded.) Scoring these on datasets (image
+metrics, Table I, contact evaluation, the reference pose pipeline) is :mod:`tactile_manip.evaluation`.
 """
 
 from tactile_manip.perception.contact import ContactEstimator, ContactState

@@ -6,7 +6,7 @@ wrapped to (-pi/2, pi/2]; its confidence is ``1 - lambda_minor / lambda_major``.
 contacts give ``defined=False`` with a reason, never NaN.
 
 :func:`angle_from_image` computes what the full-image float64 pipeline
-(:func:`~tactile_manip.perception.pose_reference.reference_angle_from_image`) computes, at a fraction of its
+(:func:`~tactile_manip.evaluation.pose_reference.reference_angle_from_image`) computes, at a fraction of its
 cost: in the image's own precision (float32 for reconstructions), and only over the contact's bounding box
 plus twice the Gaussian's reach (nothing outside can change the result: a pixel below the threshold
 everywhere within the filter radius filters to below the threshold), with the filter as small banded matrix

@@ -14,7 +14,7 @@ from tactile_manip.bench.accuracy import rod_scene
 from tactile_manip.bench.candidates import ModelEntry
 from tactile_manip.bench.suite import SHARE_TOLERANCE_MM, BenchSettings, run_bench
 from tactile_manip.bench.timing import TimingBudget
-from tactile_manip.perception.evaluation import evaluate_methods
+from tactile_manip.evaluation.images import evaluate_methods
 from tactile_manip.perception.reconstruct import load_reconstructor
 from tactile_manip.data import load_dataset
 from tactile_manip.trials.scene import load_scene

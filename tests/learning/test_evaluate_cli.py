@@ -65,7 +65,7 @@ def test_evaluation_breaks_down_by_force_band_and_sensor_draw(tmp_path):
     import numpy as np
 
     from tactile_manip.data import PairedDataset, depth_image_spec
-    from tactile_manip.perception.evaluation import evaluate_methods, markdown_table
+    from tactile_manip.evaluation.images import evaluate_methods, markdown_table
     from tactile_manip.perception.reconstruct import BASELINES
 
     rng = np.random.default_rng(0)

@@ -15,7 +15,7 @@ from tactile_manip.cli import main
 from tactile_manip.data import load_dataset, save_dataset
 from tactile_manip.perception import TactilePoseEstimator, load_reconstructor
 from tactile_manip.perception.confidence import ConfidenceCalibration, calibration_path, load_calibration_beside
-from tactile_manip.perception.evaluation import rod_estimates
+from tactile_manip.evaluation.images import rod_estimates
 from tactile_manip.sim.dataset import DatasetConfig, ObjectSpec, PoseRanges, generate
 
 pytest.importorskip("onnxruntime")

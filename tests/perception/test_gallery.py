@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from tactile_manip.perception.evaluation import gallery, gallery_figure, untrained
+from tactile_manip.evaluation.images import gallery, gallery_figure, untrained
 from tactile_manip.perception.reconstruct import OnnxReconstructor, load_reconstructor
 
 pytest.importorskip("onnxruntime")

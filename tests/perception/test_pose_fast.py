@@ -1,7 +1,7 @@
 """The cropped float32 pose pipeline against the full-image float64 reference it replaces.
 
 ``angle_from_image`` (on its C kernel and on its numpy path) must give what ``reference_angle_from_image`` (the
-pipeline as first written, kept in tactile_manip/perception/pose_reference.py) gives: the same defined flag and
+pipeline as first written, kept in tactile_manip/evaluation/pose_reference.py) gives: the same defined flag and
 reason, and angle, confidence, centroid and area within float32 rounding. Images: simulated VBTS presses of
 the rods and the SuperMag objects, synthetic bars and blobs with speckle, hard cases (empty, isotropic, tiny,
 +-90 deg, NaN, huge values, a positive background, contact at the border), in float32 and float64, and other
@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from tactile_manip.perception.pose import PoseParams, _median, angle_from_image, wrap_axial
-from tactile_manip.perception.pose_reference import reference_angle_from_image
+from tactile_manip.evaluation.pose_reference import reference_angle_from_image
 from tactile_manip.types import AngleEstimate
 
 pytestmark = pytest.mark.usefixtures("pose_path")  # every test on both paths of the pose stage

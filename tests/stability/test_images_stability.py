@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 from checks import assert_sane_estimate
 
-from tactile_manip.perception.metrics import DEPTH_RANGE_MM, MAX_ABS_MM, psnr, ssim
+from tactile_manip.evaluation.metrics import DEPTH_RANGE_MM, MAX_ABS_MM, psnr, ssim
 from tactile_manip.perception.pose import angle_from_image, wrap_axial
 from tactile_manip.types import AngleEstimate
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy import linalg
 
-from tactile_manip.perception.metrics import (DEPTH_RANGE_MM, dct_features, fd_dct, frechet_distance, psnr,
+from tactile_manip.evaluation.metrics import (DEPTH_RANGE_MM, dct_features, fd_dct, frechet_distance, psnr,
                                               ssim)
 
 
