@@ -42,6 +42,9 @@ COMMANDS: dict[str, tuple[str, str]] = {
               "train a model on a dataset: depth images, contact position and force, or the angle"),
     "export": ("tactile_manip.commands.export",
                "convert a trial run, recording or pair log to LeRobot, Rerun or MCAP; a trained model to ONNX"),
+    "export-model": ("tactile_manip.commands.export_model",
+                     "write a trained checkpoint as ONNX (image model, contact model, or an angle head into a pose "
+                     "model), checked against torch; the same as export --checkpoint"),
     "evaluate": ("tactile_manip.commands.evaluate",
                  "score models against baselines on test presses: depth images and angles, or contact"),
     "emulate": ("tactile_manip.commands.emulate",

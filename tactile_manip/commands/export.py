@@ -35,40 +35,50 @@ def share(text: str) -> float:
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    """Both jobs' options, each job's in its own group of ``--help`` (``export-model`` takes the second alone)."""
     from tactile_manip.interop.export import WRITERS
 
     p.add_argument("source", nargs="?", default=None,
                    help="trial run folder, recording (.tmrec) or pair log to convert (with --format)")
-    p.add_argument("--format", choices=sorted(WRITERS), default=None,
-                   help="with SOURCE: lerobot (a LeRobotDataset v3.0 folder), rrd (Rerun) or mcap")
-    p.add_argument("--ros2", action="store_true", help="with --format mcap: a rosbag2-compatible profile")
-    p.add_argument("--depth", nargs="?", const="models/supermag.onnx", default=None, metavar="MODEL",
-                   help="with SOURCE: include each frame's reconstructed depth from MODEL (default "
-                        "models/supermag.onnx; or bilinear, bicubic)")
-    p.add_argument("--checkpoint", default=None, help="training checkpoint (RUN/best.pt) to write as ONNX")
-    p.add_argument("--attach-to", default=None, metavar="MODEL",
-                   help="with an angle head's checkpoint: the pose model (.onnx) to copy to --out with the head inside")
-    p.add_argument("--head-symmetries", type=int, choices=(1, 8), default=8,
-                   help="with --attach-to: read each reading in the board's 8 symmetric copies and average their "
-                        "axes (default), or once (1)")
-    p.add_argument("--image-position-weight", type=share, default=None, metavar="W",
-                   help="contact models: the reconstructed image's share in the position that TactileEstimator "
-                        "gives with this model (0-1; benchmarks/contact_position_fusion.py chooses it on "
-                        "validation presses); default: the contact model's position alone")
     p.add_argument("--out", required=True,
                    help="output: the dataset folder (lerobot), the .rrd / .mcap file, or the .onnx file")
     p.add_argument("--force", action="store_true",
                    help="replace an earlier output of export at --out (and --card); never the source, nor a file or "
                         "folder export did not write")
-    p.add_argument("--data", default=None, nargs="+", action="extend",
+    data = p.add_argument_group("converting a trial run, recording or pair log (SOURCE)")
+    data.add_argument("--format", choices=sorted(WRITERS), default=None,
+                      help="lerobot (a LeRobotDataset v3.0 folder), rrd (Rerun) or mcap")
+    data.add_argument("--ros2", action="store_true", help="with --format mcap: a rosbag2-compatible profile")
+    data.add_argument("--depth", nargs="?", const="models/supermag.onnx", default=None, metavar="MODEL",
+                      help="include each frame's reconstructed depth from MODEL (default models/supermag.onnx; or "
+                           "bilinear, bicubic)")
+    add_model_arguments(p.add_argument_group("writing a trained model as ONNX (also `tactile-manip export-model`)"),
+                        required=False)
+
+
+def add_model_arguments(g, *, required: bool) -> None:
+    """The options of a model export (``--checkpoint`` and what goes with it) on ``g``, a parser or a group."""
+    g.add_argument("--checkpoint", required=required, default=None,
+                   help="training checkpoint (RUN/best.pt) to write as ONNX: an image model, a contact model, or an "
+                        "angle head (with --attach-to)")
+    g.add_argument("--attach-to", default=None, metavar="MODEL",
+                   help="with an angle head's checkpoint: the pose model (.onnx) to copy to --out with the head inside")
+    g.add_argument("--head-symmetries", type=int, choices=(1, 8), default=8,
+                   help="with --attach-to: read each reading in the board's 8 symmetric copies and average their "
+                        "axes (default), or once (1)")
+    g.add_argument("--image-position-weight", type=share, default=None, metavar="W",
+                   help="contact models: the reconstructed image's share in the position that TactileEstimator "
+                        "gives with this model (0-1; benchmarks/contact_position_fusion.py chooses it on "
+                        "validation presses); default: the contact model's position alone")
+    g.add_argument("--data", default=None, nargs="+", action="extend",
                    help="the training dataset(s), as given to train: real readings for the parity check, pixel size "
                         "and provenance")
-    p.add_argument("--metrics", default=None, help="results.json of `tactile-manip evaluate` to store inside")
-    p.add_argument("--pixel-mm", type=float, default=None, help="output pixel size (default: from --data or 0.1)")
-    p.add_argument("--card", default=None, help="also write a model card (markdown) here")
-    p.add_argument("--history", default=None, help="the run's history.json, for the model card")
-    p.add_argument("--table", default=None, help="table.md of `tactile-manip evaluate`, for the model card")
-    p.add_argument("--latency", default=None, help="markdown latency table (benchmarks.bench_model), for the card")
+    g.add_argument("--metrics", default=None, help="results.json of `tactile-manip evaluate` to store inside")
+    g.add_argument("--pixel-mm", type=float, default=None, help="output pixel size (default: from --data or 0.1)")
+    g.add_argument("--card", default=None, help="also write a model card (markdown) here")
+    g.add_argument("--history", default=None, help="the run's history.json, for the model card")
+    g.add_argument("--table", default=None, help="table.md of `tactile-manip evaluate`, for the model card")
+    g.add_argument("--latency", default=None, help="markdown latency table (benchmarks.bench_model), for the card")
 
 
 def run(args: argparse.Namespace) -> int:

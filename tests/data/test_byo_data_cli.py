@@ -53,7 +53,8 @@ def _train_export_evaluate(data, folder, capsys) -> dict:
     cfg.write_text('preset = "small"\nepochs = 2\nbatch_size = 8\nlr = 3e-3\nthreads = 1\n')
     run, model, out = folder / "run", folder / "m.onnx", folder / "eval"
     assert main(["train", "--config", str(cfg), "--data", str(data), "--out", str(run)]) == 0
-    assert main(["export", "--checkpoint", str(run / "best.pt"), "--out", str(model), "--data", str(data),
+    # export-model: the model half of `export --checkpoint`, on its own
+    assert main(["export-model", "--checkpoint", str(run / "best.pt"), "--out", str(model), "--data", str(data),
                  "--card", str(folder / "card.md")]) == 0
     assert main(["evaluate", "--data", str(data), "--model", f"Mine={model}", "--out", str(out)]) == 0
     assert main(["show", "--data", str(data), "--index", "0", "--out", str(folder / "sample.png")]) == 0

@@ -254,7 +254,8 @@ def _onnx_model(path: Path, producer: str) -> Path:
     return path
 
 
-def test_model_export_refuses_its_inputs_and_files_that_are_not_its_models(tmp_path, capsys) -> None:
+@pytest.mark.parametrize("command", ["export", "export-model"])  # export-model is export --checkpoint on its own
+def test_model_export_refuses_its_inputs_and_files_that_are_not_its_models(tmp_path, capsys, command) -> None:
     pytest.importorskip("torch", reason="model export needs torch")
     pytest.importorskip("onnx", reason="model export needs onnx")
     pytest.importorskip("onnxruntime", reason="model export's parity check needs onnxruntime")
