@@ -21,7 +21,7 @@ import numpy as np
 
 from tactile_manip.behaviours.grip import GripResult
 from tactile_manip.behaviours.place import PlaceResult
-from tactile_manip.behaviours.reorient import ReorientResult
+from tactile_manip.behaviours.reorient import ReorientResult, grasp_estimate_reorient
 from tactile_manip.errors import ConfigError
 from tactile_manip.extras import require
 from tactile_manip.perception.estimator import TactilePoseEstimator
@@ -167,8 +167,6 @@ class SimulatedCell:
         release included. ``contact`` (a :class:`~tactile_manip.perception.contact.ContactEstimator` of the
         sensor's board) estimates the grip force at the estimate step.
         """
-        from tactile_manip.trials.operator import run_reorientation
-
         with self.presented(p, arm_fault=arm_fault, sensor_stall=sensor_stall) as (obj, truth):
             if self.scene.task == "place":
                 return self._place(p, estimator, obj, truth)
@@ -230,3 +228,16 @@ def make_cell(scene: TrialScene):
     from tactile_manip.trials.operator import OperatorCell
 
     return OperatorCell(scene)
+
+
+def run_reorientation(cell, estimator: TactilePoseEstimator, object_width_m: float, truth,
+                      observer=None, contact: ContactEstimator | None = None) -> ReorientResult:
+    """The scene's reorientation behaviour in ``cell`` (its arm, gripper, sensor and scene) on the held object;
+    ``observer`` is told each phase, the release included (the cell opens the gripper when the trial ends);
+    ``contact``, the scene's contact model, estimates the grip force at the estimate step."""
+    result = grasp_estimate_reorient(cell.arm, cell.gripper, cell.sensor, estimator, object_width_m=object_width_m,
+                                     target_angle_rad=math.radians(cell.scene.target_deg),
+                                     config=cell.scene.behaviour, truth=truth, observer=observer, contact=contact)
+    if observer is not None:
+        observer.phase("release")
+    return result

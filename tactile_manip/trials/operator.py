@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from tactile_manip.behaviours.reorient import ReorientResult, grasp_estimate_reorient
+from tactile_manip.behaviours.reorient import ReorientResult
 from tactile_manip.errors import ConfigError
 from tactile_manip.extras import require
 from tactile_manip.perception.estimator import TactilePoseEstimator
@@ -31,6 +31,7 @@ from tactile_manip.robot.base import Arm, Gripper
 from tactile_manip.robot.frames import hand_T_pad
 from tactile_manip.sensors.base import TactileSensor
 from tactile_manip.sensors.config import SerialSensorConfig
+from tactile_manip.trials.cells import run_reorientation
 from tactile_manip.trials.scene import TrialScene
 
 if TYPE_CHECKING:
@@ -139,16 +140,3 @@ class OperatorCell:
             raise ConfigError("injected faults exist only in simulation")
         with self.presented(p) as (obj, truth):
             return run_reorientation(self, estimator, obj.width_m, truth, observer, contact)
-
-
-def run_reorientation(cell, estimator: TactilePoseEstimator, object_width_m: float, truth,
-                      observer=None, contact: ContactEstimator | None = None) -> ReorientResult:
-    """The scene's reorientation behaviour in ``cell`` (its arm, gripper, sensor and scene) on the held object;
-    ``observer`` is told each phase, the release included (the cell opens the gripper when the trial ends);
-    ``contact``, the scene's contact model, estimates the grip force at the estimate step."""
-    result = grasp_estimate_reorient(cell.arm, cell.gripper, cell.sensor, estimator, object_width_m=object_width_m,
-                                     target_angle_rad=math.radians(cell.scene.target_deg),
-                                     config=cell.scene.behaviour, truth=truth, observer=observer, contact=contact)
-    if observer is not None:
-        observer.phase("release")
-    return result
