@@ -36,13 +36,18 @@ ABOVE_THE_FORMATS = ("data", "sim", "sensors", "collection", "perception", "robo
 HEAVY = ("torch", "onnxruntime", "roboticstoolbox", "franky", "serial", "trimesh", "matplotlib", "cv2", "sklearn")
 
 
-def _heavy_modules_after(code: str) -> list[str]:
-    """Run ``code`` in a fresh interpreter; return the heavy top-level packages it left in ``sys.modules``."""
-    probe = (f"{code}\nimport json, sys\n"
-             f"print(json.dumps(sorted({{m.split('.')[0] for m in sys.modules}} & set({list(HEAVY)!r}))))")
+def _modules_after(code: str, condition: str) -> list[str]:
+    """Run ``code`` in a fresh interpreter; return the modules ``m`` in its ``sys.modules`` for which the Python
+    expression ``condition`` holds, sorted."""
+    probe = f"{code}\nimport json, sys\nprint(json.dumps(sorted({{m for m in sys.modules if {condition}}})))"
     done = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr
     return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def _heavy_modules_after(code: str) -> list[str]:
+    """Run ``code`` in a fresh interpreter; return the heavy top-level packages it left in ``sys.modules``."""
+    return sorted({m.split(".")[0] for m in _modules_after(code, f"m.split('.')[0] in {list(HEAVY)!r}")})
 
 
 @pytest.mark.parametrize("code", [
@@ -199,14 +204,11 @@ def test_the_evaluation_scan_sees_the_aliases():
 
 
 def test_perception_loads_no_evaluation_module():
-    code = ("import json, sys\nimport tactile_manip.perception, tactile_manip.perception.reconstruct, "
+    code = ("import tactile_manip.perception, tactile_manip.perception.reconstruct, "
             "tactile_manip.perception.pose, tactile_manip.perception.estimator, tactile_manip.perception.contact, "
             "tactile_manip.perception.contact_pose, tactile_manip.perception.confidence, "
-            "tactile_manip.perception.symmetry, tactile_manip.perception.angle_head\n"
-            "print(json.dumps(sorted(m for m in sys.modules if m.split('.')[:2] == ['tactile_manip', 'evaluation'])))")
-    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
-    assert done.returncode == 0, done.stderr
-    assert json.loads(done.stdout.strip().splitlines()[-1]) == []
+            "tactile_manip.perception.symmetry, tactile_manip.perception.angle_head")
+    assert _modules_after(code, "m.split('.')[:2] == ['tactile_manip', 'evaluation']") == []
 
 
 @pytest.mark.parametrize("old", sorted(MOVED_TO_EVALUATION))
