@@ -4,8 +4,9 @@ The object is between the open fingers. The gripper closes to the force threshol
 read, the estimator gives the in-hand angle and its confidence, and the arm turns the hand (and with it the
 object) about the pad normal through the contact by ``target - estimate``, so the object ends at the target
 angle in the pad frame the grasp started in. Low confidence follows a policy: act anyway, re-grasp and read
-again, or abstain. Given a contact model of the sensor's board, the estimate step also reads the grip force
-from the newest frame of the final grasp.
+again, or abstain. Given a :class:`~tactile_manip.perception.contact_pose.TactileEstimator` (the pose
+estimator and a contact model of the sensor's board), the estimate step also reads the grip force from the
+newest frame of the final grasp.
 
 The behaviour receives its hardware (any :class:`~tactile_manip.robot.base.Arm`,
 :class:`~tactile_manip.robot.base.Gripper`, :class:`~tactile_manip.sensors.base.TactileSensor`) and a
@@ -34,6 +35,7 @@ from tactile_manip.types import AngleEstimate
 
 if TYPE_CHECKING:
     from tactile_manip.perception.contact import ContactEstimator, ContactState
+    from tactile_manip.perception.contact_pose import TactileEstimator
 
 POLICIES = ("act", "regrasp", "abstain")
 NO_TURN_RAD = 1e-6  # a correction smaller than this is not made (0.00006 deg)
@@ -136,32 +138,31 @@ class _Abort(Exception):
         self.outcome, self.detail = outcome, detail
 
 
-def grasp_estimate_reorient(arm: Arm, gripper: Gripper, sensor: TactileSensor, estimator: TactilePoseEstimator,
-                            *, object_width_m: float, target_angle_rad: float, config: ReorientConfig | None = None,
+def grasp_estimate_reorient(arm: Arm, gripper: Gripper, sensor: TactileSensor,
+                            estimator: TactilePoseEstimator | TactileEstimator, *, object_width_m: float,
+                            target_angle_rad: float, config: ReorientConfig | None = None,
                             truth: GroundTruth | None = None, pad_T: np.ndarray | None = None,
-                            observer: PhaseObserver | None = None,
-                            contact: ContactEstimator | None = None) -> ReorientResult:
+                            observer: PhaseObserver | None = None) -> ReorientResult:
     """Run the behaviour once on the object between the fingers (see the module docstring).
 
     Args:
-        estimator: a pose estimator, or a :class:`~tactile_manip.perception.contact_pose.TactileEstimator` (its
-            pose estimator gives the angle, its contact model the grip force, as ``contact`` would).
+        estimator: a pose estimator, or a :class:`~tactile_manip.perception.contact_pose.TactileEstimator`: its
+            pose estimator gives the angle; after the angle estimate, its contact model reads the newest frame of
+            the final grasp into ``result.contact`` (the grip force and its sigma; None when no frame is fresh).
+            A contact model of another board layout than the sensor's raises ValueError before anything moves.
         object_width_m: nominal width of the object across the fingers, m.
         target_angle_rad: commanded final angle of the object's axis in the pad frame at grasp.
         truth: scores the final angle when given (``final_angle_rad`` and ``error_rad`` stay None otherwise).
         pad_T: hand_T_pad of the sensor (default: the pad on the +y finger at the grasp width,
             :func:`~tactile_manip.robot.frames.hand_T_finger_pad`).
         observer: told each phase and estimate as they happen (see :class:`PhaseObserver`).
-        contact: a contact model of the sensor's board: after the angle estimate, the newest frame of the
-            final grasp gives ``result.contact`` (the grip force and its sigma; None when no frame is fresh).
-            A model of another board layout than the sensor's raises ValueError before anything moves.
 
     The gripper is left closed on the object (the caller releases it); the arm stays where the correction
     left it, or where a fault stopped it.
     """
     cfg = config or ReorientConfig()
     observer = observer or _Silent()
-    estimator, contact = split_estimator(estimator, contact)
+    estimator, contact = split_estimator(estimator)
     if contact is not None:
         contact.check_layout(sensor.layout.name)
     target = float(wrap_axial(check_finite_scalar("target_angle_rad", target_angle_rad)))
@@ -215,15 +216,13 @@ def _move_hand(arm: Arm, target: np.ndarray, cfg: ReorientConfig, what: str) -> 
         raise _Abort("arm_fault", f"{what}: {exc}") from None
 
 
-def split_estimator(estimator, contact: ContactEstimator | None = None):
+def split_estimator(estimator) -> tuple[TactilePoseEstimator, ContactEstimator | None]:
     """(pose estimator, contact model) of what a behaviour was given: a
-    :class:`~tactile_manip.perception.contact_pose.TactileEstimator` is both (a contact model given beside it
-    as well is refused: ValueError), anything else is the pose estimator, with ``contact`` as given."""
+    :class:`~tactile_manip.perception.contact_pose.TactileEstimator` is both; anything else is the pose
+    estimator, without a contact model."""
     pose, model = getattr(estimator, "pose", None), getattr(estimator, "contact", None)
     if pose is None or model is None:
-        return estimator, contact
-    if contact is not None and contact is not model:
-        raise ValueError("the estimator already holds a contact model: give contact= or a TactileEstimator, not both")
+        return estimator, None
     return pose, model
 
 

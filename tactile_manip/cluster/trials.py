@@ -28,7 +28,7 @@ def run_trial_block(scene: TrialScene, scene_path: str | None, trials: list[int]
                     frames_dir: str | None) -> list[TrialRecord]:
     """Run ``methods`` on each presentation in ``trials`` in this process's cell; the records in run order."""
     from tactile_manip.trials.cells import make_cell
-    from tactile_manip.trials.methods import build_contact_estimators, build_estimators
+    from tactile_manip.trials.methods import build_tactile_estimators
     from tactile_manip.trials.runner import run_scene
 
     key = (repr(scene), scene_path)
@@ -36,13 +36,13 @@ def run_trial_block(scene: TrialScene, scene_path: str | None, trials: list[int]
         _WORKER.clear()
         where = Path(scene_path) if scene_path else None
         cell = make_cell(scene)
-        _WORKER.update(key=key, estimators=build_estimators(scene, where), cell=cell,
-                       contact=build_contact_estimators(scene, where, layout=cell.sensor.layout.name))
+        _WORKER.update(key=key, cell=cell,
+                       estimators=build_tactile_estimators(scene, where, layout=cell.sensor.layout.name))
     wanted = set(trials)
     skip = {(i, m) for i in range(scene.trials) for m in _WORKER["estimators"] if i not in wanted or m not in methods}
     records: list[TrialRecord] = []
     run_scene(scene, records.append, estimators=_WORKER["estimators"], skip=skip, progress=False,
-              cell=_WORKER["cell"], frames_dir=frames_dir, contact=_WORKER["contact"])
+              cell=_WORKER["cell"], frames_dir=frames_dir)
     return records
 
 
@@ -55,15 +55,16 @@ def run_trials_on_ray(scene: TrialScene, out_dir: str | Path, *, scene_path: str
     from tactile_manip.trials.log import TrialLog, completed_keys, read_run_info, read_trials
     from tactile_manip.trials.report import write_report
     from tactile_manip.trials.cells import make_cell
-    from tactile_manip.trials.methods import build_contact_estimators, build_estimators
+    from tactile_manip.trials.methods import build_tactile_estimators
+    from tactile_manip.trials.scene import TASK_TITLES
 
     if block_trials < 1:
         raise ValueError(f"--block-trials must be >= 1, got {block_trials}")
     out = Path(out_dir)
     scene_file = str(Path(scene_path).resolve()) if scene_path is not None else None
-    estimators = build_estimators(scene, Path(scene_file) if scene_file else None)  # a bad scene fails here
-    cell = make_cell(scene)
-    build_contact_estimators(scene, Path(scene_file) if scene_file else None, layout=cell.sensor.layout.name)
+    cell = make_cell(scene)  # a bad scene fails here, before the run folder is made
+    estimators = build_tactile_estimators(scene, Path(scene_file) if scene_file else None,
+                                          layout=cell.sensor.layout.name)
     methods = list(estimators)
     skip = completed_keys(out / "trials.jsonl") if resume and (out / "trials.jsonl").exists() else set()
     todo = [i for i in range(scene.trials) if any((i, m) not in skip for m in methods)]
@@ -72,8 +73,8 @@ def run_trials_on_ray(scene: TrialScene, out_dir: str | Path, *, scene_path: str
         _run_blocks(ray, scene, scene_file, blocks, methods, log, skip,
                     frames_dir=str(out / "frames") if frames and scene.task == "reorient" else None, progress=progress)
     tolerance = math.radians(scene.tolerance_deg)
-    return write_report(out, read_trials(out / "trials.jsonl"), tolerance, title=f"Reorientation trials: {scene.name}",
-                        run_info=read_run_info(out))
+    return write_report(out, read_trials(out / "trials.jsonl"), tolerance,
+                        title=f"{TASK_TITLES[scene.task]}: {scene.name}", run_info=read_run_info(out), task=scene.task)
 
 
 def _run_blocks(ray: Any, scene: TrialScene, scene_file: str | None, blocks: list[list[int]], methods: list[str],

@@ -31,7 +31,7 @@ from tactile_manip.trials.presentation import Presentation, pad_T_object
 from tactile_manip.trials.scene import TrialScene
 
 if TYPE_CHECKING:
-    from tactile_manip.perception.contact import ContactEstimator
+    from tactile_manip.perception.contact_pose import TactileEstimator
 
 
 class Cell(Protocol):
@@ -43,9 +43,10 @@ class Cell(Protocol):
         """Connect the cell's arm, gripper and sensor, take the sensor's baseline, disconnect at the end."""
 
     def run_one(self, p: Presentation, estimator, *, arm_fault: bool = False, sensor_stall: bool = False,
-                observer=None, contact: ContactEstimator | None = None):
-        """Present ``p`` and run the scene's task with ``estimator``; the task's result (never raises for a
-        fault of the trial: it is an outcome)."""
+                observer=None):
+        """Present ``p`` and run the scene's task with ``estimator`` (a pose estimator, or a
+        :class:`~tactile_manip.perception.contact_pose.TactileEstimator` with the method's contact model); the
+        task's result (never raises for a fault of the trial: it is an outcome)."""
 
 
 # A drawn sensor's baseline: 25 frames (0.2 s) average the chip noise (<= 15 uT per frame) to <= 3 uT, well
@@ -158,21 +159,22 @@ class SimulatedCell:
         self.sensor.calibrate_baseline(frames=SENSOR_DRAW_BASELINE_FRAMES)
         self._sensor_key = key
 
-    def run_one(self, p: Presentation, estimator: TactilePoseEstimator, *, arm_fault: bool = False,
-                sensor_stall: bool = False, observer=None,
-                contact: ContactEstimator | None = None) -> ReorientResult | PlaceResult | GripResult:
-        """Present ``p``, run the reorientation behaviour with ``estimator``, release, reset.
+    def run_one(self, p: Presentation, estimator: TactilePoseEstimator | TactileEstimator, *,
+                arm_fault: bool = False, sensor_stall: bool = False,
+                observer=None) -> ReorientResult | PlaceResult | GripResult:
+        """Present ``p``, run the scene's task with ``estimator``, release, reset.
 
-        ``observer`` (a :class:`~tactile_manip.behaviours.reorient.PhaseObserver`) is told each phase, the
-        release included. ``contact`` (a :class:`~tactile_manip.perception.contact.ContactEstimator` of the
-        sensor's board) estimates the grip force at the estimate step.
+        ``estimator``: a pose estimator, or a :class:`~tactile_manip.perception.contact_pose.TactileEstimator`
+        whose contact model (of the sensor's board) estimates the grip force at the estimate step and closes
+        the "grip" task's loop. ``observer`` (a :class:`~tactile_manip.behaviours.reorient.PhaseObserver`) is
+        told each phase, the release included.
         """
         with self.presented(p, arm_fault=arm_fault, sensor_stall=sensor_stall) as (obj, truth):
             if self.scene.task == "place":
                 return self._place(p, estimator, obj, truth)
             if self.scene.task == "grip":
-                return self._grip(estimator, obj, truth, contact)
-            return run_reorientation(self, estimator, obj.width_m, truth, observer, contact)
+                return self._grip(estimator, obj, truth)
+            return run_reorientation(self, estimator, obj.width_m, truth, observer)
 
     def _place(self, p: Presentation, estimator: TactilePoseEstimator, obj, truth: WorldTruth) -> PlaceResult:
         """The "place" task: a slot drawn from the presentation's seed, the rod put into it."""
@@ -184,17 +186,12 @@ class SimulatedCell:
         return place_in_slot(self.arm, self.gripper, self.sensor, estimator, slot, object_width_m=obj.width_m,
                              config=self.scene.behaviour, truth=truth)
 
-    def _grip(self, estimator: TactilePoseEstimator, obj, truth: WorldTruth,
-              contact: ContactEstimator | None) -> GripResult:
-        """The "grip" task: the method's pose estimator and the scene's contact model as one estimator (the
-        closed loop); the blind baseline, or a scene without a contact model, grips open loop."""
+    def _grip(self, estimator: TactilePoseEstimator | TactileEstimator, obj, truth: WorldTruth) -> GripResult:
+        """The "grip" task: a TactileEstimator closes the loop on its force and position; the blind baseline, or
+        a method without a contact model, grips open loop."""
         from tactile_manip.behaviours.grip import grip_to_force
-        from tactile_manip.perception.contact_pose import TactileEstimator
 
-        tactile = estimator
-        if contact is not None and isinstance(estimator, TactilePoseEstimator):
-            tactile = TactileEstimator(estimator, contact)
-        return grip_to_force(self.arm, self.gripper, self.sensor, tactile, object_width_m=obj.width_m,
+        return grip_to_force(self.arm, self.gripper, self.sensor, estimator, object_width_m=obj.width_m,
                              config=self.scene.behaviour, grip=self.scene.grip, truth=truth)
 
     def _ready_for_trial(self) -> None:
@@ -230,14 +227,14 @@ def make_cell(scene: TrialScene):
     return OperatorCell(scene)
 
 
-def run_reorientation(cell, estimator: TactilePoseEstimator, object_width_m: float, truth,
-                      observer=None, contact: ContactEstimator | None = None) -> ReorientResult:
+def run_reorientation(cell, estimator: TactilePoseEstimator | TactileEstimator, object_width_m: float, truth,
+                      observer=None) -> ReorientResult:
     """The scene's reorientation behaviour in ``cell`` (its arm, gripper, sensor and scene) on the held object;
-    ``observer`` is told each phase, the release included (the cell opens the gripper when the trial ends);
-    ``contact``, the scene's contact model, estimates the grip force at the estimate step."""
+    ``observer`` is told each phase, the release included (the cell opens the gripper when the trial ends); a
+    TactileEstimator's contact model estimates the grip force at the estimate step."""
     result = grasp_estimate_reorient(cell.arm, cell.gripper, cell.sensor, estimator, object_width_m=object_width_m,
                                      target_angle_rad=math.radians(cell.scene.target_deg),
-                                     config=cell.scene.behaviour, truth=truth, observer=observer, contact=contact)
+                                     config=cell.scene.behaviour, truth=truth, observer=observer)
     if observer is not None:
         observer.phase("release")
     return result

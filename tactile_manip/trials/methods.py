@@ -1,5 +1,9 @@
 """A scene's methods made ready to run: each method's pose estimator (model, baseline or the blind one) and
-contact model, every file found and checked before the first trial."""
+contact model, every file found and checked before the first trial.
+
+:func:`build_tactile_estimators` gives what each method's behaviour is handed: its pose estimator joined with
+its contact model as one :class:`~tactile_manip.perception.contact_pose.TactileEstimator`, or the pose
+estimator alone (a method without a contact model, and the blind baseline, which has no tactile input)."""
 
 from __future__ import annotations
 
@@ -112,3 +116,18 @@ def build_estimators(scene: TrialScene, scene_path: Path | None = None) -> dict[
         out[spec.name] = TactilePoseEstimator(reconstructor, params, calibration=calibration, escalation=escalation,
                                               escalate_below=spec.escalate_below, angle_source=spec.angle_source)
     return out
+
+
+def build_tactile_estimators(scene: TrialScene, scene_path: Path | None = None, *,
+                             layout: str | None = None) -> dict:
+    """What each method's behaviour is handed: its pose estimator (:func:`build_estimators`) joined with its
+    contact model (:func:`build_contact_estimators`, checked against the board ``layout``) as one
+    :class:`~tactile_manip.perception.contact_pose.TactileEstimator`; the pose estimator alone for a method
+    without a contact model and for the blind baseline (no tactile input)."""
+    from tactile_manip.perception.contact_pose import TactileEstimator
+
+    poses = build_estimators(scene, scene_path)
+    contacts = build_contact_estimators(scene, scene_path, layout=layout)
+    return {name: TactileEstimator(pose, contacts[name])
+            if contacts[name] is not None and isinstance(pose, TactilePoseEstimator) else pose
+            for name, pose in poses.items()}

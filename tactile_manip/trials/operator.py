@@ -35,7 +35,7 @@ from tactile_manip.trials.cells import run_reorientation
 from tactile_manip.trials.scene import TrialScene
 
 if TYPE_CHECKING:
-    from tactile_manip.perception.contact import ContactEstimator
+    from tactile_manip.perception.contact_pose import TactileEstimator
 
 
 @dataclass(frozen=True)
@@ -132,11 +132,11 @@ class OperatorCell:
             self.gripper.open()
             self._ask("take the object out of the hand, then press Enter ")
 
-    def run_one(self, p, estimator: TactilePoseEstimator, *, arm_fault: bool = False,
-                sensor_stall: bool = False, observer=None, contact: ContactEstimator | None = None) -> ReorientResult:
-        """Present ``p``, run the reorientation behaviour, ask for the measured final angle (``observer`` and
-        ``contact``: see :meth:`~tactile_manip.trials.cells.SimulatedCell.run_one`)."""
+    def run_one(self, p, estimator: TactilePoseEstimator | TactileEstimator, *, arm_fault: bool = False,
+                sensor_stall: bool = False, observer=None) -> ReorientResult:
+        """Present ``p``, run the reorientation behaviour, ask for the measured final angle (``estimator`` and
+        ``observer``: see :meth:`~tactile_manip.trials.cells.SimulatedCell.run_one`)."""
         if arm_fault or sensor_stall:
             raise ConfigError("injected faults exist only in simulation")
         with self.presented(p) as (obj, truth):
-            return run_reorientation(self, estimator, obj.width_m, truth, observer, contact)
+            return run_reorientation(self, estimator, obj.width_m, truth, observer)

@@ -29,25 +29,31 @@ from tactile_manip.trials.record import TrialRecord
 from tactile_manip.trials.scene import TASK_TITLES, TrialScene
 from tactile_manip.trials.cells import SENSOR_DRAW_BASELINE_FRAMES, Cell, SimulatedCell, WorldTruth, make_cell
 from tactile_manip.trials.methods import (build_contact_estimator, build_contact_estimators, build_estimators,
-                                          resolve_model_path, resolve_scene_path)
+                                          build_tactile_estimators, resolve_model_path, resolve_scene_path)
 from tactile_manip.trials.presentation import Presentation, draw_presentation, pad_T_object
 from tactile_manip.trials.task_records import make_grip_record, make_place_record, make_record
 
 if TYPE_CHECKING:
-    from tactile_manip.perception.contact import ContactEstimator
+    from tactile_manip.perception.contact_pose import TactileEstimator
 
 # the parts' names, importable from here too
 __all__ = ["SENSOR_DRAW_BASELINE_FRAMES", "Cell", "Presentation", "SimulatedCell", "WorldTruth",
-           "build_contact_estimator", "build_contact_estimators", "build_estimators", "draw_presentation",
+           "build_contact_estimator", "build_contact_estimators", "build_estimators", "build_tactile_estimators",
+           "draw_presentation",
            "make_cell", "make_grip_record", "make_place_record", "make_record", "pad_T_object",
            "resolve_model_path", "resolve_scene_path", "run_scene", "run_trials"]
 
 
-def run_scene(scene: TrialScene, write: Callable[[TrialRecord], None], *, estimators: dict[str, TactilePoseEstimator],
+def run_scene(scene: TrialScene, write: Callable[[TrialRecord], None], *,
+              estimators: Mapping[str, TactilePoseEstimator | TactileEstimator],
               skip: set[tuple[int, str]] = frozenset(), progress: bool = True, cell: Cell | None = None,
-              trial_observer=None, frames_dir: str | Path | None = None,
-              contact: ContactEstimator | Mapping[str, ContactEstimator | None] | None = None) -> int:
+              trial_observer=None, frames_dir: str | Path | None = None) -> int:
     """Run every (trial, method) of ``scene`` not in ``skip``; ``write`` each record.
+
+    ``estimators``: what each method's behaviour is handed, by method name (:func:`build_tactile_estimators`:
+    a method with a contact model gets a :class:`~tactile_manip.perception.contact_pose.TactileEstimator`, so its
+    records carry the grip force it estimated, and the "grip" task servoes on it; :func:`build_estimators`: the
+    pose estimators alone).
 
     ``cell`` (default: built from ``scene.robot.backend``: :class:`SimulatedCell` for the twin,
     :class:`~tactile_manip.trials.operator.OperatorCell` for a real FR3) provides ``connected()`` and ``run_one``.
@@ -56,9 +62,6 @@ def run_scene(scene: TrialScene, write: Callable[[TrialRecord], None], *, estima
     was written; it watches, it changes nothing.
     With ``frames_dir``, each trial's per-frame streams go to ``frames_dir/<method>-<trial>.tmframes``
     (:mod:`tactile_manip.trials.frames`; the cell also needs ``sensor``, ``arm`` and ``gripper``).
-    With ``contact`` (the scene's contact model, :func:`build_contact_estimator`, or one per method,
-    :func:`build_contact_estimators`), each record carries the grip force it estimated at the estimate step (and
-    the "grip" task servoes on it).
 
     Returns the number of trials run. Outcomes other than "done" are recorded, never raised; only an
     interrupt (Ctrl-C) or a failure to build the cell stops the run.
@@ -81,9 +84,6 @@ def run_scene(scene: TrialScene, write: Callable[[TrialRecord], None], *, estima
             try:
                 with _frame_stream(cell, frames_dir, p, method, scene, code) as observer:
                     kwargs = {} if observer is None else {"observer": observer}
-                    mine = contact.get(method) if isinstance(contact, Mapping) else contact
-                    if mine is not None:
-                        kwargs["contact"] = mine
                     result = cell.run_one(p, estimators[method], arm_fault=i in faults.arm_fault_trials,
                                           sensor_stall=i in faults.sensor_stall_trials, **kwargs)
             except Exception as exc:  # noqa: BLE001 - a broken trial is recorded, the run goes on
@@ -143,14 +143,13 @@ def run_trials(scene: TrialScene, out_dir: str | Path, *, scene_path: str | Path
 
     out = Path(out_dir)
     # every part the scene names is built before the run folder is made, so a bad scene leaves no folder behind
-    estimators = build_estimators(scene, Path(scene_path) if scene_path is not None else None)
     cell = make_cell(scene)
-    contact = build_contact_estimators(scene, Path(scene_path) if scene_path is not None else None,
-                                       layout=cell.sensor.layout.name)
+    estimators = build_tactile_estimators(scene, Path(scene_path) if scene_path is not None else None,
+                                          layout=cell.sensor.layout.name)
     skip = completed_keys(out / "trials.jsonl") if resume and (out / "trials.jsonl").exists() else set()
     with TrialLog(out, config=to_dict(scene), resume=resume) as log:
         run_scene(scene, log.append, estimators=estimators, skip=skip, progress=progress, cell=cell,
-                  trial_observer=trial_observer, contact=contact,
+                  trial_observer=trial_observer,
                   frames_dir=out / "frames" if frames and scene.task == "reorient" else None)
     tolerance = math.radians(scene.tolerance_deg if tolerance_deg is None else tolerance_deg)
     return write_report(out, read_trials(out / "trials.jsonl"), tolerance,

@@ -258,7 +258,7 @@ def test_the_operator_cell_runs_the_same_behaviour_with_a_person_in_the_loop() -
 
 def test_the_operator_cell_logs_the_grip_force_of_the_scenes_contact_model() -> None:
     from tactile_manip.trials.operator import OperatorCell
-    from tactile_manip.trials.runner import build_contact_estimator
+    from tactile_manip.trials.runner import build_tactile_estimators
 
     scene = _scene(trials=2, methods=[MethodSpec("bilinear", "bilinear", output_px=16)],
                    contact_model=str(REPO / "models" / "contact_supermag.onnx"))
@@ -266,8 +266,8 @@ def test_the_operator_cell_logs_the_grip_force_of_the_scenes_contact_model() -> 
     person = _ScriptedOperator(sim, answer_blank_on=set())
     cell = OperatorCell(scene, arm=sim.arm, gripper=sim.gripper, sensor=sim.sensor, ask=person.ask, say=person.say)
     records = []
-    run_scene(scene, records.append, estimators=build_estimators(scene), progress=False, cell=cell,
-              contact=build_contact_estimator(scene, layout=cell.sensor.layout.name))
+    run_scene(scene, records.append, progress=False, cell=cell,
+              estimators=build_tactile_estimators(scene, layout=cell.sensor.layout.name))
     assert [r.outcome for r in records] == ["done", "done"], [r.detail for r in records]
     for r in records:
         assert abs(r.estimated_grip_force_n - r.extra["force_n"]) < 3 * r.estimated_grip_force_sigma_n
