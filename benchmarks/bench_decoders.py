@@ -121,7 +121,7 @@ def main() -> None:
     parser.add_argument("--profile-calls", type=int, default=200)
     parser.add_argument("--out", default="benchmarks/results/decoders.json")
     args = parser.parse_args()
-    from tactile_manip.learning.eager import export_untrained
+    from tactile_manip.learning.cvae.eager import export_untrained
 
     configs = args.config or sorted(glob.glob("experiments/decoder_candidates/decoder_*.toml"))
     fields, _ = rod_readings(args.readings, 0)

@@ -28,8 +28,8 @@ def time_checkpoint(path: Path, *, repeats: int, batch: int) -> dict[str, Any]:
     import torch
 
     from tactile_manip.bench.timing import TimingBudget, batch_throughput, single_reading_ms
-    from tactile_manip.learning.eager import TorchReconstructor
-    from tactile_manip.learning.model import count_parameters
+    from tactile_manip.learning.cvae.eager import TorchReconstructor
+    from tactile_manip.learning.cvae.model import count_parameters
 
     rec = TorchReconstructor(path, device="cuda")  # each call ends with the copy back: the GPU work is done
     readings = np.random.default_rng(0).normal(0, 150, (repeats,) + rec.input_shape).astype(np.float32)
@@ -70,7 +70,7 @@ def main(argv: list[str] | None = None) -> int:
     if not torch.cuda.is_available():
         raise SystemExit(f"bench_gpu needs a CUDA GPU; torch {torch.__version__} sees none "
                          "(benchmarks.bench_model times the CPU path)")
-    from tactile_manip.learning.eager import export_untrained
+    from tactile_manip.learning.cvae.eager import export_untrained
 
     with tempfile.TemporaryDirectory() as tmp:
         models = [tuple(s.split("=", 1)) for s in args.model]

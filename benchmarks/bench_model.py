@@ -33,7 +33,7 @@ PERIOD_MS = 8.0  # the sensor's 125 Hz frame period
 
 def _untrained(preset: str, folder: Path) -> Path:
     """Export a randomly initialised model of ``preset`` (for timing only)."""
-    from tactile_manip.learning.eager import export_untrained
+    from tactile_manip.learning.cvae.eager import export_untrained
 
     return export_untrained(preset, folder)
 

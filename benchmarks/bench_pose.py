@@ -130,7 +130,7 @@ def markdown(report: dict[str, Any]) -> str:
 
 def untrained_model(name: str, config: str, folder: Path) -> Path:
     """Export an untrained model of the preset or training config ``config`` (torch needed) for timing."""
-    from tactile_manip.learning.eager import export_untrained
+    from tactile_manip.learning.cvae.eager import export_untrained
 
     return export_untrained(config, folder / name)
 

@@ -63,7 +63,7 @@ def train(readings: np.ndarray, angle: np.ndarray, weight: np.ndarray, *, epochs
     import torch
     from torch import nn
 
-    from tactile_manip.learning.angle_train import symmetric
+    from tactile_manip.learning.angle_head.train import symmetric
 
     torch.manual_seed(seed)
     torch.set_num_threads(2)

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import os
 import tempfile
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from pathlib import Path
 
 from tactile_manip.errors import TactileManipError
@@ -50,6 +50,21 @@ def check_output_dir(path: str | Path) -> Path:
     else:
         check_writable_parent(path)
     return path
+
+
+def check_report_folder(out: str | Path, files: Sequence[str], *, force: bool,
+                        hint: str = "pass --force to replace them, or give another --out") -> Path:
+    """Return ``out`` after checking it is a writable folder that holds none of ``files`` (unless ``force``).
+
+    Raises:
+        OutputPathError: ``out`` is a file or cannot be written into, or it holds some of ``files`` (an
+            earlier run's) and ``force`` is False; ``hint`` says what to do then.
+    """
+    out = check_output_dir(out)
+    held = [name for name in files if (out / name).exists()]
+    if held and not force:
+        raise OutputPathError(f"{out} already holds {', '.join(held)} of an earlier run: {hint}")
+    return out
 
 
 def check_apart(out: str | Path, inputs: Iterable[tuple[str, str | Path]], *, option: str = "--out") -> None:

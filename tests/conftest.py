@@ -152,8 +152,8 @@ def contact_model_files(tmp_path_factory):
     pytest.importorskip("torch", reason="training the contact model needs torch")
     pytest.importorskip("onnxruntime", reason="exporting the contact model checks it on onnxruntime")
     from tactile_manip.data import save_dataset
-    from tactile_manip.learning.contact_export import export_contact_onnx
-    from tactile_manip.learning.contact_train import ContactTrainConfig, train_contact
+    from tactile_manip.learning.contact.export import export_contact_onnx
+    from tactile_manip.learning.contact.train import ContactTrainConfig, train_contact
 
     root = tmp_path_factory.mktemp("contact")
     save_dataset(root / "presses.npz", _labelled_presses())

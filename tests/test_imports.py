@@ -27,6 +27,13 @@ SIMULATED = "sensors/simulated/"
 MOVED_TO_EVALUATION = {"evaluation": "images", "contact_evaluation": "contact", "contact_baselines": "contact_baselines",
                        "metrics": "metrics", "pose_reference": "pose_reference"}
 ALIASES = tuple(f"perception/{old}.py" for old in MOVED_TO_EVALUATION)
+# the modules that moved into learning/'s folder per model: the old name -> the new one, kept importable the same way
+MOVED_IN_LEARNING = {"model": "cvae.model", "train": "cvae.train", "export": "cvae.export", "eager": "cvae.eager",
+                     "data": "cvae.data", "angle_model": "angle_head.model", "angle_train": "angle_head.train",
+                     "angle_export": "angle_head.export", "contact_model": "contact.model",
+                     "contact_train": "contact.train", "contact_export": "contact.export",
+                     "fewlabel": "contact.fewlabel"}
+LEARNING_ALIASES = tuple(f"learning/{old}.py" for old in MOVED_IN_LEARNING)
 REPOSITORY = Path(__file__).resolve().parents[1]
 
 # what the byte formats (tactile_manip.wire, tactile_manip.logs) never import: every layer above the core
@@ -75,6 +82,9 @@ def _heavy_modules_after(code: str) -> list[str]:
     "import tactile_manip.robot, tactile_manip.robot.twin, tactile_manip.robot.safety, tactile_manip.robot.conformance",
     "import tactile_manip.behaviours.reorient, tactile_manip.behaviours.place",
     "import tactile_manip.trials.scene, tactile_manip.trials.runner, tactile_manip.trials.stats",
+    # the registry of model kinds and the verbs' modules it names import torch only when a verb runs
+    "import tactile_manip.learning.kinds, tactile_manip.learning.cli, tactile_manip.learning.cvae.cli, "
+    "tactile_manip.learning.angle_head.cli, tactile_manip.learning.contact.cli",
     # the CLI parser imports every command module, and `--help` must stay fast
     "import tactile_manip.cli; tactile_manip.cli.build_parser()",
 ])
@@ -224,6 +234,19 @@ def test_old_perception_paths_stay_importable(old):
     assert done.returncode == 0, done.stderr
 
 
+@pytest.mark.parametrize("old", sorted(MOVED_IN_LEARNING))
+def test_old_learning_paths_stay_importable(old):
+    """A user's `from tactile_manip.learning.<old> import ...` gets the very module of the model's folder."""
+    new = MOVED_IN_LEARNING[old]
+    code = (f"import importlib\nimport tactile_manip.learning.{old} as alias\n"
+            f"import tactile_manip.learning.{new} as moved\n"
+            f"assert alias is moved, alias\n"
+            f"import tactile_manip.learning as package\nassert package.{old} is moved\n"
+            f"assert importlib.import_module('tactile_manip.learning.{old}') is moved")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+
+
 def _absolute_imports(path: Path) -> set[str]:
     """Every module a script outside the package imports by its absolute name, as dotted names."""
     names = set()
@@ -237,15 +260,16 @@ def _absolute_imports(path: Path) -> set[str]:
 
 
 def test_no_code_imports_through_the_aliases():
-    """The old perception paths are for users: the package, tests, benchmarks, tasks and examples import the
-    evaluation modules by their new names."""
-    old_names = {f"tactile_manip.perception.{old}" for old in MOVED_TO_EVALUATION}
+    """The old perception and learning paths are for users: the package, tests, benchmarks, tasks, examples and
+    experiments import the moved modules by their new names."""
+    old_names = ({f"tactile_manip.perception.{old}" for old in MOVED_TO_EVALUATION}
+                 | {f"tactile_manip.learning.{old}" for old in MOVED_IN_LEARNING})
     offenders = {}
     for path in sorted(PACKAGE.rglob("*.py")):
         where = path.relative_to(PACKAGE).as_posix()
-        if where not in ALIASES and _imported_modules(path) & old_names:
+        if where not in ALIASES + LEARNING_ALIASES and _imported_modules(path) & old_names:
             offenders[f"tactile_manip/{where}"] = sorted(_imported_modules(path) & old_names)
-    for folder in ("tests", "benchmarks", "tasks", "examples"):
+    for folder in ("tests", "benchmarks", "tasks", "examples", "experiments"):
         for path in sorted((REPOSITORY / folder).rglob("*.py")):
             if _absolute_imports(path) & old_names:
                 offenders[path.relative_to(REPOSITORY).as_posix()] = sorted(_absolute_imports(path) & old_names)

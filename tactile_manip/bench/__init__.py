@@ -9,5 +9,5 @@
 - :mod:`~tactile_manip.bench.suite`: settings and the run that ties them together.
 
 Importing this package costs numpy only; onnxruntime is loaded with the first model and torch only for the
-torch-eager reference (through :mod:`tactile_manip.learning.eager`).
+torch-eager reference (through :mod:`tactile_manip.learning.cvae.eager`).
 """

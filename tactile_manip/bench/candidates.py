@@ -156,7 +156,7 @@ def model_candidates(entry: ModelEntry, workdir: Path, *, runtimes: tuple[str, .
             notes.append(f"{entry.name}: skipped, {path} not found (train it and `tactile-manip export` it)")
             return []
         try:
-            from tactile_manip.learning.eager import export_untrained
+            from tactile_manip.learning.cvae.eager import export_untrained
         except ImportError:
             notes.append(f"{entry.name}: skipped, {path} not found and torch is not installed to export an "
                          "untrained one for latency")
@@ -211,7 +211,7 @@ def _runtime_candidate(entry: ModelEntry, method: str, sym: bool, runtime: str, 
             notes.append(f"{entry.name}: torch eager n/a (no checkpoint {entry.checkpoint or 'beside the file'})")
             return None
         try:
-            from tactile_manip.learning.eager import TorchReconstructor
+            from tactile_manip.learning.cvae.eager import TorchReconstructor
         except ImportError:
             notes.append(f"{entry.name}: torch eager n/a (torch is not installed)")
             return None

@@ -7,20 +7,25 @@ export of the same format: never the source, a path inside it or a folder holdin
 
 ``tactile-manip export --checkpoint RUN/best.pt --out m.onnx`` writes a checkpoint as ONNX (prior + decoder)
 with its metadata; for an angle head (``kind = "angle_head"``), ``--attach-to MODEL.onnx`` writes a copy of that
-pose model with the head inside (:mod:`tactile_manip.learning.angle_export`). The parity check runs the ONNX file on onnxruntime against torch on the same inputs (real
-readings from ``--data`` when given) and refuses to keep a file that disagrees. ``--out`` and ``--card`` must not
-be one of the inputs; ``--force`` replaces only an ONNX model of tactile_manip.
+pose model with the head inside (:mod:`tactile_manip.learning.angle_head.export`). The checkpoint's kind is looked
+up in :mod:`tactile_manip.learning.kinds`, whose entry writes it. The parity check runs the ONNX file on
+onnxruntime against torch on the same inputs (real readings from ``--data`` when given) and refuses to keep a file
+that disagrees. ``--out`` and ``--card`` must not be one of the inputs; ``--force`` replaces only an ONNX model of
+tactile_manip.
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import math
 
 
 CHECKPOINT_ONLY = ("data", "metrics", "pixel_mm", "card", "history", "table", "latency", "attach_to",
                    "image_position_weight")
+# the model-export options that one kind's checkpoint takes and every other refuses: option -> (its kind, the
+# checkpoint it is for, as the refusal names it)
+KIND_ONLY_OPTIONS = {"image_position_weight": ("contact", "a contact model's"),
+                     "attach_to": ("angle_head", "an angle head's")}
 
 
 def share(text: str) -> float:
@@ -119,58 +124,23 @@ def _export_source(args: argparse.Namespace) -> int:
 
 
 def _export_checkpoint(args: argparse.Namespace) -> int:
+    """The checkpoint's kind (:mod:`tactile_manip.learning.kinds`) writes it, once the outputs are checked and the
+    options of another kind's checkpoint refused."""
     from tactile_manip.learning.import_check import require_torch
 
     require_torch()
     from tactile_manip.extras import require
-    from tactile_manip.learning.export import export_onnx
-    from tactile_manip.data import load_datasets
-    from tactile_manip.outputs import check_output_file
+    from tactile_manip.learning.kinds import kind_of_checkpoint
 
     require("onnx", "export")
     require("onnxruntime", "export's parity check")
     _check_model_outputs(args)
-    kind = _checkpoint_kind(args.checkpoint)
-    if args.image_position_weight is not None and kind != "contact":
-        raise ValueError(f"--image-position-weight is for a contact model's checkpoint; {args.checkpoint} is a "
-                         f"{kind} checkpoint")
-    if kind == "angle_head":
-        return _attach_angle_head(args)
-    if args.attach_to is not None:
-        raise ValueError(f"--attach-to is for an angle head's checkpoint; {args.checkpoint} is a {kind} checkpoint")
-    if kind == "contact":
-        return _export_contact(args)
-    if args.card:
-        check_output_file(args.card, force=args.force)
-    readings, pixel_mm, extra = None, args.pixel_mm or 0.1, {}
-    if args.data:
-        data = load_datasets(args.data)
-        data.require_images("export of an image model with --data")
-        readings = data.readings[data.indices("val")]
-        pixel_mm = args.pixel_mm or data.image.pixel_mm or 0.1
-        trained_on = sorted(set(data.objects(data.indices("train")).tolist()))
-        extra["training_data"] = {"path": " ".join(args.data), "fingerprint": data.fingerprint(), "pairs": len(data),
-                                  "objects": sorted(set(data.objects().tolist())),
-                                  "objects_with_train_split": trained_on, "source": data.provenance.get("source"),
-                                  "image": data.image.to_dict(),
-                                  "code_version": data.provenance.get("code_version")}
-    metrics = json.loads(open(args.metrics).read()) if args.metrics else {}
-    meta = export_onnx(args.checkpoint, args.out, pixel_mm=pixel_mm, metrics=metrics, extra=extra,
-                       check_readings=readings)
-    print(f"wrote {args.out}: {meta['parameters']:,} inference parameters, preset {meta['preset']}, "
-          f"ONNX vs torch max |diff| {meta['parity_max_abs_mm']:.2e} mm")
-    if args.card:
-        from pathlib import Path
-
-        from tactile_manip.learning.card import write_model_card
-
-        history = args.history or str(Path(args.checkpoint).with_name("history.json"))
-        table = Path(args.table).read_text() if args.table else ""
-        latency = Path(args.latency).read_text() if args.latency else ""
-        write_model_card(args.card, meta, history, name=Path(args.out).stem, table_md=table, machine=_cpu_name(),
-                         commands=_commands(args), latency=latency)
-        print(f"wrote {args.card}")
-    return 0
+    kind = kind_of_checkpoint(args.checkpoint)
+    for name, (owner, whose) in KIND_ONLY_OPTIONS.items():
+        if getattr(args, name) is not None and kind.name != owner:
+            raise ValueError(f"--{name.replace('_', '-')} is for {whose} checkpoint; {args.checkpoint} is a "
+                             f"{kind.name} checkpoint")
+    return kind.run_export(args)
 
 
 def _check_model_outputs(args: argparse.Namespace) -> None:
@@ -207,86 +177,3 @@ def _not_our_model(path) -> str | None:
     if proto.producer_name == "tactile_manip" or any(k.split(".")[0] == "tactile_manip" for k in keys):
         return None
     return f"its producer is {proto.producer_name or 'unnamed'} and it holds no tactile_manip metadata"
-
-
-def _cpu_name() -> str:
-    import os
-    from pathlib import Path
-
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return f"{line.split(':', 1)[1].strip()} ({os.cpu_count()} cores)"
-    except OSError:
-        pass
-    return f"{os.cpu_count()} cores"
-
-
-def _commands(args: argparse.Namespace) -> list[str]:
-    from pathlib import Path
-
-    run = Path(args.checkpoint).parent
-    data = [Path(d) for d in (args.data or ["data/supermag.npz"])]
-    files = " ".join(map(str, data))
-    return [*(f"tactile-manip simulate --config configs/dataset/{d.stem}.toml --out {d}" for d in data),
-            f"tactile-manip train --config configs/train/{run.name}.toml --data {files} --out {run}",
-            f"tactile-manip export --checkpoint {args.checkpoint} --out {args.out} --data {files} --force"]
-
-
-def _checkpoint_kind(path: str) -> str:
-    """"contact" for a contact-model checkpoint, else "cvae" (read_checkpoint names a bad file)."""
-    from tactile_manip.learning.checkpoint import read_checkpoint
-
-    return str(read_checkpoint(path).get("kind", "cvae"))
-
-
-def _attach_angle_head(args: argparse.Namespace) -> int:
-    """Copy --attach-to to --out with the angle head inside; --data gives real readings to check it on."""
-    import numpy as np
-
-    from tactile_manip.learning.angle_export import attach_angle_head
-    from tactile_manip.data import load_dataset
-
-    if args.attach_to is None:
-        raise ValueError(f"{args.checkpoint} is an angle head: give the pose model to attach it to with --attach-to "
-                         "MODEL.onnx (e.g. experiments/model_variants/supermag_robust.onnx)")
-    given = [f"--{n.replace('_', '-')}" for n in ("metrics", "pixel_mm", "card", "history", "table", "latency")
-             if getattr(args, n) is not None]
-    if given:
-        raise ValueError(f"{', '.join(given)}: not for an angle head, whose validation figures travel in its record")
-    readings = None
-    if args.data:  # datasets with and without images: each is read alone
-        readings = np.concatenate([d.readings[d.indices("val")][:64] for d in map(load_dataset, args.data)])
-    record = attach_angle_head(args.checkpoint, args.attach_to, args.out, check_readings=readings,
-                               symmetries=args.head_symmetries == 8)
-    val = record["validation"]
-    copies = "its 8 symmetric copies" if record["symmetries"] == 8 else "1 copy (no symmetric copies)"
-    print(f"wrote {args.out}: {args.attach_to} with an angle head of {record['parameters']:,} parameters reading "
-          f"{copies} "
-          f"(validation {val.get('val_within_5', float('nan')):.1%} within 5 deg), ONNX vs torch max |diff| "
-          f"{record['parity_max_abs']:.2e}")
-    return 0
-
-
-def _export_contact(args: argparse.Namespace) -> int:
-    """Export a contact model (tactile_manip.learning.contact_export); --data gives real windows to check."""
-    from tactile_manip.learning.contact_export import export_contact_onnx, load_contact_checkpoint
-    from tactile_manip.learning.contact_train import dataset_windows
-    from tactile_manip.data import load_datasets
-
-    if args.card or args.pixel_mm is not None:
-        raise ValueError("--card and --pixel-mm are for image models; a contact model keeps its validation "
-                         "figures in its metadata")
-    windows = None
-    if args.data:
-        _, payload = load_contact_checkpoint(args.checkpoint)
-        data = load_datasets(args.data, images=False)
-        windows = dataset_windows(data, payload["input"]["context"])[data.indices("test")]
-    metrics = json.loads(open(args.metrics).read()) if args.metrics else {}
-    meta = export_contact_onnx(args.checkpoint, args.out, metrics=metrics, check_windows=windows,
-                               image_position_weight=args.image_position_weight)
-    targets = ", ".join(f"{n} [{u}]" for n, u in zip(meta["targets"]["names"], meta["targets"]["units"]))
-    print(f"wrote {args.out}: contact model, {meta['parameters']:,} parameters, targets {targets}, "
-          f"{meta['context']['frames']} frame(s) of context, ONNX vs torch max |diff| "
-          f"{meta['parity_max_abs']:.2e} target spreads")
-    return 0

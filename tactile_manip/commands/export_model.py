@@ -2,7 +2,8 @@
 
 The model half of ``tactile-manip export`` on its own (``export --checkpoint`` does the same): an image model
 (prior + decoder, with its metadata and an optional model card), a contact model, or an angle head attached to a
-pose model (``--attach-to``). See :mod:`tactile_manip.commands.export`.
+pose model (``--attach-to``), as the checkpoint's kind in :mod:`tactile_manip.learning.kinds` says. See
+:mod:`tactile_manip.commands.export`.
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """Reading a training checkpoint (``RUN/best.pt``, ``RUN/checkpoint.pt``) back, with one clear error per fault.
 
-A checkpoint is a ``torch.save`` dict written by ``tactile_manip.learning.train``; it is loaded with
+A checkpoint is a ``torch.save`` dict written by ``tactile_manip.learning.cvae.train``; it is loaded with
 ``weights_only=True`` (files are data). A truncated file, a foreign one (any other ``torch.save`` dict, a zip,
 a pickle) or one of another architecture raises :class:`CheckpointError` naming the file and what is wrong.
 """

@@ -8,11 +8,11 @@ from typing import Any
 import torch
 
 from tactile_manip.config import check_ranges
-from tactile_manip.learning.train import SCHEDULE_RANGES, TrainingError
+from tactile_manip.learning.cvae.train import SCHEDULE_RANGES, TrainingError
 
 
 def check_schedule(cfg: Any) -> None:
-    """Refuse epochs, batch size or patience outside :data:`~tactile_manip.learning.train.SCHEDULE_RANGES`
+    """Refuse epochs, batch size or patience outside :data:`~tactile_manip.learning.cvae.train.SCHEDULE_RANGES`
     (ConfigError), a learning rate outside (0, 1) or a negative weight decay (ValueError) on ``cfg`` (a dataclass
     with those fields)."""
     check_ranges(cfg, SCHEDULE_RANGES)

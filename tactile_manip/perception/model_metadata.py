@@ -28,7 +28,7 @@ from typing import Any
 
 from tactile_manip.errors import DatasetError, TactileManipError
 
-MAX_CONTEXT_FRAMES = 64   # the training config's bound (learning/contact_model.py)
+MAX_CONTEXT_FRAMES = 64   # the training config's bound (learning/contact/model.py)
 MAX_GAP_S = 3600.0        # the training config's bound on context.max_gap_s
 KINDS = ("image", "contact")
 _NUMBER = (int, float)

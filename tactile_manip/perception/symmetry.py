@@ -9,7 +9,7 @@ per reading (4 for a rectangular grid, whose group is the rectangle's: identity,
 
 Conventions (docs/design.md, Conventions): readings (..., R, C, 3) with row 0 at +y and column 0 at -x, images
 (..., H, W) in the same layout, so ``numpy.rot90`` on (row, column) is a counter-clockwise turn. The same
-transforms as the training augmentation (:func:`tactile_manip.learning.data.dihedral`, a test checks it).
+transforms as the training augmentation (:func:`tactile_manip.learning.cvae.data.dihedral`, a test checks it).
 """
 
 from __future__ import annotations

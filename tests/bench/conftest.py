@@ -29,8 +29,8 @@ def tiny_model(tmp_path_factory: pytest.TempPathFactory) -> Path:
     pytest.importorskip("onnx", reason="exporting a model needs onnx (pip install -e '.[train]')")
     pytest.importorskip("onnxruntime", reason="running a model needs onnxruntime")
     from tactile_manip.config import to_dict
-    from tactile_manip.learning.export import export_onnx
-    from tactile_manip.learning.model import SuperMagCVAE, preset
+    from tactile_manip.learning.cvae.export import export_onnx
+    from tactile_manip.learning.cvae.model import SuperMagCVAE, preset
 
     run = tmp_path_factory.mktemp("run")
     torch.manual_seed(0)

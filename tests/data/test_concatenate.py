@@ -87,8 +87,8 @@ def test_labelled_presses_with_and_without_images_join_when_images_are_left_unre
 
 
 def test_select_drops_flagged_presses_and_keeps_data_without_the_flag():
-    torch = pytest.importorskip("torch", reason=TORCH_MISSING)  # noqa: F841 (learning.data imports torch)
-    from tactile_manip.learning.data import select
+    torch = pytest.importorskip("torch", reason=TORCH_MISSING)  # noqa: F841 (learning.cvae.data imports torch)
+    from tactile_manip.learning.cvae.data import select
 
     flagged = np.zeros(9, bool)
     flagged[[0, 3]] = True  # both in "train"

@@ -15,10 +15,10 @@ pytest.importorskip("onnxruntime", reason="running a head needs onnxruntime")
 from tactile_manip.cli import main  # noqa: E402
 from tactile_manip.data import PairedDataset, depth_image_spec, quantise_depth, save_dataset  # noqa: E402
 from tactile_manip.errors import DatasetError  # noqa: E402
-from tactile_manip.learning.angle_export import attach_angle_head, load_angle_checkpoint  # noqa: E402
-from tactile_manip.learning.angle_train import (AngleTrainConfig, axis_labels, is_axial, symmetric,  # noqa: E402
-                                                train_angle_head)
-from tactile_manip.learning.export import ExportError  # noqa: E402
+from tactile_manip.learning.angle_head.export import attach_angle_head, load_angle_checkpoint  # noqa: E402
+from tactile_manip.learning.angle_head.train import (AngleTrainConfig, axis_labels, is_axial, symmetric,  # noqa: E402
+                                                     train_angle_head)
+from tactile_manip.learning.cvae.export import ExportError  # noqa: E402
 from tactile_manip.perception import load_reconstructor, wrap_axial  # noqa: E402
 from tactile_manip.perception.symmetry import transform_reading  # noqa: E402
 from tactile_manip.shipped import shipped_model  # noqa: E402

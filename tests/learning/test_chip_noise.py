@@ -66,7 +66,7 @@ def test_data_without_clean_readings_is_refused_by_name(pressed, tmp_path) -> No
 
 def test_training_reads_the_presses_through_new_chips(pressed, tmp_path) -> None:
     pytest.importorskip("torch", reason=TORCH_MISSING)
-    from tactile_manip.learning.angle_train import AngleTrainConfig, train_angle_head
+    from tactile_manip.learning.angle_head.train import AngleTrainConfig, train_angle_head
 
     path = save_dataset(tmp_path / "bars.npz", pressed)
     cfg = AngleTrainConfig(hidden=16, layers=1, epochs=3, batch_size=8, patience=3, threads=1, redraw_noise=True)
@@ -82,7 +82,7 @@ def test_training_reads_the_presses_through_new_chips(pressed, tmp_path) -> None
 def test_contact_training_reads_the_presses_of_each_dataset_through_new_chips(pressed, tmp_path) -> None:
     pytest.importorskip("torch", reason=TORCH_MISSING)
     from tactile_manip.data import load_datasets
-    from tactile_manip.learning.contact_train import ContactTrainConfig, split_indices, train_contact
+    from tactile_manip.learning.contact.train import ContactTrainConfig, split_indices, train_contact
 
     first = save_dataset(tmp_path / "first.npz", pressed)
     second = save_dataset(tmp_path / "second.npz", pressed.subset(np.arange(20, 40)))

@@ -12,9 +12,9 @@ onnx = pytest.importorskip("onnx", reason="export needs onnx")
 ort = pytest.importorskip("onnxruntime", reason="the parity check runs onnxruntime")
 
 from tactile_manip.cli import main  # noqa: E402
-from tactile_manip.learning.contact_export import load_contact_checkpoint  # noqa: E402
-from tactile_manip.learning.contact_model import FusedContactModel  # noqa: E402
-from tactile_manip.learning.contact_train import dataset_windows  # noqa: E402
+from tactile_manip.learning.contact.export import load_contact_checkpoint  # noqa: E402
+from tactile_manip.learning.contact.model import FusedContactModel  # noqa: E402
+from tactile_manip.learning.contact.train import dataset_windows  # noqa: E402
 from tactile_manip.perception.reconstruct import METADATA_KEY  # noqa: E402
 
 

@@ -12,8 +12,8 @@ torch = pytest.importorskip("torch", reason="training needs torch")
 
 from tactile_manip.config import load_config  # noqa: E402
 from tactile_manip.errors import ConfigError, DatasetError  # noqa: E402
-from tactile_manip.learning.contact_export import load_contact_checkpoint  # noqa: E402
-from tactile_manip.learning.contact_train import (ContactTrainConfig, dataset_windows, split_indices,  # noqa: E402
+from tactile_manip.learning.contact.export import load_contact_checkpoint  # noqa: E402
+from tactile_manip.learning.contact.train import (ContactTrainConfig, dataset_windows, split_indices,  # noqa: E402
                                                   train_contact)
 
 
@@ -125,7 +125,7 @@ def test_sigma_is_scaled_so_that_68_percent_of_validation_errors_are_within_one_
 
 def test_the_sigma_map_holds_68_percent_in_each_part_of_the_models_sigma(contact_model_files,
                                                                           labelled_presses) -> None:
-    from tactile_manip.learning.contact_train import SIGMA_MAP_RUN, fit_sigma_maps
+    from tactile_manip.learning.contact.train import SIGMA_MAP_RUN, fit_sigma_maps
     from tactile_manip.perception.confidence import SigmaCalibration
 
     _, run, _ = contact_model_files

@@ -10,11 +10,11 @@ from checks import TORCH_MISSING
 pytest.importorskip("torch", reason=TORCH_MISSING)
 import torch
 
-from tactile_manip.learning.export import load_checkpoint
+from tactile_manip.learning.cvae.export import load_checkpoint
 
 SCRIPT = """
 import sys
-from tactile_manip.learning.train import TrainConfig, train
+from tactile_manip.learning.cvae.train import TrainConfig, train
 cfg = TrainConfig(preset="small", norm="group", batch_size=8, lr=3e-3, epochs=2, patience=50, threads=1, seed=3)
 train(cfg, sys.argv[1], sys.argv[2])
 """

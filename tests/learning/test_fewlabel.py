@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from tactile_manip.errors import DatasetError
-from tactile_manip.learning.fewlabel import MIN_LABELLED, isomap, pseudo_labels
+from tactile_manip.learning.contact.fewlabel import MIN_LABELLED, isomap, pseudo_labels
 
 
 def _knn_rmse(x, y, lab, k=5):
@@ -98,7 +98,7 @@ def few_label_runs(tmp_path_factory, labelled_presses):
     """(dataset, summary with unlabelled = "manifold", summary with "ignore") of a tiny network on 30 labels."""
     pytest.importorskip("torch", reason="training needs torch")
     from tactile_manip.data import save_dataset
-    from tactile_manip.learning.contact_train import ContactTrainConfig, train_contact
+    from tactile_manip.learning.contact.train import ContactTrainConfig, train_contact
 
     root = tmp_path_factory.mktemp("fewlabel")
     save_dataset(root / "few.npz", _hide_labels(labelled_presses(700), 30))
@@ -121,7 +121,7 @@ def test_manifold_training_learns_from_every_training_row_and_records_the_labell
 
 
 def test_sigma_is_widened_by_the_labels_own_leave_one_out_error(few_label_runs) -> None:
-    from tactile_manip.learning.contact_train import widening
+    from tactile_manip.learning.contact.train import widening
 
     _, manifold, _ = few_label_runs
     loo = manifold["pseudo_labels"]["loo_rmse"]
@@ -132,7 +132,7 @@ def test_sigma_is_widened_by_the_labels_own_leave_one_out_error(few_label_runs) 
 
 def test_the_few_label_recipe_is_the_contact_recipe_with_the_unlabelled_presses_mapped() -> None:
     from tactile_manip.config import load_config
-    from tactile_manip.learning.contact_train import ContactTrainConfig
+    from tactile_manip.learning.contact.train import ContactTrainConfig
 
     few = load_config("configs/train/contact_fewlabel.toml", ContactTrainConfig)
     full = load_config("configs/train/contact.toml", ContactTrainConfig)

@@ -7,7 +7,7 @@ from checks import TORCH_MISSING
 
 torch = pytest.importorskip("torch", reason=TORCH_MISSING)
 
-from tactile_manip.learning.model import SuperMagCVAE, mean_and_spread, preset, taxel_grid  # noqa: E402
+from tactile_manip.learning.cvae.model import SuperMagCVAE, mean_and_spread, preset, taxel_grid  # noqa: E402
 
 
 def test_taxel_grid_puts_each_reading_value_at_its_row_column_and_axis():
@@ -132,7 +132,7 @@ def test_decoder_options_are_validated():
 
 
 def test_a_training_config_decoder_table_overrides_the_preset(tmp_path):
-    from tactile_manip.learning.train import architecture, load_train_config
+    from tactile_manip.learning.cvae.train import architecture, load_train_config
 
     path = tmp_path / "fast.toml"
     path.write_text('preset = "compact"\n\n[decoder]\nnative_scale = 4\nchannels = [24, 12, 6]\nhead = "shuffle"\n'
@@ -156,7 +156,7 @@ def test_an_untrained_export_of_a_training_config_runs_on_onnxruntime(tmp_path):
     pytest.importorskip("onnxruntime")
     import numpy as np
 
-    from tactile_manip.learning.eager import export_untrained
+    from tactile_manip.learning.cvae.eager import export_untrained
     from tactile_manip.perception.reconstruct import load_reconstructor
 
     config = tmp_path / "tiny_fast.toml"
@@ -172,7 +172,7 @@ def test_an_untrained_export_of_a_training_config_runs_on_onnxruntime(tmp_path):
 def test_the_shuffle_heads_unpadded_convolution_keeps_exactly_the_centre_crop(image_hw, trims):
     """A native grid one pixel too large on every side: the unpadded head equals the padded head then cropped,
     for the training output (mean and log-variance) and for the mean alone."""
-    from tactile_manip.learning.model import CVAEConfig
+    from tactile_manip.learning.cvae.model import CVAEConfig
 
     torch.manual_seed(0)
     cfg = preset("small", image_h=image_hw[0], image_w=image_hw[1])

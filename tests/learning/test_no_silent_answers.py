@@ -16,10 +16,9 @@ torch = pytest.importorskip("torch", reason=TORCH_MISSING)
 from tactile_manip.cli import main  # noqa: E402
 from tactile_manip.data import save_dataset  # noqa: E402
 from tactile_manip.errors import ConfigError, DatasetError  # noqa: E402
-from tactile_manip.learning.angle_train import AngleTrainConfig, load_angle_config  # noqa: E402
-from tactile_manip.learning.contact_train import (ContactTrainConfig, load_contact_config,  # noqa: E402
-                                                  train_contact)
-from tactile_manip.learning.train import TrainConfig, load_train_config, train  # noqa: E402
+from tactile_manip.learning.angle_head.train import AngleTrainConfig, load_angle_config  # noqa: E402
+from tactile_manip.learning.contact.train import ContactTrainConfig, load_contact_config, train_contact  # noqa: E402
+from tactile_manip.learning.cvae.train import TrainConfig, load_train_config, train  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
 CONTACT_MODEL = ROOT / "models" / "contact_supermag.onnx"

@@ -10,9 +10,9 @@ from checks import TORCH_MISSING
 pytest.importorskip("torch", reason=TORCH_MISSING)
 import torch
 
-from tactile_manip.learning.export import export_onnx, load_checkpoint
-from tactile_manip.learning.model import SuperMagCVAE, count_parameters, preset
-from tactile_manip.learning.train import TrainConfig, TrainingError, resolve_device, train
+from tactile_manip.learning.cvae.export import export_onnx, load_checkpoint
+from tactile_manip.learning.cvae.model import SuperMagCVAE, count_parameters, preset
+from tactile_manip.learning.cvae.train import TrainConfig, TrainingError, resolve_device, train
 from tactile_manip.perception.reconstruct import OnnxReconstructor
 from tactile_manip.data import ImageSpec, load_dataset, save_dataset
 

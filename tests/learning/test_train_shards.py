@@ -12,10 +12,10 @@ pytest.importorskip("torch", reason="training tests need torch: pip install torc
 import torch
 
 from tactile_manip.data import ChannelSpec, load_dataset, save_dataset, save_sharded
-from tactile_manip.learning.data import (InputSpec, StreamedData, StreamedPairs, TensorPairs, open_training_data,
-                                         select)
-from tactile_manip.learning.train import TrainConfig, evaluate_split, train
-from tactile_manip.learning.model import SuperMagCVAE, preset
+from tactile_manip.learning.cvae.data import (InputSpec, StreamedData, StreamedPairs, TensorPairs, open_training_data,
+                                              select)
+from tactile_manip.learning.cvae.train import TrainConfig, evaluate_split, train
+from tactile_manip.learning.cvae.model import SuperMagCVAE, preset
 
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -47,10 +47,10 @@ def _export(tmp: Path, *, rows: int, cols: int, h: int, w: int, pixel_mm: float)
     torch = pytest.importorskip("torch", reason=TORCH_MISSING)
     pytest.importorskip("onnx", reason="exporting a model needs onnx (pip install -e '.[train]')")
     pytest.importorskip("onnxruntime", reason="running a model needs onnxruntime (pip install -e '.[onnx]')")
-    from tactile_manip.learning.data import InputSpec
-    from tactile_manip.learning.export import export_onnx
-    from tactile_manip.learning.model import SuperMagCVAE, preset
-    from tactile_manip.learning.train import TrainConfig, _save_checkpoint
+    from tactile_manip.learning.cvae.data import InputSpec
+    from tactile_manip.learning.cvae.export import export_onnx
+    from tactile_manip.learning.cvae.model import SuperMagCVAE, preset
+    from tactile_manip.learning.cvae.train import TrainConfig, _save_checkpoint
 
     torch.manual_seed(0)
     data = _tiny_dataset(rows, cols, h, w)

@@ -226,8 +226,8 @@ def test_stream_yields_one_state_per_frame_and_refuses_another_board(contact_mod
 def test_one_reading_gives_angle_and_contact_with_the_pose_estimator(tmp_path, contact_model_files) -> None:
     pytest.importorskip("torch", reason="training the 4 x 4 contact model needs torch")
     from tactile_manip.data import PairedDataset, save_dataset
-    from tactile_manip.learning.contact_export import export_contact_onnx
-    from tactile_manip.learning.contact_train import ContactTrainConfig, train_contact
+    from tactile_manip.learning.contact.export import export_contact_onnx
+    from tactile_manip.learning.contact.train import ContactTrainConfig, train_contact
     from tactile_manip.perception import TactilePoseEstimator, load_reconstructor
     from tactile_manip.perception.contact_pose import TactileEstimate, TactileEstimator, image_centroid_mm
     from tactile_manip.types import AngleEstimate

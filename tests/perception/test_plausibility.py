@@ -238,7 +238,7 @@ def test_a_stored_field_bound_and_trained_range_are_read(contact_model_of_layout
 
 def test_export_stores_the_field_bound_and_the_trained_ranges(contact_model_files, tmp_path) -> None:
     pytest.importorskip("torch", reason="exporting a contact model needs torch")
-    from tactile_manip.learning.contact_export import export_contact_onnx
+    from tactile_manip.learning.contact.export import export_contact_onnx
 
     _, run, _ = contact_model_files
     meta = export_contact_onnx(run / "best.pt", tmp_path / "c.onnx", plausible_field_ut=1500.0,
@@ -258,7 +258,7 @@ def test_an_image_model_export_stores_the_field_bound_for_the_pose_estimator(onn
     import warnings
 
     torch = pytest.importorskip("torch", reason="exporting a model needs torch")
-    from tactile_manip.learning.export import export_onnx
+    from tactile_manip.learning.cvae.export import export_onnx
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", DeprecationWarning)

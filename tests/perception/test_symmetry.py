@@ -54,7 +54,7 @@ def test_the_group_and_the_inverse() -> None:
 
 def test_the_same_transforms_as_the_training_augmentation() -> None:
     torch = pytest.importorskip("torch", reason=TORCH_MISSING)
-    from tactile_manip.learning.data import dihedral
+    from tactile_manip.learning.cvae.data import dihedral
 
     rng = np.random.default_rng(1)
     field, image = rng.normal(size=(2, 4, 4, 3)), rng.random((2, 12, 12))

@@ -29,8 +29,8 @@ import torch
 
 from tactile_manip.cli import main
 from tactile_manip.errors import ConfigError
-from tactile_manip.learning import train as train_module
-from tactile_manip.learning.train import TrainConfig, TrainingError, load_train_config, train, with_overrides
+from tactile_manip.learning.cvae import train as train_module
+from tactile_manip.learning.cvae.train import TrainConfig, TrainingError, load_train_config, train, with_overrides
 from tactile_manip.data import PairedDataset, depth_image_spec, quantise_depth, save_dataset
 
 TINY = dict(preset="small", batch_size=8, epochs=4, patience=50, threads=1, seed=0, weight_decay=0.0)

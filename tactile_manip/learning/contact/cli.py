@@ -1,0 +1,67 @@
+"""The contact network's verbs (kind ``"contact"``, :mod:`tactile_manip.learning.kinds`): ``tactile-manip train``
+on its config and ``export --checkpoint`` / ``export-model`` of its checkpoint."""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+
+def run_train(args: argparse.Namespace) -> int:
+    """Train the contact network (:mod:`.train`; targets from labelled presses); the CVAE-only flags are
+    refused."""
+    from tqdm import tqdm
+
+    from tactile_manip.learning.cli import small_net_config
+    from tactile_manip.learning.contact.train import load_contact_config, train_contact
+
+    cfg = small_net_config(args, 'a contact model (kind = "contact")', load_contact_config)
+    bars = []
+
+    def start(total: int) -> None:
+        bars.append(tqdm(total=total, unit="epoch", desc=f"training contact x{cfg.members}"))
+
+    def progress(row: dict) -> None:
+        bars[0].update(1)
+        bars[0].set_postfix(member=row["member"], loss=f"{row['loss']:.3f}", val_rmse=f"{row['val_rmse']:.3f}")
+
+    try:
+        summary = train_contact(cfg, args.data, args.out, progress=progress, on_start=start)
+    finally:
+        for bar in bars:
+            bar.close()
+    rmse = ", ".join(f"{k} {v:.3g}" for k, v in summary["val_rmse"].items())
+    pseudo = summary.get("pseudo_labels")
+    if pseudo:
+        loo = ", ".join(f"{k} {v:.3g} ({m})" for k, v, m in zip(summary["targets"], pseudo["loo_rmse"],
+                                                               pseudo["methods"]))
+        print(f"{pseudo['unlabelled']} unlabelled presses labelled from {pseudo['labelled']} on the map of the "
+              f"readings; leave-one-out RMSE on the labelled: {loo}")
+        rmse += " against those labels"
+    print(f"validation RMSE {rmse} ({summary['val_samples']} samples; {summary['train_seconds'] / 60:.1f} min); "
+          f"wrote {args.out}/best.pt, history.json")
+    return 0
+
+
+def run_export(args: argparse.Namespace) -> int:
+    """Export a contact model (:mod:`.export`); --data gives real windows to check it on."""
+    from tactile_manip.data import load_datasets
+    from tactile_manip.learning.contact.export import export_contact_onnx, load_contact_checkpoint
+    from tactile_manip.learning.contact.train import dataset_windows
+
+    if args.card or args.pixel_mm is not None:
+        raise ValueError("--card and --pixel-mm are for image models; a contact model keeps its validation "
+                         "figures in its metadata")
+    windows = None
+    if args.data:
+        _, payload = load_contact_checkpoint(args.checkpoint)
+        data = load_datasets(args.data, images=False)
+        windows = dataset_windows(data, payload["input"]["context"])[data.indices("test")]
+    metrics = json.loads(open(args.metrics).read()) if args.metrics else {}
+    meta = export_contact_onnx(args.checkpoint, args.out, metrics=metrics, check_windows=windows,
+                               image_position_weight=args.image_position_weight)
+    targets = ", ".join(f"{n} [{u}]" for n, u in zip(meta["targets"]["names"], meta["targets"]["units"]))
+    print(f"wrote {args.out}: contact model, {meta['parameters']:,} parameters, targets {targets}, "
+          f"{meta['context']['frames']} frame(s) of context, ONNX vs torch max |diff| "
+          f"{meta['parity_max_abs']:.2e} target spreads")
+    return 0

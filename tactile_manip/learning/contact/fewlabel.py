@@ -1,0 +1,182 @@
+"""Labels for the unlabelled presses of a dataset, from a handful of labelled ones and the shape of the readings.
+
+A probe rig gives a few labelled presses; pressing the pad by hand, or the rig run without its load cell or stage
+log, gives thousands of unlabelled readings. The readings of a pad lie on a low-dimensional surface (a press has
+a position, a depth and little else), and neighbouring readings on that surface are neighbouring presses. This
+module maps that surface (Isomap: graph distances between each reading and its nearest neighbours, laid out by
+classical scaling from landmark readings) and fits each target on the map from the labelled presses alone,
+choosing for each target among a few small models by leave-one-out error on those labels:
+
+- an affine map of the 2 or 3 leading map coordinates;
+- the affine map plus a Gaussian-kernel ridge correction (three widths);
+- a polynomial (degree 1-3) of the reading's field norm, which follows depth and force at a fixed place, alone
+  or with an affine term in the next one or two coordinates of the reading's map (what the norm misses: at one
+  place, the elastomer's loading history).
+
+Three maps are tried: two of the reading's direction (the unit vector of all channels: the press position,
+whatever its depth), one with each graph edge measured in units of the local spacing of the readings (as if the
+presses were spread evenly over the pad), and one of the standardised reading. The chosen fits label every
+unlabelled training row (:func:`pseudo_labels`); the contact network then trains on them
+(``unlabelled = "manifold"`` in a contact training config). The leave-one-out RMSE of the chosen fit travels with the labels: the network's sigma is
+widened by it, since the network cannot be more exact than the labels it learnt from.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+
+import numpy as np
+
+from tactile_manip.errors import DatasetError
+
+MIN_LABELLED = 5          # below this, no fit is chosen by leave-one-out
+LANDMARKS = 1500          # readings whose graph distances to all others lay out the map
+MAP_DIMS = 3              # map coordinates kept
+RBF_WIDTHS = (0.3, 1.0, 3.0)  # gamma of the kernel correction, on map coordinates of unit spread
+RBF_ALPHA = 0.1           # ridge of the kernel correction
+RIDGE = 1e-6              # ridge of the affine and polynomial fits
+
+
+@dataclass(frozen=True)
+class PseudoLabels:
+    """Targets (N, K) for every row given (labelled rows keep their labels), the leave-one-out RMSE (K,) of each
+    target's chosen fit on the labelled rows, and that fit's name per target."""
+
+    values: np.ndarray
+    loo_rmse: np.ndarray
+    methods: tuple[str, ...]
+
+
+def pseudo_labels(readings: np.ndarray, targets: np.ndarray, labelled: np.ndarray, *, neighbours: int = 20
+                  ) -> PseudoLabels:
+    """Label every row of ``readings`` (N, ...) from the rows where ``labelled`` (N,) holds.
+
+    ``targets`` (N, K) is read only on the labelled rows. Raises ``DatasetError`` with fewer than
+    ``MIN_LABELLED`` labelled rows, a non-finite label or reading, or fewer rows than ``neighbours`` + 1.
+    """
+    x = np.asarray(readings, np.float64).reshape(len(readings), -1)
+    y = np.asarray(targets, np.float64).reshape(len(readings), -1)
+    lab = np.asarray(labelled, bool)
+    if lab.sum() < MIN_LABELLED:
+        raise DatasetError(f"{int(lab.sum())} labelled press(es): the unlabelled presses need at least "
+                           f"{MIN_LABELLED} labelled ones to be placed on the map")
+    if not np.isfinite(y[lab]).all():
+        raise DatasetError("a labelled press has a NaN or infinite target")
+    if not np.isfinite(x).all():
+        raise DatasetError("a reading is NaN or infinite: the map of the readings needs finite readings")
+    if len(x) <= neighbours:
+        raise DatasetError(f"{len(x)} presses: the map of the readings needs more than {neighbours}")
+    x = x[:, x.std(axis=0) > 0]
+    norm = np.linalg.norm(x, axis=1)
+    direction = x / np.maximum(norm, 1e-12)[:, None]
+    standard = (x - x.mean(axis=0)) / x.std(axis=0)
+    maps = {"direction": isomap(direction, neighbours), "reading": isomap(standard, neighbours),
+            "direction (even)": isomap(direction, neighbours, even=True)}
+    values = np.empty((len(x), y.shape[1]))
+    loo = np.empty(y.shape[1])
+    methods = []
+    for k in range(y.shape[1]):
+        best = None
+        for name, fit in _candidates(maps, norm):
+            err = _loo_rmse(fit, y[:, k], lab)
+            if best is None or err < best[0]:
+                best = (err, name, fit)
+        loo[k], name, fit = best
+        values[:, k] = fit(lab, y[:, k])
+        values[lab, k] = y[lab, k]
+        methods.append(name)
+    return PseudoLabels(values=values, loo_rmse=loo, methods=tuple(methods))
+
+
+def isomap(points: np.ndarray, neighbours: int, dims: int = MAP_DIMS, *, even: bool = False) -> np.ndarray:
+    """Isomap coordinates (N, dims) of ``points`` (N, D): shortest paths over the ``neighbours``-nearest graph
+    from up to ``LANDMARKS`` evenly spaced landmark points, laid out by landmark classical scaling. Parts of the
+    graph that no path joins are joined at the largest distance found. ``even``: each edge is measured in units
+    of its ends' distances to their farthest neighbour, as if the points were spread evenly over the surface."""
+    from scipy.sparse import csr_matrix
+    from scipy.sparse.csgraph import shortest_path
+    from scipy.spatial import cKDTree
+
+    n = len(points)
+    dist, idx = cKDTree(points).query(points, k=neighbours + 1)
+    rows = np.repeat(np.arange(n), neighbours)
+    if even:
+        reach = np.maximum(dist[:, -1], 1e-12)
+        dist = dist / np.sqrt(reach[:, None] * reach[idx])
+    graph = csr_matrix((dist[:, 1:].ravel() + 1e-12, (rows, idx[:, 1:].ravel())), shape=(n, n))
+    graph = graph.maximum(graph.T)
+    marks = np.unique(np.linspace(0, n - 1, min(n, LANDMARKS)).round().astype(int))
+    d = shortest_path(graph, directed=False, indices=marks)
+    finite = np.isfinite(d)
+    d[~finite] = 1.5 * d[finite].max()
+    d2 = d ** 2
+    dl = d2[:, marks]
+    centred = -0.5 * (dl - dl.mean(axis=0) - dl.mean(axis=1)[:, None] + dl.mean())
+    vals, vecs = np.linalg.eigh(centred)
+    order = np.argsort(vals)[::-1][:dims]
+    vals, vecs = np.maximum(vals[order], 1e-12), vecs[:, order]
+    # every point from its distances to the landmarks (de Silva & Tenenbaum's triangulation)
+    return (-0.5 * (d2 - dl.mean(axis=1)[:, None]).T @ (vecs / np.sqrt(vals)))
+
+
+Fit = Callable[[np.ndarray, np.ndarray], np.ndarray]  # (labelled mask, target column) -> prediction per row
+
+
+def _candidates(maps: dict[str, np.ndarray], norm: np.ndarray) -> Iterator[tuple[str, Fit]]:
+    for name, coords in maps.items():
+        z = coords / coords[:, :2].std()
+        yield f"{name} map, affine in 2", _affine(z[:, :2])
+        yield f"{name} map, affine in 3", _affine(z[:, :3])
+        for gamma in RBF_WIDTHS:
+            yield f"{name} map, affine + kernel {gamma:g}", _affine_kernel(z[:, :2], gamma)
+    scaled = norm / norm.std()
+    reading = maps["reading"] / maps["reading"].std(axis=0)
+    for degree in (1, 2, 3):
+        powers = np.stack([scaled ** p for p in range(1, degree + 1)], axis=1)
+        yield f"field norm, degree {degree}", _affine(powers)
+        for more in (1, 2):  # and what the norm misses (the loading history at one place): the map's next axes
+            yield f"field norm, degree {degree}, + reading map {more}", _affine(np.hstack([powers,
+                                                                                        reading[:, 1:1 + more]]))
+
+
+def _design(z: np.ndarray) -> np.ndarray:
+    return np.hstack([np.ones((len(z), 1)), z])
+
+
+def _affine(z: np.ndarray) -> Fit:
+    a = _design(z)
+
+    def fit(lab: np.ndarray, y: np.ndarray) -> np.ndarray:
+        al = a[lab]
+        coef = np.linalg.solve(al.T @ al + RIDGE * np.eye(a.shape[1]), al.T @ y[lab])
+        return a @ coef
+    return fit
+
+
+def _affine_kernel(z: np.ndarray, gamma: float) -> Fit:
+    affine = _affine(z)
+
+    def fit(lab: np.ndarray, y: np.ndarray) -> np.ndarray:
+        base = affine(lab, y)
+        zl = z[lab]
+        k = np.exp(-gamma * ((zl[:, None] - zl[None]) ** 2).sum(-1))
+        w = np.linalg.solve(k + RBF_ALPHA * np.eye(len(zl)), y[lab] - base[lab])
+        out = np.empty(len(z))
+        for s in range(0, len(z), 4096):  # the kernel to every row, in blocks
+            out[s:s + 4096] = np.exp(-gamma * ((z[s:s + 4096, None] - zl[None]) ** 2).sum(-1)) @ w
+        return base + out
+    return fit
+
+
+def _loo_rmse(fit: Fit, y: np.ndarray, lab: np.ndarray) -> float:
+    """Leave-one-out RMSE of ``fit`` over the labelled rows (at most 200 of them, evenly spaced)."""
+    rows = np.flatnonzero(lab)
+    held = rows[np.unique(np.linspace(0, len(rows) - 1, min(len(rows), 200)).round().astype(int))]
+    errs = []
+    for i in held:
+        keep = lab.copy()
+        keep[i] = False
+        errs.append(fit(keep, y)[i] - y[i])
+    err = float(np.sqrt(np.mean(np.square(errs))))
+    return err if np.isfinite(err) else np.inf
