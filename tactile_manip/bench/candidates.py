@@ -48,21 +48,11 @@ class ModelEntry:
     runtimes: tuple[str, ...] | None = None
 
 
-DECODER_CANDIDATES = "experiments/decoder_candidates/decoder_*.toml"  # faster decoders, timed untrained until trained
 SHIPPED_MODEL = "models/supermag.onnx"  # the default model: the robust image graphs with an angle head inside
 FAST_MODEL = "experiments/model_variants/supermag_fast.onnx"  # a reference model, kept for the bench
-FAST_RECIPE = "experiments/model_variants/supermag_fast.train.toml"  # the training config copied beside it
 COMPACT_MODEL = "experiments/model_variants/supermag_compact.onnx"  # the accuracy reference, kept for the bench
 ROBUST_MODEL = "experiments/model_variants/supermag_robust.onnx"  # the default's image graphs, without its head
-FAST_CONFIGS = "configs/train/fast*.toml"  # the fast decoder on the full recipe: measured when trained, else skipped
-
-
-def _recipe(path: Path) -> dict:
-    """A training config's values (its comments may differ from the copy shipped beside the model)."""
-    from tactile_manip.config import tomllib
-
-    with path.open("rb") as f:
-        return tomllib.load(f)
+RESEARCH_CANDIDATES = "experiments/speed_reports/research_candidates.toml"  # what --research adds
 
 
 def default_models(root: str | Path = ".", *, research: bool = False) -> list[ModelEntry]:
@@ -71,34 +61,83 @@ def default_models(root: str | Path = ".", *, research: bool = False) -> list[Mo
     the paper's protocol only; ``compact``, the accuracy reference; ``robust``, the default's image graphs
     without its head, on one thread: the fast model's graph), paths under ``root``.
 
-    With ``research`` also the study's training runs under ``root/runs/`` (each skipped with a note when it was
-    not trained there): the torch rows of the reference models from their checkpoints, the size variants on one
-    8-epoch recipe, the paper preset, the other full-recipe runs of ``configs/train/fast*.toml``
-    (``runs/<stem>/``, as ``<stem>_full``, on one thread; the fast model's own recipe is ``fast``), and the
-    decoder candidates of ``experiments/decoder_candidates/decoder_*.toml`` (their run's export when trained,
-    else an untrained export timed on one thread): how the published speed reports were made."""
+    With ``research`` also the study's training runs that ``root``'s
+    ``experiments/speed_reports/research_candidates.toml`` names (:func:`candidates_file`): how the published
+    speed reports were made."""
     r = Path(root)
     shipped = [ModelEntry("supermag", r / SHIPPED_MODEL, symmetrized=True),
-               ModelEntry("fast", r / FAST_MODEL, r / "runs/fast_b48/best.pt" if research else None,
-                          symmetrized=True),
-               ModelEntry("compact", r / COMPACT_MODEL, r / "runs/compact/best.pt" if research else None,
-                          symmetrized=True),
-               ModelEntry("robust", r / ROBUST_MODEL, r / "runs/robust_b48/best.pt" if research else None,
-                          runtimes=("ort-1",))]
-    if not research:
-        return shipped
-    candidates = [ModelEntry(c.stem, r / "runs" / c.stem / "model.onnx", r / "runs" / c.stem / "best.pt",
-                             untrained_preset=str(c), runtimes=("ort-1",)) for c in sorted(r.glob(DECODER_CANDIDATES))]
-    fast_recipe = r / FAST_RECIPE
-    recipe = _recipe(fast_recipe) if fast_recipe.is_file() else None
-    fast = [ModelEntry(f"{c.stem}_full", r / "runs" / c.stem / "model.onnx", r / "runs" / c.stem / "best.pt",
-                       runtimes=("ort-1",)) for c in sorted(r.glob(FAST_CONFIGS)) if _recipe(c) != recipe]
-    return [*shipped,
-            ModelEntry("small_8ep", r / "runs/variant_small/model.onnx", r / "runs/variant_small/best.pt"),
-            ModelEntry("compact_8ep", r / "runs/table1_full/model.onnx", r / "runs/table1_full/best.pt"),
-            ModelEntry("large_8ep", r / "runs/variant_large/model.onnx", r / "runs/variant_large/best.pt"),
-            ModelEntry("paper", r / "runs/paper/model.onnx", r / "runs/paper/best.pt", untrained_preset="paper"),
-            *fast, *candidates]
+               ModelEntry("fast", r / FAST_MODEL, symmetrized=True),
+               ModelEntry("compact", r / COMPACT_MODEL, symmetrized=True),
+               ModelEntry("robust", r / ROBUST_MODEL, runtimes=("ort-1",))]
+    return candidates_file(r / RESEARCH_CANDIDATES, r, shipped) if research else shipped
+
+
+def candidates_file(path: str | Path, root: str | Path = ".", models: list[ModelEntry] | None = None
+                    ) -> list[ModelEntry]:
+    """``models`` (default: none) and the models a candidates file names, paths under ``root``.
+
+    The file (TOML; ``experiments/speed_reports/research_candidates.toml`` is one) holds ``[checkpoints]``,
+    ``NAME = "RUN/best.pt"``: the torch-eager checkpoint of a model already in ``models``; ``[[model]]`` tables
+    (``name``, ``path``, optional ``checkpoint``, ``untrained``: a preset or training config exported untrained
+    when ``path`` is missing, ``runtimes``, ``symmetrized``); and ``[[runs]]`` tables: every training config
+    matching the glob ``configs`` as ``runs/<stem>/model.onnx`` named ``<stem><suffix>``, on one thread
+    (``untrained = true``: exported untrained when not trained; ``unless_recipe_of``: a config whose values are
+    that file's is left out).
+
+    Raises:
+        ConfigError: the file is missing, not TOML, or holds an unknown table or key.
+    """
+    from tactile_manip.config import tomllib
+    from tactile_manip.errors import ConfigError
+
+    path, r = Path(path), Path(root)
+    try:
+        doc = tomllib.loads(path.read_text())
+    except (OSError, ValueError) as e:
+        raise ConfigError(f"{path}: cannot read the bench candidates ({e})") from None
+
+    def check(table: dict, allowed: set[str], where: str) -> None:
+        unknown = sorted(set(table) - allowed)
+        if unknown:
+            raise ConfigError(f"{path}: unknown key(s) {', '.join(unknown)} in {where}; known: "
+                              f"{', '.join(sorted(allowed))}")
+
+    check(doc, {"checkpoints", "model", "runs"}, "the file")
+    entries = list(models or [])
+    names = {e.name for e in entries}
+    for name, checkpoint in doc.get("checkpoints", {}).items():
+        if name not in names:
+            raise ConfigError(f"{path}: [checkpoints] names {name!r}, not one of the models {sorted(names)}")
+        entries = [dataclasses.replace(e, checkpoint=r / checkpoint) if e.name == name else e for e in entries]
+    for i, m in enumerate(doc.get("model", [])):
+        check(m, {"name", "path", "checkpoint", "untrained", "runtimes", "symmetrized"}, f"[[model]] {i + 1}")
+        if "name" not in m or "path" not in m:
+            raise ConfigError(f"{path}: [[model]] {i + 1} needs a name and a path")
+        entries.append(ModelEntry(m["name"], r / m["path"], r / m["checkpoint"] if "checkpoint" in m else None,
+                                  symmetrized=bool(m.get("symmetrized", False)), untrained_preset=m.get("untrained"),
+                                  runtimes=tuple(m["runtimes"]) if "runtimes" in m else None))
+    for i, group in enumerate(doc.get("runs", [])):
+        check(group, {"configs", "suffix", "untrained", "unless_recipe_of"}, f"[[runs]] {i + 1}")
+        if "configs" not in group:
+            raise ConfigError(f"{path}: [[runs]] {i + 1} needs configs, a glob of training configs")
+        same = r / group["unless_recipe_of"] if "unless_recipe_of" in group else None
+        recipe = _recipe(same) if same is not None and same.is_file() else None
+        for c in sorted(r.glob(group["configs"])):
+            if recipe is not None and _recipe(c) == recipe:
+                continue
+            run = r / "runs" / c.stem
+            entries.append(ModelEntry(f"{c.stem}{group.get('suffix', '')}", run / "model.onnx", run / "best.pt",
+                                      untrained_preset=str(c) if group.get("untrained") else None,
+                                      runtimes=("ort-1",)))
+    return entries
+
+
+def _recipe(path: Path) -> dict:
+    """A training config's values (its comments may differ from the copy shipped beside the model)."""
+    from tactile_manip.config import tomllib
+
+    with path.open("rb") as f:
+        return tomllib.load(f)
 
 
 def parse_model_spec(spec: str) -> ModelEntry:

@@ -1,8 +1,10 @@
 """``tactile-manip bench``: speed against error of every method on this machine, in one report.
 
 Runs the baselines and the shipped models (the default model, one pass and symmetry-averaged; the reference
-models kept for the bench; with ``--research`` also the study's training runs: the small, compact and large
-presets on one 8-epoch recipe, the paper preset, the decoder candidates) on onnxruntime with 1 thread and
+models kept for the bench; with ``--candidates FILE`` the models a candidates file names, and with
+``--research`` the study's training runs that ``experiments/speed_reports/research_candidates.toml`` names: the
+small, compact and large presets on one 8-epoch recipe, the paper preset, the decoder candidates) on
+onnxruntime with 1 thread and
 all threads, on a dynamically int8-quantised copy, and in torch eager from the checkpoint, through the same
 readings. Writes ``OUT/report.md``, ``report.json`` and ``pareto.png`` and prints the table. Missing model
 files are skipped with a note.
@@ -38,15 +40,19 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--per-object", type=int, default=None,
                    help="readings per test object (default: all of the test split; quick 3)")
     p.add_argument("--root", default=".", help="repository root the default model paths are under (default: .)")
+    p.add_argument("--candidates", action="append", default=[], metavar="FILE",
+                   help="also the models this TOML names (repeatable; paths under --root; the format: "
+                        "experiments/speed_reports/research_candidates.toml)")
     p.add_argument("--research", action="store_true",
-                   help="also the study's training runs under ROOT/runs/ (size variants, paper preset, decoder "
-                        "candidates, torch rows from checkpoints): how the published speed reports were made")
+                   help="--candidates experiments/speed_reports/research_candidates.toml: the study's training "
+                        "runs under ROOT/runs/ (size variants, paper preset, decoder candidates, torch rows from "
+                        "checkpoints), how the published speed reports were made")
 
 
 def run(args: argparse.Namespace) -> int:
     import dataclasses
 
-    from tactile_manip.bench.candidates import RUNTIMES, default_models, parse_model_spec
+    from tactile_manip.bench.candidates import RUNTIMES, candidates_file, default_models, parse_model_spec
     from tactile_manip.bench.report import markdown_table, pose_table, write_report
     from tactile_manip.bench.suite import BenchSettings, run_bench
     from tactile_manip.commands import check_report_folder
@@ -57,7 +63,15 @@ def run(args: argparse.Namespace) -> int:
         settings = dataclasses.replace(settings, trials=args.trials)
     if args.per_object is not None:
         settings = dataclasses.replace(settings, per_object=args.per_object)
-    models = default_models(args.root, research=args.research) + [parse_model_spec(s) for s in args.model]
+    models = default_models(args.root, research=args.research)
+    for path in args.candidates:
+        models = candidates_file(path, args.root, models)
+    models += [parse_model_spec(s) for s in args.model]
+    taken = [e.name for e in models]
+    repeated = sorted({n for n in taken if taken.count(n) > 1})
+    if repeated:
+        raise ValueError(f"the bench's models are named more than once: {', '.join(repeated)} (--candidates, "
+                         "--research and --model each add models; name each once)")
     runtimes = _split(args.runtimes) or list(RUNTIMES)
     report = run_bench(settings=settings, models=models, runtimes=runtimes, data_path=args.data,
                        dataset_config=args.dataset_config, scene_path=args.scene, methods=_split(args.methods),

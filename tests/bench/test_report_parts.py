@@ -193,3 +193,50 @@ def test_default_models_include_the_decoder_candidates_on_one_thread_only(tiny_m
     found = model_candidates(entry, tmp_path, runtimes=("ort-1", "ort-all", "ort-int8"), notes=notes)
     assert [c.runtime for c in found] == ["onnxruntime 1 thread"]
     assert model_candidates(entry, tmp_path, runtimes=("ort-all",), notes=notes) == []
+
+
+def test_a_candidates_file_adds_models_and_names_what_it_cannot_read(tmp_path) -> None:
+    from pathlib import Path
+
+    from tactile_manip.bench.candidates import ModelEntry, candidates_file
+    from tactile_manip.errors import ConfigError
+
+    (tmp_path / "configs").mkdir()
+    for stem in ("mine_a", "mine_b"):
+        (tmp_path / "configs" / f"{stem}.toml").write_text(f'preset = "fast"\nepochs = {len(stem)}\n')
+    (tmp_path / "configs" / "same.toml").write_text('preset = "fast"\nepochs = 1\n')
+    (tmp_path / "recipe.toml").write_text('# a copy with other comments\npreset = "fast"\nepochs = 1\n')
+    good = tmp_path / "candidates.toml"
+    good.write_text('[checkpoints]\nbase = "runs/base/best.pt"\n\n'
+                    '[[model]]\nname = "big"\npath = "runs/big/model.onnx"\nuntrained = "paper"\n\n'
+                    '[[runs]]\nconfigs = "configs/*.toml"\nsuffix = "_run"\nunless_recipe_of = "recipe.toml"\n')
+    base = [ModelEntry("base", tmp_path / "base.onnx")]
+    entries = {e.name: e for e in candidates_file(good, tmp_path, base)}
+    assert list(entries) == ["base", "big", "mine_a_run", "mine_b_run"]  # same.toml is recipe.toml's values
+    assert entries["base"].checkpoint == tmp_path / "runs" / "base" / "best.pt"
+    assert entries["big"].untrained_preset == "paper" and entries["big"].checkpoint is None
+    assert entries["mine_a_run"].path == tmp_path / "runs" / "mine_a" / "model.onnx"
+    assert entries["mine_a_run"].runtimes == ("ort-1",) and entries["mine_a_run"].untrained_preset is None
+    for text, problem in (('[[model]]\nname = "x"\npath = "x.onnx"\nthreads = 2\n', r"unknown key\(s\) threads"),
+                          ('[checkpoints]\nnobody = "a.pt"\n', "names 'nobody', not one of the models"),
+                          ('[[model]]\nname = "x"\n', "needs a name and a path"),
+                          ('[bench]\n', r"unknown key\(s\) bench in the file")):
+        bad = tmp_path / "bad.toml"
+        bad.write_text(text)
+        with pytest.raises(ConfigError, match=problem):
+            candidates_file(bad, tmp_path, base)
+    with pytest.raises(ConfigError, match="cannot read the bench candidates"):
+        candidates_file(tmp_path / "missing.toml", tmp_path)
+    assert Path(good).is_file()
+
+
+def test_the_bench_refuses_a_model_named_twice_before_measuring(tmp_path, capsys) -> None:
+    from checks import assert_one_line_error
+
+    from tactile_manip.cli import main
+
+    extra = tmp_path / "candidates.toml"
+    extra.write_text('[[model]]\nname = "supermag"\npath = "models/supermag.onnx"\n')
+    assert main(["bench", "--out", str(tmp_path / "b"), "--candidates", str(extra), "--quick"]) == 2
+    assert_one_line_error(capsys.readouterr().err, "bench", "named more than once: supermag")
+    assert not (tmp_path / "b").exists()

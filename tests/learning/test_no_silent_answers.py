@@ -96,6 +96,11 @@ def test_every_shipped_training_config_still_loads():
         data = tomllib.loads(path.read_text())
         if "methods" in data and "presentation" in data:  # a study's trial scene (experiments/fast_model/), not a recipe
             continue
+        if {"model", "runs", "checkpoints"} & set(data):  # the bench's candidates (experiments/speed_reports/)
+            from tactile_manip.bench.candidates import candidates_file, default_models
+
+            assert candidates_file(path, ROOT, default_models(ROOT))
+            continue
         loaders.get(data.get("kind", "cvae"), load_train_config)(path)
 
 
