@@ -21,11 +21,12 @@ import math
 
 
 CHECKPOINT_ONLY = ("data", "metrics", "pixel_mm", "card", "history", "table", "latency", "attach_to",
-                   "image_position_weight")
+                   "image_position_weight", "image_symmetry")
 # the model-export options that one kind's checkpoint takes and every other refuses: option -> (its kind, the
 # checkpoint it is for, as the refusal names it)
-KIND_ONLY_OPTIONS = {"image_position_weight": ("contact", "a contact model's"),
-                     "attach_to": ("angle_head", "an angle head's")}
+KIND_ONLY_OPTIONS = {"image_position_weight": (("contact",), "a contact model's"),
+                     "attach_to": (("angle_head",), "an angle head's"),
+                     "image_symmetry": (("cvae", "angle_head"), "an image model's or an angle head's")}
 
 
 def share(text: str) -> float:
@@ -63,6 +64,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def add_model_arguments(g, *, required: bool) -> None:
     """The options of a model export (``--checkpoint`` and what goes with it) on ``g``, a parser or a group."""
+    from tactile_manip.perception.board_symmetry import IMAGE_SYMMETRIES
+
     g.add_argument("--checkpoint", required=required, default=None,
                    help="training checkpoint (RUN/best.pt) to write as ONNX: an image model, a contact model, or an "
                         "angle head (with --attach-to)")
@@ -71,6 +74,11 @@ def add_model_arguments(g, *, required: bool) -> None:
     g.add_argument("--head-symmetries", type=int, choices=(1, 8), default=8,
                    help="with --attach-to: read each reading in the board's 8 symmetric copies and average their "
                         "axes (default), or once (1)")
+    g.add_argument("--image-symmetry", choices=IMAGE_SYMMETRIES, default=None,
+                   help="image models, and with --attach-to the pose model: average each image over the reading's "
+                        "4 quarter turns (rotations; the shipped model) or its 8 symmetric copies (all), at 4 or 8 "
+                        "decoder passes per image, or decode it once (none; the default of a new image model; with "
+                        "--attach-to: as the pose model says)")
     g.add_argument("--image-position-weight", type=share, default=None, metavar="W",
                    help="contact models: the reconstructed image's share in the position that TactileEstimator "
                         "gives with this model (0-1; benchmarks/contact_position_fusion.py chooses it on "
@@ -137,7 +145,7 @@ def _export_checkpoint(args: argparse.Namespace) -> int:
     _check_model_outputs(args)
     kind = kind_of_checkpoint(args.checkpoint)
     for name, (owner, whose) in KIND_ONLY_OPTIONS.items():
-        if getattr(args, name) is not None and kind.name != owner:
+        if getattr(args, name) is not None and kind.name not in owner:
             raise ValueError(f"--{name.replace('_', '-')} is for {whose} checkpoint; {args.checkpoint} is a "
                              f"{kind.name} checkpoint")
     return kind.run_export(args)

@@ -134,7 +134,9 @@ def blueprint(paths: EntityPaths, *, robot: bool = False, depth: bool = True, vb
     series = [rrb.TimeSeriesView(origin=paths.angle, name="angle (deg)"),
               rrb.TimeSeriesView(origin=paths.confidence, name="confidence")]
     if robot:
-        series += [rrb.TimeSeriesView(origin="robot", name="arm and gripper"),
+        # joints and gripper apart: on one axis the width's tens of mm flatten the joints' radians
+        series += [rrb.TimeSeriesView(origin=JOINTS, name="arm joints (rad)"),
+                   rrb.TimeSeriesView(origin=GRIPPER, name="gripper width (mm)"),
                    rrb.TimeSeriesView(origin="trial", contents=[TARGET, TRUE_ANGLE], name="trial"),
                    rrb.TextLogView(origin="trial", name="trial log")]
     columns = [pad, rrb.Vertical(*images), rrb.Vertical(*series)] if images else [pad, rrb.Vertical(*series)]

@@ -88,11 +88,14 @@ def fused_position_mm(angle: AngleEstimate, contact: ContactState, image_weight:
     """``image_weight`` times the image's centroid plus the rest times the contact model's position; either
     alone where the other has none (the contact model's only while it reports a contact). None where the
     reading's field is below the pose estimator's ``min_field_ut``: a contact model trained on presses only
-    reports a contact on an empty pad."""
+    reports a contact on an empty pad. With no share for the image, the contact model's position needs no image
+    (a deferred one stays undecoded)."""
     if angle.reason == NO_CONTACT_FIELD:
         return None
-    image = image_centroid_mm(angle, min_area_mm2)
     model = contact.position_mm if contact.in_contact else None
+    if image_weight == 0.0 and model is not None:
+        return model
+    image = image_centroid_mm(angle, min_area_mm2)
     if image is None or model is None:
         return image or model
     return (image_weight * image[0] + (1.0 - image_weight) * model[0],

@@ -27,6 +27,7 @@ from pathlib import Path
 from typing import Any
 
 from tactile_manip.errors import DatasetError, TactileManipError
+from tactile_manip.perception.board_symmetry import IMAGE_SYMMETRIES
 
 MAX_CONTEXT_FRAMES = 64   # the training config's bound (learning/contact/model.py)
 MAX_GAP_S = 3600.0        # the training config's bound on context.max_gap_s
@@ -37,7 +38,7 @@ TOP_LEVEL = {"format_version": int, "kind": str, "package_version": str, "board_
              "data_fingerprint": str, "parameters": int, "input": dict, "output": dict, "noise": dict,
              "context": dict, "targets": dict, "normalisation": dict, "sigma_calibration": dict,
              "model_config": dict, "train_config": dict, "training": dict, "training_data": dict, "metrics": dict,
-             "one_reading": dict, "image_position_weight": _NUMBER}
+             "one_reading": dict, "image_position_weight": _NUMBER, "image_symmetry": str}
 _GRID_NAME = re.compile(r"grid-(\d+)x(\d+)")
 
 
@@ -148,6 +149,8 @@ def _check_image(check: _Checker, meta: dict) -> None:
     if len(latent) != 3:
         raise check.fail("noise.shape", f"is {latent}, not [batch, samples, latent]")
     check.count(latent[2], "noise.shape[2]")
+    if meta.get("image_symmetry", "none") not in IMAGE_SYMMETRIES:
+        raise check.fail("image_symmetry", f"is {meta['image_symmetry']!r}, not one of {', '.join(IMAGE_SYMMETRIES)}")
 
 
 def _check_contact(check: _Checker, meta: dict, dims: list[int]) -> None:

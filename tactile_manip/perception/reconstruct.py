@@ -28,6 +28,7 @@ from scipy import ndimage
 
 from tactile_manip.chips import MLX90393, full_scale_ut
 from tactile_manip.perception.angle_head import AngleHead, open_angle_head
+from tactile_manip.perception.board_symmetry import average_images, image_subgroup
 from tactile_manip.perception.model_metadata import ModelFileError, check_metadata
 from tactile_manip.perception.one_reading import open_one_reading
 from tactile_manip.perception.onnx_session import session_options
@@ -126,6 +127,8 @@ class Reconstructor(abc.ABC):
     #: readings are MLX90393 fields in uT (clamped to the chip's full scale); False for models trained on
     #: another sensor's readings (tactile-manip import), whose values pass as they are
     magnetic_ut: bool = True
+    #: the symmetries of the board each image is averaged over (:data:`~.board_symmetry.IMAGE_SYMMETRIES`)
+    image_symmetry: str = "none"
 
     def _check(self, field_ut: np.ndarray, *, batch: bool = False) -> np.ndarray:
         # finiteness is checked before the float32 cast and the clamp: a finite float64 beyond float32's range
@@ -166,10 +169,17 @@ class OnnxReconstructor(Reconstructor):
             sessions taking turns fight over the cores (p99 5 ms against 1.1 ms at 2 threads on 2 cores).
         angle_head: open the file's angle head when it has one (:attr:`angle_head`); False leaves it out (the
             pose estimator then reads the angle from the image alone).
+        image_symmetry: what each image is averaged over (None: what the file says, ``"none"`` for files that
+            say nothing): ``"rotations"`` decodes the reading in its 4 quarter turns and averages the turned-back
+            images (exactly equivariant under the turns, sharper on unseen shapes: +0.41 dB PSNR for the default
+            model's decoder on the unseen presses of ``data/supermag.npz``, 25.16 against 24.75 dB), ``"all"`` in its 8
+            symmetric copies, ``"none"`` once. Each copy is a decoder pass: 4 or 8 times the image's cost, which
+            only callers of the image pay (the angle head reads the reading, not the image).
     """
 
     def __init__(self, path: str | Path, *, threads: int = 1, providers: tuple[str, ...] = ("CPUExecutionProvider",),
-                 samples: int = 1, seed: int = 0, one_reading_graph: bool = True, angle_head: bool = True) -> None:
+                 samples: int = 1, seed: int = 0, one_reading_graph: bool = True, angle_head: bool = True,
+                 image_symmetry: str | None = None) -> None:
         ort = require("onnxruntime", "OnnxReconstructor")
         self.path = Path(path)
         if samples < 1:
@@ -199,8 +209,11 @@ class OnnxReconstructor(Reconstructor):
         # models exported before board layouts existed were all trained on the SuperMag board
         self.board_layout = str(self.metadata.get("board_layout", DEFAULT_BOARD_LAYOUT))
         self._check_graph()
+        self.image_symmetry = str(self.metadata.get("image_symmetry", "none")) if image_symmetry is None \
+            else image_symmetry
+        self._image_group = image_subgroup(self.input_shape, self.output_shape, self.image_symmetry)
         self._one = None
-        if samples == 1 and threads == 1 and one_reading_graph:
+        if samples == 1 and threads == 1 and one_reading_graph and len(self._image_group) == 1:
             meta_in = self.metadata["input"]
             centre, width = ((np.asarray(meta_in["offset"]), np.asarray(meta_in["spread"])) if meta_in.get("offset")
                              else (0.0, 0.3 * float(meta_in.get("clamp_ut", 500.0))))
@@ -209,7 +222,8 @@ class OnnxReconstructor(Reconstructor):
                                          output_shape=self.output_shape, latent=self.latent, probe_centre=centre,
                                          probe_width=width, error=ModelFileError)
         #: whether single readings run through the file's one-reading graph (False with samples > 1, threads
-        #: other than 1, one_reading_graph=False, and for files exported before it)
+        #: other than 1, one_reading_graph=False, an image averaged over symmetric copies (a batch of them), and
+        #: for files exported before it)
         self.one_reading = self._one is not None
         self.angle_head = open_angle_head(ort, self.session, where=str(self.path), options=options,
                                           providers=list(providers), input_shape=self.input_shape,
@@ -251,6 +265,11 @@ class OnnxReconstructor(Reconstructor):
             raise ModelFileError(f"{self.path}: the model produced non-finite output; the file may be corrupt")
 
     def _run(self, fields_ut: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+        if len(self._image_group) > 1:
+            return average_images(self._run_once, fields_ut, self._image_group)
+        return self._run_once(fields_ut)
+
+    def _run_once(self, fields_ut: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
         n = len(fields_ut)
         if n == 1 and self._one is not None:
             depth = self._one.run(None, {"field_ut": fields_ut})[0]

@@ -6,6 +6,8 @@ a reconstructor ``f`` can be replaced by its group average ``mean_g g^-1 f(g x)`
 equivariant and cancels the part of the model's error that is not (for the fast reference model on unseen rods the
 orientation bias towards the grid axes mostly cancels; see docs/trials.md). It costs one batch of 8 readings
 per reading (4 for a rectangular grid, whose group is the rectangle's: identity, half turn and two mirrors).
+A model that already averages its images over part of the group (its ``image_symmetry``: the turns) is
+averaged over the rest only, one copy per coset (a reading and its mirror): the same average, no pass twice.
 
 Conventions (docs/design.md, Conventions): readings (..., R, C, 3) with row 0 at +y and column 0 at -x, images
 (..., H, W) in the same layout, so ``numpy.rot90`` on (row, column) is a counter-clockwise turn. The same
@@ -16,43 +18,14 @@ from __future__ import annotations
 
 import numpy as np
 
+from tactile_manip.perception.board_symmetry import (inverse_transform_image, symmetry_group, transform_image,
+                                                     transform_reading)
 from tactile_manip.perception.reconstruct import Reconstructor
 
+__all__ = ["CHUNK", "SymmetrizedReconstructor", "inverse_transform_image", "symmetry_group", "transform_image",
+           "transform_reading"]
+
 CHUNK = 64  # readings per inner batch (8 x 64 images at a time)
-
-
-def transform_reading(field_ut: np.ndarray, quarter_turns: int, mirror: bool) -> np.ndarray:
-    """Readings (..., R, C, 3) after ``mirror`` (x -> -x) and then ``quarter_turns`` counter-clockwise turns."""
-    f = np.asarray(field_ut)
-    if mirror:
-        f = f[..., :, ::-1, :] * np.array([-1.0, 1.0, 1.0], dtype=f.dtype)
-    for _ in range(quarter_turns % 4):
-        f = np.rot90(f, 1, axes=(-3, -2))
-        f = np.stack([-f[..., 1], f[..., 0], f[..., 2]], axis=-1)  # (Bx, By) -> (-By, Bx)
-    return np.ascontiguousarray(f)
-
-
-def transform_image(image: np.ndarray, quarter_turns: int, mirror: bool) -> np.ndarray:
-    """Images (..., H, W) after the same symmetry as :func:`transform_reading`."""
-    im = np.asarray(image)
-    if mirror:
-        im = im[..., ::-1]
-    return np.ascontiguousarray(np.rot90(im, quarter_turns % 4, axes=(-2, -1)))
-
-
-def inverse_transform_image(image: np.ndarray, quarter_turns: int, mirror: bool) -> np.ndarray:
-    """Undo :func:`transform_image`."""
-    im = np.rot90(np.asarray(image), -(quarter_turns % 4), axes=(-2, -1))
-    if mirror:
-        im = im[..., ::-1]
-    return np.ascontiguousarray(im)
-
-
-def symmetry_group(input_shape: tuple[int, ...], output_shape: tuple[int, int]) -> list[tuple[int, bool]]:
-    """(quarter_turns, mirror) of every symmetry both the taxel grid and the image have."""
-    square = input_shape[0] == input_shape[1] and output_shape[0] == output_shape[1]
-    turns = (0, 1, 2, 3) if square else (0, 2)
-    return [(k, m) for m in (False, True) for k in turns]
 
 
 class SymmetrizedReconstructor(Reconstructor):
@@ -72,7 +45,8 @@ class SymmetrizedReconstructor(Reconstructor):
         self.board_layout, self.magnetic_ut = inner.board_layout, inner.magnetic_ut
         self.angle_head = inner.angle_head
         self.deterministic = inner.deterministic
-        self.group = symmetry_group(self.input_shape, self.output_shape)
+        self.group = _cosets(symmetry_group(self.input_shape, self.output_shape),
+                             getattr(inner, "image_symmetry", "none"))
 
     def _run(self, fields_ut: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
         if len(fields_ut) > CHUNK:  # bound the memory of the 8x batch
@@ -85,3 +59,14 @@ class SymmetrizedReconstructor(Reconstructor):
         back = np.stack([inverse_transform_image(images[i], k, m) for i, (k, m) in enumerate(self.group)])
         spread = back.std(axis=0).astype(np.float32) if self.spread else None
         return back.mean(axis=0).astype(np.float32), spread
+
+
+def _cosets(group: list[tuple[int, bool]], inner_symmetry: str) -> list[tuple[int, bool]]:
+    """One symmetry of each coset of the subgroup the inner model already averages over (its
+    ``image_symmetry``): an image that is exactly equivariant under the turns needs only itself and its mirror
+    to be averaged over the whole group; one averaged over every symmetry needs itself alone."""
+    if inner_symmetry == "all":
+        return [(0, False)]
+    if inner_symmetry == "rotations":
+        return [(0, False), (0, True)]
+    return group

@@ -20,6 +20,7 @@ from tactile_manip.learning.angle_head.train import (AngleTrainConfig, axis_labe
                                                      train_angle_head)
 from tactile_manip.learning.cvae.export import ExportError  # noqa: E402
 from tactile_manip.perception import load_reconstructor, wrap_axial  # noqa: E402
+from tactile_manip.perception.reconstruct import read_metadata  # noqa: E402
 from tactile_manip.perception.symmetry import transform_reading  # noqa: E402
 from tactile_manip.shipped import shipped_model  # noqa: E402
 
@@ -210,6 +211,12 @@ def test_the_commands_train_and_attach_and_refuse_what_does_not_fit(trained, tmp
     assert main(["export", "--checkpoint", str(run / "best.pt"), "--attach-to", str(BASE), "--out", str(once),
                  "--head-symmetries", "1"]) == 0
     assert "no symmetric copies" in capsys.readouterr().out
+    assert read_metadata(once).get("image_symmetry", "none") == read_metadata(BASE).get("image_symmetry", "none")
+    turned = tmp_path / "turned.onnx"
+    assert main(["export", "--checkpoint", str(run / "best.pt"), "--attach-to", str(BASE), "--out", str(turned),
+                 "--image-symmetry", "rotations"]) == 0
+    assert read_metadata(turned)["image_symmetry"] == "rotations"  # the pose model's images, averaged over turns
+    assert load_reconstructor(turned).image_symmetry == "rotations"
     assert main(["export", "--checkpoint", str(run / "best.pt"), "--attach-to", str(tmp_path / "missing.onnx"),
                  "--out", str(tmp_path / "n.onnx")]) == 2
     assert_one_line_error(capsys.readouterr().err, "export", "missing.onnx")

@@ -140,6 +140,19 @@ def test_export_refuses_an_image_share_for_an_image_model_or_outside_0_to_1(run,
     assert not out.exists()
 
 
+def test_export_stores_what_an_image_model_averages_its_images_over(run, capsys):
+    from tactile_manip.perception.reconstruct import read_metadata
+
+    out = run / "turns.onnx"
+    assert main(["export", "--checkpoint", str(run / "run" / "best.pt"), "--out", str(out),
+                 "--image-symmetry", "rotations"]) == 0
+    assert read_metadata(out)["image_symmetry"] == "rotations"
+    with pytest.raises(SystemExit):  # argparse: usage and exit 2
+        main(["export", "--checkpoint", str(run / "run" / "best.pt"), "--out", str(run / "x.onnx"),
+              "--image-symmetry", "twice"])
+    assert "invalid choice: 'twice'" in capsys.readouterr().err
+
+
 def test_evaluate_refuses_to_replace_an_earlier_report_without_force(tiny_data, tmp_path, capsys):
     out = tmp_path / "eval"
     out.mkdir()

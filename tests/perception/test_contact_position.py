@@ -57,3 +57,31 @@ def test_an_isotropic_contact_has_no_angle_but_keeps_its_centroid() -> None:
     assert not est.defined and est.reason.startswith(ISOTROPIC_REASON)
     assert image_centroid_mm(est) == pytest.approx((3.05, -0.05), abs=0.01)
     assert fused_position_mm(est, TOUCH, 0.5) == pytest.approx(((3.05 + 1.0) / 2, (-0.05 + 1.0) / 2), abs=0.01)
+
+
+def test_without_a_share_for_the_image_the_position_decodes_no_image() -> None:
+    pytest.importorskip("onnxruntime")
+    import numpy as np
+
+    from tactile_manip.perception import TactilePoseEstimator, load_reconstructor
+    from tactile_manip.perception.contact import ContactEstimator
+    from tactile_manip.perception.contact_pose import TactileEstimator
+    from tactile_manip.shipped import shipped_model
+    from tactile_manip.sim.objects import IndenterPose
+    from tactile_manip.sim.pair import SensorPair
+    from tactile_manip.sim.shapes import make_indenter
+
+    rec = load_reconstructor(shipped_model())
+    runs = []
+    run = rec._run
+    rec._run = lambda fields: runs.append(len(fields)) or run(fields)
+    rng = np.random.default_rng(0)
+    fields = np.stack([SensorPair(seed=0).press(make_indenter("cylinder", size_mm=3.0), IndenterPose(x, 0.5, 0.2),
+                                                10.0, rng, render_depth=False).field_ut for x in (-1.0, 1.5)])
+    contact = ContactEstimator(shipped_model("contact"))
+    model_only = TactileEstimator(TactilePoseEstimator(rec), contact, image_position_weight=0.0)
+    for est in model_only.estimate_many(fields):
+        assert est.position_mm == est.contact.position_mm
+    assert runs == []  # the angles came from the head, the positions from the contact model: no image decoded
+    fused = TactileEstimator(TactilePoseEstimator(rec), contact, image_position_weight=0.5).estimate_many(fields)
+    assert fused[0].position_mm != fused[0].contact.position_mm and runs == [2]  # one batch for both pads

@@ -107,3 +107,76 @@ def test_large_batches_are_processed_in_chunks_with_the_same_result(monkeypatch)
     whole = sym.reconstruct_batch(fields)
     monkeypatch.setattr(symmetry, "CHUNK", 2)
     assert np.allclose(sym.reconstruct_batch(fields), whole)
+
+
+# ---------------------------------------------------------------- a model's own image symmetry
+
+
+def _press(seed: int = 2) -> np.ndarray:
+    return SensorPair(seed=0).press(make_indenter("hex_bar", size_mm=4.0), IndenterPose(0.5, 1.0, 0.3), 10.0,
+                                    np.random.default_rng(seed), render_depth=False).field_ut
+
+
+def test_the_default_model_averages_its_images_over_the_turns_exactly() -> None:
+    pytest.importorskip("onnxruntime")
+    from tactile_manip.perception.reconstruct import OnnxReconstructor
+
+    turns, once = OnnxReconstructor(MODEL), OnnxReconstructor(MODEL, image_symmetry="none")
+    assert (turns.image_symmetry, once.image_symmetry) == ("rotations", "none")  # the file says rotations
+    field = _press()
+    base = turns.reconstruct(field).depth_mm
+    by_hand = np.mean([inverse_transform_image(once.reconstruct(transform_reading(field, k, False)).depth_mm, k, False)
+                       for k in range(4)], axis=0)
+    assert np.abs(base - by_hand).max() < 1e-5 and np.abs(base - once.reconstruct(field).depth_mm).max() > 1e-3
+    for k in (1, 2, 3):  # equivariant under the turns, not under a mirror
+        turned = turns.reconstruct(transform_reading(field, k, False)).depth_mm
+        assert np.abs(turned - transform_image(base, k, False)).max() < 1e-4
+    mirrored = turns.reconstruct(transform_reading(field, 0, True)).depth_mm
+    assert np.abs(mirrored - transform_image(base, 0, True)).max() > 1e-3
+    batch = turns.reconstruct_batch(np.stack([field, _press(3), field]))
+    assert np.abs(batch[0] - base).max() < 1e-5 and np.array_equal(batch[0], batch[2])
+
+
+def test_averaging_a_turn_averaged_model_over_the_group_takes_one_copy_per_mirror() -> None:
+    pytest.importorskip("onnxruntime")
+    from tactile_manip.perception.reconstruct import OnnxReconstructor
+
+    turns = SymmetrizedReconstructor(OnnxReconstructor(MODEL))
+    full = SymmetrizedReconstructor(OnnxReconstructor(MODEL, image_symmetry="none"))
+    assert turns.group == [(0, False), (0, True)] and len(full.group) == 8
+    every = OnnxReconstructor(MODEL, image_symmetry="all")
+    assert SymmetrizedReconstructor(every).group == [(0, False)]
+    field = _press()
+    want = full.reconstruct(field).depth_mm
+    for got in (turns.reconstruct(field).depth_mm, every.reconstruct(field).depth_mm):
+        assert np.abs(got - want).max() < 1e-5  # the same group average, 8 decoder passes each
+
+
+def test_a_rectangular_board_turns_by_half_turns(onnx_5x6) -> None:
+    from tactile_manip.perception.reconstruct import OnnxReconstructor
+
+    rect = OnnxReconstructor(onnx_5x6.path, image_symmetry="rotations")
+    field = np.random.default_rng(0).normal(0, 50, (5, 6, 3))
+    base = rect.reconstruct(field).depth_mm
+    assert np.abs(rect.reconstruct(transform_reading(field, 2, False)).depth_mm
+                  - transform_image(base, 2, False)).max() < 1e-4
+    assert OnnxReconstructor(onnx_5x6.path).image_symmetry == "none"  # a new export decodes once unless told
+
+
+def test_an_unknown_image_symmetry_is_refused(onnx_4x4, tmp_path) -> None:
+    import json
+
+    import onnx
+
+    from tactile_manip.perception.model_metadata import ModelFileError
+    from tactile_manip.perception.reconstruct import METADATA_KEY, OnnxReconstructor
+
+    with pytest.raises(ValueError, match="image_symmetry must be one of none, rotations, all, got 'mirrors'"):
+        OnnxReconstructor(onnx_4x4.path, image_symmetry="mirrors")
+    proto = onnx.load(str(onnx_4x4.path))
+    for p in proto.metadata_props:
+        if p.key == METADATA_KEY:
+            p.value = json.dumps({**json.loads(p.value), "image_symmetry": "twice"})
+    onnx.save(proto, str(tmp_path / "edited.onnx"))
+    with pytest.raises(ModelFileError, match="metadata field image_symmetry is 'twice', not one of none, rotations"):
+        OnnxReconstructor(tmp_path / "edited.onnx")

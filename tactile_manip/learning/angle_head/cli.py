@@ -56,7 +56,7 @@ def run_export(args: argparse.Namespace) -> int:
     if args.data:  # datasets with and without images: each is read alone
         readings = np.concatenate([d.readings[d.indices("val")][:64] for d in map(load_dataset, args.data)])
     record = attach_angle_head(args.checkpoint, args.attach_to, args.out, check_readings=readings,
-                               symmetries=args.head_symmetries == 8)
+                               symmetries=args.head_symmetries == 8, image_symmetry=args.image_symmetry)
     val = record["validation"]
     copies = "its 8 symmetric copies" if record["symmetries"] == 8 else "1 copy (no symmetric copies)"
     print(f"wrote {args.out}: {args.attach_to} with an angle head of {record['parameters']:,} parameters reading "

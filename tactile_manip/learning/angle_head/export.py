@@ -24,7 +24,8 @@ from tactile_manip.learning.checkpoint import load_net_checkpoint
 from tactile_manip.learning.cvae.export import ExportError
 from tactile_manip.perception.angle_head import ANGLE_HEAD_KEY, ANGLE_HEAD_META_KEY
 from tactile_manip.perception.one_reading import encode
-from tactile_manip.perception.reconstruct import read_metadata
+from tactile_manip.perception.board_symmetry import IMAGE_SYMMETRIES
+from tactile_manip.perception.reconstruct import METADATA_KEY, read_metadata
 from tactile_manip.perception.symmetry import transform_reading
 from tactile_manip.version import __version__
 
@@ -64,11 +65,17 @@ def head_onnx_bytes(model: AngleHead | SymmetrizedAngleHead) -> bytes:
 
 
 def attach_angle_head(checkpoint: str | Path, base: str | Path, out: str | Path, *,
-                      check_readings: np.ndarray | None = None, symmetries: bool = True) -> dict[str, Any]:
+                      check_readings: np.ndarray | None = None, symmetries: bool = True,
+                      image_symmetry: str | None = None) -> dict[str, Any]:
     """Write ``out``: ``base`` with the head of ``checkpoint`` attached; returns the head's record (with
     ``parity_max_abs``). ``check_readings`` (N, R, C, A): real readings for the parity check. ``symmetries``:
-    the graph reads every reading in its 8 symmetric copies and averages their axes (:func:`symmetrized`)."""
+    the graph reads every reading in its 8 symmetric copies and averages their axes (:func:`symmetrized`).
+    ``image_symmetry``: what the copy averages its images over
+    (:data:`~tactile_manip.perception.board_symmetry.IMAGE_SYMMETRIES`; None: as ``base`` says)."""
     import onnx
+
+    if image_symmetry is not None and image_symmetry not in IMAGE_SYMMETRIES:
+        raise ValueError(f"image_symmetry must be one of {', '.join(IMAGE_SYMMETRIES)}, got {image_symmetry!r}")
 
     head, payload = load_angle_checkpoint(checkpoint)
     model = symmetrized(head) if symmetries else head
@@ -90,6 +97,9 @@ def attach_angle_head(checkpoint: str | Path, base: str | Path, out: str | Path,
               "validation": payload.get("val", {}), "parity_max_abs": parity}
     proto = onnx.load(str(base))
     keep = [(p.key, p.value) for p in proto.metadata_props if p.key not in (ANGLE_HEAD_KEY, ANGLE_HEAD_META_KEY)]
+    if image_symmetry is not None:  # the pose model's own record says what its images are averaged over
+        keep = [(key, json.dumps({**json.loads(value), "image_symmetry": image_symmetry}) if key == METADATA_KEY
+                 else value) for key, value in keep]
     del proto.metadata_props[:]
     for key, value in [*keep, (ANGLE_HEAD_KEY, encode(graph)), (ANGLE_HEAD_META_KEY, json.dumps(record))]:
         entry = proto.metadata_props.add()

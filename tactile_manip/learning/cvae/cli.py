@@ -69,7 +69,7 @@ def run_export(args: argparse.Namespace) -> int:
                                   "code_version": data.provenance.get("code_version")}
     metrics = json.loads(open(args.metrics).read()) if args.metrics else {}
     meta = export_onnx(args.checkpoint, args.out, pixel_mm=pixel_mm, metrics=metrics, extra=extra,
-                       check_readings=readings)
+                       check_readings=readings, image_symmetry=args.image_symmetry or "none")
     print(f"wrote {args.out}: {meta['parameters']:,} inference parameters, preset {meta['preset']}, "
           f"ONNX vs torch max |diff| {meta['parity_max_abs_mm']:.2e} mm")
     if args.card:

@@ -36,6 +36,7 @@ from tactile_manip.learning.checkpoint import CheckpointError, read_checkpoint
 from tactile_manip.learning.cvae.data import InputSpec, OutputSpec
 from tactile_manip.learning.cvae.model import CVAEConfig, SuperMagCVAE, count_parameters
 from tactile_manip.perception.one_reading import ONE_READING_KEY, encode, open_one_reading
+from tactile_manip.perception.board_symmetry import IMAGE_SYMMETRIES
 from tactile_manip.perception.reconstruct import METADATA_KEY
 from tactile_manip.version import __version__
 
@@ -88,14 +89,20 @@ def load_checkpoint(path: str | Path) -> tuple[SuperMagCVAE, InputSpec, dict[str
 
 def export_onnx(checkpoint: str | Path, out: str | Path, *, pixel_mm: float, metrics: dict | None = None,
                 extra: dict | None = None, check_readings: np.ndarray | None = None,
-                plausible_field_ut: float | None = None) -> dict[str, Any]:
+                plausible_field_ut: float | None = None, image_symmetry: str = "none") -> dict[str, Any]:
     """Write ``out`` (.onnx) from ``checkpoint`` and return its metadata.
+
+    ``image_symmetry``: what the loaded model averages each image over
+    (:data:`~tactile_manip.perception.board_symmetry.IMAGE_SYMMETRIES`; stored in the metadata, applied by
+    :class:`~tactile_manip.perception.reconstruct.OnnxReconstructor`).
 
     ``check_readings`` (N, R, C, 3) real readings for the parity check (random ones are added).
     ``plausible_field_ut``: the largest |field| (uT) of a reading the model answers for, stored as
     ``input.plausible_field_ut`` (none: the pose estimator takes its board's bound,
     :data:`~tactile_manip.perception.estimator.PLAUSIBLE_FIELD_UT`).
     """
+    if image_symmetry not in IMAGE_SYMMETRIES:
+        raise ValueError(f"image_symmetry must be one of {', '.join(IMAGE_SYMMETRIES)}, got {image_symmetry!r}")
     if plausible_field_ut is not None and not (math.isfinite(plausible_field_ut) and plausible_field_ut > 0):
         raise ValueError(f"plausible_field_ut must be a finite number of uT > 0, got {plausible_field_ut!r}")
     import onnx
@@ -119,6 +126,7 @@ def export_onnx(checkpoint: str | Path, out: str | Path, *, pixel_mm: float, met
     meta = _metadata(model, spec, payload, pixel_mm, metrics or {}, extra or {})
     if plausible_field_ut is not None:
         meta["input"]["plausible_field_ut"] = float(plausible_field_ut)
+    meta["image_symmetry"] = image_symmetry
     proto = onnx.load(str(out))
     for key, value in ((METADATA_KEY, json.dumps(meta)), (ONE_READING_KEY, encode(one_bytes.getvalue()))):
         entry = proto.metadata_props.add()
