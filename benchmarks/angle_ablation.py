@@ -3,7 +3,7 @@
     python -m benchmarks.angle_ablation --data data/rods_test.npz \\
         --model fast=experiments/model_variants/supermag_fast.onnx \\
         --model robust=experiments/model_variants/supermag_robust.onnx \\
-        --model default=models/supermag.onnx --bound benchmarks/results/angle_information_rods_test.json
+        --model default=models/supermag.onnx --bound docs/results/benchmarks/angle_information_rods_test.json
 
 For every ``--model`` the presses of elongated objects in the dataset's test split (rods and flat bars; single
 frames, as recorded) go through :class:`~tactile_manip.perception.TactilePoseEstimator`: the image route alone
@@ -15,7 +15,7 @@ head is the more likely within 5 deg (the image's probability from the calibrati
 same dataset) the share an efficient estimator would reach per band (Cramer-Rao, pose and sensor unknown).
 Reported: share within 5 and 2 deg, median error, within 5 deg per force band and per object; and the head's
 reliability (the probability its concentration gives against the share observed). Prints markdown, writes
-benchmarks/results/angle_ablation.json; asserts nothing.
+docs/results/benchmarks/angle_ablation.json; asserts nothing.
 """
 
 from __future__ import annotations
@@ -97,7 +97,7 @@ def main() -> None:
     parser.add_argument("--data", default="data/rods_test.npz")
     parser.add_argument("--model", action="append", default=[], metavar="NAME=PATH", required=True)
     parser.add_argument("--bound", default=None, help="angle_information JSON of the same dataset")
-    parser.add_argument("--out", default="benchmarks/results/angle_ablation.json")
+    parser.add_argument("--out", default="docs/results/benchmarks/angle_ablation.json")
     args = parser.parse_args()
     data = load_dataset(args.data)
     idx = data.indices("test")

@@ -29,7 +29,7 @@ loose (estimators there have threshold effects, e.g. a 90 deg ambiguity, that th
 so these shares are upper bounds on what any method can do from such readings, not predictions. Reported for
 one frame as the dataset records it (drift included), four frames averaged, and one frame after a tare (drift
 removed); per force band and per tercile of the drawn chip noise. Prints markdown and writes
-benchmarks/results/angle_information.json; asserts nothing.
+docs/results/benchmarks/angle_information.json; asserts nothing.
 """
 
 from __future__ import annotations
@@ -286,7 +286,7 @@ def main() -> None:
     parser.add_argument("--split", default="test")
     parser.add_argument("--limit", type=int, default=0, help="the first N rod presses only (0: all)")
     parser.add_argument("--workers", type=int, default=0, help="processes (0: all cores)")
-    parser.add_argument("--out", default="benchmarks/results/angle_information.json")
+    parser.add_argument("--out", default="docs/results/benchmarks/angle_information.json")
     parser.add_argument("--report", default=None,
                         help="an earlier run's JSON: plot it (with --plot) instead of computing again")
     parser.add_argument("--compare", action="append", default=[], metavar="RESULTS.json",

@@ -11,7 +11,7 @@
    models in a shuffled order per reading so a busy machine slows all of them alike: wall p50 / p99 and the
    calling thread's CPU time p50; and each candidate's own node profile by operator type.
 
-Writes benchmarks/results/decoders.json and prints markdown tables. No accuracy here: an untrained model's
+Writes docs/results/benchmarks/decoders.json and prints markdown tables. No accuracy here: an untrained model's
 images say nothing; train a candidate (``tactile-manip train --config ...``) and ``tactile-manip evaluate`` it.
 """
 
@@ -119,7 +119,7 @@ def main() -> None:
     parser.add_argument("--readings", type=int, default=120)
     parser.add_argument("--rounds", type=int, default=2)
     parser.add_argument("--profile-calls", type=int, default=200)
-    parser.add_argument("--out", default="benchmarks/results/decoders.json")
+    parser.add_argument("--out", default="docs/results/benchmarks/decoders.json")
     args = parser.parse_args()
     from tactile_manip.learning.cvae.eager import export_untrained
 

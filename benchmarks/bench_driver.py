@@ -2,7 +2,7 @@
 
 Run from the repository root (Linux: the emulator needs a pty)::
 
-    python -m benchmarks.bench_driver [--seconds 10] [--frames 20000] [--out benchmarks/results/driver.json]
+    python -m benchmarks.bench_driver [--seconds 10] [--frames 20000] [--out docs/results/benchmarks/driver.json]
 
 Latency: the emulator runs in another process with ``--clock host``, putting ``time.monotonic_ns() // 1000``
 (CLOCK_MONOTONIC is system-wide on Linux) into each frame's ``t_mcu_us`` right before writing it; the host
@@ -31,7 +31,7 @@ from tactile_manip.sensors.wire.anyskin import pack_frame
 from tactile_manip.sim.params import ChipParams
 
 ROOT = Path(__file__).resolve().parents[1]
-DEFAULT_OUT = ROOT / "benchmarks" / "results" / "driver.json"
+DEFAULT_OUT = ROOT / "docs" / "results" / "benchmarks" / "driver.json"
 GOALS = {"decode_us": 10.0, "latency_p99_ms": 2.0, "reader_cpu_percent": 5.0}
 
 

@@ -9,7 +9,7 @@ each escalation: the reading's 8 symmetric copies averaged ("symmetry") and K pr
 each confidence level, the presses whose first estimate is below it take the escalation's estimate; the table
 gives the share escalated, the angle within 2 and 5 deg, and the latency: p50 / p99 of the one-pass estimate
 and of the escalation (one thread, timed on ``--timed`` presses), and the mean per press at that level (one
-pass + share x escalation). Writes benchmarks/results/escalation.json. It measures; it asserts nothing.
+pass + share x escalation). Writes docs/results/benchmarks/escalation.json. It measures; it asserts nothing.
 """
 
 from __future__ import annotations
@@ -97,7 +97,7 @@ def main() -> None:
     p.add_argument("--levels", default="0,0.5,0.8,0.9,0.95,1", help="confidence levels, comma-separated")
     p.add_argument("--samples", type=int, default=8, help="prior samples of the 'samples' escalation")
     p.add_argument("--timed", type=int, default=200, help="presses timed per method")
-    p.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results" / "escalation.json")
+    p.add_argument("--out", type=Path, default=ROOT / "docs" / "results" / "benchmarks" / "escalation.json")
     a = p.parse_args()
     levels = [float(v) for v in a.levels.split(",")]
     publish(run(a.model, a.data, levels, a.samples, a.timed), a.out, markdown)

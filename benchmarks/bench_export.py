@@ -10,7 +10,7 @@
    export is also timed with ``--depth bilinear`` (a depth image per frame, PNG-encoded).
 2. With ``--trials N`` the README's scene (configs/scenes/reorient_sim.toml, every method) runs N trials with
    and without per-frame recording, alternately after one untimed warm-up run, and the table gives the wall time per trial and the
-   frames files' size. Writes benchmarks/results/export.json. It reports; it asserts nothing.
+   frames files' size. Writes docs/results/benchmarks/export.json. It reports; it asserts nothing.
 """
 
 from __future__ import annotations
@@ -142,7 +142,7 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=3, help="exports per format (3)")
     parser.add_argument("--trials", type=int, default=10, help="trials per run for the recording cost (10; 0: skip)")
     parser.add_argument("--rounds", type=int, default=3, help="runs with and without frames each (3)")
-    parser.add_argument("--out", default="benchmarks/results/export.json", help="JSON report")
+    parser.add_argument("--out", default="docs/results/benchmarks/export.json", help="JSON report")
     args = parser.parse_args()
     with tempfile.TemporaryDirectory(prefix="bench_export-") as tmp:
         work = Path(tmp)

@@ -7,7 +7,7 @@ The paper reports 2.5 ms per reading on an RTX 3090; this is the comparable figu
 goes in and the image comes out as numpy on the host, so each timing includes both copies (what a control
 loop pays). The product path is onnxruntime on the CPU (benchmarks.bench_model); this harness needs torch
 with CUDA and a GPU, and says so when either is missing. Latency does not depend on the weights, so presets
-without a checkpoint are timed untrained. Prints a markdown table and writes benchmarks/results/gpu.json.
+without a checkpoint are timed untrained. Prints a markdown table and writes docs/results/benchmarks/gpu.json.
 """
 
 from __future__ import annotations
@@ -61,7 +61,7 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--model", action="append", default=[], metavar="LABEL=CHECKPOINT.pt")
     p.add_argument("--repeats", type=int, default=1000)
-    p.add_argument("--out", default="benchmarks/results/gpu.json")
+    p.add_argument("--out", default="docs/results/benchmarks/gpu.json")
     args = p.parse_args(argv)
     try:
         import torch

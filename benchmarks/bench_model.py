@@ -8,7 +8,7 @@ interleaved, for comparison.
     python -m benchmarks.bench_model --model NAME=PATH.onnx --repeats 2000
 
 Without a trained paper-preset file the harness exports an untrained one (latency does not depend on the
-weights). Prints a markdown table and writes benchmarks/results/model.json. It measures; it asserts nothing.
+weights). Prints a markdown table and writes docs/results/benchmarks/model.json. It measures; it asserts nothing.
 """
 
 from __future__ import annotations
@@ -94,7 +94,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--model", action="append", default=[], metavar="LABEL=PATH")
     p.add_argument("--repeats", type=int, default=1000)
     p.add_argument("--threads", type=int, nargs="+", default=[1, os.cpu_count() or 1])
-    p.add_argument("--out", default="benchmarks/results/model.json")
+    p.add_argument("--out", default="docs/results/benchmarks/model.json")
     args = p.parse_args(argv)
     with tempfile.TemporaryDirectory() as tmp:
         models = [tuple(s.split("=", 1)) for s in args.model]

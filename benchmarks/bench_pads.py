@@ -19,7 +19,7 @@ so that a large decode does not leave the light calls a cold cache):
 
 The estimates of every call of the first pass are checked against the single-pad ``estimate`` of each reading
 (angle, confidence, centroid and area equal); the angle error of each route is measured on every reading.
-Prints a markdown table and writes it beside the JSON (default ``benchmarks/results/pads.json`` and ``.md``).
+Prints a markdown table and writes it beside the JSON (default ``docs/results/benchmarks/pads.json`` and ``.md``).
 It measures; it asserts nothing but the equality.
 """
 
@@ -173,7 +173,7 @@ def main() -> None:
     parser.add_argument("--readings", type=int, default=240)
     parser.add_argument("--repeats", type=int, default=3, help="passes over the readings")
     parser.add_argument("--seed", type=int, default=11)
-    parser.add_argument("--out", default="benchmarks/results/pads.json")
+    parser.add_argument("--out", default="docs/results/benchmarks/pads.json")
     args = parser.parse_args()
     if args.readings < max(PADS) or args.repeats < 1:
         parser.error(f"--readings must be >= {max(PADS)} and --repeats >= 1")

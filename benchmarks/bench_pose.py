@@ -14,7 +14,7 @@ of each reading's fastest call (the cost the machine's jitter does not explain),
 after the reconstruction; of ``estimate_many`` on two pads' readings (one batched model run, time per pair);
 and the angle error median / p95 / share within 5 deg. The paper preset (and every ``--untrained`` config) is
 an untrained export, timed only (latency does not depend on the weights; at most ``--slow-calls`` calls), and
-every method's p50 is compared with it. Prints a markdown table and writes benchmarks/results/pose.json. It
+every method's p50 is compared with it. Prints a markdown table and writes docs/results/benchmarks/pose.json. It
 measures; it asserts nothing.
 """
 
@@ -148,7 +148,7 @@ def main() -> None:
                         "with --method")
     parser.add_argument("--no-paper", action="store_true", help="skip the paper preset (needs torch to export)")
     parser.add_argument("--slow-calls", type=int, default=40, help="calls at most for the untrained models")
-    parser.add_argument("--out", default="benchmarks/results/pose.json")
+    parser.add_argument("--out", default="docs/results/benchmarks/pose.json")
     args = parser.parse_args()
     shipped = load_reconstructor("experiments/model_variants/supermag_fast.onnx", threads=1)
     methods = {"supermag_fast": shipped, "supermag_fast_sym": SymmetrizedReconstructor(shipped),

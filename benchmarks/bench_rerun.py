@@ -2,7 +2,7 @@
 
 Run from the repository root (extras ``viz`` and ``mcap``)::
 
-    python -m benchmarks.bench_rerun [--seconds 10] [--frames 5000] [--repeats 3] [--out benchmarks/results/rerun.json]
+    python -m benchmarks.bench_rerun [--seconds 10] [--frames 5000] [--repeats 3] [--out docs/results/benchmarks/rerun.json]
 
 Logging: :class:`~tactile_manip.interop.rerun_log.RerunLogger` writes to a ``.rrd`` file (what ``view --rerun
 --save`` does) the three timelines and the field arrows of every frame, sent column-wise 12 frames at a time,
@@ -33,7 +33,7 @@ from benchmarks._common import machine_info, publish
 from tactile_manip.interop.frames import PHASES, Episode, Frame
 
 ROOT = Path(__file__).resolve().parents[1]
-DEFAULT_OUT = ROOT / "benchmarks" / "results" / "rerun.json"
+DEFAULT_OUT = ROOT / "docs" / "results" / "benchmarks" / "rerun.json"
 RATE_HZ = 125.0
 ESTIMATE_EVERY = 12          # frames between estimates: 125 / 12 = 10.4 Hz
 GOAL_PERCENT = 10.0

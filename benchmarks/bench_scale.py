@@ -2,7 +2,7 @@
 
 Run from the repository root (needs the ``ray`` extra)::
 
-    python -m benchmarks.bench_scale [--scale 0.02] [--workers 1 2] [--two-node] [--out benchmarks/results/scale.json]
+    python -m benchmarks.bench_scale [--scale 0.02] [--workers 1 2] [--two-node] [--out docs/results/benchmarks/scale.json]
 
 For each worker count it generates the same dataset with ``generate`` (a process pool) and with
 ``generate_on_ray`` (a private Ray instance of that many CPUs), checks that both give the same fingerprint, and
@@ -125,7 +125,7 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--workers", type=int, nargs="+", default=[1, 2])
     p.add_argument("--block-size", type=int, default=DEFAULT_BLOCK_SIZE)
     p.add_argument("--two-node", action="store_true", help="also run on a two-node cluster on loopback")
-    p.add_argument("--out", default="benchmarks/results/scale.json")
+    p.add_argument("--out", default="docs/results/benchmarks/scale.json")
     args = p.parse_args(argv)
     publish(run(args), args.out, markdown)
 

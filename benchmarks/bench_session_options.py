@@ -9,7 +9,7 @@ extended, memory patterns off, spinning off, parallel execution, the batch and s
 an in-memory copy of the graph, io_binding with buffers bound once); and ``OnnxReconstructor.reconstruct``
 as users call it. Every variant runs each reading in turn (in a shuffled order per reading), so a busy
 machine slows all of them alike. Per variant: wall-clock p50 / p99 and the calling thread's CPU time p50
-(less sensitive to other processes than the wall clock). Writes benchmarks/results/session_options.json; it
+(less sensitive to other processes than the wall clock). Writes docs/results/benchmarks/session_options.json; it
 measures, it asserts nothing.
 """
 
@@ -163,7 +163,7 @@ def main() -> None:
     parser.add_argument("--model", default="experiments/model_variants/supermag_fast.onnx")
     parser.add_argument("--readings", type=int, default=300)
     parser.add_argument("--rounds", type=int, default=2)
-    parser.add_argument("--out", default="benchmarks/results/session_options.json")
+    parser.add_argument("--out", default="docs/results/benchmarks/session_options.json")
     args = parser.parse_args()
     fields, _ = rod_readings(args.readings, 0)
     report = {"machine": machine_info(), "model": args.model,

@@ -2,7 +2,7 @@
 
 Run from the repository root (see ``benchmarks/README.md``)::
 
-    python -m benchmarks.bench_sim [--samples N] [--workers 1 2] [--out benchmarks/results/sim.json] [--full]
+    python -m benchmarks.bench_sim [--samples N] [--workers 1 2] [--out docs/results/benchmarks/sim.json] [--full]
 
 Prints markdown tables and writes a JSON report with the machine it ran on. It measures; it asserts nothing.
 """
@@ -29,7 +29,7 @@ from tactile_manip.sim.vbts import dtact_depth
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_CONFIG = ROOT / "configs" / "dataset" / "supermag.toml"
-DEFAULT_OUT = ROOT / "benchmarks" / "results" / "sim.json"
+DEFAULT_OUT = ROOT / "docs" / "results" / "benchmarks" / "sim.json"
 OBJECTS = (("allen_key", {}), ("letter_r", {}), ("cylinder", {"size_mm": 4.0}), ("procedural", {"seed": 7}))
 FORCE_N = 10.5      # middle of the dataset's 10-11 N range
 OFFSET_MM = 2.0     # presses land within +-2 mm of the pad centre, so every one touches

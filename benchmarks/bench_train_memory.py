@@ -34,7 +34,7 @@ from tactile_manip.sim.dataset import generate, load_dataset_config
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_CONFIG = ROOT / "configs" / "dataset" / "supermag.toml"
 DEFAULT_TRAIN = ROOT / "configs" / "train" / "fast.toml"
-DEFAULT_OUT = ROOT / "benchmarks" / "results" / "train_memory.json"
+DEFAULT_OUT = ROOT / "docs" / "results" / "benchmarks" / "train_memory.json"
 DEFAULT_SAMPLES = 7290   # presses in configs/dataset/supermag.toml at scale 1
 
 

@@ -10,7 +10,7 @@ offline, checks its episode count, frame count and fps against ``meta/info.json`
 ``__getitem__`` and compares each numeric feature with the parquet file read by pyarrow (exact for float32,
 int and bool features; ``host_time_s`` to float32, which lerobot's torch transform gives), decodes every image
 feature, and loads once more with ``delta_timestamps`` (the past 2 frames of the tactile field) as a policy
-would. Prints a table and writes benchmarks/results/lerobot_load.json. Exit status 1 when any check fails.
+would. Prints a table and writes docs/results/benchmarks/lerobot_load.json. Exit status 1 when any check fails.
 """
 
 from __future__ import annotations
@@ -100,7 +100,7 @@ def markdown(report: dict[str, Any]) -> str:
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("datasets", nargs="+", help="dataset folders written by `tactile-manip export --format lerobot`")
-    parser.add_argument("--out", default="benchmarks/results/lerobot_load.json", help="JSON report")
+    parser.add_argument("--out", default="docs/results/benchmarks/lerobot_load.json", help="JSON report")
     args = parser.parse_args()
     import lerobot
 

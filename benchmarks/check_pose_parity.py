@@ -8,7 +8,7 @@ Reconstructs every test-split reading (unseen objects) with the model, then runs
 the full-image float64 :func:`~tactile_manip.evaluation.pose_reference.reference_angle_from_image` on each
 image, interleaved, and prints per path the largest differences (angle in degrees, confidence, centroid, area),
 the number of images whose defined flag or reason differ, and the post-processing time (p50 / p99, one thread). Writes
-benchmarks/results/pose_parity.json. The acceptance bar is a largest angle difference of
+docs/results/benchmarks/pose_parity.json. The acceptance bar is a largest angle difference of
 0.05 deg with no flag changed; the script reports, it does not assert.
 """
 
@@ -108,7 +108,7 @@ def main() -> None:
     parser.add_argument("--model", default="experiments/model_variants/supermag_fast.onnx")
     parser.add_argument("--data", default="data/supermag.npz")
     parser.add_argument("--split", default="test")
-    parser.add_argument("--out", default="benchmarks/results/pose_parity.json")
+    parser.add_argument("--out", default="docs/results/benchmarks/pose_parity.json")
     args = parser.parse_args()
     data = load_dataset(args.data)
     rec = load_reconstructor(args.model, threads=1)

@@ -18,7 +18,7 @@ Two measurements on a simulated contact dataset (``configs/dataset/contact_*.tom
   estimates the spread of force among presses that give the same reading, an irreducible error that no
   estimator from that reading can go under (an estimate, since "nearly identical" is not identical).
 
-Prints markdown and writes benchmarks/results/contact_force_information.json; asserts nothing.
+Prints markdown and writes docs/results/benchmarks/contact_force_information.json; asserts nothing.
 """
 
 from __future__ import annotations
@@ -110,7 +110,7 @@ def markdown(report: dict[str, Any]) -> str:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--data", required=True, help="a simulated contact dataset (.npz) with force_n and depth_mm")
-    parser.add_argument("--out", default="benchmarks/results/contact_force_information.json")
+    parser.add_argument("--out", default="docs/results/benchmarks/contact_force_information.json")
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args(argv)
 

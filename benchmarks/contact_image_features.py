@@ -8,7 +8,7 @@ The same network (3 x 256 GELU, dropout 0.1, AdamW, cosine decay, mean-squared e
 split of the datasets given: on the reading (the 48 field values and each chip's log norm), and on the reading
 plus the pose model's reconstruction pooled to 20 x 20 cells (each cell the mean depth of 10 x 10 pixels, 1 mm
 on the SuperMag pad). Both are tested on the first dataset's test split. Prints markdown and writes
-benchmarks/results/contact_image_features.json; asserts nothing; about five minutes on one core.
+docs/results/benchmarks/contact_image_features.json; asserts nothing; about five minutes on one core.
 """
 
 from __future__ import annotations
@@ -99,7 +99,7 @@ def main() -> None:
     parser.add_argument("--data", nargs="+", required=True, help="labelled datasets; the first one's test split")
     parser.add_argument("--pose", default="models/supermag.onnx", help="the image model")
     parser.add_argument("--epochs", type=int, default=150)
-    parser.add_argument("--out", default="benchmarks/results/contact_image_features.json")
+    parser.add_argument("--out", default="docs/results/benchmarks/contact_image_features.json")
     args = parser.parse_args()
     publish(compute(args), args.out, markdown)
 

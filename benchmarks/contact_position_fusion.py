@@ -14,7 +14,7 @@ smallest area), else the model's position stands; the presses are those labelled
 per-press weights from the contact model's sigma (``sigma^2 / (sigma^2 + s^2)``, the image's error ``s`` chosen
 on the validation split as well).
 
-Prints markdown and writes benchmarks/results/contact_position_fusion.json; asserts nothing.
+Prints markdown and writes docs/results/benchmarks/contact_position_fusion.json; asserts nothing.
 """
 
 from __future__ import annotations
@@ -132,7 +132,7 @@ def main() -> None:
     parser.add_argument("--contact", default="models/contact_supermag.onnx")
     parser.add_argument("--weights", default="0,0.1,0.2,0.3,0.4,0.5,0.6,0.7,0.8,0.9,1",
                         help="image shares to compare, comma-separated")
-    parser.add_argument("--out", default="benchmarks/results/contact_position_fusion.json")
+    parser.add_argument("--out", default="docs/results/benchmarks/contact_position_fusion.json")
     args = parser.parse_args()
     publish(compute(args), args.out, markdown)
 

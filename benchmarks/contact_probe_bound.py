@@ -19,7 +19,7 @@ nominal sensor, 2-15 N):
   once with the centre of pressure as the position target, once with the centroid of the contact patch
   (the extra ``contact_centroid_mm``, where the dataset has it).
 
-Prints markdown and writes benchmarks/results/contact_probe_bound.json; asserts nothing.
+Prints markdown and writes docs/results/benchmarks/contact_probe_bound.json; asserts nothing.
 """
 
 from __future__ import annotations
@@ -129,7 +129,7 @@ def main(argv: list[str] | None = None) -> int:
                         help="the dataset config whose probe, sensor and pose ranges the bound uses")
     parser.add_argument("--bound-presses", type=int, default=40, help="poses of the bound (0: skip it)")
     parser.add_argument("--epochs", type=int, default=400, help="epochs of the plain MLP")
-    parser.add_argument("--out", default="benchmarks/results/contact_probe_bound.json")
+    parser.add_argument("--out", default="docs/results/benchmarks/contact_probe_bound.json")
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args(argv)
 

@@ -9,7 +9,7 @@ quantile of |error| / sigma of the validation presses predicted in that band), a
 within 1 and 2 sigma is compared per band of the *true* force (as ``tactile-manip evaluate`` reports it),
 before and after. Nothing is fitted on the test split.
 
-Prints markdown and writes benchmarks/results/contact_sigma_bands.json; asserts nothing.
+Prints markdown and writes docs/results/benchmarks/contact_sigma_bands.json; asserts nothing.
 """
 
 from __future__ import annotations
@@ -66,7 +66,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--data", required=True, help="a dataset with force_n targets and val and test splits")
     parser.add_argument("--model", required=True, help="an exported single-frame contact model (.onnx)")
     parser.add_argument("--edges", default="5,10", help="edges of the predicted-force bands, N")
-    parser.add_argument("--out", default="benchmarks/results/contact_sigma_bands.json")
+    parser.add_argument("--out", default="docs/results/benchmarks/contact_sigma_bands.json")
     args = parser.parse_args(argv)
 
     data, est = load_dataset(args.data), ContactEstimator(args.model)

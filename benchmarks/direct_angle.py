@@ -17,7 +17,7 @@ sensor's dihedral symmetries drawn at random (a quarter turn adds 90 deg, a mirr
 Tested on the unseen rods against their true yaw: the 600 of data/robust.npz (2-15 N, drawn sensors) per
 force band, and the 240 of data/supermag.npz (10-11 N, nominal sensor), beside the image route with
 ``--model`` on the same presses and the paper's PCA on the true (VBTS) depth image: what the image route
-would reach with a perfect reconstruction. Prints markdown, writes benchmarks/results/direct_angle.json.
+would reach with a perfect reconstruction. Prints markdown, writes docs/results/benchmarks/direct_angle.json.
 """
 
 from __future__ import annotations
@@ -138,7 +138,7 @@ def main() -> None:
                         help="the image route to compare with")
     parser.add_argument("--epochs", type=int, default=300)
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--out", default="benchmarks/results/direct_angle.json")
+    parser.add_argument("--out", default="docs/results/benchmarks/direct_angle.json")
     args = parser.parse_args()
     robust, paper = load_dataset("data/robust.npz"), load_dataset("data/supermag.npz")
     parts = [labelled(d, "train") for d in (paper, robust)]

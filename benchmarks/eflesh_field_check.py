@@ -12,7 +12,7 @@ components follow from the magnets' place in the board file; x and y depend on p
 magnets and chips and are listed only. Then one force-controlled press (a 6 mm sphere, 3 N, at the centre) is
 timed: the median of ``--presses`` presses after one warm-up (which fills the kernel caches).
 
-Prints markdown and writes benchmarks/results/eflesh_field_check.json; asserts nothing.
+Prints markdown and writes docs/results/benchmarks/eflesh_field_check.json; asserts nothing.
 """
 
 from __future__ import annotations
@@ -78,7 +78,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--data", type=Path, default=DEFAULT_DATA,
                         help="folder of the eFlesh runs (each a folder with sensor.csv)")
     parser.add_argument("--presses", type=int, default=20, help="presses timed")
-    parser.add_argument("--out", default="benchmarks/results/eflesh_field_check.json")
+    parser.add_argument("--out", default="docs/results/benchmarks/eflesh_field_check.json")
     args = parser.parse_args(argv)
 
     runs = sorted(p for p in args.data.glob("*") if (p / "sensor.csv").is_file())
