@@ -60,7 +60,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
                   "calibrate a model's confidence to the chance its angle is within tolerance"),
     "score": ("tactile_manip.commands.score", "re-score a saved trial run at another tolerance, without re-running"),
     "collect": ("tactile_manip.commands.collect",
-                "collect training data from real sensors: calibrate the VBTS, record paired presses"),
+                "collect paired training data: calibrate the VBTS, record paired presses (real sensors, or --sim)"),
     "bench": ("tactile_manip.commands.bench", "measure speed against error of every method and runtime here"),
 }
 

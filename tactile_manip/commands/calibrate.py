@@ -28,7 +28,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="split of --fit to use (default test: configs/dataset/calibration.toml puts its rods there)")
     p.add_argument("--report", required=True, metavar="DATA",
                    help="paired dataset whose rod presses check the calibration (other presses than --fit's)")
-    p.add_argument("--report-split", default="test", choices=("train", "val", "test"))
+    p.add_argument("--report-split", default="test", choices=("train", "val", "test"),
+                   help="the split of --report whose presses check the fitted calibration (default test)")
     p.add_argument("--tolerance-deg", type=float, default=5.0, help="the error the probability is about (default 5)")
     p.add_argument("--samples", type=int, default=1,
                    help="ONNX models: prior samples per reading, as the estimator will run (default 1: one pass)")

@@ -27,8 +27,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=int, default=0, help="seed of the chip noise and the faults")
     p.add_argument("--temperature", action="store_true", help="also send chip temperatures (flags bit 0)")
     p.add_argument("--wire-format", choices=("supermag", "anyskin"), default=None,
-                   help="the bytes: our frames (the default) or the ReSkin/AnySkin binary sketch's (float32 per chip, "
-                        "CRLF); default: the board's")
+                   help="the bytes: our frames (supermag) or the ReSkin/AnySkin binary sketch's (anyskin: float32 per "
+                        "chip, CRLF); default: the wire format the board names (our frames when no --board)")
     p.add_argument("--board", "--layout", dest="layout", default="", metavar="NAME|FILE",
                    help="the board whose chips the frames carry (anyskin-5, eflesh, or a board file of that wire "
                         "format), read at its chips' places from the simulated pad; default: the wire format's own")

@@ -23,14 +23,17 @@ REPORT_FILES = ("table.md", "results.json", "gallery.png")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--data", required=True, help="paired dataset .npz (its test split is evaluated)")
+    p.add_argument("--data", required=True,
+                   help="dataset .npz whose test split is evaluated: readings paired with depth images (image models), "
+                        "or labelled presses (contact models; tactile-manip import)")
     p.add_argument("--model", action="append", default=[], metavar="LABEL=PATH",
                    help="an exported model, e.g. 'SuperMag=models/supermag.onnx' (repeatable)")
     p.add_argument("--symmetrized", action="append", default=[], metavar="LABEL=PATH",
                    help="an exported model averaged over the sensor's 8 symmetries (SymmetrizedReconstructor)")
     p.add_argument("--out", required=True, help="folder for table.md, results.json and gallery.png")
     p.add_argument("--force", action="store_true", help="replace the report files of an earlier evaluation in --out")
-    p.add_argument("--split", default="test", choices=("train", "val", "test"))
+    p.add_argument("--split", default="test", choices=("train", "val", "test"),
+                   help="the split of --data to score (default test; the others were trained or tuned on)")
     p.add_argument("--inception-onnx", default=None,
                    help="Inception-v3 pool features as ONNX ((N,3,299,299) -> (N,2048)) to report a real FID")
     p.add_argument("--threads", type=int, default=1, help="onnxruntime threads per model (default 1)")

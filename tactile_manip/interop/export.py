@@ -30,6 +30,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from tactile_manip.extras import require
 from tactile_manip.interop.sources import Source, read_source
 from tactile_manip.outputs import OutputPathError, check_apart, check_writable_parent, fsync_dir
 
@@ -39,6 +40,8 @@ WRITERS: dict[str, str] = {
     "rrd": "tactile_manip.interop.rerun_export:write_rrd",
     "mcap": "tactile_manip.interop.mcap_export:write_mcap",
 }
+# the optional packages each writer needs, checked before anything is read (each names its extra when missing)
+WRITER_PACKAGES: dict[str, tuple[str, ...]] = {"lerobot": ("pyarrow", "pandas"), "rrd": ("rerun",), "mcap": ("mcap",)}
 
 
 @dataclass
@@ -66,6 +69,8 @@ def load_writer(fmt: str) -> Callable[..., dict]:
         if e.name != module_name:  # the writer exists but a package it needs does not: the extra's message
             raise
         raise ValueError(f"--format {fmt}: this installation has no {fmt} writer ({module_name} is missing)") from None
+    for package in WRITER_PACKAGES.get(fmt, ()):
+        require(package, f"export --format {fmt}")
     return getattr(module, func_name)
 
 

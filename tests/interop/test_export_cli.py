@@ -91,6 +91,19 @@ def test_a_format_whose_writer_is_missing_gives_one_line_and_writes_nothing(reco
     assert list(tmp_path.iterdir()) == []
 
 
+def test_a_writer_whose_extra_is_missing_names_it_before_reading_the_source(recording, tmp_path, capsys,
+                                                                          monkeypatch) -> None:
+    import sys
+
+    monkeypatch.setitem(sys.modules, "mcap", None)  # as if not installed: importing it raises ImportError
+    assert main(["export", str(recording), "--format", "mcap", "--out", str(tmp_path / "x.mcap")]) == 2
+    captured = capsys.readouterr()
+    assert "read " not in captured.out  # nothing was read before the refusal
+    err = captured.err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("tactile-manip export: error: ") and ".[mcap]" in err[0], err
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_depth_from_a_model_becomes_an_image_feature(recording, tmp_path) -> None:
     out = tmp_path / "DS"
     assert main(["export", str(recording), "--format", "lerobot", "--out", str(out), "--depth", "bilinear"]) == 0

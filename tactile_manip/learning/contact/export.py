@@ -130,8 +130,9 @@ def contact_metadata(model: ContactModel, payload: dict[str, Any], metrics: dict
 
 
 def check_contact_parity(model: ContactModel, path: Path, windows: np.ndarray | None = None) -> float:
-    """Max |ONNX - torch| over real and random windows, relative to the target spreads; raises above tolerance
-    (and removes ``path``)."""
+    """Max |ONNX - torch| over real and random windows, relative to the target spreads, or to the output itself
+    where it is larger (the rounding of float32 grows with the value: an undertrained model's sigma on random
+    windows may be hundreds of spreads); raises above tolerance (and removes ``path``)."""
     import onnxruntime as ort
 
     cfg = model.cfg
@@ -147,8 +148,8 @@ def check_contact_parity(model: ContactModel, path: Path, windows: np.ndarray | 
             ref = [t.numpy() for t in model(torch.from_numpy(w))]
         got = session.run(None, {"field_ut": w})
         got_one = [np.concatenate(o) for o in zip(*(session.run(None, {"field_ut": w[i:i + 1]}) for i in range(3)))]
-        worst = max(worst, *(float(np.max(np.abs(a - b) / scale)) for a, b in zip(ref, got)),
-                    *(float(np.max(np.abs(a[:3] - b) / scale)) for a, b in zip(ref, got_one)))
+        worst = max(worst, *(float(np.max(np.abs(a - b) / np.maximum(scale, np.abs(a)))) for a, b in zip(ref, got)),
+                    *(float(np.max(np.abs(a[:3] - b) / np.maximum(scale, np.abs(a[:3])))) for a, b in zip(ref, got_one)))
     if not worst <= PARITY_TOLERANCE:
         path.unlink(missing_ok=True)
         raise ExportError(f"ONNX output differs from torch by {worst:.3g} target spreads (> {PARITY_TOLERANCE}); "
