@@ -280,12 +280,15 @@ def headline(root: Path, doc: str) -> list[str]:
         [f"depth image of {presses} unseen test presses: PSNR / SSIM", f"{sm['psnr_db_mean']:.2f} dB / "
          f"{sm['ssim_mean']:.3f}", f"{bl['psnr_db_mean']:.2f} dB / {bl['ssim_mean']:.3f}",
          _link("Table I", TABLE1_DEFAULT.replace("results.json", "table.md"), doc)],
-        [f"rod angle within 2 deg, one reading: {nominal['presses']} unseen rod presses, nominal sensor, 10-11 N",
+        [f"rod angle within 2 deg, one reading (SuperMag: its angle head): {nominal['presses']} unseen rod presses, "
+         "nominal sensor, 10-11 N",
          _pct(nominal["within_2"]), _pct(bl_nominal["within_2_deg"]),
          _link("ablation", ABLATIONS["data/supermag.npz"].replace(".json", ".md"), doc)],
-        [f"rod angle within 5 deg, one reading: {head['presses']} unseen rod presses, 2-15 N, drawn sensors "
+        [f"rod angle within 5 deg, one reading (SuperMag: its angle head): {head['presses']} unseen rod presses, "
+         "2-15 N, drawn sensors "
          f"(bound {_pct(bound['all'])})", _pct(head["within_5"]), _pct(bl_single["within_5_deg"]), ablation],
-        [f"main job: {main['supermag'].n} reorientations within 5 deg (6 unseen rods, 10-11 N)",
+        [f"main job: {main['supermag'].n} reorientations within 5 deg (6 unseen rods, 10-11 N; SuperMag: the angle "
+         "head)",
          trials(main["supermag"]), trials(main["bilinear"]), runs],
         ["main job, the paper's own route on the default model (image, outliers removed, Gaussian filter, PCA)",
          trials(main["paper_route"]), trials(main["bilinear"]), runs],
