@@ -35,6 +35,7 @@ from tactile_manip.perception.onnx_session import session_options
 from tactile_manip.extras import require
 
 METADATA_KEY = "tactile_manip"
+SYMMETRY_CHUNK = 64  # readings per batch of symmetric copies (4 or 8 images each)
 SUPPORTED_FORMAT = 1
 # (3,) uT: the MLX90393's full scale per axis (x, y, z) at ReSkin's settings; no reading can exceed it
 READING_LIMIT_UT = full_scale_ut(MLX90393)
@@ -172,9 +173,9 @@ class OnnxReconstructor(Reconstructor):
         image_symmetry: what each image is averaged over (None: what the file says, ``"none"`` for files that
             say nothing): ``"rotations"`` decodes the reading in its 4 quarter turns and averages the turned-back
             images (exactly equivariant under the turns, sharper on unseen shapes: +0.41 dB PSNR for the default
-            model's decoder on the unseen presses of ``data/supermag.npz``, 25.16 against 24.75 dB), ``"all"`` in its 8
-            symmetric copies, ``"none"`` once. Each copy is a decoder pass: 4 or 8 times the image's cost, which
-            only callers of the image pay (the angle head reads the reading, not the image).
+            model's decoder on the unseen presses of ``data/supermag.npz``, 25.16 against 24.75 dB), ``"all"``
+            in its 8 symmetric copies, ``"none"`` once. Each copy is a decoder pass: 4 or 8 times the image's
+            cost, which only callers of the image pay (the angle head reads the reading, not the image).
     """
 
     def __init__(self, path: str | Path, *, threads: int = 1, providers: tuple[str, ...] = ("CPUExecutionProvider",),
@@ -265,9 +266,12 @@ class OnnxReconstructor(Reconstructor):
             raise ModelFileError(f"{self.path}: the model produced non-finite output; the file may be corrupt")
 
     def _run(self, fields_ut: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
-        if len(self._image_group) > 1:
-            return average_images(self._run_once, fields_ut, self._image_group)
-        return self._run_once(fields_ut)
+        if len(self._image_group) == 1:
+            return self._run_once(fields_ut)
+        parts = [average_images(self._run_once, fields_ut[i:i + SYMMETRY_CHUNK], self._image_group)
+                 for i in range(0, len(fields_ut), SYMMETRY_CHUNK)]  # bounds the memory of the copies' batch
+        spread = None if parts[0][1] is None else np.concatenate([p[1] for p in parts])
+        return (parts[0][0] if len(parts) == 1 else np.concatenate([p[0] for p in parts])), spread
 
     def _run_once(self, fields_ut: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
         n = len(fields_ut)

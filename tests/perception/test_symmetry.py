@@ -180,3 +180,14 @@ def test_an_unknown_image_symmetry_is_refused(onnx_4x4, tmp_path) -> None:
     onnx.save(proto, str(tmp_path / "edited.onnx"))
     with pytest.raises(ModelFileError, match="metadata field image_symmetry is 'twice', not one of none, rotations"):
         OnnxReconstructor(tmp_path / "edited.onnx")
+
+
+def test_a_large_batch_of_turned_copies_runs_in_chunks_with_the_same_images(onnx_4x4) -> None:
+    from tactile_manip.perception.reconstruct import SYMMETRY_CHUNK, OnnxReconstructor
+
+    turns = OnnxReconstructor(onnx_4x4.path, image_symmetry="rotations")
+    fields = np.random.default_rng(1).normal(0, 80, (SYMMETRY_CHUNK + 6, 4, 4, 3))
+    batch = turns.reconstruct_batch(fields)
+    assert batch.shape == (len(fields), *turns.output_shape)
+    for i in (0, SYMMETRY_CHUNK - 1, SYMMETRY_CHUNK, len(fields) - 1):
+        assert np.abs(batch[i] - turns.reconstruct(fields[i]).depth_mm).max() < 1e-5
