@@ -132,7 +132,9 @@ def bound_shares(info: dict[str, Any], bound: str = "pose_sensor") -> dict[str, 
     overall and per band, from the JSON of ``benchmarks.angle_information``."""
     rows = info["bounds"]["one frame"]
     pick = {k: v[f"{bound}_within_5"] for k, v in rows.items()}
-    return {"all": pick.get("all"), "by_force": {k: v for k, v in pick.items() if k.endswith(" N")}}
+    return {"all": pick.get("all"), "by_force": {k: v for k, v in pick.items() if k.endswith(" N")},
+            "by_object": {k: v for k, v in pick.items()  # reports made since the bound has rows per object
+                          if k != "all" and not k.endswith(" N") and not k.startswith("chip noise")}}
 
 
 def _share(x: float | None) -> str:
@@ -157,6 +159,11 @@ def markdown(report: dict[str, Any]) -> str:
     objects = sorted({o for r in report["results"].values() for o in r["by_object"]})
     lines += ["", "Within 5 deg per object:", "", "| route | " + " | ".join(objects) + " |",
               "|---" * (1 + len(objects)) + "|"]
+    for key, name in (("bound", "Cramer-Rao bound (pose and sensor unknown)"),
+                      ("bound_shape", "Cramer-Rao bound (rod dimensions unknown too)")):
+        if report.get(key, {}).get("by_object"):
+            lines.append(f"| {name} | " + " | ".join(f"{report[key]['by_object'].get(o, math.nan):.0%}"
+                                                     for o in objects) + " |")
     for name, r in report["results"].items():
         lines.append(f"| {name} | " + " | ".join(f"{r['by_object'].get(o, math.nan):.0%}" for o in objects) + " |")
     rel = [(n, r["reliability"]) for n, r in report["results"].items() if r.get("reliability")]

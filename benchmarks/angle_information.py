@@ -28,7 +28,7 @@ would reach is the mean over presses of erf(tol / (sqrt(2) sigma)). Where the si
 loose (estimators there have threshold effects, e.g. a 90 deg ambiguity, that the local bound does not see),
 so these shares are upper bounds on what any method can do from such readings, not predictions. Reported for
 one frame as the dataset records it (drift included), four frames averaged, and one frame after a tare (drift
-removed); per force band and per tercile of the drawn chip noise. Prints markdown and writes
+removed); per force band, per tercile of the drawn chip noise and per object. Prints markdown and writes
 docs/results/benchmarks/angle_information.json; asserts nothing.
 """
 
@@ -197,6 +197,9 @@ def summarise(infos: list[dict[str, Any]]) -> dict[str, Any]:
         groups |= {"chip noise low third": noise <= terciles[0],
                    "chip noise mid third": (noise > terciles[0]) & (noise <= terciles[1]),
                    "chip noise high third": noise > terciles[1]}
+    labels = np.array([i["label"] for i in infos])
+    if len(set(labels)) > 1:
+        groups |= {str(name): labels == name for name in sorted(set(labels))}
     out: dict[str, Any] = {}
     for case, (frames, drift) in CASES.items():
         sig = np.array([bounds_deg(i, frames, drift) for i in infos])

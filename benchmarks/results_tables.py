@@ -37,6 +37,7 @@ BENCH = "experiments/speed_reports/bench_2026-11-25_one_reading/report.json"  # 
 BENCH_DEFAULT = "docs/results/bench_2026-11-28_default/report.json"  # tactile-manip bench of the default model
 ABLATIONS = {"data/robust.npz": "docs/results/angle_head/ablation_robust.json",  # python -m benchmarks.angle_ablation
              "data/rods_test.npz": "docs/results/angle_head/ablation_rods_test.json",
+             "data/rods_hard.npz": "docs/results/angle_head/ablation_rods_hard.json",
              "data/supermag.npz": "docs/results/angle_head/ablation_supermag.json"}
 SINGLE_FRAMES = ("experiments/robust_training/fast_vs_compact/single_frame.json",  # evaluate on data/robust.npz
                  "experiments/robust_training/robust_b48/single_frame.json")

@@ -1,0 +1,53 @@
+"""The angle bound's and the angle ablation's report parts: shares per force band and per object."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from benchmarks.angle_ablation import bound_shares, markdown
+from benchmarks.angle_information import POSE_NUISANCES, SENSOR_NUISANCES, summarise
+
+
+def _info(label: str, force_n: float, angle_gain: float, rng: np.random.Generator) -> dict:
+    """One press whose reading moves with the angle by ``angle_gain`` and with each nuisance at random."""
+    jac = rng.normal(size=(48, 1 + len(POSE_NUISANCES) + len(SENSOR_NUISANCES)))
+    jac[:, 0] *= angle_gain
+    return {"label": label, "force_n": force_n, "jacobian": jac.tolist(), "white_var": [1.0] * 48,
+            "drift_var": 0.5, "noise_xy_ut": float(rng.uniform(1, 10)), "saturated": [False] * 48}
+
+
+def test_the_bound_has_a_row_per_object_only_where_there_are_several() -> None:
+    rng = np.random.default_rng(0)
+    # the flat bar's angle moves the reading a hundredth as much: its share within 5 deg must be the smaller
+    infos = ([_info("cylinder_3mm", 3.0 + i, 1.0, rng) for i in range(6)]
+             + [_info("flat_bar_7x2mm", 3.0 + i, 0.01, rng) for i in range(4)])
+    rows = summarise(infos)["one frame"]
+    assert rows["cylinder_3mm"]["presses"] == 6 and rows["flat_bar_7x2mm"]["presses"] == 4
+    assert rows["flat_bar_7x2mm"]["pose_sensor_within_5"] < rows["cylinder_3mm"]["pose_sensor_within_5"]
+    # the whole is the presses' mean of its objects
+    whole = (6 * rows["cylinder_3mm"]["pose_within_5"] + 4 * rows["flat_bar_7x2mm"]["pose_within_5"]) / 10
+    assert math.isclose(rows["all"]["pose_within_5"], whole, rel_tol=1e-12)
+    single = summarise([_info("cylinder_3mm", 3.0 + i, 1.0, rng) for i in range(3)])["one frame"]
+    assert "cylinder_3mm" not in single and set(single) >= {"all", "2-5 N"}
+
+
+def test_the_ablation_lists_the_bound_per_object_beside_each_route() -> None:
+    bound = {"bounds": {"one frame": {
+        "all": {"pose_sensor_within_5": 0.9}, "2-5 N": {"pose_sensor_within_5": 0.8},
+        "chip noise low third": {"pose_sensor_within_5": 0.95},
+        "cylinder_3mm": {"pose_sensor_within_5": 0.99}, "flat_bar_7x2mm": {"pose_sensor_within_5": 0.87}}}}
+    shares = bound_shares(bound)
+    assert shares["by_force"] == {"2-5 N": 0.8}
+    assert shares["by_object"] == {"cylinder_3mm": 0.99, "flat_bar_7x2mm": 0.87}  # not the noise terciles
+    route = {"within_5": 0.92, "within_2": 0.8, "median_deg": 0.7, "by_force": {"2-5 N": 0.75},
+             "by_object": {"cylinder_3mm": 0.99, "flat_bar_7x2mm": 0.82}, "reliability": []}
+    text = markdown({"presses": 10, "data": "d.npz", "results": {"default: head": route}, "bound": shares})
+    objects = text.split("Within 5 deg per object:")[1]
+    assert "| Cramer-Rao bound (pose and sensor unknown) | 99% | 87% |" in objects
+    assert "| default: head | 99% | 82% |" in objects
+    # an older bound report has no rows per object: the table then lists the routes alone
+    old = markdown({"presses": 10, "data": "d.npz", "results": {"default: head": route},
+                    "bound": {"all": 0.9, "by_force": {"2-5 N": 0.8}}})
+    assert "Cramer-Rao" not in old.split("Within 5 deg per object:")[1]
