@@ -266,7 +266,7 @@ def plot(report: dict[str, Any], compare: list[str], path: str) -> None:
             if all(b in force for b in bands):
                 series[res["method"]] = [force[b]["angle_within_5_deg"] for b in bands]
     plt = _pyplot()
-    fig, ax = plt.subplots(figsize=(9, 4.8), constrained_layout=True)
+    fig, ax = plt.subplots(figsize=(10, 4.8 + 0.25 * len(series)), constrained_layout=True)
     width = 0.8 / len(series)
     for k, (name, values) in enumerate(series.items()):
         hatch = "//" if name.startswith("bound") else None
@@ -277,7 +277,7 @@ def plot(report: dict[str, Any], compare: list[str], path: str) -> None:
     ax.set_ylabel("unseen bars within 5 deg [%]")
     ax.set_ylim(0, 102)
     ax.set_title(f"One reading: the Cramer-Rao bound against the methods ({report['source']})", fontsize=10)
-    ax.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.1), ncols=3)
+    ax.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.1), ncols=2)  # long names: two columns fit
     fig.savefig(path, dpi=100)
     plt.close(fig)
     print(f"wrote {path}")
