@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from pathlib import Path
 
@@ -9,6 +10,7 @@ import numpy as np
 import pytest
 
 from tactile_manip.behaviours.reorient import grasp_estimate_reorient
+from tactile_manip.shipped import shipped_model
 from tactile_manip.trials.runner import SimulatedCell, build_estimators, draw_presentation
 from tactile_manip.trials.scene import MethodSpec, PresentationConfig, TrialObject, TrialScene
 
@@ -91,7 +93,10 @@ def test_a_tactile_estimator_gives_both_the_angle_and_the_grip_force(cell) -> No
     from tactile_manip.perception.contact import ContactEstimator
     from tactile_manip.perception.contact_pose import TactileEstimator
 
-    both = TactileEstimator(build_estimators(cell.scene)["bilinear"], ContactEstimator(CONTACT_MODEL))
+    # the default model's pose: the 16x16 bilinear image of a 3 mm rod is at times too small to give an axis,
+    # and whether it is depends on the chip noise of the frames read
+    scene = dataclasses.replace(cell.scene, methods=[MethodSpec("supermag", str(shipped_model()))])
+    both = TactileEstimator(build_estimators(scene)["supermag"], ContactEstimator(CONTACT_MODEL))
     with cell.presented(draw_presentation(cell.scene, 0)) as (obj, truth):
         result = grasp_estimate_reorient(cell.arm, cell.gripper, cell.sensor, both, object_width_m=obj.width_m,
                                          target_angle_rad=0.0, truth=truth)
