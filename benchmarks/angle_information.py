@@ -8,13 +8,14 @@
 
 Each unseen-rod press of the dataset's test split is rebuilt from what the dataset recorded (its drawn sensor
 from the ``sensor_params`` extra, or the nominal sensor; its pose; its force; the rod), and the noise-free
-reading (the chips' expected values, misalignment included) is differentiated by central differences with
-respect to the rod's in-plane angle and the nuisances a real estimator does not know: the rod's x and y
-offsets, the force and the two tilts, and the drawn sensor's magnet remanence, chip gap and skin modulus. The
-chips' Gaussian noise (the drawn sigma_xy and sigma_z, plus the quantisation step's variance, plus the
-per-press drift as more noise unless the baseline is tared just before the press) makes a reading Gaussian
-about that value, so the Fisher information J of its 48 channels bounds the standard
-deviation of any unbiased angle estimate:
+reading as the dataset records it (the chips' expected values, misalignment included, less that sensor's own
+unloaded reading, so that a sensor parameter moves it only through the press) is differentiated by central
+differences with respect to the rod's in-plane angle and the nuisances a real estimator does not know: the
+rod's x and y offsets, the force and the two tilts, and the drawn sensor's magnet remanence, chip gap and skin
+modulus. The chips' Gaussian noise (the drawn sigma_xy and sigma_z, plus the quantisation step's variance,
+plus the per-press drift as more noise unless the baseline is tared just before the press) makes a reading
+Gaussian about that value, so the Fisher information J of its 48 channels bounds the standard deviation of any
+unbiased angle estimate:
 
 - ``oracle``: everything but the angle known: sigma >= 1 / sqrt(J_aa), the most optimistic bound;
 - ``pose``: the offsets, force and tilts unknown as well: sigma >= sqrt([J^-1]_aa) over those parameters;
@@ -100,11 +101,10 @@ def _information(job: dict[str, Any]) -> dict[str, Any]:
     rod = make_indenter(job["kind"], **job["kwargs"])
     sizes = shape_sizes(job["kind"], job["kwargs"])
     pose0, force = np.asarray(job["pose"], float), job["force_n"]
-    rng = np.random.default_rng(0)  # the noise draw is not used: only the noise-free field change
 
     def reading(pose: np.ndarray, scale: float = 1.0, pair: SensorPair = nominal, shape: Any = rod) -> np.ndarray:
-        s = pair.press(shape, IndenterPose(*pose), force * scale, rng, render_depth=False)
-        return pair.chips.expected_ut(pair.baseline_field_ut + s.field_change_ut).ravel()
+        # as recorded: less the sensor's own unloaded reading, so a sensor parameter moves it only through the press
+        return pair.expected_reading_ut(shape, IndenterPose(*pose), force * scale).ravel()
 
     def along_pose(k: int, step: float) -> np.ndarray:
         e = np.zeros(5)

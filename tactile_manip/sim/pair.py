@@ -128,6 +128,27 @@ class SensorPair:
         force = check_finite_scalar("force_n", force_n, low=0.0, low_open=True)
         return self._sample(indenter, pose, force, rng, self.chips.draw_drift(rng), render_depth, 0.0)
 
+    def expected_reading_ut(self, indenter: Indenter, pose: IndenterPose, force_n: float) -> np.ndarray:
+        """The magnetic reading of a press as a dataset records it, without drift, noise or quantisation.
+
+        Returns:
+            (4, 4, 3) float64 uT: the chips' expected values less this sensor's own unloaded reading, what
+            :meth:`press` returns as ``field_clean_ut``. Only the skin's contact is solved (no gel, no image), so
+            it costs about half a press: for derivatives and fits of the physics. An object off the pad gives 0.
+
+        Raises:
+            ValueError: ``force_n`` not finite and > 0.
+            SimulationError: the contact solve did not converge.
+        """
+        force = check_finite_scalar("force_n", force_n, low=0.0, low_open=True)
+        x, y, _ = self._contact_xy
+        protrusion = indenter.protrusion_mm(x, y, pose)
+        change_ut = np.zeros((4, 4, 3))
+        if np.isfinite(protrusion).any():  # a force-controlled solve: the gaps' datum does not matter
+            skin = self._solve(np.nanmax(protrusion) - protrusion, force, self.params.layer.skin_modulus_kpa)
+            change_ut = self.skin.field_change_t(skin.pressure_mpa, skin.pixel_mm) * 1e6
+        return self.chips.expected_ut(self.baseline_field_ut + change_ut) - self.baseline_ut
+
     def ramp(self, indenter: Indenter, pose: IndenterPose, forces_n: np.ndarray, rng: np.random.Generator, *,
              render_depth: bool = False) -> list[PairedSample]:
         """A press as a sequence at the chip rate (125 Hz): one sample per entry of ``forces_n``.

@@ -105,3 +105,31 @@ def test_fresh_draws_read_the_clean_field_through_new_chips_and_tared_ones_witho
     # with drift the draws differ (the drift is drawn afresh), and the mean lies within their range
     assert seen[0].drift_ut.min() > 0
     assert drifting["within_5_range"][0] <= drifting["within_5"] <= drifting["within_5_range"][1]
+
+
+def test_the_bound_differentiates_the_reading_as_recorded_less_the_sensors_own_baseline() -> None:
+    # a recorded reading is the field less the drawn sensor's own unloaded reading, so a sensor parameter moves
+    # it only through the press. Differentiating the absolute field instead would let the bound read the magnet's
+    # strength and the chip gap off the baseline, which no estimator of a recorded reading sees.
+    from benchmarks.angle_information import _information, shape_sizes
+    from tactile_manip.sim.objects import IndenterPose
+    from tactile_manip.sim.pair import SensorPair
+    from tactile_manip.sim.params import SimParams, with_values
+    from tactile_manip.sim.shapes import make_indenter
+
+    params = {"magnet.remanence_t": 0.04, "magnet.chip_gap_mm": 1.2, "layer.skin_modulus_kpa": 180.0}
+    job = {"index": 0, "label": "hex_bar_4mm", "kind": "hex_bar", "kwargs": {"size_mm": 4.0}, "sensor_seed": 0,
+           "params": params, "pose": [1.0, -0.5, 0.4, 0.0, 0.0], "force_n": 4.0, "saturated": [[[False] * 3] * 4] * 4}
+    jac = np.asarray(_information(job)["jacobian"])
+    assert jac.shape == (48, 1 + len(POSE_NUISANCES) + len(SENSOR_NUISANCES) + len(shape_sizes("hex_bar", {})))
+    # the remanence's column against the recorded clean field of the press on two sensors either side
+    rod, pose = make_indenter("hex_bar", size_mm=4.0), IndenterPose(1.0, -0.5, 0.4)
+    clean = [SensorPair(with_values(SimParams(), params | {"magnet.remanence_t": 0.04 * (1 + s)}), seed=0)
+             .press(rod, pose, 4.0, np.random.default_rng(0), render_depth=False).field_clean_ut.ravel()
+             for s in (0.02, -0.02)]
+    column = jac[:, 1 + len(POSE_NUISANCES) + SENSOR_NUISANCES.index("magnet.remanence_t")]
+    assert np.abs(column).max() > 100  # uT per T: the press moves with the magnet's strength
+    np.testing.assert_allclose(column, (clean[0] - clean[1]) / (0.04 * 0.04), rtol=1e-3, atol=1e-2)
+    # off the pad nothing touches: no parameter moves the recorded reading
+    off = _information(job | {"pose": [60.0, 0.0, 0.4, 0.0, 0.0]})
+    assert np.abs(np.asarray(off["jacobian"])).max() == 0.0

@@ -153,3 +153,20 @@ def test_ramp_is_a_125hz_press_sequence(pair):
     rise = peaks[: int(np.argmax(profile))]
     assert np.all(np.diff(rise) > 0)  # the field grows while the force rises
     assert all(s.depth_mm is None for s in seq)  # no ground truth rendered unless asked
+
+
+@pytest.mark.parametrize("name, pose, force_n", [("hex_bar", IndenterPose(1.0, -0.5, 0.4, 0.03, -0.02), 3.0),
+                                                  ("flat_bar", IndenterPose(-2.0, 1.5, 2.0), 12.0),
+                                                  ("letter_r", CENTRE, 10.0)])
+def test_the_expected_reading_is_the_press_clean_field_without_its_image(name, pose, force_n):
+    params = SimParams(magnet=MagnetParams(remanence_t=0.035))  # not the nominal sensor: its own baseline comes off
+    pair = SensorPair(params, seed=3)
+    rod = make_indenter(name)
+    sample = pair.press(rod, pose, force_n, np.random.default_rng(0), render_depth=False)
+    expected = pair.expected_reading_ut(rod, pose, force_n)
+    assert expected.shape == (4, 4, 3) and expected.dtype == np.float64
+    assert np.abs(expected).max() > 20.0  # a press well above the noise
+    np.testing.assert_allclose(expected, sample.field_clean_ut, rtol=1e-5, atol=1e-3)
+    assert not pair.expected_reading_ut(rod, IndenterPose(40.0, 0.0), force_n).any()  # off the pad
+    with pytest.raises(ValueError, match="force_n"):
+        pair.expected_reading_ut(rod, pose, float("nan"))
