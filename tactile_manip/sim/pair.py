@@ -134,7 +134,8 @@ class SensorPair:
         Returns:
             (4, 4, 3) float64 uT: the chips' expected values less this sensor's own unloaded reading, what
             :meth:`press` returns as ``field_clean_ut``. Only the skin's contact is solved (no gel, no image), so
-            it costs about half a press: for derivatives and fits of the physics. An object off the pad gives 0.
+            it costs about a third of a press: for derivatives and fits of the physics. An object off the pad
+            gives 0.
 
         Raises:
             ValueError: ``force_n`` not finite and > 0.
