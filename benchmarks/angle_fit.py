@@ -214,28 +214,31 @@ def head_angles_deg(model: str, readings: np.ndarray) -> np.ndarray:
     return np.degrees(out)
 
 
-def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
+def groups(rows: list[dict[str, Any]]) -> dict[str, np.ndarray]:
+    """The rows of each reported group (all, each force band, each object) as masks; empty groups left out."""
     force = np.array([r["force_n"] for r in rows])
     labels = np.array([r["label"] for r in rows])
-    groups = {"all": np.ones(len(rows), bool)}
-    groups |= {f"{lo:g}-{hi:g} N": (force >= lo) & (force < hi) for lo, hi in FORCE_BANDS_N}
-    groups |= {str(name): labels == name for name in sorted(set(labels.tolist()))}
+    out = {"all": np.ones(len(rows), bool)}
+    out |= {f"{lo:g}-{hi:g} N": (force >= lo) & (force < hi) for lo, hi in FORCE_BANDS_N}
+    out |= {str(name): labels == name for name in sorted(set(labels.tolist()))}
+    return {name: sel for name, sel in out.items() if sel.any()}
+
+
+def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
     fit = np.array([r["fit_error_deg"] for r in rows])
     head = np.array([r["head_error_deg"] for r in rows])
     short = np.array([r["short"] for r in rows])
     ml = np.array([r["ml_error_deg"] for r in rows]) if rows and all("ml_error_deg" in r for r in rows) else None
     out = {}
-    for name, sel in groups.items():
-        if sel.any():
-            out[name] = {"presses": int(sel.sum()), "fit_within_5": float(np.mean(fit[sel] <= 5)),
-                         "head_within_5": float(np.mean(head[sel] <= 5)),
-                         "fit_median_deg": float(np.median(fit[sel])),
-                         "head_median_deg": float(np.median(head[sel])),
-                         "fit_only": int(np.sum((fit[sel] <= 5) & (head[sel] > 5))),
-                         "head_only": int(np.sum((head[sel] <= 5) & (fit[sel] > 5))),
-                         "short": int(short[sel].sum()), "short_and_missed": int(np.sum(short[sel] & (fit[sel] > 5)))}
-            if ml is not None:
-                out[name]["ml_within_5"] = float(np.mean(ml[sel] <= 5))
+    for name, sel in groups(rows).items():
+        out[name] = {"presses": int(sel.sum()), "fit_within_5": float(np.mean(fit[sel] <= 5)),
+                     "head_within_5": float(np.mean(head[sel] <= 5)),
+                     "fit_median_deg": float(np.median(fit[sel])), "head_median_deg": float(np.median(head[sel])),
+                     "fit_only": int(np.sum((fit[sel] <= 5) & (head[sel] > 5))),
+                     "head_only": int(np.sum((head[sel] <= 5) & (fit[sel] > 5))),
+                     "short": int(short[sel].sum()), "short_and_missed": int(np.sum(short[sel] & (fit[sel] > 5)))}
+        if ml is not None:
+            out[name]["ml_within_5"] = float(np.mean(ml[sel] <= 5))
     return out
 
 
@@ -359,19 +362,8 @@ def _bound_shares(rows: list[dict[str, Any]], sigma_deg: dict[int, float]) -> di
     missing = [r["index"] for r in rows if r["index"] not in sigma_deg]
     if missing:
         raise SystemExit(f"--bound has no press {missing[0]} of these ({len(missing)} missing): another dataset?")
-    sub = [{"label": r["label"], "force_n": r["force_n"], "sigma": sigma_deg[r["index"]]} for r in rows]
-    out = {}
-    for name in summarise([r | {"short": False} for r in rows]):
-        sel = [s for s in sub if name == "all" or s["label"] == name or _in_band(s["force_n"], name)]
-        out[name] = within(np.array([s["sigma"] for s in sel]), 5.0)
-    return out
-
-
-def _in_band(force_n: float, name: str) -> bool:
-    for lo, hi in FORCE_BANDS_N:
-        if name == f"{lo:g}-{hi:g} N":
-            return lo <= force_n < hi
-    return False
+    sigma = np.array([sigma_deg[r["index"]] for r in rows])
+    return {name: within(sigma[sel], 5.0) for name, sel in groups(rows).items()}
 
 
 if __name__ == "__main__":
