@@ -200,8 +200,9 @@ def fit_press(job: dict[str, Any]) -> dict[str, Any]:
 
 def axial_error_deg(a_deg: float, b_deg: float) -> float:
     """|a - b| as axes (modulo 180 deg), in [0, 90]."""
-    d = (a_deg - b_deg) % 180.0
-    return float(min(d, 180.0 - d))
+    from tactile_manip.perception import wrap_axial
+
+    return float(abs(math.degrees(wrap_axial(math.radians(a_deg - b_deg)))))
 
 
 def head_angles_deg(model: str, readings: np.ndarray) -> np.ndarray:
