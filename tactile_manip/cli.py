@@ -135,22 +135,50 @@ class Terminated(KeyboardInterrupt):
 class _SigtermRaises:
     """Inside the ``with`` block, SIGTERM raises :class:`Terminated` where the command is, so its ``finally`` and
     ``except BaseException`` cleanups run; a second SIGTERM during that cleanup ends the process at once. Only the
-    main thread can hold a signal handler: elsewhere this does nothing."""
+    main thread can hold a signal handler: elsewhere this does nothing.
+
+    Python runs a signal handler at the next instruction of the main thread, which may be inside a weakref
+    callback, a ``__del__`` or an import lock's cleanup: there an exception is printed as "Exception ignored" and
+    dropped, and the command would run on to exit 0. So while the block is open an unraisable :class:`Terminated`
+    is delivered again, to land in the command's own code."""
 
     def __enter__(self) -> _SigtermRaises:
         self._installed = threading.current_thread() is threading.main_thread()
+        self._raised = False  # the first SIGTERM became a Terminated
+        self._redelivering = False  # that Terminated was dropped, and the signal is on its way again
         if self._installed:
             self._previous = signal.signal(signal.SIGTERM, self._raise)
+            self._previous_hook = sys.unraisablehook
+            sys.unraisablehook = self._unraisable
         return self
 
-    @staticmethod
-    def _raise(signum, frame) -> NoReturn:
-        signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    def _raise(self, signum, frame) -> NoReturn:
+        if self._raised and not self._redelivering:  # a second SIGTERM: die as the default handler would
+            signal.signal(signal.SIGTERM, signal.SIG_DFL)
+            os.kill(os.getpid(), signal.SIGTERM)
+        self._raised, self._redelivering = True, False
         raise Terminated()
+
+    def _unraisable(self, info) -> None:
+        if isinstance(info.exc_value, Terminated):
+            self._redelivering = True  # delivered again from another thread, once this hook has returned
+            main = threading.main_thread().ident
+            self._again = threading.Timer(0.02, signal.pthread_kill, args=(main, signal.SIGTERM))
+            self._again.start()
+            return
+        self._previous_hook(info)
+
+    def raise_if_dropped(self) -> None:
+        """Raise the :class:`Terminated` that was dropped if the command ended before it was delivered again."""
+        if self._redelivering:
+            self._again.cancel()
+            self._redelivering = False
+            raise Terminated()
 
     def __exit__(self, *exc_info) -> None:
         if self._installed:  # None: a handler set outside Python, which cannot be put back; the default then
             signal.signal(signal.SIGTERM, signal.SIG_DFL if self._previous is None else self._previous)
+            sys.unraisablehook = self._previous_hook
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -169,10 +197,11 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    with _HeldWarnings() as held, _SigtermRaises():
+    with _HeldWarnings() as held, _SigtermRaises() as sigterm:
         try:
             status = int(importlib.import_module(args._module).run(args) or 0)
             sys.stdout.flush()  # a closed stdout shows here, not in the interpreter's exit
+            sigterm.raise_if_dropped()
             return status
         except BrokenPipeError:  # the reader went away (`tactile-manip params | head -1`): nothing left to say
             _silence_stdout()
