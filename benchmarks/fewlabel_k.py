@@ -1,6 +1,7 @@
 """Contact error against the number of labelled presses K, on the eFlesh characterisation runs.
 
     python -m benchmarks.fewlabel_k --runs ../shared/data/eflesh_dev            # K = 10, 25, 100, all; seeds 0, 1
+    python -m benchmarks.fewlabel_k --runs ../shared/data/eflesh_dev --run normal_20250401_014340 --k 25
 
 For each run (the spatial run's 2-D position, the normal run's force) and each K, the commands a board owner
 runs: ``tactile-manip import ... --board eflesh --labelled K --seed S`` (chronological 80/20 split; K training
@@ -74,8 +75,8 @@ def plot(report: dict[str, Any], path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(1, len(report["runs"]), figsize=(5.5 * len(report["runs"]), 4.2))
-    for ax, (run, rows) in zip(list(axes), report["runs"].items()):
+    fig, axes = plt.subplots(1, len(report["runs"]), figsize=(5.5 * len(report["runs"]), 4.2), squeeze=False)
+    for ax, (run, rows) in zip(axes[0], report["runs"].items()):
         ks = list(rows)
         xs = [report["train_presses"][run] if k == "all" else int(k) for k in ks]
         for m, label in METHODS.items():
@@ -97,11 +98,12 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--runs", type=Path, required=True, help="folder holding the eFlesh run folders")
     p.add_argument("--k", nargs="+", default=["10", "25", "100", "all"], help="labelled presses (or all)")
     p.add_argument("--seeds", type=int, nargs="+", default=[0, 1])
+    p.add_argument("--run", nargs="+", choices=list(RUNS), default=list(RUNS), help="which runs (default: both)")
     p.add_argument("--out", type=Path, default=Path("docs/results/contact/fewlabel_k.json"))
     args = p.parse_args(argv)
     report: dict[str, Any] = {"machine": machine_info(), "seeds": args.seeds, "runs": {}, "train_presses": {}}
     with tempfile.TemporaryDirectory() as tmp:
-        for run in RUNS:
+        for run in args.run:
             report["runs"][run] = {}
             report["train_presses"][run] = sum(1 for _ in open(args.runs / run / "states.csv")) * 4 // 5
             for k in args.k:

@@ -138,3 +138,82 @@ def test_the_few_label_recipe_is_the_contact_recipe_with_the_unlabelled_presses_
     full = load_config("configs/train/contact.toml", ContactTrainConfig)
     assert few.unlabelled == "manifold" and full.unlabelled == "ignore"
     assert dataclasses.replace(few, unlabelled="ignore", threads=full.threads) == full
+
+
+def _hysteretic_presses(cycles: int = 10, per_cycle: int = 80, seed: int = 4):
+    """Readings (N, 15), the reading 2 frames earlier (N, 15) and force (N,) of presses at one place that go in
+    and out: the force is 2 N lower on the way in than on the way out at the same depth (an elastomer's
+    hysteresis), so the field norm alone cannot tell the two."""
+    rng = np.random.default_rng(seed)
+    phase = np.arange(cycles * per_cycle) / per_cycle % 1.0
+    depth = 1.0 - np.abs(2.0 * phase - 1.0)                     # 0 -> 1 -> 0 each cycle
+    unloading = phase > 0.5
+    force = 30.0 * depth + np.where(unloading, 1.0, -1.0) * 4.0 * depth * (1.0 - depth) * 2.0
+    direction = rng.normal(size=15)
+    readings = (depth ** 0.8)[:, None] * 2000.0 * direction / np.linalg.norm(direction) + rng.normal(0, 2.0, (len(depth), 15))
+    earlier = readings[np.maximum(np.arange(len(depth)) - 2, 0)]
+    return readings, earlier, force
+
+
+def test_the_norm_s_change_tells_loading_from_unloading() -> None:
+    readings, earlier, force = _hysteretic_presses()
+    lab = _labelled_mask(len(force), 25, seed=5)
+    with_change = pseudo_labels(readings, force[:, None], lab, earlier=earlier)
+    alone = pseudo_labels(readings, force[:, None], lab)
+    err = [float(np.sqrt(np.mean((f.values[~lab, 0] - force[~lab]) ** 2))) for f in (with_change, alone)]
+    assert "change" in with_change.methods[0], with_change.methods
+    assert not any("change" in m for m in alone.methods)     # without earlier frames the fit is not offered
+    assert err[0] < 0.5 * err[1], err                         # the 2 N branches apart are found from 25 labels
+
+
+def test_the_shrunk_fit_keeps_its_labels_steady_where_the_terms_nearly_outnumber_them() -> None:
+    from tactile_manip.learning.contact.fewlabel import _shrunk
+
+    errors = []
+    for seed in range(8):  # 12 labels, 9 coefficients: only the free term matters, the others fit noise
+        rng = np.random.default_rng(seed)
+        z = rng.normal(size=(400, 8))
+        y = 3.0 * z[:, 0] + rng.normal(0, 0.3, 400)
+        lab = _labelled_mask(400, 12, seed=seed)
+        design = np.hstack([np.ones((400, 1)), z])
+        plain = design @ np.linalg.lstsq(design[lab], y[lab], rcond=None)[0]
+        errors.append([float(np.sqrt(np.mean((p[~lab] - y[~lab]) ** 2))) for p in (_shrunk(z, free=1)(lab, y), plain)])
+    shrunk, plain = np.array(errors).T
+    assert shrunk.mean() < 0.75 * plain.mean() and np.all(shrunk < 1.05 * plain), errors
+
+
+def test_earlier_frames_of_another_shape_or_not_finite_are_refused() -> None:
+    readings, earlier, force = _hysteretic_presses(cycles=2)
+    lab = _labelled_mask(len(force), 10)
+    with pytest.raises(DatasetError, match="earlier frames"):
+        pseudo_labels(readings, force[:, None], lab, earlier=earlier[:, :12])
+    bad = earlier.copy()
+    bad[5, 0] = np.nan
+    with pytest.raises(DatasetError, match="earlier frames"):
+        pseudo_labels(readings, force[:, None], lab, earlier=bad)
+
+
+def test_training_hands_the_labeller_each_press_s_oldest_context_frame(labelled_presses, monkeypatch) -> None:
+    pytest.importorskip("torch", reason="training needs torch")
+    from tactile_manip.learning.contact import fewlabel
+    from tactile_manip.learning.contact.train import ContactTrainConfig, _pseudo_labels, dataset_windows
+
+    data = _hide_labels(labelled_presses(200), 20)
+    cfg = ContactTrainConfig(unlabelled="manifold", context_frames=3)
+    windows = dataset_windows(data, cfg)
+    seen = {}
+    real = fewlabel.pseudo_labels
+
+    def spy(readings, targets, labelled, **kwargs):
+        seen.update(readings=readings, earlier=kwargs["earlier"])
+        return real(readings, targets, labelled, **kwargs)
+
+    monkeypatch.setattr(fewlabel, "pseudo_labels", spy)
+    labels = data.targets.astype(np.float64).copy()
+    _pseudo_labels(data, labels, cfg, windows)
+    rows = np.flatnonzero(np.isin(data.split, ["train", "unlabelled"]))
+    np.testing.assert_array_equal(seen["earlier"], windows[rows, -1])
+    assert not np.array_equal(seen["earlier"], seen["readings"])   # 20 Hz presses: the frames before are context
+    single = dataclasses.replace(cfg, context_frames=1)
+    _pseudo_labels(data, labels, single, dataset_windows(data, single))
+    assert seen["earlier"] is None

@@ -11,7 +11,13 @@ choosing for each target among a few small models by leave-one-out error on thos
 - the affine map plus a Gaussian-kernel ridge correction (three widths);
 - a polynomial (degree 1-3) of the reading's field norm, which follows depth and force at a fixed place, alone
   or with an affine term in the next one or two coordinates of the reading's map (what the norm misses: at one
-  place, the elastomer's loading history).
+  place, the elastomer's loading history);
+- where the readings come with the frames before them, the same polynomial plus the norm's change since the
+  oldest of those frames, alone and times the norm: an elastomer gives less force for the same field while it
+  is pressed in than while it springs back, and the sign and speed of that change say which;
+- a cubic of the norm with that change and the second and third principal axes of the standardised readings
+  (how the field's pattern, not only its size, moves as the elastomer is loaded), all but the norm's linear
+  term shrunk by a ridge whose weight is chosen by leave-one-out on the labels.
 
 Three maps are tried: two of the reading's direction (the unit vector of all channels: the press position,
 whatever its depth), one with each graph edge measured in units of the local spacing of the readings (as if the
@@ -36,6 +42,7 @@ MAP_DIMS = 3              # map coordinates kept
 RBF_WIDTHS = (0.3, 1.0, 3.0)  # gamma of the kernel correction, on map coordinates of unit spread
 RBF_ALPHA = 0.1           # ridge of the kernel correction
 RIDGE = 1e-6              # ridge of the affine and polynomial fits
+SHRINK = (0.0, 0.01, 0.03, 0.1, 0.3, 1.0, 3.0, 10.0, 30.0, 100.0)  # ridge weights of the shrunk fit, on unit-spread terms
 
 
 @dataclass(frozen=True)
@@ -48,11 +55,13 @@ class PseudoLabels:
     methods: tuple[str, ...]
 
 
-def pseudo_labels(readings: np.ndarray, targets: np.ndarray, labelled: np.ndarray, *, neighbours: int = 20
-                  ) -> PseudoLabels:
+def pseudo_labels(readings: np.ndarray, targets: np.ndarray, labelled: np.ndarray, *, neighbours: int = 20,
+                  earlier: np.ndarray | None = None) -> PseudoLabels:
     """Label every row of ``readings`` (N, ...) from the rows where ``labelled`` (N,) holds.
 
-    ``targets`` (N, K) is read only on the labelled rows. Raises ``DatasetError`` with fewer than
+    ``targets`` (N, K) is read only on the labelled rows. ``earlier`` (N, ...): the reading a few frames before
+    each one in its stream (the reading itself where there is none), which adds the fits on the field norm's
+    change. Raises ``DatasetError`` with fewer than
     ``MIN_LABELLED`` labelled rows, a non-finite label or reading, or fewer rows than ``neighbours`` + 1.
     """
     x = np.asarray(readings, np.float64).reshape(len(readings), -1)
@@ -67,18 +76,26 @@ def pseudo_labels(readings: np.ndarray, targets: np.ndarray, labelled: np.ndarra
         raise DatasetError("a reading is NaN or infinite: the map of the readings needs finite readings")
     if len(x) <= neighbours:
         raise DatasetError(f"{len(x)} presses: the map of the readings needs more than {neighbours}")
-    x = x[:, x.std(axis=0) > 0]
+    varies = x.std(axis=0) > 0
+    x = x[:, varies]
     norm = np.linalg.norm(x, axis=1)
+    change = None
+    if earlier is not None:
+        before = np.asarray(earlier, np.float64).reshape(len(readings), -1)
+        if before.shape[1] != varies.size or not np.isfinite(before).all():
+            raise DatasetError("the earlier frames must be finite readings of the same shape as the readings")
+        change = norm - np.linalg.norm(before[:, varies], axis=1)
     direction = x / np.maximum(norm, 1e-12)[:, None]
     standard = (x - x.mean(axis=0)) / x.std(axis=0)
     maps = {"direction": isomap(direction, neighbours), "reading": isomap(standard, neighbours),
             "direction (even)": isomap(direction, neighbours, even=True)}
+    axes = _principal_axes(standard, 3)[:, 1:]
     values = np.empty((len(x), y.shape[1]))
     loo = np.empty(y.shape[1])
     methods = []
     for k in range(y.shape[1]):
         best = None
-        for name, fit in _candidates(maps, norm):
+        for name, fit in _candidates(maps, norm, change, axes):
             err = _loo_rmse(fit, y[:, k], lab)
             if best is None or err < best[0]:
                 best = (err, name, fit)
@@ -123,7 +140,16 @@ def isomap(points: np.ndarray, neighbours: int, dims: int = MAP_DIMS, *, even: b
 Fit = Callable[[np.ndarray, np.ndarray], np.ndarray]  # (labelled mask, target column) -> prediction per row
 
 
-def _candidates(maps: dict[str, np.ndarray], norm: np.ndarray) -> Iterator[tuple[str, Fit]]:
+def _principal_axes(z: np.ndarray, count: int) -> np.ndarray:
+    """The first ``count`` principal components (N, count) of the rows of ``z``, each of unit spread."""
+    centred = z - z.mean(axis=0)
+    _, _, vt = np.linalg.svd(centred, full_matrices=False)
+    scores = centred @ vt[:count].T
+    return scores / np.maximum(scores.std(axis=0), 1e-12)
+
+
+def _candidates(maps: dict[str, np.ndarray], norm: np.ndarray, change: np.ndarray | None, axes: np.ndarray
+                ) -> Iterator[tuple[str, Fit]]:
     for name, coords in maps.items():
         z = coords / coords[:, :2].std()
         yield f"{name} map, affine in 2", _affine(z[:, :2])
@@ -132,12 +158,22 @@ def _candidates(maps: dict[str, np.ndarray], norm: np.ndarray) -> Iterator[tuple
             yield f"{name} map, affine + kernel {gamma:g}", _affine_kernel(z[:, :2], gamma)
     scaled = norm / norm.std()
     reading = maps["reading"] / maps["reading"].std(axis=0)
+    rate = change / change.std() if change is not None and change.std() > 0 else None  # loading or unloading
     for degree in (1, 2, 3):
         powers = np.stack([scaled ** p for p in range(1, degree + 1)], axis=1)
         yield f"field norm, degree {degree}", _affine(powers)
         for more in (1, 2):  # and what the norm misses (the loading history at one place): the map's next axes
             yield f"field norm, degree {degree}, + reading map {more}", _affine(np.hstack([powers,
                                                                                         reading[:, 1:1 + more]]))
+        if rate is not None:
+            yield f"field norm, degree {degree}, + its change", _affine(np.hstack([powers, np.stack(
+                [rate, rate * scaled], axis=1)]))
+    terms = [np.stack([scaled ** p for p in (1, 2, 3)], axis=1)]
+    if rate is not None:
+        terms.append(np.stack([rate, rate * scaled], axis=1))
+    shrunk = np.hstack([*terms, axes])
+    yield ("field norm, degree 3, + " + ("its change, " if rate is not None else "")
+           + "reading axes 2-3, shrunk"), _shrunk(shrunk / shrunk.std(axis=0).clip(1e-12), free=1)
 
 
 def _design(z: np.ndarray) -> np.ndarray:
@@ -166,6 +202,27 @@ def _affine_kernel(z: np.ndarray, gamma: float) -> Fit:
         for s in range(0, len(z), 4096):  # the kernel to every row, in blocks
             out[s:s + 4096] = np.exp(-gamma * ((z[s:s + 4096, None] - zl[None]) ** 2).sum(-1)) @ w
         return base + out
+    return fit
+
+
+def _shrunk(z: np.ndarray, free: int) -> Fit:
+    """Affine in ``z`` (N, D), every term after the first ``free`` shrunk by a ridge whose weight (``SHRINK``) has
+    the lowest leave-one-out error on the labelled rows (closed form: the residual over one less the leverage)."""
+    a = _design(z)
+    penalty = np.ones(a.shape[1])
+    penalty[:1 + free] = 0.0  # the intercept and the free terms are not shrunk
+
+    def fit(lab: np.ndarray, y: np.ndarray) -> np.ndarray:
+        al, yl = a[lab], y[lab]
+        best = None
+        for weight in SHRINK:
+            gram = al.T @ al + np.diag(weight * penalty + RIDGE)
+            coef = np.linalg.solve(gram, al.T @ yl)
+            leverage = np.einsum("ij,ji->i", al, np.linalg.solve(gram, al.T))
+            err = float(np.mean(((yl - al @ coef) / np.maximum(1.0 - leverage, 1e-9)) ** 2))
+            if best is None or err < best[0]:
+                best = (err, coef)
+        return a @ best[1]
     return fit
 
 

@@ -164,11 +164,12 @@ def train_contact(cfg: ContactTrainConfig, data_paths: list[str | Path], out: st
     check_training_rows(data, data_name(data_paths))
     check_finite_readings(data, np.arange(len(data)), data_name(data_paths))  # any row may be a context frame
     labels = np.stack([data.target(n) for n in names], axis=1)
-    pseudo = _pseudo_labels(data, labels, cfg) if cfg.unlabelled == "manifold" else None
+    windows = dataset_windows(data, cfg)
+    pseudo = _pseudo_labels(data, labels, cfg, windows) if cfg.unlabelled == "manifold" else None
     train_idx, val_idx = split_indices(data, cfg.val_fraction, unlabelled=pseudo is not None)
     if len(train_idx) < 2:
         raise DatasetError(f"{len(train_idx)} training sample(s): too few to train on")
-    windows = torch.from_numpy(dataset_windows(data, cfg))
+    windows = torch.from_numpy(windows)
     targets = torch.from_numpy(labels.astype(np.float32))
     mcfg = cfg.model_config(tuple(data.readings.shape[1:]), len(names))
     torch.manual_seed(cfg.seed)
@@ -223,10 +224,11 @@ def train_contact(cfg: ContactTrainConfig, data_paths: list[str | Path], out: st
     return summary
 
 
-def _pseudo_labels(data: PairedDataset, labels: np.ndarray, cfg: ContactTrainConfig) -> dict[str, Any] | None:
+def _pseudo_labels(data: PairedDataset, labels: np.ndarray, cfg: ContactTrainConfig, windows: np.ndarray
+                   ) -> dict[str, Any] | None:
     """Fill ``labels`` (N, K) in place on the unlabelled training presses from the labelled ones
-    (:func:`~tactile_manip.learning.contact.fewlabel.pseudo_labels`); what was done, or None where nothing is
-    unlabelled."""
+    (:func:`~tactile_manip.learning.contact.fewlabel.pseudo_labels`, given the oldest frame of each press's
+    ``windows`` as its earlier reading); what was done, or None where nothing is unlabelled."""
     from tactile_manip.learning.contact.fewlabel import pseudo_labels
 
     hidden = data.indices(UNLABELLED)
@@ -234,7 +236,8 @@ def _pseudo_labels(data: PairedDataset, labels: np.ndarray, cfg: ContactTrainCon
         return None
     rows = np.sort(np.concatenate([data.indices("train"), hidden]))
     labelled = np.isin(rows, data.indices("train"))
-    found = pseudo_labels(data.readings[rows], labels[rows], labelled, neighbours=cfg.manifold_neighbours)
+    found = pseudo_labels(data.readings[rows], labels[rows], labelled, neighbours=cfg.manifold_neighbours,
+                          earlier=windows[rows, -1] if windows.shape[1] > 1 else None)
     labels[rows] = found.values
     return {"labelled": int(labelled.sum()), "unlabelled": int(len(hidden)),
             "loo_rmse": [float(v) for v in found.loo_rmse], "methods": list(found.methods)}
