@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import math
+import time
 
 import numpy as np
 import pytest
@@ -13,7 +14,7 @@ from tactile_manip.sensors import SimulatedSensor, SimulatedSensorConfig
 from tactile_manip.collection.camera import CameraTimeoutError
 from tactile_manip.collection.camera_sim import SimulatedCamera, SimulatedCameraConfig
 from tactile_manip.collection.collect import CollectConfig, PairCollector
-from tactile_manip.collection.force import FieldForce, FunctionForce, PressTrigger, ScriptForce
+from tactile_manip.collection.force import FieldForce, ForceSource, FunctionForce, PressTrigger, ScriptForce
 from tactile_manip.sensors.simulated.contacts import Press
 from tactile_manip.collection.pair_log import dataset_from_pair_logs, read_pair_log
 from tactile_manip.data import load_dataset, save_dataset
@@ -115,16 +116,30 @@ def devices():
         yield sensor, camera
 
 
+class _StepForce(ForceSource):
+    """No press before ``on_s`` (host time), then ``force_n``: the force by frame time, so that camera frames
+    still in the camera's buffer from before the press was set are not taken as pressed."""
+
+    def __init__(self) -> None:
+        self.on_s, self.value_n = math.inf, 0.0
+
+    def press(self, force_n: float) -> None:
+        self.on_s, self.value_n = time.monotonic(), force_n
+
+    def force_n(self, t_host_s: float) -> float:
+        return self.value_n if t_host_s >= self.on_s else 0.0
+
+
 def test_a_still_press_gives_pairs_with_the_simulators_content(devices, calibration, tmp_path):
     sensor, camera = devices
-    force = {"n": 0.0}
-    collector = PairCollector(sensor, camera, calibration, FunctionForce(lambda: force["n"]), tmp_path / "p.tmpairs",
+    force = _StepForce()
+    collector = PairCollector(sensor, camera, calibration, force, tmp_path / "p.tmpairs",
                               config=CollectConfig(pairs_per_press=3, object_name="allen_key", **FAST))
     collector.prepare()
     obj, pose = make_indenter("allen_key"), IndenterPose(x_mm=1.0, yaw_rad=0.3)
     change = sensor.set_contact(obj, pose, 10.5)
     camera.set_contact(obj, pose, 10.5)
-    force["n"] = 10.5
+    force.press(10.5)
     summary = collector.run(presses=1, duration_s=10.0)
     assert summary.pairs == 3 and summary.complete_presses == 1 and summary.max_abs_dt_s <= 0.005
     data = dataset_from_pair_logs([summary.path])
