@@ -159,20 +159,18 @@ def _candidates(maps: dict[str, np.ndarray], norm: np.ndarray, change: np.ndarra
     scaled = norm / norm.std()
     reading = maps["reading"] / maps["reading"].std(axis=0)
     rate = change / change.std() if change is not None and change.std() > 0 else None  # loading or unloading
+    changing = None if rate is None else np.stack([rate, rate * scaled], axis=1)
     for degree in (1, 2, 3):
         powers = np.stack([scaled ** p for p in range(1, degree + 1)], axis=1)
         yield f"field norm, degree {degree}", _affine(powers)
         for more in (1, 2):  # and what the norm misses (the loading history at one place): the map's next axes
             yield f"field norm, degree {degree}, + reading map {more}", _affine(np.hstack([powers,
                                                                                         reading[:, 1:1 + more]]))
-        if rate is not None:
-            yield f"field norm, degree {degree}, + its change", _affine(np.hstack([powers, np.stack(
-                [rate, rate * scaled], axis=1)]))
-    terms = [np.stack([scaled ** p for p in (1, 2, 3)], axis=1)]
-    if rate is not None:
-        terms.append(np.stack([rate, rate * scaled], axis=1))
-    shrunk = np.hstack([*terms, axes])
-    yield ("field norm, degree 3, + " + ("its change, " if rate is not None else "")
+        if changing is not None:
+            yield f"field norm, degree {degree}, + its change", _affine(np.hstack([powers, changing]))
+    # powers is the cubic here; the norm's linear term is the one left unshrunk
+    shrunk = np.hstack([powers, axes] if changing is None else [powers, changing, axes])
+    yield ("field norm, degree 3, + " + ("" if changing is None else "its change, ")
            + "reading axes 2-3, shrunk"), _shrunk(shrunk / shrunk.std(axis=0).clip(1e-12), free=1)
 
 
