@@ -42,7 +42,7 @@ from typing import Any
 import numpy as np
 
 from benchmarks._common import machine_info, publish
-from benchmarks.angle_information import FORCE_BANDS_N, _jobs, rod_presses
+from benchmarks.angle_information import FORCE_BANDS_N, _jobs, rod_presses, white_var
 from tactile_manip.data import load_dataset
 
 FITTED = ("angle_deg", "x_mm", "y_mm", "log_force_n", "tilt_x_deg", "tilt_y_deg", "remanence_mt", "chip_gap_mm")
@@ -91,8 +91,7 @@ class _Press:
         self.params = SimParams() if job["params"] is None else with_values(SimParams(), job["params"])
         self.params = with_values(self.params, {"layer.skin_modulus_kpa": e_nom})
         c = self.params.chip
-        var = (np.tile([c.noise_xy_ut, c.noise_xy_ut, c.noise_z_ut], 16) ** 2
-               + np.tile([c.lsb_xy_ut, c.lsb_xy_ut, c.lsb_z_ut], 16) ** 2 / 12.0 + c.drift_ut ** 2)
+        var = white_var(c) + c.drift_ut ** 2
         self.sigma, self.keep = np.sqrt(var), ~np.asarray(job["saturated"], bool).ravel()
         self.reading = reading.ravel().astype(np.float64)
         self.rod, self.seed = make_indenter(job["kind"], **job["kwargs"]), job["sensor_seed"]

@@ -136,12 +136,17 @@ def _information(job: dict[str, Any]) -> dict[str, Any]:
                *[along_shape(name) for name in sizes]]
     coarse = along_pose(2, 3 * STEPS["angle_rad"])  # the angle's derivative again, at three times the step
     c = params.chip
-    noise = np.tile([c.noise_xy_ut, c.noise_xy_ut, c.noise_z_ut], 16) ** 2
-    lsb = np.tile([c.lsb_xy_ut, c.lsb_xy_ut, c.lsb_z_ut], 16) ** 2 / 12.0
     return {"index": job["index"], "label": job["label"], "force_n": force, "jacobian": np.stack(columns, 1).tolist(),
-            "white_var": (noise + lsb).tolist(), "drift_var": c.drift_ut ** 2, "noise_xy_ut": c.noise_xy_ut,
+            "white_var": white_var(c).tolist(), "drift_var": c.drift_ut ** 2, "noise_xy_ut": c.noise_xy_ut,
             "saturated": np.asarray(job["saturated"], bool).ravel().tolist(), "shape_nuisances": list(sizes),
             "step_check": float(np.linalg.norm(coarse - columns[0]) / max(np.linalg.norm(columns[0]), 1e-12))}
+
+
+def white_var(chip: Any) -> np.ndarray:
+    """Each channel's (48,) white variance (uT^2) in one frame of the chip model ``chip``: its Gaussian noise and
+    its quantisation step's, without the drift."""
+    noise = np.tile([chip.noise_xy_ut, chip.noise_xy_ut, chip.noise_z_ut], 16) ** 2
+    return noise + np.tile([chip.lsb_xy_ut, chip.lsb_xy_ut, chip.lsb_z_ut], 16) ** 2 / 12.0
 
 
 def shape_sizes(kind: str, kwargs: dict[str, Any]) -> dict[str, float]:
