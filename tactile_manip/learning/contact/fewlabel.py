@@ -85,11 +85,8 @@ def pseudo_labels(readings: np.ndarray, targets: np.ndarray, labelled: np.ndarra
         if before.shape[1] != varies.size or not np.isfinite(before).all():
             raise DatasetError("the earlier frames must be finite readings of the same shape as the readings")
         change = norm - np.linalg.norm(before[:, varies], axis=1)
-    direction = x / np.maximum(norm, 1e-12)[:, None]
-    standard = (x - x.mean(axis=0)) / x.std(axis=0)
-    maps = {"direction": isomap(direction, neighbours), "reading": isomap(standard, neighbours),
-            "direction (even)": isomap(direction, neighbours, even=True)}
-    axes = _principal_axes(standard, 3)[:, 1:]
+    maps = reading_maps(x, neighbours)
+    axes = _principal_axes((x - x.mean(axis=0)) / x.std(axis=0), 3)[:, 1:]
     values = np.empty((len(x), y.shape[1]))
     loo = np.empty(y.shape[1])
     methods = []
@@ -104,6 +101,17 @@ def pseudo_labels(readings: np.ndarray, targets: np.ndarray, labelled: np.ndarra
         values[lab, k] = y[lab, k]
         methods.append(name)
     return PseudoLabels(values=values, loo_rmse=loo, methods=tuple(methods))
+
+
+def reading_maps(readings: np.ndarray, neighbours: int = 20) -> dict[str, np.ndarray]:
+    """The three maps (N, ``MAP_DIMS``) the labels are fitted on, by name, of ``readings`` (N, D) whose every
+    channel varies: Isomap of the reading's direction (its unit vector), the same measured evenly
+    (``isomap(..., even=True)``), and Isomap of the standardised reading."""
+    x = np.asarray(readings, np.float64)
+    direction = x / np.maximum(np.linalg.norm(x, axis=1), 1e-12)[:, None]
+    standard = (x - x.mean(axis=0)) / x.std(axis=0)
+    return {"direction": isomap(direction, neighbours), "reading": isomap(standard, neighbours),
+            "direction (even)": isomap(direction, neighbours, even=True)}
 
 
 def isomap(points: np.ndarray, neighbours: int, dims: int = MAP_DIMS, *, even: bool = False) -> np.ndarray:
