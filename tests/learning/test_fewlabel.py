@@ -1,4 +1,5 @@
-"""Labels for unlabelled presses from a handful of labelled ones, on the map of the readings."""
+"""Labels for unlabelled presses from a handful of labelled ones: places on the map of the readings, loads on the
+field norm."""
 
 from __future__ import annotations
 
@@ -38,6 +39,22 @@ def test_25_labels_place_the_other_presses_far_better_than_a_knn_on_them(labelle
     assert all("map" in m for m in found.methods)          # position comes from the map, not the field norm
     np.testing.assert_array_equal(found.values[lab], xy[lab])  # labels are kept
     assert found.loo_rmse.shape == (2,) and np.all(found.loo_rmse > 0)
+
+
+def test_target_names_route_a_place_to_the_maps_and_a_load_to_the_field_norm(labelled_presses) -> None:
+    data = labelled_presses(600)
+    y = data.targets.astype(np.float64)
+    lab = _labelled_mask(len(data), 25, seed=3)
+    names = list(data.target_names)
+    assert names == ["x_mm", "y_mm", "force_n"]
+    named = pseudo_labels(data.readings, y, lab, names=names)
+    assert [m.split(",")[0].endswith("map") for m in named.methods] == [True, True, False]
+    assert named.methods[2].startswith("field norm")
+    # an unknown target may take either kind of fit: here the force's field norm, as the lowest leave-one-out
+    other = pseudo_labels(data.readings, y[:, 2:], lab, names=["grip_n"])
+    assert other.methods == named.methods[2:] and other.loo_rmse[0] == pytest.approx(named.loo_rmse[2])
+    with pytest.raises(DatasetError, match="2 target name.*3 target"):
+        pseudo_labels(data.readings, y, lab, names=names[:2])
 
 
 def test_a_force_at_one_place_is_fitted_on_the_field_norm() -> None:
@@ -193,7 +210,8 @@ def test_earlier_frames_of_another_shape_or_not_finite_are_refused() -> None:
         pseudo_labels(readings, force[:, None], lab, earlier=bad)
 
 
-def test_training_hands_the_labeller_each_press_s_oldest_context_frame(labelled_presses, monkeypatch) -> None:
+def test_training_hands_the_labeller_each_press_s_oldest_context_frame_and_the_target_names(labelled_presses,
+                                                                                              monkeypatch) -> None:
     pytest.importorskip("torch", reason="training needs torch")
     from tactile_manip.learning.contact import fewlabel
     from tactile_manip.learning.contact.train import ContactTrainConfig, _pseudo_labels, dataset_windows
@@ -205,15 +223,16 @@ def test_training_hands_the_labeller_each_press_s_oldest_context_frame(labelled_
     real = fewlabel.pseudo_labels
 
     def spy(readings, targets, labelled, **kwargs):
-        seen.update(readings=readings, earlier=kwargs["earlier"])
+        seen.update(readings=readings, earlier=kwargs["earlier"], names=kwargs["names"])
         return real(readings, targets, labelled, **kwargs)
 
     monkeypatch.setattr(fewlabel, "pseudo_labels", spy)
     labels = data.targets.astype(np.float64).copy()
-    _pseudo_labels(data, labels, cfg, windows)
+    _pseudo_labels(data, labels, ["x_mm", "y_mm", "force_n"], cfg, windows)
+    assert seen["names"] == ["x_mm", "y_mm", "force_n"]
     rows = np.flatnonzero(np.isin(data.split, ["train", "unlabelled"]))
     np.testing.assert_array_equal(seen["earlier"], windows[rows, -1])
     assert not np.array_equal(seen["earlier"], seen["readings"])   # 20 Hz presses: the frames before are context
     single = dataclasses.replace(cfg, context_frames=1)
-    _pseudo_labels(data, labels, single, dataset_windows(data, single))
+    _pseudo_labels(data, labels, ["x_mm", "y_mm", "force_n"], single, dataset_windows(data, single))
     assert seen["earlier"] is None

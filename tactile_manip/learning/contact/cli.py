@@ -35,8 +35,8 @@ def run_train(args: argparse.Namespace) -> int:
     if pseudo:
         loo = ", ".join(f"{k} {v:.3g} ({m})" for k, v, m in zip(summary["targets"], pseudo["loo_rmse"],
                                                                pseudo["methods"]))
-        print(f"{pseudo['unlabelled']} unlabelled presses labelled from {pseudo['labelled']} on the map of the "
-              f"readings; leave-one-out RMSE on the labelled: {loo}")
+        print(f"{pseudo['unlabelled']} unlabelled presses labelled from {pseudo['labelled']}; leave-one-out RMSE "
+              f"of each target's fit on the labelled: {loo}")
         rmse += " against those labels"
     print(f"validation RMSE {rmse} ({summary['val_samples']} samples; {summary['train_seconds'] / 60:.1f} min); "
           f"wrote {args.out}/best.pt, history.json")

@@ -78,7 +78,7 @@ class ContactTrainConfig:
     redraw_noise: bool = False    # each epoch reads the training presses through new chip drift and noise
                                   # (simulated datasets, one frame of context: tactile_manip.learning.noise)
     unlabelled: Literal["ignore", "manifold"] = "ignore"  # the dataset's unlabelled training presses: left out,
-                                  # or labelled from the labelled ones on the map of the readings (.fewlabel)
+                                  # or labelled from the labelled ones (.fewlabel)
     manifold_neighbours: int = 20  # neighbours per reading in that map
     seed: int = 0
     threads: int = 0              # torch CPU threads (0: torch's default)
@@ -165,7 +165,7 @@ def train_contact(cfg: ContactTrainConfig, data_paths: list[str | Path], out: st
     check_finite_readings(data, np.arange(len(data)), data_name(data_paths))  # any row may be a context frame
     labels = np.stack([data.target(n) for n in names], axis=1)
     windows = dataset_windows(data, cfg)
-    pseudo = _pseudo_labels(data, labels, cfg, windows) if cfg.unlabelled == "manifold" else None
+    pseudo = _pseudo_labels(data, labels, names, cfg, windows) if cfg.unlabelled == "manifold" else None
     train_idx, val_idx = split_indices(data, cfg.val_fraction, unlabelled=pseudo is not None)
     if len(train_idx) < 2:
         raise DatasetError(f"{len(train_idx)} training sample(s): too few to train on")
@@ -224,11 +224,11 @@ def train_contact(cfg: ContactTrainConfig, data_paths: list[str | Path], out: st
     return summary
 
 
-def _pseudo_labels(data: PairedDataset, labels: np.ndarray, cfg: ContactTrainConfig, windows: np.ndarray
-                   ) -> dict[str, Any] | None:
-    """Fill ``labels`` (N, K) in place on the unlabelled training presses from the labelled ones
-    (:func:`~tactile_manip.learning.contact.fewlabel.pseudo_labels`, given the oldest frame of each press's
-    ``windows`` as its earlier reading); what was done, or None where nothing is unlabelled."""
+def _pseudo_labels(data: PairedDataset, labels: np.ndarray, names: list[str], cfg: ContactTrainConfig,
+                   windows: np.ndarray) -> dict[str, Any] | None:
+    """Fill ``labels`` (N, K) of the targets ``names`` in place on the unlabelled training presses from the
+    labelled ones (:func:`~tactile_manip.learning.contact.fewlabel.pseudo_labels`, given the oldest frame of each
+    press's ``windows`` as its earlier reading); what was done, or None where nothing is unlabelled."""
     from tactile_manip.learning.contact.fewlabel import pseudo_labels
 
     hidden = data.indices(UNLABELLED)
@@ -237,7 +237,7 @@ def _pseudo_labels(data: PairedDataset, labels: np.ndarray, cfg: ContactTrainCon
     rows = np.sort(np.concatenate([data.indices("train"), hidden]))
     labelled = np.isin(rows, data.indices("train"))
     found = pseudo_labels(data.readings[rows], labels[rows], labelled, neighbours=cfg.manifold_neighbours,
-                          earlier=windows[rows, -1] if windows.shape[1] > 1 else None)
+                          earlier=windows[rows, -1] if windows.shape[1] > 1 else None, names=names)
     labels[rows] = found.values
     return {"labelled": int(labelled.sum()), "unlabelled": int(len(hidden)),
             "loo_rmse": [float(v) for v in found.loo_rmse], "methods": list(found.methods)}
