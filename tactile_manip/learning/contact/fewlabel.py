@@ -10,13 +10,13 @@ either, the fit chosen by leave-one-out error on the labels:
 
 - on the maps: an affine map of the 2 or 3 leading map coordinates, alone or plus a Gaussian-kernel ridge
   correction (three widths);
-- on the field norm: one fit of the reading's field norm, which follows depth and force at a fixed place: a cubic of the norm, with
-  the second and third principal axes of the standardised readings (how the field's pattern, not only its size,
-  moves as the elastomer is loaded) and, where the readings come with the frames before them, the norm's change
-  since the oldest of those frames, alone and times the norm (an elastomer gives less force for the same field
-  while it is pressed in than while it springs back, and the sign and speed of that change say which). Every
-  term but the norm's linear one is shrunk by a ridge whose weight is chosen by leave-one-out on the labels. The
-  simpler fits of the norm are special cases of this one; offered beside it, they were chosen by the luck of
+- on the field norm: one fit of the reading's field norm, which follows depth and force at a fixed place: a cubic
+  of the norm, with the second and third principal axes of the standardised readings (how the field's pattern, not
+  only its size, moves as the elastomer is loaded) and, where the readings come with the frames before them, the
+  norm's change since the oldest of those frames, alone and times the norm (an elastomer gives less force for the
+  same field while it is pressed in than while it springs back, and the sign and speed of that change say which).
+  Every term but the norm's linear one is shrunk by a ridge whose weight is chosen by leave-one-out on the labels.
+  The simpler fits of the norm are special cases of this one; offered beside it, they were chosen by the luck of
   the draw more than by their fit (on the eFlesh normal run, 30 draws of 25 labels: 0.76 N against 0.71 N), as
   were the maps' fits for the force.
 
