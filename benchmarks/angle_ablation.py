@@ -17,7 +17,9 @@ Reported: share within 5 and 2 deg, median error, within 5 deg per force band an
 reliability (the probability its concentration gives against the share observed). With ``--draws N`` the
 head also reads every press through N fresh draws of its chips (the stored clean field, new noise): once with
 drift as recorded presses carry it, once tared (no drift, as after a baseline taken just before the press),
-each the mean over the draws with the lowest and highest draw's share. Prints markdown, writes
+each the mean over the draws with the lowest and highest draw's share. ``--model NAME=A.onnx,B.onnx`` reads the
+angle heads of several files as one (the mean of their doubled-angle vectors; an ensemble of heads of other
+seeds): its raw output and, with ``--draws``, its fresh draws. Prints markdown, writes
 docs/results/benchmarks/angle_ablation.json; asserts nothing.
 """
 
@@ -26,6 +28,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import math
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
@@ -85,17 +88,34 @@ def route_estimates(path: str, readings: np.ndarray) -> dict[str, tuple[np.ndarr
     return out
 
 
-def fresh_draws(path: str, data, idx: np.ndarray, draws: int, yaw: np.ndarray, force: np.ndarray,
-                names: np.ndarray) -> dict[str, dict[str, Any]]:
-    """The head of the model at ``path`` on ``draws`` fresh readings of every press (its stored clean field
-    through new chip noise, :class:`~tactile_manip.learning.noise.ChipNoise`), with the drift as recorded
-    presses have it and without (a baseline taken just before the press): each summary is the mean over the
-    draws, with the lowest and highest share within 5 deg, overall and at 2-5 N."""
+def head_axes(paths: Sequence[str]) -> Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]] | None:
+    """The angle heads of the model files at ``paths`` read as one: each reading's axis is that of the mean of the
+    heads' doubled-angle vectors kappa (cos 2t, sin 2t), its concentration that mean's length (the heads' own
+    where they agree, less where they do not). None where a file has no head."""
+    models = [load_reconstructor(path, threads=2) for path in paths]
+    if any(model.angle_head is None for model in models):
+        return None
+
+    def axes(readings: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        if len(models) == 1:
+            return models[0].angle_head.axes(np.stack([models[0].checked(r) for r in readings]))
+        total = np.zeros((len(readings), 2))
+        for model in models:
+            angle, kappa = model.angle_head.axes(np.stack([model.checked(r) for r in readings]))
+            total += kappa[:, None] * np.stack([np.cos(2 * angle), np.sin(2 * angle)], axis=1)
+        total /= len(models)
+        return 0.5 * np.arctan2(total[:, 1], total[:, 0]), np.hypot(total[:, 0], total[:, 1])
+    return axes
+
+
+def fresh_draws(axes: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]], model: str, data, idx: np.ndarray,
+                draws: int, yaw: np.ndarray, force: np.ndarray, names: np.ndarray) -> dict[str, dict[str, Any]]:
+    """The head ``axes`` (:func:`head_axes`) of ``model`` on ``draws`` fresh readings of every press (its stored
+    clean field through new chip noise, :class:`~tactile_manip.learning.noise.ChipNoise`), with the drift as
+    recorded presses have it and without (a baseline taken just before the press): each summary is the mean over
+    the draws, with the lowest and highest share within 5 deg, overall and at 2-5 N."""
     from tactile_manip.learning.noise import ChipNoise
 
-    model = load_reconstructor(path, threads=2)
-    if model.angle_head is None:
-        return {}
     chips = ChipNoise.of(data, idx, data.provenance)
     cases = {f"fresh chip draws (mean of {draws})": chips,
              f"fresh chip draws, tared (mean of {draws})": dataclasses.replace(chips,
@@ -105,13 +125,13 @@ def fresh_draws(path: str, data, idx: np.ndarray, draws: int, yaw: np.ndarray, f
         rng = np.random.default_rng(seed)  # the same draws for every model
         rows = []
         for _ in range(draws):
-            angle, _kappa = model.angle_head.axes(np.stack([model.checked(r) for r in noise.draw(rng)]))
+            angle, _kappa = axes(noise.draw(rng))
             rows.append(summary(errors_deg(angle, np.ones(len(angle), bool), yaw), force, names))
         mean = {k: float(np.mean([r[k] for r in rows])) for k in ("within_5", "within_2", "median_deg")}
         for part in ("by_force", "by_object"):
             mean[part] = {k: float(np.mean([r[part][k] for r in rows])) for k in rows[0][part]}
         light = [r["by_force"].get("2-5 N", math.nan) for r in rows]
-        out[case] = {"presses": rows[0]["presses"], **mean, "model": path, "reliability": [], "draws": draws,
+        out[case] = {"presses": rows[0]["presses"], **mean, "model": model, "reliability": [], "draws": draws,
                      "within_5_range": [min(r["within_5"] for r in rows), max(r["within_5"] for r in rows)],
                      "within_5_at_2_5_n_range": [min(light), max(light)]}
     return out
@@ -130,7 +150,9 @@ def reliability(prob: np.ndarray, err: np.ndarray) -> list[dict[str, float]]:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--data", default="data/rods_test.npz")
-    parser.add_argument("--model", action="append", default=[], metavar="NAME=PATH", required=True)
+    parser.add_argument("--model", action="append", default=[], metavar="NAME=PATH[,PATH...]", required=True,
+                        help="a model file; several, comma-separated, read their angle heads as one (the mean of "
+                             "their doubled-angle vectors): the heads' raw output only")
     parser.add_argument("--bound", default=None, help="angle_information JSON of the same dataset")
     parser.add_argument("--out", default="docs/results/benchmarks/angle_ablation.json")
     parser.add_argument("--draws", type=int, default=0, metavar="N",
@@ -147,13 +169,24 @@ def main() -> None:
     results: dict[str, Any] = {}
     for spec in args.model:
         label, _, path = spec.partition("=")
-        for route, (angle, defined, prob) in route_estimates(path, readings).items():
+        paths = path.split(",")
+        if len(paths) == 1:
+            estimates = route_estimates(path, readings)
+        else:  # several heads read as one: their raw output only
+            axes = head_axes(paths)
+            if axes is None:
+                parser.error(f"--model {spec}: every file of an ensemble needs an angle head")
+            angle, kappa = axes(readings)
+            estimates = {"head, raw probability": (angle, np.ones(len(angle), bool),
+                                                   within_probability(kappa, math.radians(5.0)))}
+        for route, (angle, defined, prob) in estimates.items():
             err = errors_deg(angle, defined, yaw)
             results[f"{label}: {route}"] = {**summary(err, force, names), "model": path,
                                             "reliability": reliability(prob, err) if route.startswith("head") else []}
-        if args.draws:
+        axes = head_axes(paths) if args.draws else None
+        if axes is not None:
             results |= {f"{label}: head, {case}": row for case, row in
-                        fresh_draws(path, data, idx, args.draws, yaw, force, names).items()}
+                        fresh_draws(axes, path, data, idx, args.draws, yaw, force, names).items()}
     if data.has_images:
         truth = [angle_from_image(img, pixel_mm=data.image.pixel_mm) for img in data.depth_mm(idx)]
         err = errors_deg(np.array([t.angle_rad for t in truth]), np.array([t.defined for t in truth]), yaw)

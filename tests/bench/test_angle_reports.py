@@ -89,7 +89,7 @@ def test_fresh_draws_read_the_clean_field_through_new_chips_and_tared_ones_witho
         return dataclasses.replace(chips, noise_ut=np.zeros_like(chips.noise_ut))
 
     monkeypatch.setattr(ChipNoise, "of", staticmethod(quiet))
-    rows = ablation.fresh_draws(path, data, idx, 3, yaw, force, names)
+    rows = ablation.fresh_draws(ablation.head_axes([path]), path, data, idx, 3, yaw, force, names)
     drifting, tared = rows["fresh chip draws (mean of 3)"], rows["fresh chip draws, tared (mean of 3)"]
     model = load_reconstructor(path)
     still = dataclasses.replace(seen[0], noise_ut=np.zeros_like(seen[0].noise_ut),
@@ -105,6 +105,34 @@ def test_fresh_draws_read_the_clean_field_through_new_chips_and_tared_ones_witho
     # with drift the draws differ (the drift is drawn afresh), and the mean lies within their range
     assert seen[0].drift_ut.min() > 0
     assert drifting["within_5_range"][0] <= drifting["within_5"] <= drifting["within_5_range"][1]
+
+
+def test_heads_read_as_one_average_their_doubled_angle_vectors(monkeypatch) -> None:
+    import types
+
+    import benchmarks.angle_ablation as ablation
+
+    def fake(angle_deg: float, kappa: float):
+        head = types.SimpleNamespace(axes=lambda fields: (np.full(len(fields), math.radians(angle_deg)),
+                                                          np.full(len(fields), kappa)))
+        return types.SimpleNamespace(angle_head=head, checked=lambda r: r)
+
+    models = {"a": fake(10.0, 2.0), "b": fake(20.0, 2.0), "across": fake(100.0, 2.0), "wrap": fake(-85.0, 2.0),
+              "near": fake(89.0, 2.0), "bare": types.SimpleNamespace(angle_head=None)}
+    monkeypatch.setattr(ablation, "load_reconstructor", lambda path, threads=2: models[path])
+    readings = np.zeros((3, 4, 4, 3))
+    angle, kappa = ablation.head_axes(["a", "b"])(readings)
+    assert np.allclose(np.degrees(angle), 15.0) and np.allclose(kappa, 2.0 * math.cos(math.radians(10.0)))
+    # heads a quarter turn apart cancel: no concentration left
+    _, kappa = ablation.head_axes(["a", "across"])(readings)
+    assert np.allclose(kappa, 0.0, atol=1e-12)
+    # axes either side of the +-90 deg wrap average across it, not through 0
+    angle, _ = ablation.head_axes(["wrap", "near"])(readings)
+    assert np.allclose(np.degrees(np.abs(angle)), 88.0)
+    # one head is read as itself
+    angle, kappa = ablation.head_axes(["b"])(readings)
+    assert np.allclose(np.degrees(angle), 20.0) and np.allclose(kappa, 2.0)
+    assert ablation.head_axes(["a", "bare"]) is None
 
 
 def test_the_bound_differentiates_the_reading_as_recorded_less_the_sensors_own_baseline() -> None:
