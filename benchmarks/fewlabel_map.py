@@ -50,14 +50,15 @@ def _knn_rmse(features: np.ndarray, positions: np.ndarray, k: int = 5) -> float:
     return _rmse(positions[idx[:, 1:]].mean(axis=1), positions)
 
 
-def map_fidelity(readings: np.ndarray, positions: np.ndarray) -> dict[str, dict[str, float]]:
-    """Per map of :func:`~tactile_manip.learning.contact.fewlabel.reading_maps`: the affine fit's RMSE in 2 and 3
-    coordinates and the kNN RMSE on 3, with every press labelled; ``"direction itself"`` holds the kNN on the
-    readings' unit vectors."""
+def map_fidelity(readings: np.ndarray, positions: np.ndarray,
+                 maps: dict[str, np.ndarray] | None = None) -> dict[str, dict[str, float]]:
+    """Per map of :func:`~tactile_manip.learning.contact.fewlabel.reading_maps` (``maps``, or built here): the
+    affine fit's RMSE in 2 and 3 coordinates and the kNN RMSE on 3, with every press labelled;
+    ``"direction itself"`` holds the kNN on the readings' unit vectors."""
     from tactile_manip.learning.contact.fewlabel import reading_maps
 
     out = {}
-    for name, coords in reading_maps(readings).items():
+    for name, coords in (reading_maps(readings) if maps is None else maps).items():
         row = {}
         for dims in (2, 3):
             a = np.hstack([np.ones((len(coords), 1)), coords[:, :dims]])
@@ -85,16 +86,18 @@ def grid_rows(positions: np.ndarray, k: int) -> np.ndarray:
     return np.array(rows)
 
 
-def labeller_error(readings: np.ndarray, positions: np.ndarray, rows: np.ndarray) -> dict[str, Any]:
-    """The labeller's RMSE on the unlabelled rows when ``rows`` are labelled: all of them, those inside the
-    labelled positions' convex hull and those outside, with the fits it chose."""
+def labeller_error(readings: np.ndarray, positions: np.ndarray, rows: np.ndarray,
+                   maps: dict[str, np.ndarray] | None = None) -> dict[str, Any]:
+    """The labeller's RMSE on the unlabelled rows when ``rows`` are labelled (``maps``: the readings' maps, shared
+    between draws): all of them, those inside the labelled positions' convex hull and those outside, with the
+    fits it chose."""
     from scipy.spatial import Delaunay
 
     from tactile_manip.learning.contact.fewlabel import pseudo_labels
 
     lab = np.zeros(len(positions), bool)
     lab[rows] = True
-    labels = pseudo_labels(readings, positions, lab)
+    labels = pseudo_labels(readings, positions, lab, maps=maps)
     inside = Delaunay(positions[lab]).find_simplex(positions) >= 0
     free = ~lab
     return {"all_mm": _rmse(labels.values[free], positions[free]),
@@ -105,13 +108,17 @@ def labeller_error(readings: np.ndarray, positions: np.ndarray, rows: np.ndarray
 
 def measure(readings: np.ndarray, positions: np.ndarray, k: int, seeds: list[int]) -> dict[str, Any]:
     """The three measurements of the module's docstring on ``readings`` (N, D) and ``positions`` (N, 2)."""
+    from tactile_manip.learning.contact.fewlabel import reading_maps
+
     x = np.asarray(readings, np.float64).reshape(len(readings), -1)
     x = x[:, x.std(axis=0) > 0]
     y = np.asarray(positions, np.float64)
-    random = {s: labeller_error(x, y, np.random.default_rng(s).choice(len(y), k, replace=False)) for s in seeds}
+    maps = reading_maps(x)  # the readings' alone: built once for every draw of labels
+    random = {s: labeller_error(x, y, np.random.default_rng(s).choice(len(y), k, replace=False), maps)
+              for s in seeds}
     mean = {key: float(np.mean([r[key] for r in random.values()])) for key in ("all_mm", "inside_mm", "outside_mm")}
-    return {"presses": len(y), "k": k, "map_every_label": map_fidelity(x, y),
-            "random": {"per_seed": random, "mean": mean}, "grid": labeller_error(x, y, grid_rows(y, k))}
+    return {"presses": len(y), "k": k, "map_every_label": map_fidelity(x, y, maps),
+            "random": {"per_seed": random, "mean": mean}, "grid": labeller_error(x, y, grid_rows(y, k), maps)}
 
 
 def markdown(report: dict[str, Any]) -> str:

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from tactile_manip.errors import DatasetError
-from tactile_manip.learning.contact.fewlabel import MIN_LABELLED, isomap, pseudo_labels
+from tactile_manip.learning.contact.fewlabel import MIN_LABELLED, isomap, pseudo_labels, reading_maps
 
 
 def _knn_rmse(x, y, lab, k=5):
@@ -55,6 +55,22 @@ def test_target_names_route_a_place_to_the_maps_and_a_load_to_the_field_norm(lab
     assert other.methods == named.methods[2:] and other.loo_rmse[0] == pytest.approx(named.loo_rmse[2])
     with pytest.raises(DatasetError, match="2 target name.*3 target"):
         pseudo_labels(data.readings, y, lab, names=names[:2])
+
+
+def test_maps_built_once_give_the_labels_of_maps_built_per_call(labelled_presses) -> None:
+    data = labelled_presses(400)
+    x = data.readings.reshape(len(data), -1).astype(np.float64)
+    x = x[:, x.std(axis=0) > 0]
+    xy = data.targets[:, :2].astype(np.float64)
+    maps = reading_maps(x)
+    for seed in (0, 1):  # two draws of labels on one set of maps
+        lab = _labelled_mask(len(data), 25, seed=seed)
+        shared = pseudo_labels(data.readings, xy, lab, maps=maps)
+        own = pseudo_labels(data.readings, xy, lab)
+        np.testing.assert_array_equal(shared.values, own.values)
+        assert shared.methods == own.methods
+    with pytest.raises(DatasetError, match=r"maps of \[399\] rows given for 400 readings"):
+        pseudo_labels(data.readings, xy, lab, maps={name: m[1:] for name, m in maps.items()})
 
 
 def test_a_force_at_one_place_is_fitted_on_the_field_norm() -> None:

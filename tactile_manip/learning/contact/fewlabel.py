@@ -60,16 +60,19 @@ class PseudoLabels:
 
 
 def pseudo_labels(readings: np.ndarray, targets: np.ndarray, labelled: np.ndarray, *, neighbours: int = 20,
-                  earlier: np.ndarray | None = None, names: Sequence[str] | None = None) -> PseudoLabels:
+                  earlier: np.ndarray | None = None, names: Sequence[str] | None = None,
+                  maps: dict[str, np.ndarray] | None = None) -> PseudoLabels:
     """Label every row of ``readings`` (N, ...) from the rows where ``labelled`` (N,) holds.
 
     ``targets`` (N, K) is read only on the labelled rows. ``earlier`` (N, ...): the reading a few frames before
     each one in its stream (the reading itself where there is none), which adds the field norm's change to the
     norm's fit. ``names`` (K,): the targets' names; a place (``PLACE_TARGETS``) is fitted on the maps only and a
     load (``LOAD_TARGETS``) on the field norm only, any other target (or every one, without names) on whichever
-    fit has the lowest leave-one-out error. Raises ``DatasetError`` with fewer than ``MIN_LABELLED`` labelled
-    rows, a non-finite label or reading, fewer rows than ``neighbours`` + 1, or names that do not match the
-    targets.
+    fit has the lowest leave-one-out error. ``maps``: :func:`reading_maps` of the same readings and
+    ``neighbours``, where the caller has them (they depend on the readings alone, so several draws of labels on
+    one set of readings can share them). Raises ``DatasetError`` with fewer than ``MIN_LABELLED`` labelled rows,
+    a non-finite label or reading, fewer rows than ``neighbours`` + 1, names that do not match the targets, or
+    maps with other rows than the readings.
     """
     x = np.asarray(readings, np.float64).reshape(len(readings), -1)
     y = np.asarray(targets, np.float64).reshape(len(readings), -1)
@@ -85,6 +88,8 @@ def pseudo_labels(readings: np.ndarray, targets: np.ndarray, labelled: np.ndarra
         raise DatasetError(f"{len(names)} target name(s) for {y.shape[1]} target(s)")
     if len(x) <= neighbours:
         raise DatasetError(f"{len(x)} presses: the map of the readings needs more than {neighbours}")
+    if maps is not None and any(np.shape(m)[:1] != (len(x),) for m in maps.values()):
+        raise DatasetError(f"maps of {sorted({len(m) for m in maps.values()})} rows given for {len(x)} readings")
     varies = x.std(axis=0) > 0
     x = x[:, varies]
     norm = np.linalg.norm(x, axis=1)
@@ -98,7 +103,7 @@ def pseudo_labels(readings: np.ndarray, targets: np.ndarray, labelled: np.ndarra
         "place" if n in PLACE_TARGETS else "load" if n in LOAD_TARGETS else None for n in names]
     fits = {}
     if any(kind != "load" for kind in kinds):
-        fits["place"] = list(_map_fits(reading_maps(x, neighbours)))
+        fits["place"] = list(_map_fits(reading_maps(x, neighbours) if maps is None else maps))
     if any(kind != "place" for kind in kinds):
         fits["load"] = [_norm_fit(norm, change, _principal_axes((x - x.mean(axis=0)) / x.std(axis=0), 3)[:, 1:])]
     values = np.empty((len(x), y.shape[1]))
