@@ -170,10 +170,10 @@ def main() -> None:
     for spec in args.model:
         label, _, path = spec.partition("=")
         paths = path.split(",")
+        axes = head_axes(paths) if len(paths) > 1 or args.draws else None
         if len(paths) == 1:
             estimates = route_estimates(path, readings)
         else:  # several heads read as one: their raw output only
-            axes = head_axes(paths)
             if axes is None:
                 parser.error(f"--model {spec}: every file of an ensemble needs an angle head")
             angle, kappa = axes(readings)
@@ -183,8 +183,7 @@ def main() -> None:
             err = errors_deg(angle, defined, yaw)
             results[f"{label}: {route}"] = {**summary(err, force, names), "model": path,
                                             "reliability": reliability(prob, err) if route.startswith("head") else []}
-        axes = head_axes(paths) if args.draws else None
-        if axes is not None:
+        if args.draws and axes is not None:
             results |= {f"{label}: head, {case}": row for case, row in
                         fresh_draws(axes, path, data, idx, args.draws, yaw, force, names).items()}
     if data.has_images:
