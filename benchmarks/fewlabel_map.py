@@ -12,14 +12,17 @@ the unlabelled training presses, before any network learns from them.
    coordinates to the position (least squares over every training press), and a kNN (k = 5) from every
    other press, on the map's 3 coordinates and on the reading's direction itself (what the map was made from).
    The affine row is what the map gives when labels only have to set its scale, turn and offset; the kNN rows
-   say how much of the place the map's coordinates still hold, against what the readings hold.
+   say how much of the place the map's coordinates still hold, against what the readings hold. A last row
+   fits the refit's field model at every press's true place and places every press by it: the refit's limit.
 2. K presses labelled at random (``--seeds``): the labeller's RMSE on the other training presses, split into
-   those inside the labelled presses' convex hull (interpolated) and those outside (extrapolated).
+   those inside the labelled presses' convex hull (interpolated) and those outside (extrapolated); for the
+   labeller as ``train`` runs it (the map fits, then the refit on a smooth model of the field,
+   :mod:`tactile_manip.learning.contact.field_inverse`) and for the map fits alone.
 3. K presses labelled on an evenly spaced sqrt(K) x sqrt(K) grid over the pressed area (the training press
    nearest each grid point, as a user pressing at the marks of a printed grid would): the same RMSE.
 
 Prints markdown and writes a JSON (default ``docs/results/contact/fewlabel_map.json``). It measures; it asserts
-nothing. About 40 s on 2 CPU cores: the maps are built once, then each labelled draw takes a few seconds.
+nothing. About 3 minutes on 2 CPU cores: the maps are built once, then each labelled draw takes about 10 s.
 """
 
 from __future__ import annotations
@@ -55,6 +58,7 @@ def map_fidelity(readings: np.ndarray, positions: np.ndarray,
     """Per map of :func:`~tactile_manip.learning.contact.fewlabel.reading_maps` (``maps``, or built here): the
     affine fit's RMSE in 2 and 3 coordinates and the kNN RMSE on 3, with every press labelled;
     ``"direction itself"`` holds the kNN on the readings' unit vectors."""
+    from tactile_manip.learning.contact.field_inverse import refine_places
     from tactile_manip.learning.contact.fewlabel import reading_maps
 
     out = {}
@@ -68,6 +72,9 @@ def map_fidelity(readings: np.ndarray, positions: np.ndarray,
         out[name] = row
     direction = readings / np.maximum(np.linalg.norm(readings, axis=1), 1e-12)[:, None]
     out["direction itself"] = {"knn_mm": _knn_rmse(direction, positions)}
+    # the refit's own limit: the field model fitted at every press's true place, every press placed by it
+    placed = refine_places(readings, positions, np.zeros(len(positions), bool))
+    out["field model"] = {"inverted_mm": _rmse(placed, positions)}
     return out
 
 
@@ -87,17 +94,17 @@ def grid_rows(positions: np.ndarray, k: int) -> np.ndarray:
 
 
 def labeller_error(readings: np.ndarray, positions: np.ndarray, rows: np.ndarray,
-                   maps: dict[str, np.ndarray] | None = None) -> dict[str, Any]:
+                   maps: dict[str, np.ndarray] | None = None, refine: bool = True) -> dict[str, Any]:
     """The labeller's RMSE on the unlabelled rows when ``rows`` are labelled (``maps``: the readings' maps, shared
-    between draws): all of them, those inside the labelled positions' convex hull and those outside, with the
-    fits it chose."""
+    between draws; ``refine``: the map fits' places refitted on the field model, as ``train`` does): all of them,
+    those inside the labelled positions' convex hull and those outside, with the fits it chose."""
     from scipy.spatial import Delaunay
 
     from tactile_manip.learning.contact.fewlabel import pseudo_labels
 
     lab = np.zeros(len(positions), bool)
     lab[rows] = True
-    labels = pseudo_labels(readings, positions, lab, maps=maps)
+    labels = pseudo_labels(readings, positions, lab, maps=maps, names=("x_mm", "y_mm"), refine=refine)
     inside = Delaunay(positions[lab]).find_simplex(positions) >= 0
     free = ~lab
     return {"all_mm": _rmse(labels.values[free], positions[free]),
@@ -114,11 +121,15 @@ def measure(readings: np.ndarray, positions: np.ndarray, k: int, seeds: list[int
     x = x[:, x.std(axis=0) > 0]
     y = np.asarray(positions, np.float64)
     maps = reading_maps(x)  # the readings' alone: built once for every draw of labels
-    random = {s: labeller_error(x, y, np.random.default_rng(s).choice(len(y), k, replace=False), maps)
-              for s in seeds}
-    mean = {key: float(np.mean([r[key] for r in random.values()])) for key in ("all_mm", "inside_mm", "outside_mm")}
-    return {"presses": len(y), "k": k, "map_every_label": map_fidelity(x, y, maps),
-            "random": {"per_seed": random, "mean": mean}, "grid": labeller_error(x, y, grid_rows(y, k), maps)}
+    out: dict[str, Any] = {"presses": len(y), "k": k, "map_every_label": map_fidelity(x, y, maps)}
+    for suffix, refine in (("", True), ("_map_only", False)):
+        random = {s: labeller_error(x, y, np.random.default_rng(s).choice(len(y), k, replace=False), maps, refine)
+                  for s in seeds}
+        mean = {key: float(np.mean([r[key] for r in random.values()]))
+                for key in ("all_mm", "inside_mm", "outside_mm")}
+        out["random" + suffix] = {"per_seed": random, "mean": mean}
+        out["grid" + suffix] = labeller_error(x, y, grid_rows(y, k), maps, refine)
+    return out
 
 
 def markdown(report: dict[str, Any]) -> str:
@@ -130,12 +141,18 @@ def markdown(report: dict[str, Any]) -> str:
             lines.append(f"| {name} | {row['affine_2_mm']:.2f} | {row['affine_3_mm']:.2f} | {row['knn_3_mm']:.2f} |")
     lines.append(f"| the reading's direction itself, no map | - | - | "
                  f"{report['map_every_label']['direction itself']['knn_mm']:.2f} |")
-    k, rnd, grid = report["k"], report["random"], report["grid"]
+    if "field model" in report["map_every_label"]:
+        lines.append(f"\nThe refit's field model fitted at every press's true place, each press placed by it: "
+                     f"{report['map_every_label']['field model']['inverted_mm']:.2f} mm (the refit's limit).")
+    k = report["k"]
     lines += [f"\nThe labeller with {k} labelled presses, on the other training presses:\n",
-              "| labelled presses | all | inside their hull | outside |", "|---|---|---|---|",
-              f"| {k} at random (mean of seeds {list(rnd['per_seed'])}) | {rnd['mean']['all_mm']:.2f} | "
-              f"{rnd['mean']['inside_mm']:.2f} | {rnd['mean']['outside_mm']:.2f} |",
-              f"| {k} on a grid | {grid['all_mm']:.2f} | {grid['inside_mm']:.2f} | {grid['outside_mm']:.2f} |"]
+              "| labelled presses | labeller | all | inside their hull | outside |", "|---|---|---|---|---|"]
+    for suffix, how in (("", "map fits, refined on the field model"), ("_map_only", "map fits alone")):
+        rnd, grid = report["random" + suffix], report["grid" + suffix]
+        lines += [f"| {k} at random (mean of seeds {list(rnd['per_seed'])}) | {how} | {rnd['mean']['all_mm']:.2f} | "
+                  f"{rnd['mean']['inside_mm']:.2f} | {rnd['mean']['outside_mm']:.2f} |",
+                  f"| {k} on a grid | {how} | {grid['all_mm']:.2f} | {grid['inside_mm']:.2f} | "
+                  f"{grid['outside_mm']:.2f} |"]
     return "\n".join(lines)
 
 

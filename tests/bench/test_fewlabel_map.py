@@ -26,6 +26,8 @@ def test_a_flat_map_is_fitted_by_an_affine_map_and_a_folded_one_is_not() -> None
     b = measure(folded, pos, k=25, seeds=[0])
     assert a["map_every_label"]["reading"]["affine_2_mm"] < 0.1
     assert b["map_every_label"]["reading"]["affine_2_mm"] > 5 * a["map_every_label"]["reading"]["affine_2_mm"]
+    # the refit's field model, fitted at the true places, places a flat pad's presses to within a grid step or so
+    assert a["map_every_label"]["field model"]["inverted_mm"] < 0.3
     # a linear pad is labelled almost exactly from 25 labels; the fold costs the labeller
     assert a["random"]["mean"]["all_mm"] < 0.2
     assert b["random"]["mean"]["all_mm"] > a["random"]["mean"]["all_mm"]
@@ -34,7 +36,8 @@ def test_a_flat_map_is_fitted_by_an_affine_map_and_a_folded_one_is_not() -> None
 def test_the_labellers_error_is_split_into_inside_and_outside_the_labelled_hull() -> None:
     readings, pos = _pad(1.0)
     out = measure(readings, pos, k=9, seeds=[1, 2])
-    for row in [*out["random"]["per_seed"].values(), out["grid"]]:
+    for row in [*out["random"]["per_seed"].values(), out["grid"], *out["random_map_only"]["per_seed"].values(),
+                out["grid_map_only"]]:
         share = row["inside_share"]
         assert 0.0 < share <= 1.0
         whole = np.sqrt(share * row["inside_mm"] ** 2 + (1 - share) * np.nan_to_num(row["outside_mm"]) ** 2)
@@ -42,7 +45,8 @@ def test_the_labellers_error_is_split_into_inside_and_outside_the_labelled_hull(
     # a grid that reaches the corners leaves nothing outside its hull
     assert out["grid"]["inside_share"] == 1.0 and np.isnan(out["grid"]["outside_mm"])
     text = markdown({"run": "synthetic", **out})
-    assert "| 9 on a grid |" in text and "| reading |" in text
+    assert "| 9 on a grid | map fits alone |" in text and "| reading |" in text
+    assert "| 9 on a grid | map fits, refined on the field model |" in text
 
 
 def test_the_grid_rows_are_distinct_presses_nearest_each_mark() -> None:

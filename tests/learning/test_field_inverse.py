@@ -1,0 +1,129 @@
+"""Placing presses by inverting a smooth model of the field, fitted on a scattered first placing."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tactile_manip.learning.contact import field_inverse
+from tactile_manip.learning.contact.field_inverse import refine_places
+from tactile_manip.learning.contact.fewlabel import pseudo_labels, reading_maps
+
+CHIPS_MM = np.array([[0.0, 0.0], [-7.0, 0.0], [7.0, 0.0], [0.0, -7.0], [0.0, 7.0]])
+
+
+def _field(places_mm: np.ndarray, scale: np.ndarray, noise: float = 0.0, seed: int = 0) -> np.ndarray:
+    """Readings (N, 15) of five chips under a press at ``places_mm`` (N, 2): each chip reads a dipole-like
+    vector pointing from the press, its size ``scale`` (N,) (how hard the press is)."""
+    rel = places_mm[:, None, :] - CHIPS_MM[None]
+    vec = np.concatenate([rel, np.full(rel.shape[:2] + (1,), 6.0)], axis=2)
+    field = vec / (np.sum(vec ** 2, axis=2, keepdims=True) ** 1.5) * 1e4 * scale[:, None, None]
+    field = field.reshape(len(places_mm), -1)
+    return field + np.random.default_rng(seed).normal(0.0, noise, field.shape)
+
+
+def _rmse(a: np.ndarray, b: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(np.sum((a - b) ** 2, axis=1))))
+
+
+@pytest.fixture(scope="module")
+def presses():
+    rng = np.random.default_rng(4)
+    truth = rng.uniform(-12.0, 12.0, (1500, 2))
+    readings = _field(truth, rng.uniform(0.5, 2.0, 1500), noise=0.05)
+    labelled = np.zeros(1500, bool)
+    labelled[rng.choice(1500, 25, replace=False)] = True
+    return readings, truth, labelled
+
+
+def test_a_scattered_placing_is_pulled_onto_the_field(presses) -> None:
+    readings, truth, labelled = presses
+    scattered = truth + np.random.default_rng(1).normal(0.0, 1.0, truth.shape) * ~labelled[:, None]
+    refined = refine_places(readings, scattered, labelled)
+    before, after = _rmse(scattered[~labelled], truth[~labelled]), _rmse(refined[~labelled], truth[~labelled])
+    assert after < 0.5 * before, (before, after)
+    np.testing.assert_array_equal(refined[labelled], scattered[labelled])  # labelled presses stay
+    # float32 readings place the presses where float64 ones do (to the grid's step)
+    single = refine_places(readings.astype(np.float32), scattered, labelled)
+    step = 24.0 * 1.12 / 120
+    assert np.mean(np.abs(single - refined) <= step + 1e-9) > 0.99
+
+
+def test_only_the_rows_asked_for_move(presses) -> None:
+    readings, truth, labelled = presses
+    scattered = truth + np.random.default_rng(2).normal(0.0, 1.0, truth.shape)
+    rows = np.array([3, 10])
+    moved = refine_places(readings, scattered, labelled, rows=rows)
+    keep = np.ones(len(truth), bool)
+    keep[rows] = False
+    np.testing.assert_array_equal(moved[keep], scattered[keep])
+    assert np.all(moved[rows] != scattered[rows])
+
+
+def test_presses_of_one_depth_per_place_are_placed_by_the_direction_alone(presses, monkeypatch) -> None:
+    _, truth, labelled = presses
+    readings = _field(truth, 1.0 + truth[:, 0] / 24.0, noise=0.05)   # the place sets how hard the press is
+    scattered = truth + np.random.default_rng(3).normal(0.0, 1.0, truth.shape) * ~labelled[:, None]
+    before = _rmse(scattered[~labelled], truth[~labelled])
+    alone = _rmse(refine_places(readings, scattered, labelled)[~labelled], truth[~labelled])
+    monkeypatch.setattr(field_inverse, "LEVEL_EXPLAINED", 1.1)   # keep the norm in the model all the same
+    with_norm = _rmse(refine_places(readings, scattered, labelled)[~labelled], truth[~labelled])
+    assert alone < 0.45 * before and alone < with_norm, (before, alone, with_norm)
+
+
+def test_places_along_a_line_are_refined_too() -> None:
+    rng = np.random.default_rng(5)
+    along = rng.uniform(-12.0, 12.0, 800)
+    truth = np.stack([along, np.full(800, 2.0)], axis=1)
+    readings = _field(truth, rng.uniform(0.5, 2.0, 800), noise=0.05)
+    labelled = np.zeros(800, bool)
+    labelled[:10] = True
+    first = along + rng.normal(0.0, 1.0, 800) * ~labelled
+    refined = refine_places(readings, first[:, None], labelled)[:, 0]
+    assert np.sqrt(np.mean((refined - along)[~labelled] ** 2)) < 0.5 * np.sqrt(np.mean((first - along)[~labelled] ** 2))
+
+
+def test_too_few_readings_or_places_that_do_not_spread_are_returned_as_they_are(presses) -> None:
+    readings, truth, labelled = presses
+    few = refine_places(readings[:100], truth[:100] + 1.0, labelled[:100])   # 100 rows, 45 terms
+    np.testing.assert_array_equal(few, truth[:100] + 1.0)
+    still = np.zeros_like(truth)
+    np.testing.assert_array_equal(refine_places(readings, still, labelled), still)
+    everyone = np.ones(len(truth), bool)
+    np.testing.assert_array_equal(refine_places(readings, truth, everyone), truth)
+    with pytest.raises(ValueError, match="3 coordinates"):
+        refine_places(readings, np.hstack([truth, truth[:, :1]]), labelled)
+
+
+def test_the_labeller_refines_named_places_and_scores_the_refit_by_leave_one_out(presses) -> None:
+    readings, truth, labelled = presses
+    names = ["x_mm", "y_mm"]
+    maps = reading_maps(readings)  # shared by the calls below
+    mapped = pseudo_labels(readings, truth, labelled, names=names, refine=False, maps=maps)
+    refined = pseudo_labels(readings, truth, labelled, names=names, maps=maps)
+    assert all(m.endswith("refined on the field model") for m in refined.methods)
+    assert not any("refined" in m for m in mapped.methods)
+    before = _rmse(mapped.values[~labelled], truth[~labelled])
+    after = _rmse(refined.values[~labelled], truth[~labelled])
+    assert after < before, (before, after)
+    np.testing.assert_array_equal(refined.values[labelled], truth[labelled])
+    assert refined.loo_rmse.shape == (2,) and np.all(np.isfinite(refined.loo_rmse)) and np.all(refined.loo_rmse > 0)
+    # the refit's leave-one-out says about how far its places are off, per coordinate
+    per_axis = np.sqrt(np.mean((refined.values[~labelled] - truth[~labelled]) ** 2, axis=0))
+    assert np.all(refined.loo_rmse < 4 * per_axis), (refined.loo_rmse, per_axis)
+    assert np.all(refined.loo_rmse > per_axis / 4), (refined.loo_rmse, per_axis)
+    # without names nothing is a place, and nothing is refined
+    assert not any("refined" in m for m in pseudo_labels(readings, truth, labelled, maps=maps).methods)
+
+
+def test_exact_labels_pull_a_stretched_placing_back_the_more_of_them_there_are(presses) -> None:
+    readings, truth, _ = presses
+    errors = []
+    for count in (25, 300):
+        labelled = np.zeros(len(truth), bool)
+        labelled[np.random.default_rng(count).choice(len(truth), count, replace=False)] = True
+        stretched = np.where(labelled[:, None], truth, 1.1 * truth + 0.02 * truth ** 2 / 12.0)  # a broad warp
+        refined = refine_places(readings, stretched, labelled)
+        errors.append((_rmse(stretched[~labelled], truth[~labelled]), _rmse(refined[~labelled], truth[~labelled])))
+    (before_few, after_few), (before_many, after_many) = errors
+    assert after_few < 0.9 * before_few and after_many < 0.7 * before_many and after_many < after_few, errors
