@@ -8,10 +8,11 @@ field itself:
 1. A forward model of the reading's direction (its unit vector over all channels): a polynomial of degree
    ``DEGREE`` in the press's place, whose coefficients are polynomials of degree ``NORM_DEGREE`` in the log field
    norm (the pattern shifts as the skin is pressed deeper; left out where the place alone sets the norm, as for
-   presses of one depth per place, since a place would then be searched at norms it never had). Least squares over every press at its current place,
-   the labelled ones at their labels, weighted so that the labels (exact places) weigh as much together as the
-   other presses (scattered places) together. A low-degree polynomial cannot follow a scatter from press to
-   press, so the model is that of the field's smooth layout, pinned where the labels are.
+   presses of one depth per place, since a place would then be searched at norms it never had). Least squares
+   over every press at its current place, the labelled ones at their labels, weighted so that the labels (exact
+   places) weigh as much together as the other presses (scattered places) together. A low-degree polynomial
+   cannot follow a scatter from press to press, so the model is that of the field's smooth layout, pinned where
+   the labels are.
 2. Each unlabelled press moves to the place, on a grid of ``GRID_STEPS`` steps per axis over the places' extent
    (and ``MARGIN`` of it beyond each side), whose modelled direction is nearest its own in the metric of the
    model's residuals (their inverse covariance: channels that scatter count less).
@@ -55,7 +56,8 @@ def refine_places(readings: np.ndarray, places: np.ndarray, labelled: np.ndarray
     x = np.asarray(readings, np.float64).reshape(len(readings), -1)
     z = np.asarray(places, np.float64).reshape(len(readings), -1)
     out = z.copy()
-    move = np.flatnonzero(~np.asarray(labelled, bool)) if rows is None else np.asarray(rows, int)
+    lab = np.asarray(labelled, bool)
+    move = np.flatnonzero(~lab) if rows is None else np.asarray(rows, int)
     if z.shape[1] not in (1, 2):
         raise ValueError(f"places of {z.shape[1]} coordinates: the field model places in 1 or 2")
     centre, spread = z.mean(axis=0), float(z.std())
@@ -74,7 +76,6 @@ def refine_places(readings: np.ndarray, places: np.ndarray, labelled: np.ndarray
     explained = 1.0 - float(np.var(level - at_places @ fitted)) / max(float(np.var(level)), 1e-300)
     norm_degree = 0 if explained > LEVEL_EXPLAINED else NORM_DEGREE
     design = _design(scaled, level, norm_degree)
-    lab = np.asarray(labelled, bool)
     # the labelled places are exact, the others scattered: together the labels weigh as much as the rest
     weight = np.sqrt(np.where(lab, max(1.0, (~lab).sum() / max(lab.sum(), 1)), 1.0))[:, None]
     coef, *_ = np.linalg.lstsq(design * weight, direction * weight, rcond=None)
