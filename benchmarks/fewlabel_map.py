@@ -22,7 +22,7 @@ the unlabelled training presses, before any network learns from them.
    nearest each grid point, as a user pressing at the marks of a printed grid would): the same RMSE.
 
 Prints markdown and writes a JSON (default ``docs/results/contact/fewlabel_map.json``). It measures; it asserts
-nothing. About 3 minutes on 2 CPU cores: the maps are built once, then each labelled draw takes about 10 s.
+nothing. About 2 minutes on 2 CPU cores: the maps are built once, then each labelled draw takes about 10 s.
 """
 
 from __future__ import annotations
@@ -100,11 +100,11 @@ def labeller_error(readings: np.ndarray, positions: np.ndarray, rows: np.ndarray
     those inside the labelled positions' convex hull and those outside, with the fits it chose."""
     from scipy.spatial import Delaunay
 
-    from tactile_manip.learning.contact.fewlabel import pseudo_labels
+    from tactile_manip.learning.contact.fewlabel import PLACE_TARGETS, pseudo_labels
 
     lab = np.zeros(len(positions), bool)
     lab[rows] = True
-    labels = pseudo_labels(readings, positions, lab, maps=maps, names=("x_mm", "y_mm"), refine=refine)
+    labels = pseudo_labels(readings, positions, lab, maps=maps, names=PLACE_TARGETS, refine=refine)
     inside = Delaunay(positions[lab]).find_simplex(positions) >= 0
     free = ~lab
     return {"all_mm": _rmse(labels.values[free], positions[free]),
