@@ -48,6 +48,9 @@ class Cell(Protocol):
         :class:`~tactile_manip.perception.contact_pose.TactileEstimator` with the method's contact model); the
         task's result (never raises for a fault of the trial: it is an outcome)."""
 
+    # A cell may also offer ``holds(p) -> bool``: whether it can hold presentation ``p`` at all. The runner then
+    # draws a trial again where it cannot (see :func:`~tactile_manip.trials.presentation.draw_presentation`).
+
 
 # A drawn sensor's baseline: 25 frames (0.2 s) average the chip noise (<= 15 uT per frame) to <= 3 uT, well
 # under the 20 uT no-contact threshold, at a fraction of the 1 s a session's first baseline takes.
@@ -80,6 +83,7 @@ class SimulatedCell:
         self._indenters = {o.display_name: make_indenter(o.name, **o.kwargs) for o in scene.presentation.objects}
         self._presentation: Presentation | None = None
         self._sensor_key: int | None = None      # seed of the drawn sensor in use (None: the nominal one)
+        self._pairs: dict[int | None, object] = {}  # the last simulated sensor pair built, by that key
         self._stall_after_grasp = False
         self.applied_force_n: float | None = None  # the force the held object feels (None: nothing held)
         self.world.on_grasp.append(self._on_grasp)
@@ -146,16 +150,36 @@ class SimulatedCell:
             self.world.remove(obj)
             self._presentation = None
 
-    def _use_sensor_of(self, p: Presentation) -> None:
-        """Swap in the trial's drawn sensor (or back to the nominal one) and take its baseline, pad unloaded."""
+    def holds(self, p: Presentation) -> bool:
+        """Whether ``p``'s object, pressed at ``p``'s force on ``p``'s sensor, stays within the skin's elastic
+        layer. Past it the object would bottom out on the rigid base, which the simulator does not model, and
+        the trial could only fail for every method alike; the runner draws such a trial again."""
+        from tactile_manip.sim.objects import IndenterPose
+
+        pose = IndenterPose(x_mm=p.offset_mm[0], y_mm=p.offset_mm[1], yaw_rad=p.angle_rad)
+        rng = np.random.default_rng(self.scene.sensor.seed)  # the press's noise is not read
+        sample = self._pair_of(p).press(self._indenters[p.obj.display_name], pose, p.force_n, rng,
+                                        render_depth=False)
+        return not sample.bottomed_out
+
+    def _pair_of(self, p: Presentation):
+        """The simulated sensor pair of ``p``'s sensor (drawn, or the nominal one); the last one is kept."""
         from tactile_manip.sim.pair import SensorPair
 
         params = p.sensor_params()
         key = None if params is None else p.seed
+        if key not in self._pairs:
+            self._pairs = {key: SensorPair(seed=self.scene.sensor.seed) if params is None
+                           else SensorPair(params, seed=self.scene.sensor.seed)}
+        return self._pairs[key]
+
+    def _use_sensor_of(self, p: Presentation) -> None:
+        """Swap in the trial's drawn sensor (or back to the nominal one) and take its baseline, pad unloaded."""
+        params = p.sensor_params()
+        key = None if params is None else p.seed
         if key == self._sensor_key:
             return
-        self.sensor.replace_pair(SensorPair(seed=self.scene.sensor.seed) if params is None
-                                 else SensorPair(params, seed=self.scene.sensor.seed))
+        self.sensor.replace_pair(self._pair_of(p))
         self.sensor.calibrate_baseline(frames=SENSOR_DRAW_BASELINE_FRAMES)
         self._sensor_key = key
 

@@ -1,9 +1,14 @@
 """A scene's presentations: which object each trial holds, at which in-hand angle, offset and force, and on
-which sensor; a pure function of the scene's seed and the trial's index, so every method meets the same one."""
+which sensor; a pure function of the scene's seed and the trial's index, so every method meets the same one.
+
+A cell may refuse a draw it cannot hold (the simulated cell: a press that would drive the object through the
+skin's elastic layer, where the simulator no longer holds); the trial is then drawn again from the next seed of
+its own, the object kept, so that no other trial's draw moves."""
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -34,9 +39,27 @@ class Presentation:
         return randomise(SimParams(), np.random.default_rng([self.seed, 1]), spread=self.sensor_spread)
 
 
-def draw_presentation(scene: TrialScene, trial: int) -> Presentation:
-    """The presentation of trial ``trial``: a pure function of the scene's seed and the index."""
-    seed = int(np.random.SeedSequence([scene.seed, trial]).generate_state(1)[0])
+MAX_REDRAWS = 20  # draws of one trial a cell may refuse before the last is kept (and its trial fails)
+
+
+def draw_presentation(scene: TrialScene, trial: int, *,
+                      holds: Callable[[Presentation], bool] | None = None) -> Presentation:
+    """The presentation of trial ``trial``: a pure function of the scene's seed, the index and ``holds``.
+
+    ``holds``: whether the cell can hold a draw (``SimulatedCell.holds``); a draw it cannot hold is replaced by
+    the trial's next one (same object; angle, offset, force and sensor drawn again), up to ``MAX_REDRAWS``
+    times, after which the last is kept and the trial records the cell's error. A draw it holds is the one
+    drawn without ``holds``.
+    """
+    for attempt in range(MAX_REDRAWS + 1):
+        entropy = [scene.seed, trial] + ([attempt] if attempt else [])
+        p = _draw(scene, trial, int(np.random.SeedSequence(entropy).generate_state(1)[0]))
+        if holds is None or holds(p):
+            break
+    return p
+
+
+def _draw(scene: TrialScene, trial: int, seed: int) -> Presentation:
     rng = np.random.default_rng(seed)
     p = scene.presentation
     obj = p.objects[trial % len(p.objects)]

@@ -74,10 +74,14 @@ def run_scene(scene: TrialScene, write: Callable[[TrialRecord], None], *,
     faults = scene.faults
     target = math.radians(scene.target_deg)
     count = 0
+    holds = getattr(cell, "holds", None)
+    drawn: dict[int, Presentation] = {}  # each trial drawn once for all its methods
     with cell.connected(), tqdm(total=len(todo), desc=f"trials ({scene.name})", unit="trial",
                                 disable=not progress) as bar:
         for i, method in todo:
-            p = draw_presentation(scene, i)
+            if i not in drawn:
+                drawn[i] = draw_presentation(scene, i, holds=holds)
+            p = drawn[i]
             if trial_observer is not None:
                 trial_observer.trial_started(p, method, cell)
             t0 = time.perf_counter()

@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from tactile_manip.errors import SimulationError
 from tactile_manip.robot.safety import SafetyLimits
 from tactile_manip.trials.log import read_trials
 from tactile_manip.trials.runner import SimulatedCell, build_estimators, draw_presentation, run_scene, run_trials
@@ -49,6 +50,46 @@ def test_presentations_are_a_pure_function_of_seed_and_index() -> None:
     assert a == b and a != draw_presentation(scene, 3)
     assert draw_presentation(dataclasses.replace(scene, seed=4), 2).seed != a.seed
     assert -math.pi / 2 < a.angle_rad <= math.pi / 2 and all(abs(o) <= 2.0 for o in a.offset_mm)
+
+
+def test_a_draw_the_cell_cannot_hold_is_drawn_again_and_no_other_draw_moves() -> None:
+    from tactile_manip.trials.presentation import MAX_REDRAWS
+
+    scene = _scene()
+    seen = []
+
+    def refuse_first(p) -> bool:
+        seen.append(p)
+        return len(seen) > 1
+    again = draw_presentation(scene, 2, holds=refuse_first)
+    plain = draw_presentation(scene, 2)
+    assert seen[0] == plain and again == seen[1] and again != plain
+    assert again.obj == plain.obj and again.trial == 2  # the object is kept, the rest is drawn again
+    assert draw_presentation(scene, 2, holds=lambda p: p != plain) == again  # a pure function of the refusals
+    assert draw_presentation(scene, 3, holds=lambda p: True) == draw_presentation(scene, 3)
+    calls = []
+    last = draw_presentation(scene, 2, holds=lambda p: calls.append(p) is None and False)
+    assert len(calls) == MAX_REDRAWS + 1 and last == calls[-1]  # never held: the last draw is kept
+
+
+def test_the_simulated_cell_refuses_a_press_through_its_layer_and_the_run_redraws_it() -> None:
+    bar = TrialObject("square_bar", "square_bar_2p5mm", {"size_mm": 2.5})
+    scene = _scene(trials=1, presentation=PresentationConfig(objects=[bar], force_n=(10.0, 10.0)))
+    cell = SimulatedCell(scene)
+    p = draw_presentation(scene, 0)
+    assert cell.holds(p)
+    crushing = dataclasses.replace(p, force_n=60.0)
+    assert not cell.holds(crushing)
+    with cell.connected(), pytest.raises(SimulationError, match="bottoms out"):  # what the trial would meet
+        cell.run_one(crushing, build_estimators(scene)["bilinear"])
+    scene = _scene(trials=2, presentation=PresentationConfig(objects=[bar], force_n=(10.0, 60.0)))
+    cell = SimulatedCell(scene)
+    held = [draw_presentation(scene, i, holds=cell.holds) for i in range(2)]
+    assert all(cell.holds(p) for p in held)
+    records = []
+    run_scene(scene, records.append, estimators=build_estimators(scene), progress=False, cell=cell)
+    assert [r.seed for r in records] == [p.seed for p in held for _ in range(2)]
+    assert all(r.outcome != "error" for r in records)
 
 
 def test_every_method_runs_every_presentation_and_supermag_turns_rods_to_target() -> None:
