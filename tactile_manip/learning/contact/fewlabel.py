@@ -49,6 +49,7 @@ RBF_WIDTHS = (0.3, 1.0, 3.0)  # gamma of the kernel correction, on map coordinat
 RBF_ALPHA = 0.1           # ridge of the kernel correction
 RIDGE = 1e-6              # ridge of the affine and polynomial fits
 SHRINK = (0.0, 0.01, 0.03, 0.1, 0.3, 1.0, 3.0, 10.0, 30.0, 100.0)  # ridge weights of the shrunk fit, on unit-spread terms
+REFINED_LOO = 25          # labelled presses held out in turn for the refitted places' leave-one-out error
 PLACE_TARGETS = ("x_mm", "y_mm")        # where the press is: fitted on the maps only
 LOAD_TARGETS = ("force_n", "depth_mm")  # how hard it is: fitted on the field norm only
 
@@ -262,10 +263,11 @@ def _shrunk(z: np.ndarray, free: int) -> Fit:
     return fit
 
 
-def _held_out(lab: np.ndarray) -> Iterator[tuple[int, np.ndarray]]:
-    """Each labelled row held out in turn (at most 200 of them, evenly spaced), with the labelled rows left."""
+def _held_out(lab: np.ndarray, most: int = 200) -> Iterator[tuple[int, np.ndarray]]:
+    """Each labelled row held out in turn (at most ``most`` of them, evenly spaced), with the labelled rows
+    left."""
     rows = np.flatnonzero(lab)
-    for i in rows[np.unique(np.linspace(0, len(rows) - 1, min(len(rows), 200)).round().astype(int))]:
+    for i in rows[np.unique(np.linspace(0, len(rows) - 1, min(len(rows), most)).round().astype(int))]:
         keep = lab.copy()
         keep[i] = False
         yield i, keep
@@ -279,13 +281,13 @@ def _loo_rmse(fit: Fit, y: np.ndarray, lab: np.ndarray) -> float:
 
 
 def _refined_loo(x: np.ndarray, y: np.ndarray, lab: np.ndarray, fits: list[Fit]) -> np.ndarray:
-    """Per place coordinate, the leave-one-out RMSE over the labelled rows (at most 200, evenly spaced) of the
-    map fits followed by the field model's refit: each held-out press is placed by the fits of the others and
-    then refitted, the others at their labels."""
+    """Per place coordinate, the leave-one-out RMSE over the labelled rows (at most ``REFINED_LOO``, evenly
+    spaced) of the map fits followed by the field model's refit: with each held-out press, every press the
+    others do not label is placed by their fits and refitted, as the labeller does without it."""
     errs = []
-    for i, keep in _held_out(lab):
+    for i, keep in _held_out(lab, REFINED_LOO):
         first = np.stack([fit(keep, y[:, k]) for k, fit in enumerate(fits)], axis=1)
         first[keep] = y[keep]
-        errs.append(refine_places(x, first, keep, rows=np.array([i]))[i] - y[i])
+        errs.append(refine_places(x, first, keep)[i] - y[i])
     err = np.sqrt(np.mean(np.square(errs), axis=0))
     return np.where(np.isfinite(err), err, np.inf)
