@@ -13,7 +13,8 @@ the unlabelled training presses, before any network learns from them.
    other press, on the map's 3 coordinates and on the reading's direction itself (what the map was made from).
    The affine row is what the map gives when labels only have to set its scale, turn and offset; the kNN rows
    say how much of the place the map's coordinates still hold, against what the readings hold. A last row
-   fits the refit's field model at every press's true place and places every press by it: the refit's limit.
+   starts the refit at every press's true place, every press unlabelled, and scores where it leaves them: the
+   refit's limit.
 2. K presses labelled at random (``--seeds``): the labeller's RMSE on the other training presses, split into
    those inside the labelled presses' convex hull (interpolated) and those outside (extrapolated); for the
    labeller as ``train`` runs it (the map fits, then the refit on a smooth model of the field,
@@ -22,7 +23,8 @@ the unlabelled training presses, before any network learns from them.
    nearest each grid point, as a user pressing at the marks of a printed grid would): the same RMSE.
 
 Prints markdown and writes a JSON (default ``docs/results/contact/fewlabel_map.json``). It measures; it asserts
-nothing. About 2 minutes on 2 CPU cores: the maps are built once, then each labelled draw takes about 10 s.
+nothing. About 5 minutes on 2 CPU cores: the maps are built once, then each labelled draw takes about 35 s
+(most of it the labeller's leave-one-out, which refits every press once per held-out label).
 """
 
 from __future__ import annotations
@@ -72,7 +74,7 @@ def map_fidelity(readings: np.ndarray, positions: np.ndarray,
         out[name] = row
     direction = readings / np.maximum(np.linalg.norm(readings, axis=1), 1e-12)[:, None]
     out["direction itself"] = {"knn_mm": _knn_rmse(direction, positions)}
-    # the refit's own limit: the field model fitted at every press's true place, every press placed by it
+    # the refit's own limit: started at every press's true place, every press unlabelled
     placed = refine_places(readings, positions, np.zeros(len(positions), bool))
     out["field model"] = {"inverted_mm": _rmse(placed, positions)}
     return out
@@ -142,7 +144,7 @@ def markdown(report: dict[str, Any]) -> str:
     lines.append(f"| the reading's direction itself, no map | - | - | "
                  f"{report['map_every_label']['direction itself']['knn_mm']:.2f} |")
     if "field model" in report["map_every_label"]:
-        lines.append(f"\nThe refit's field model fitted at every press's true place, each press placed by it: "
+        lines.append(f"\nThe refit started at every press's true place, each press placed by it: "
                      f"{report['map_every_label']['field model']['inverted_mm']:.2f} mm (the refit's limit).")
     k = report["k"]
     lines += [f"\nThe labeller with {k} labelled presses, on the other training presses:\n",
