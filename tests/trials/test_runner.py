@@ -86,6 +86,7 @@ def test_the_simulated_cell_refuses_a_press_through_its_layer_and_the_run_redraw
     cell = SimulatedCell(scene)
     held = [draw_presentation(scene, i, holds=cell.holds) for i in range(2)]
     assert all(cell.holds(p) for p in held)
+    assert not any(cell.holds(draw_presentation(scene, i)) for i in range(2))  # both first draws were refused
     records = []
     run_scene(scene, records.append, estimators=build_estimators(scene), progress=False, cell=cell)
     assert [r.seed for r in records] == [p.seed for p in held for _ in range(2)]

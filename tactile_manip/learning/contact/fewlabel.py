@@ -25,11 +25,10 @@ whatever its depth), one with each graph edge measured in units of the local spa
 presses were spread evenly over the pad), and one of the standardised reading. The chosen fits label every
 unlabelled training row (:func:`pseudo_labels`); the places among them (one or two named place targets) are then
 refitted on a smooth model of the field (:mod:`~tactile_manip.learning.contact.field_inverse`), which takes out
-the map's local scatter, in two passes (on the eFlesh spatial run, 25 labels: 2.01 to 1.62 mm over 8 draws). The contact
-network then trains on them
-(``unlabelled = "manifold"`` in a contact training config). The leave-one-out RMSE of the chosen fit travels
-with the labels: the network's sigma is widened by it, since the network cannot be more exact than the labels
-it learnt from.
+the map's local scatter, in two passes (on the eFlesh spatial run, 25 labels: 2.01 to 1.62 mm over 8 draws).
+The contact network then trains on them (``unlabelled = "manifold"`` in a contact training config). The
+leave-one-out RMSE of the chosen fit travels with the labels: the network's sigma is widened by it, since the
+network cannot be more exact than the labels it learnt from.
 """
 
 from __future__ import annotations
@@ -49,7 +48,7 @@ RBF_WIDTHS = (0.3, 1.0, 3.0)  # gamma of the kernel correction, on map coordinat
 RBF_ALPHA = 0.1           # ridge of the kernel correction
 RIDGE = 1e-6              # ridge of the affine and polynomial fits
 SHRINK = (0.0, 0.01, 0.03, 0.1, 0.3, 1.0, 3.0, 10.0, 30.0, 100.0)  # ridge weights of the shrunk fit, on unit-spread terms
-REFINED_LOO = 25          # labelled presses held out in turn for the refitted places' leave-one-out error
+REFINED_LOO = 25          # labelled presses held out in turn for the refitted places' leave-one-out RMSE
 PLACE_TARGETS = ("x_mm", "y_mm")        # where the press is: fitted on the maps only
 LOAD_TARGETS = ("force_n", "depth_mm")  # how hard it is: fitted on the field norm only
 
