@@ -46,6 +46,33 @@ def test_set_contact_puts_the_true_field_on_the_readings(pair, monkeypatch):
         assert np.abs(s.wait_new(2.0).field_ut).max() < 15.0
 
 
+def test_no_frame_after_clear_contact_returns_carries_the_contact(pair, monkeypatch):
+    import threading
+
+    bar, pose = make_indenter("hex_bar", size_mm=4.0), IndenterPose(yaw_rad=0.5)
+    with SimulatedSensor(pair=pair) as s:
+        s.set_baseline(s.expected_baseline_ut)
+        s.set_contact(bar, pose, 10.0)
+        s.read_latest(1.0)
+        assert np.abs(s.wait_new(2.0).field_ut).max() > 50.0  # the bar is on the pad
+        measuring, chips = threading.Event(), pair.chips
+
+        class SlowChips:  # the next frame is measured with the bar still on, and takes 0.2 s to come out
+            def __getattr__(self, name):
+                return getattr(chips, name)
+
+            def measure(self, field, rng):
+                measuring.set()
+                time.sleep(0.2)
+                return chips.measure(field, rng)
+        monkeypatch.setattr(pair, "chips", SlowChips())
+        assert measuring.wait(2.0)
+        s.clear_contact()  # returns once the frame in flight is out
+        monkeypatch.setattr(pair, "chips", chips)
+        with s.subscribe() as frames:  # every frame published from now on
+            assert all(np.abs(frames.get(2.0).reading.field_ut).max() < 15.0 for _ in range(3))
+
+
 def test_a_contact_that_bottoms_out_is_refused(pair):
     from tactile_manip.errors import SimulationError
 

@@ -56,6 +56,9 @@ class SimulatedSensor(TactileSensor):
         self._cpu_s = 0.0
         self._last_error = ""
         self._pair_generation = self._published_generation = 0  # replace_pair count; that of the last frame out
+        # held while a frame is measured and published, and while the contact changes: a frame published after
+        # set_contact, clear_contact or play returns carries the new contact
+        self._contact_lock = threading.Lock()
 
     # ------------------------------------------------------------------ contacts and faults
 
@@ -86,8 +89,9 @@ class SimulatedSensor(TactileSensor):
                 self._cache.popitem(last=False)
         else:
             self._cache.move_to_end(key)
-        self._script = None
-        self._static = change
+        with self._contact_lock:
+            self._script = None
+            self._static = change
         return change
 
     def replace_pair(self, pair: SensorPair) -> None:
@@ -109,15 +113,18 @@ class SimulatedSensor(TactileSensor):
                 self._cond.wait_for(lambda: self._published_generation == self._pair_generation, timeout=1.0)
 
     def clear_contact(self) -> None:
-        """Nothing on the pad from the next frame on (stops a script too)."""
-        self._script = None
-        self._static = None
+        """Nothing on the pad from the next frame on (stops a script too): no frame published after this returns
+        carries the contact."""
+        with self._contact_lock:
+            self._script = None
+            self._static = None
 
     def play(self, presses: Sequence[Press], *, period_s: float | None = None) -> ContactTimeline:
         """Solve a script of presses (in the caller's thread), then play it from now; replaces any contact."""
         timeline = ContactTimeline(self.pair, presses, period_s=period_s, seed=self.config.seed)
-        self._static = None
-        self._script = (timeline, time.monotonic())
+        with self._contact_lock:
+            self._static = None
+            self._script = (timeline, time.monotonic())
         return timeline
 
     @property
@@ -192,8 +199,10 @@ class SimulatedSensor(TactileSensor):
                 if not self._stalled:
                     # read per frame (generation first): replace_pair swaps the pair while the thread runs
                     generation, pair = self._pair_generation, self.pair
-                    m = pair.chips.measure(pair.baseline_field_ut + self._change_at(deadline), rng)
-                    self._publish(m.raw_ut, m.saturated, seq=seq, t_host_s=time.monotonic(), t_device_s=k * period)
+                    with self._contact_lock:
+                        m = pair.chips.measure(pair.baseline_field_ut + self._change_at(deadline), rng)
+                        self._publish(m.raw_ut, m.saturated, seq=seq, t_host_s=time.monotonic(),
+                                      t_device_s=k * period)
                     with self._cond:
                         self._published_generation = generation
                         self._cond.notify_all()
