@@ -25,7 +25,7 @@ whatever its depth), one with each graph edge measured in units of the local spa
 presses were spread evenly over the pad), and one of the standardised reading. The chosen fits label every
 unlabelled training row (:func:`pseudo_labels`); the places among them (one or two named place targets) are then
 refitted on a smooth model of the field (:mod:`~tactile_manip.learning.contact.field_inverse`), which takes out
-the map's local scatter, in two passes (on the eFlesh spatial run, 25 labels: 2.01 to 1.62 mm over 8 draws).
+the map's local scatter, in three passes (on the eFlesh spatial run, 25 labels: 2.13 to 1.64 mm over 16 draws).
 The contact network then trains on them (``unlabelled = "manifold"`` in a contact training config). The
 leave-one-out RMSE of the chosen fit travels with the labels: the network's sigma is widened by it, since the
 network cannot be more exact than the labels it learnt from.
