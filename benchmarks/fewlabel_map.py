@@ -18,12 +18,13 @@ the unlabelled training presses, before any network learns from them.
 2. K presses labelled at random (``--seeds``): the labeller's RMSE on the other training presses, split into
    those inside the labelled presses' convex hull (interpolated) and those outside (extrapolated); for the
    labeller as ``train`` runs it (the map fits, then the refit on a smooth model of the field,
-   :mod:`tactile_manip.learning.contact.field_inverse`) and for the map fits alone.
+   :mod:`tactile_manip.learning.contact.field_inverse`) and for the map fits alone; and by the distance from
+   each press to the nearest labelled one (bands ``NEAREST_MM``).
 3. K presses labelled on an evenly spaced sqrt(K) x sqrt(K) grid over the pressed area (the training press
    nearest each grid point, as a user pressing at the marks of a printed grid would): the same RMSE.
 
 Prints markdown and writes a JSON (default ``docs/results/contact/fewlabel_map.json``). It measures; it asserts
-nothing. About 5 minutes on 2 CPU cores: the maps are built once, then each labelled draw takes about 35 s
+nothing. About 7.5 minutes on 2 CPU cores: the maps are built once, then each labelled draw takes about 45 s
 (most of it the labeller's leave-one-out, which refits every press once per held-out label).
 """
 
@@ -41,6 +42,7 @@ from benchmarks._common import machine_info, publish
 from benchmarks.fewlabel_k import RUNS, _cli
 
 RUN = "spatial_20250316_155729"
+NEAREST_MM = (1.5, 3.0, 4.5)  # edges of the bands of distance to the nearest labelled press
 
 
 def _rmse(pred: np.ndarray, truth: np.ndarray) -> float:
@@ -80,6 +82,11 @@ def map_fidelity(readings: np.ndarray, positions: np.ndarray,
     return out
 
 
+def _finite_mean(values: list[float]) -> float:
+    finite = [v for v in values if math.isfinite(v)]
+    return float(np.mean(finite)) if finite else math.nan
+
+
 def grid_rows(positions: np.ndarray, k: int) -> np.ndarray:
     """Indices of the rows nearest an evenly spaced n x n grid (n = round(sqrt(k))) over the positions' extent,
     one per grid point, distinct."""
@@ -99,8 +106,9 @@ def labeller_error(readings: np.ndarray, positions: np.ndarray, rows: np.ndarray
                    maps: dict[str, np.ndarray] | None = None, refine: bool = True) -> dict[str, Any]:
     """The labeller's RMSE on the unlabelled rows when ``rows`` are labelled (``maps``: the readings' maps, shared
     between draws; ``refine``: the map fits' places refitted on the field model, as ``train`` does): all of them,
-    those inside the labelled positions' convex hull and those outside, with the fits it chose."""
-    from scipy.spatial import Delaunay
+    those inside the labelled positions' convex hull and those outside, and per band of distance to the nearest
+    labelled press (``NEAREST_MM``: its share of the unlabelled rows and their RMSE), with the fits it chose."""
+    from scipy.spatial import Delaunay, cKDTree
 
     from tactile_manip.learning.contact.fewlabel import PLACE_TARGETS, pseudo_labels
 
@@ -109,10 +117,17 @@ def labeller_error(readings: np.ndarray, positions: np.ndarray, rows: np.ndarray
     labels = pseudo_labels(readings, positions, lab, maps=maps, names=PLACE_TARGETS, refine=refine)
     inside = Delaunay(positions[lab]).find_simplex(positions) >= 0
     free = ~lab
+    gap_mm = cKDTree(positions[lab]).query(positions[free])[0]
+    band = np.digitize(gap_mm, NEAREST_MM)
+    wrong = labels.values[free] - positions[free]
+    nearest = [{"share": float(np.mean(band == b)),
+                "rmse_mm": _rmse(wrong[band == b], np.zeros((int(np.sum(band == b)), 2)))}
+               for b in range(len(NEAREST_MM) + 1)]
     return {"all_mm": _rmse(labels.values[free], positions[free]),
             "inside_mm": _rmse(labels.values[free & inside], positions[free & inside]),
             "outside_mm": _rmse(labels.values[free & ~inside], positions[free & ~inside]),
-            "inside_share": float((free & inside).sum() / free.sum()), "fits": list(labels.methods)}
+            "inside_share": float((free & inside).sum() / free.sum()), "by_nearest_label": nearest,
+            "fits": list(labels.methods)}
 
 
 def measure(readings: np.ndarray, positions: np.ndarray, k: int, seeds: list[int]) -> dict[str, Any]:
@@ -129,6 +144,9 @@ def measure(readings: np.ndarray, positions: np.ndarray, k: int, seeds: list[int
                   for s in seeds}
         mean = {key: float(np.mean([r[key] for r in random.values()]))
                 for key in ("all_mm", "inside_mm", "outside_mm")}
+        mean["by_nearest_label"] = [
+            {key: _finite_mean([r["by_nearest_label"][b][key] for r in random.values()])
+             for key in ("share", "rmse_mm")} for b in range(len(NEAREST_MM) + 1)]
         out["random" + suffix] = {"per_seed": random, "mean": mean}
         out["grid" + suffix] = labeller_error(x, y, grid_rows(y, k), maps, refine)
     return out
@@ -155,6 +173,13 @@ def markdown(report: dict[str, Any]) -> str:
                   f"{rnd['mean']['inside_mm']:.2f} | {rnd['mean']['outside_mm']:.2f} |",
                   f"| {k} on a grid | {how} | {grid['all_mm']:.2f} | {grid['inside_mm']:.2f} | "
                   f"{grid['outside_mm']:.2f} |"]
+    bands = report["random"]["mean"].get("by_nearest_label")
+    if bands:
+        names = [f"< {NEAREST_MM[0]:g}", *(f"{a:g}-{b:g}" for a, b in zip(NEAREST_MM, NEAREST_MM[1:])),
+                 f">= {NEAREST_MM[-1]:g}"]
+        lines += [f"\nThe refined labeller, {k} at random, by distance to the nearest labelled press:\n",
+                  "| distance (mm) | share of the presses | RMSE (mm) |", "|---|---|---|"]
+        lines += [f"| {name} | {band['share']:.0%} | {band['rmse_mm']:.2f} |" for name, band in zip(names, bands)]
     return "\n".join(lines)
 
 

@@ -42,11 +42,17 @@ def test_the_labellers_error_is_split_into_inside_and_outside_the_labelled_hull(
         assert 0.0 < share <= 1.0
         whole = np.sqrt(share * row["inside_mm"] ** 2 + (1 - share) * np.nan_to_num(row["outside_mm"]) ** 2)
         assert whole == pytest.approx(row["all_mm"], rel=1e-9)
+        # so are the bands of distance to the nearest labelled press
+        bands = row["by_nearest_label"]
+        assert sum(b["share"] for b in bands) == pytest.approx(1.0)
+        assert np.sqrt(sum(b["share"] * np.nan_to_num(b["rmse_mm"]) ** 2 for b in bands)) == pytest.approx(
+            row["all_mm"], rel=1e-9)
     # a grid that reaches the corners leaves nothing outside its hull
     assert out["grid"]["inside_share"] == 1.0 and np.isnan(out["grid"]["outside_mm"])
     text = markdown({"run": "synthetic", **out})
     assert "| 9 on a grid | map fits alone |" in text and "| reading |" in text
     assert "| 9 on a grid | map fits, refined on the field model |" in text
+    assert "| < 1.5 |" in text and "| 1.5-3 |" in text and "| >= 4.5 |" in text
 
 
 def test_the_grid_rows_are_distinct_presses_nearest_each_mark() -> None:
