@@ -144,8 +144,11 @@ def _one_pass(direction: np.ndarray, level: np.ndarray, z: np.ndarray, weight: n
     coef, *_ = np.linalg.lstsq(design * weight, direction * weight, rcond=None)
     resid = direction - design @ coef
     cov = np.cov(resid.T).reshape(direction.shape[1], -1)
-    cov += np.eye(len(cov)) * max(1e-12, 1e-9 * float(np.trace(cov)))
-    white = np.linalg.cholesky(np.linalg.inv(cov))  # d @ white: residuals of unit covariance
+    floor = max(1e-12, 1e-9 * float(np.trace(cov)))
+    # d @ white: residuals of unit covariance. From the eigenvectors, not a Cholesky factor of the inverse: where
+    # the readings span fewer dimensions than their channels, the inverse's rounding can leave it indefinite.
+    vals, vecs = np.linalg.eigh(cov)
+    white = vecs / np.sqrt(np.maximum(vals, 0.0) + floor)
     lo, hi = z.min(axis=0), z.max(axis=0)
     pad = MARGIN * (hi - lo)
     axes = [np.linspace(a - p, b + p, GRID_STEPS + 1) for a, b, p in zip(lo, hi, pad)]
