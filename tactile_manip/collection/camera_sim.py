@@ -114,8 +114,9 @@ class SimulatedCamera(Camera):
         self.alignment = self.config.alignment()
         self.reference_image = self._no_contact_image()
         self._pad_xy, self._pad_index = self._pad_pixels()
-        self._static: tuple[_Contact, float] | None = None
-        self._script: tuple[list[Press], list[_Contact], float] | None = None
+        # what presses the gel: None, a static (contact, force) or a script (presses, contacts, start); one
+        # attribute, replaced whole, so the frame thread never reads half of a switch between them
+        self._scene: tuple[_Contact, float] | tuple[list[Press], list[_Contact], float] | None = None
         self._stalled = False
         self._stall_lock = threading.Lock()
         self._solved: dict[tuple, _Contact] = {}
@@ -126,12 +127,11 @@ class SimulatedCamera(Camera):
         """Press ``indenter`` at ``pose`` (MBTS pad frame) with ``force_n`` from the next frame on (~50 ms solve)."""
         force = check_finite_scalar("force_n", force_n, low=0.0)
         contact = self._solve(indenter, pose, np.array([force])) if force > 0 else None
-        self._script = None
-        self._static = None if contact is None else (contact, force)
+        self._scene = None if contact is None else (contact, force)
 
     def clear_contact(self) -> None:
         """Nothing on the pad from the next frame on (stops a script too)."""
-        self._static = self._script = None
+        self._scene = None
 
     def play(self, presses: Sequence[Press], *, start_host_s: float | None = None) -> None:
         """Play a script of presses from ``start_host_s`` (default now); replaces any contact.
@@ -147,8 +147,7 @@ class SimulatedCamera(Camera):
             if key not in self._solved:
                 self._solved[key] = self._solve(p.indenter(), p.pose, np.array(FORCE_LEVELS) * p.peak_force_n)
             contacts.append(self._solved[key])
-        self._static = None
-        self._script = (ordered, contacts, time.monotonic() if start_host_s is None else float(start_host_s))
+        self._scene = (ordered, contacts, time.monotonic() if start_host_s is None else float(start_host_s))
 
     def indentation_at(self, t_host_s: float) -> np.ndarray:
         """True indentation (H, W) float32 mm at the camera's pixels at host time ``t_host_s`` (ground truth)."""
@@ -215,15 +214,16 @@ class SimulatedCamera(Camera):
     # ------------------------------------------------------------------ physics and optics
 
     def _contact_at(self, t_host_s: float) -> tuple[_Contact | None, float]:
-        static, script = self._static, self._script
-        if static is not None:
-            return static
-        if script is not None:
-            presses, contacts, start = script
-            t = t_host_s - start
-            for p, c in zip(presses, contacts):
-                if p.start_s < t < p.end_s:
-                    return c, p.force_at(t)
+        scene = self._scene
+        if scene is None:
+            return None, 0.0
+        if len(scene) == 2:
+            return scene
+        presses, contacts, start = scene
+        t = t_host_s - start
+        for p, c in zip(presses, contacts):
+            if p.start_s < t < p.end_s:
+                return c, p.force_at(t)
         return None, 0.0
 
     def _solve(self, indenter: Indenter, pose: IndenterPose, forces_n: np.ndarray) -> _Contact:

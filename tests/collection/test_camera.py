@@ -13,6 +13,7 @@ from tactile_manip.errors import SensorDisconnectedError
 from tactile_manip.collection.camera import CameraError, CameraFrame, CameraTimeoutError, make_camera
 from tactile_manip.collection.camera_opencv import OpenCVCamera, OpenCVCameraConfig
 from tactile_manip.collection.camera_sim import SimulatedCamera, SimulatedCameraConfig, ball_indenter
+from tactile_manip.sensors.simulated.contacts import Press
 from tactile_manip.sim.objects import IndenterPose
 
 
@@ -89,6 +90,30 @@ def test_a_press_darkens_the_pad_where_the_simulator_says():
     assert np.all(darker[truth == 0] == 0)  # noise-free: nothing changes off the contact
     noisy = cam.render(0.0, rng).astype(np.float32)
     assert 0.7 < np.std(noisy - pressed) < 1.3  # ~1 grey level of read noise
+
+
+class _WatchedCamera(SimulatedCamera):
+    """A simulated camera that reads its contact, as the frame thread would, after every attribute it sets."""
+
+    seen: list
+
+    def __setattr__(self, name, value):
+        super().__setattr__(name, value)
+        if "seen" in self.__dict__:
+            self.seen.append(self._contact_at(1.0)[0] is not None)
+
+
+def test_switching_between_a_script_and_a_still_press_never_shows_a_frame_without_either():
+    cam = _WatchedCamera(SimulatedCameraConfig(rate_hz=100.0))
+    script = [Press(ball_indenter(4.0), start_s=0.0, peak_force_n=3.0, rise_s=1.0, hold_s=10.0)]
+    cam.play(script, start_host_s=0.0)  # solved once; the host time 1.0 s read below is within the press
+    cam.seen = []
+    for _ in range(3):
+        cam.set_contact(ball_indenter(4.0), IndenterPose(), 3.0)
+        cam.play(script, start_host_s=0.0)
+    assert cam.seen and all(cam.seen)  # every state the frame thread could read holds a contact
+    cam.clear_contact()
+    assert cam.seen[-1] is False
 
 
 def test_simulated_camera_config_refuses_bad_values():
