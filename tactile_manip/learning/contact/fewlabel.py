@@ -29,7 +29,8 @@ the map's local scatter, in three passes (on the eFlesh spatial run, 25 labels: 
 The refit starts from several first placings and takes the mean of where they lead: on every map whose best fits
 are about as good as the best map's (``START_SPREAD``), the best and the next best fit per coordinate. Each start
 leaves its own smooth bend between the labels, and the bends partly cancel (same run and labels: 1.64 to 1.55 mm
-over those 16 draws, closer in 13; the map of the standardised reading fits 2-3 times worse there and starts none).
+over those 16 draws, closer in 13, and 1.69 to 1.55 mm over 24 draws not used for the choice, closer in 20; the
+map of the standardised reading fits 2-3 times worse there and starts none).
 The contact network then trains on them (``unlabelled = "manifold"`` in a contact training config). The
 leave-one-out RMSE of the chosen fit travels with the labels: the network's sigma is widened by it, since the
 network cannot be more exact than the labels it learnt from.
