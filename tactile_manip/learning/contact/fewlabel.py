@@ -124,10 +124,17 @@ def pseudo_labels(readings: np.ndarray, targets: np.ndarray, labelled: np.ndarra
     values = np.empty((len(x), y.shape[1]))
     loo = np.empty(y.shape[1])
     methods = []
+    scored: dict[tuple[int, int], float] = {}
+
+    def score(fit: Fit, k: int) -> float:  # a fit's leave-one-out RMSE on target k, computed once
+        if (id(fit), k) not in scored:
+            scored[id(fit), k] = _loo_rmse(fit, y[:, k], lab)
+        return scored[id(fit), k]
+
     for k, kind in enumerate(kinds):
         best = None
         for name, fit in fits[kind] if kind else [*fits["place"], *fits["load"]]:
-            err = _loo_rmse(fit, y[:, k], lab)
+            err = score(fit, k)
             if best is None or err < best[0]:
                 best = (err, name, fit)
         loo[k], name, fit = best
@@ -136,7 +143,7 @@ def pseudo_labels(readings: np.ndarray, targets: np.ndarray, labelled: np.ndarra
         methods.append(name)
     places = [k for k, kind in enumerate(kinds) if kind == "place"]
     if refine and len(places) in (1, 2) and (~lab).any():
-        starts = _starts(by_map, y[:, places], lab)
+        starts = _starts(by_map, places, score)
         values[:, places] = _refit(x, y[:, places], lab, starts)
         loo[places] = _refined_loo(x, y[:, places], lab, starts)
         for k in places:
@@ -290,16 +297,18 @@ def _loo_rmse(fit: Fit, y: np.ndarray, lab: np.ndarray) -> float:
     return err if np.isfinite(err) else np.inf
 
 
-def _starts(by_map: dict[str, list[tuple[str, Fit]]], y: np.ndarray, lab: np.ndarray) -> list[list[Fit]]:
-    """The first placings the field model's refit starts from, each a fit per place coordinate of ``y`` (N, P):
-    on every map whose best fits leave at most ``START_SPREAD`` times the leave-one-out error of the best map's
-    (over the coordinates), the fits of least error per coordinate, then the next least (``STARTS_PER_MAP``)."""
+def _starts(by_map: dict[str, list[tuple[str, Fit]]], places: list[int],
+            score: Callable[[Fit, int], float]) -> list[list[Fit]]:
+    """The first placings the field model's refit starts from, each a fit per place target (``places``, target
+    indices; ``score(fit, k)``: the fit's leave-one-out RMSE on target k): on every map whose best fits leave at
+    most ``START_SPREAD`` times the leave-one-out error of the best map's (over the coordinates), the fits of least
+    error per coordinate, then the next least (``STARTS_PER_MAP``)."""
     ranked = {}
     for name, group in by_map.items():
-        errs = np.array([[_loo_rmse(fit, y[:, k], lab) for _, fit in group] for k in range(y.shape[1])])
+        errs = np.array([[score(fit, k) for _, fit in group] for k in places])
         ranked[name] = (float(np.sqrt(np.sum(errs.min(axis=1) ** 2))), np.argsort(errs, axis=1, kind="stable"))
     best = min(err for err, _ in ranked.values())
-    return [[by_map[name][order[k, rank]][1] for k in range(y.shape[1])]
+    return [[by_map[name][order[k, rank]][1] for k in range(len(places))]
             for name, (err, order) in ranked.items() if err <= START_SPREAD * best
             for rank in range(min(STARTS_PER_MAP, order.shape[1]))]
 
