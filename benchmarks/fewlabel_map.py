@@ -24,8 +24,8 @@ the unlabelled training presses, before any network learns from them.
    nearest each grid point, as a user pressing at the marks of a printed grid would): the same RMSE.
 
 Prints markdown and writes a JSON (default ``docs/results/contact/fewlabel_map.json``). It measures; it asserts
-nothing. About 7.5 minutes on 2 CPU cores: the maps are built once, then each labelled draw takes about 45 s
-(most of it the labeller's leave-one-out, which refits every press once per held-out label).
+nothing. About 20 minutes on 2 CPU cores: the maps are built once, then each labelled draw takes about 2 minutes
+(most of it the labeller's leave-one-out, which refits every press once per start and held-out label).
 """
 
 from __future__ import annotations

@@ -20,17 +20,19 @@ either, the fit chosen by leave-one-out error on the labels:
   the draw more than by their fit (on the eFlesh normal run, 30 draws of 25 labels: 0.76 N against 0.71 N), as
   were the maps' fits for the force.
 
-Three maps are tried: two of the reading's direction (the unit vector of all channels: the press position,
-whatever its depth), one with each graph edge measured in units of the local spacing of the readings (as if the
-presses were spread evenly over the pad), and one of the standardised reading. The chosen fits label every
-unlabelled training row (:func:`pseudo_labels`); the places among them (one or two named place targets) are then
-refitted on a smooth model of the field (:mod:`~tactile_manip.learning.contact.field_inverse`), which takes out
-the map's local scatter, in three passes (on the eFlesh spatial run, 25 labels: 2.13 to 1.64 mm over 16 draws).
-The refit starts from several first placings and takes the mean of where they lead: on every map whose best fits
-are about as good as the best map's (``START_SPREAD``), the best and the next best fit per coordinate. Each start
-leaves its own smooth bend between the labels, and the bends partly cancel (same run and labels: 1.64 to 1.55 mm
-over those 16 draws, closer in 13, and 1.69 to 1.55 mm over 24 draws not used for the choice, closer in 20; the
-map of the standardised reading fits 2-3 times worse there and starts none).
+Three maps are tried: two of the reading's direction (the unit vector of all channels: the press position, whatever
+its depth), one with each graph edge measured in units of the local spacing of the readings (as if the presses were
+spread evenly over the pad), and one of the standardised reading. The chosen fits label every unlabelled training
+row (:func:`pseudo_labels`); the places among them (one or two named place targets) are then refitted on a smooth
+model of the field (:mod:`~tactile_manip.learning.contact.field_inverse`), which takes out the map's local scatter,
+in up to six passes, coarse to fine, as many as give the least leave-one-out error on the labels (on the eFlesh
+spatial run, 25 labels, from the map fit of least leave-one-out error: 2.13 to 1.57 mm over 16 draws after six
+passes, 1.64 mm after three). The refit starts from several first placings and takes the mean of where they lead: on
+every map whose best fits are about as good as the best map's (``START_SPREAD``), the best and the next best fit per
+coordinate. Each start leaves its own smooth bend between the labels, and the bends partly cancel (same run and
+labels, six passes: 1.57 to 1.48 mm over those 16 draws, closer in 12, and 1.62 to 1.47 mm over 24 draws not used
+for any choice, closer in 20; with three passes 1.64 to 1.55 and 1.69 to 1.55 mm; the map of the standardised
+reading fits 2-3 times worse there and starts none).
 The contact network then trains on them (``unlabelled = "manifold"`` in a contact training config). The
 leave-one-out RMSE of the chosen fit travels with the labels: the network's sigma is widened by it, since the
 network cannot be more exact than the labels it learnt from.
@@ -44,7 +46,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from tactile_manip.errors import DatasetError
-from tactile_manip.learning.contact.field_inverse import refine_places
+from tactile_manip.learning.contact.field_inverse import places_by_pass
 
 MIN_LABELLED = 5          # below this, no fit is chosen by leave-one-out
 LANDMARKS = 1500          # readings whose graph distances to all others lay out the map
@@ -81,11 +83,11 @@ def pseudo_labels(readings: np.ndarray, targets: np.ndarray, labelled: np.ndarra
     load (``LOAD_TARGETS``) on the field norm only, any other target (or every one, without names) on whichever
     fit has the lowest leave-one-out error. ``maps``: :func:`reading_maps` of the same readings and
     ``neighbours``, where the caller has them (they depend on the readings alone, so several draws of labels on
-    one set of readings can share them). ``refine``: the places (one or two place targets, named) are refitted
-    from a smooth model of the field (:func:`~tactile_manip.learning.contact.field_inverse.refine_places`), and
-    their leave-one-out RMSE is that of the refitted places. Raises ``DatasetError`` with fewer than
-    ``MIN_LABELLED`` labelled rows, a non-finite label or reading, fewer rows than ``neighbours`` + 1, names that
-    do not match the targets, or maps with other rows than the readings.
+    one set of readings can share them). ``refine``: the places (one or two place targets, named) are refitted from
+    a smooth model of the field (:func:`~tactile_manip.learning.contact.field_inverse.places_by_pass`) in as many
+    passes as give the least leave-one-out RMSE, and their leave-one-out RMSE is that of the refitted places. Raises
+    ``DatasetError`` with fewer than ``MIN_LABELLED`` labelled rows, a non-finite label or reading, fewer rows than
+    ``neighbours`` + 1, names that do not match the targets, or maps with other rows than the readings.
     """
     x = np.asarray(readings, np.float64).reshape(len(readings), -1)
     y = np.asarray(targets, np.float64).reshape(len(readings), -1)
@@ -144,10 +146,13 @@ def pseudo_labels(readings: np.ndarray, targets: np.ndarray, labelled: np.ndarra
     places = [k for k, kind in enumerate(kinds) if kind == "place"]
     if refine and len(places) in (1, 2) and (~lab).any():
         starts = _starts(by_map, places, score)
-        values[:, places] = _refit(x, y[:, places], lab, starts)
-        loo[places] = _refined_loo(x, y[:, places], lab, starts)
+        by_pass = _refined_loo(x, y[:, places], lab, starts)  # (passes, places)
+        count = int(np.argmin(np.sum(by_pass ** 2, axis=1))) + 1  # the passes of least leave-one-out error
+        values[:, places] = _refit(x, y[:, places], lab, starts)[count - 1]
+        loo[places] = by_pass[count - 1]
         for k in places:
-            methods[k] += f", refined on the field model (mean of {len(starts)} starts)"
+            methods[k] += (f", refined on the field model in {count} pass{'es' if count > 1 else ''} "
+                           f"(mean of {len(starts)} starts)")
     return PseudoLabels(values=values, loo_rmse=loo, methods=tuple(methods))
 
 
@@ -314,20 +319,21 @@ def _starts(by_map: dict[str, list[tuple[str, Fit]]], places: list[int],
 
 
 def _refit(x: np.ndarray, y: np.ndarray, lab: np.ndarray, starts: list[list[Fit]]) -> np.ndarray:
-    """The places (N, P) of every row: from each start, the rows ``lab`` does not hold placed by its fits and
-    refitted on the field model, the labelled rows at their labels ``y``; the mean over the starts."""
+    """The places (passes, N, P) of every row after each pass of the field model's refit: from each start, the
+    rows ``lab`` does not hold placed by its fits and refitted, the labelled rows at their labels ``y``; the mean
+    over the starts."""
     placed = []
     for fits in starts:
         first = np.stack([fit(lab, y[:, k]) for k, fit in enumerate(fits)], axis=1)
         first[lab] = y[lab]
-        placed.append(refine_places(x, first, lab))
+        placed.append(places_by_pass(x, first, lab))
     return np.mean(placed, axis=0)
 
 
 def _refined_loo(x: np.ndarray, y: np.ndarray, lab: np.ndarray, starts: list[list[Fit]]) -> np.ndarray:
-    """Per place coordinate, the leave-one-out RMSE over the labelled rows (at most ``REFINED_LOO``, evenly
-    spaced) of the refit from ``starts`` (:func:`_refit`): with each held-out press, every press the others do
-    not label is placed and refitted, as the labeller does without it."""
-    errs = [_refit(x, y, keep, starts)[i] - y[i] for i, keep in _held_out(lab, REFINED_LOO)]
+    """After each pass (passes, P): per place coordinate, the leave-one-out RMSE over the labelled rows (at most
+    ``REFINED_LOO``, evenly spaced) of the refit from ``starts`` (:func:`_refit`): with each held-out press, every
+    press the others do not label is placed and refitted, as the labeller does without it."""
+    errs = [_refit(x, y, keep, starts)[:, i] - y[i] for i, keep in _held_out(lab, REFINED_LOO)]
     err = np.sqrt(np.mean(np.square(errs), axis=0))
     return np.where(np.isfinite(err), err, np.inf)

@@ -17,30 +17,39 @@ field itself:
    model's residuals (their inverse covariance: channels that scatter count less). In two coordinates the grid
    is searched coarse to fine: every ``COARSE``-th point per axis, then the whole grid around the ``CANDIDATES``
    best of those. On the eFlesh spatial run it lands every press where the exhaustive search does, to the last
-   bit, and the labeller of 25 labels takes 49 s in place of 100 s on one core.
+   bit, in half the time.
 
-Three passes (``PASSES``), coarse to fine. The first model, of degree 4 in the place with coefficients quadratic in
+Six passes (``PASSES``), coarse to fine. The first model, of degree 4 in the place with coefficients quadratic in
 the norm, takes out most of the map's scatter; the second, fitted on the places the first left, is of degree 5 and
 follows the direction alone; the third adds to it the part of the field that repeats across the pad, as a printed
 lattice of cells makes it: the cosine and sine of the place at one period (and their products across the axes), each
 times a linear function of the place, the period being the one of ``LATTICE_PERIODS`` (in the places' units: mm for
-``x_mm``, ``y_mm``) whose model leaves the least weighted residual, which needs no labels. Repeating one model gains
-nothing and then drifts (the model learns the errors of its own placing); each finer pass gains. On the eFlesh
-spatial run, 25 labelled presses, 16 draws: the first placing 2.13 mm off, after the first pass 1.83 mm, after the
-second 1.70 mm, after the third 1.64 mm (closer than after two in every draw, and than a third pass of degree 6
-without the repeating terms, 1.67 mm, in every draw too; 8 further draws: 1.73, 1.67 and 1.70 mm after two, three
-and the plain third). The period chosen there is 8-10 mm in every draw; the field model's residual at every press's
-true place has its strongest repeating component at about 7.8 mm. With 100 labels: 1.62 mm first, 1.17 mm after two
-passes, 1.05 mm after three (4 draws); with 10: 2.92, 2.68 and 2.67 mm.
+``x_mm``, ``y_mm``) whose model leaves the least weighted residual, which needs no labels (found once, at the third
+pass). The last three keep the repeating terms and follow finer detail of the field: degree 7 and 9 with
+coefficients linear in the norm, then degree 11 with quadratic ones. Repeating one model gains nothing and then
+drifts (the model learns the errors of its own placing); each finer pass gains, on a field with detail finer than a
+polynomial of degree 5 can follow. On the eFlesh spatial run, 25 labelled presses placed first by the map fit of
+least leave-one-out error, 16 draws (the passes were chosen on six of them): the first placing 2.13 mm off, after
+the passes 1.83, 1.70, 1.64, 1.59, 1.58 and 1.57 mm (after six closer than after three in every draw; 24 further
+draws, not used for any choice: 2.14, then 1.87, 1.74, 1.69, 1.65, 1.63 and 1.62 mm, closer in every draw). Fitted
+at every press's true place, the finest model places the presses 0.50 mm off, the models of degree 7 and 9 0.55 and
+0.52 mm, the second and third 0.81 and 0.71 mm: the finer passes follow the field more closely. The period chosen
+there is 8-10 mm in every draw; the field model's residual at every press's true place has its strongest repeating
+component at about 7.8 mm. On a smooth field the finer passes learn the placing's errors instead, so
+:func:`places_by_pass` returns the places after every pass and the labeller keeps the number of passes with the
+least leave-one-out error on its labels. With 100 labels and three passes: 1.62 mm first, 1.17 mm after two, 1.05 mm
+after three (4 draws); with 10: 2.92, 2.68 and 2.67 mm.
 """
 
 from __future__ import annotations
+
+import itertools
 
 import numpy as np
 
 # per pass: the model's degree in the place, its coefficients' in the log norm, and whether it adds the repeating
 # pattern of the skin's cells
-PASSES = ((4, 2, False), (5, 0, False), (5, 0, True))
+PASSES = ((4, 2, False), (5, 0, False), (5, 0, True), (7, 1, True), (9, 1, True), (11, 2, True))
 LATTICE_PERIODS = (5.0, 6.0, 7.0, 8.0, 9.0, 10.0, 12.0, 14.0)  # candidate periods of the repeating pattern
 LATTICE_DEGREE = 1  # degree in the place of each repeating term's amplitude
 GRID_STEPS = 120    # grid steps per place axis
@@ -54,9 +63,10 @@ CANDIDATES = 4      # then every point within COARSE steps of the CANDIDATES bes
 
 def _monomials(z: np.ndarray, degree: int) -> np.ndarray:
     """Every monomial of the columns of ``z`` (N, 1 or 2) up to total ``degree``, constant first (N, terms)."""
+    powers = z[:, :, None] ** np.arange(degree + 1)  # (N, P, degree + 1)
     if z.shape[1] == 1:
-        return np.stack([z[:, 0] ** i for i in range(degree + 1)], axis=1)
-    return np.stack([z[:, 0] ** i * z[:, 1] ** j for i in range(degree + 1) for j in range(degree + 1 - i)], axis=1)
+        return powers[:, 0]
+    return np.hstack([powers[:, 0, i:i + 1] * powers[:, 1, :degree + 1 - i] for i in range(degree + 1)])
 
 
 def _design(z: np.ndarray, level: np.ndarray, degree: int, norm_degree: int) -> np.ndarray:
@@ -67,10 +77,19 @@ def _design(z: np.ndarray, level: np.ndarray, degree: int, norm_degree: int) -> 
 def refine_places(readings: np.ndarray, places: np.ndarray, labelled: np.ndarray,
                   rows: np.ndarray | None = None) -> np.ndarray:
     """New places (N, P) for ``rows`` (default: every row not ``labelled``) of ``readings`` (N, D), given every
-    row's current ``places`` (N, P), P = 1 or 2; the other rows keep theirs. ``readings`` must be finite and
-    not all zero. Each of ``PASSES`` fits its model on the places the pass before left and moves ``rows``.
-    Returns ``places`` unchanged (a copy) where the readings are too few for a pass's model
-    (``MIN_ROWS_PER_TERM`` rows per term) or the places do not spread."""
+    row's current ``places`` (N, P), P = 1 or 2: those after the last pass of :func:`places_by_pass`."""
+    return places_by_pass(readings, places, labelled, rows)[-1]
+
+
+def places_by_pass(readings: np.ndarray, places: np.ndarray, labelled: np.ndarray,
+                   rows: np.ndarray | None = None) -> np.ndarray:
+    """The places (len(``PASSES``), N, P) after each pass of the refit of ``rows`` (default: every row not
+    ``labelled``) of ``readings`` (N, D), given every row's current ``places`` (N, P), P = 1 or 2; the other rows
+    keep theirs. ``readings`` must be finite and not all zero. Each of ``PASSES`` fits its model on the places the
+    pass before left and moves ``rows``. A pass whose model has more terms than the readings allow
+    (``MIN_ROWS_PER_TERM`` rows per term) is left out, and with it every finer one, as is a pass of the repeating
+    pattern on a pad too small for it: its places are those of the pass before, or ``places`` themselves (a copy)
+    where no pass runs or the places do not spread."""
     x = np.asarray(readings, np.float64).reshape(len(readings), -1)
     z = np.asarray(places, np.float64).reshape(len(readings), -1)
     out = z.copy()
@@ -78,23 +97,30 @@ def refine_places(readings: np.ndarray, places: np.ndarray, labelled: np.ndarray
     move = np.flatnonzero(~lab) if rows is None else np.asarray(rows, int)
     if z.shape[1] not in (1, 2):
         raise ValueError(f"places of {z.shape[1]} coordinates: the field model places in 1 or 2")
-    terms = max((norm_degree + 1) * _monomials(z[:1], degree).shape[1]
-                + (_repeating(z[:1], 1.0, z[:1], 1.0).shape[1] if lattice else 0)
-                for degree, norm_degree, lattice in PASSES)
-    if not len(move) or len(x) < MIN_ROWS_PER_TERM * terms or float(z.std()) <= 0:
-        return out
+    # the passes, coarse to fine, up to the first whose model has more terms than the readings allow
+    passes = list(itertools.takewhile(
+        lambda p: len(x) >= MIN_ROWS_PER_TERM * ((p[1] + 1) * _monomials(z[:1], p[0]).shape[1]
+                                                 + (_repeating(z[:1], 1.0, z[:1], 1.0).shape[1] if p[2] else 0)),
+        PASSES))
+    if not len(move) or not passes or float(z.std()) <= 0:
+        return np.repeat(out[None], len(PASSES), axis=0)
     norm = np.maximum(np.linalg.norm(x, axis=1), 1e-12)
     direction = x / norm[:, None]
     level = np.log(norm)
     level = (level - level.mean()) / max(float(level.std()), 1e-12)
     # the labelled places are exact, the others scattered: together the labels weigh as much as the rest
     weight = np.sqrt(np.where(lab, max(1.0, (~lab).sum() / max(lab.sum(), 1)), 1.0))[:, None]
-    for degree, norm_degree, lattice in PASSES:
-        period = _lattice_period(direction, out, weight, degree) if lattice else None
-        if lattice and period is None:  # a pad too small for the pattern to repeat: the pass would repeat the last
-            continue
-        out[move] = _one_pass(direction, level, out, weight, move, degree, norm_degree, period)
-    return out
+    period, sought = None, False
+    after = []
+    for degree, norm_degree, lattice in passes:
+        if lattice and not sought:  # the skin's period, found once, on the places the passes before left
+            period, sought = _lattice_period(direction, out, weight, degree), True
+        if not lattice or period is not None:  # (a pad too small for the pattern to repeat: the pass is left out)
+            out = out.copy()
+            out[move] = _one_pass(direction, level, out, weight, move, degree, norm_degree,
+                                  period if lattice else None)
+        after.append(out)
+    return np.stack(after + [out] * (len(PASSES) - len(after)))
 
 
 def _repeating(z: np.ndarray, period: float, centre: np.ndarray, spread: float) -> np.ndarray:
