@@ -98,10 +98,7 @@ def places_by_pass(readings: np.ndarray, places: np.ndarray, labelled: np.ndarra
     if z.shape[1] not in (1, 2):
         raise ValueError(f"places of {z.shape[1]} coordinates: the field model places in 1 or 2")
     # the passes, coarse to fine, up to the first whose model has more terms than the readings allow
-    passes = list(itertools.takewhile(
-        lambda p: len(x) >= MIN_ROWS_PER_TERM * ((p[1] + 1) * _monomials(z[:1], p[0]).shape[1]
-                                                 + (_repeating(z[:1], 1.0, z[:1], 1.0).shape[1] if p[2] else 0)),
-        PASSES))
+    passes = list(itertools.takewhile(lambda spec: len(x) >= MIN_ROWS_PER_TERM * _terms(z.shape[1], *spec), PASSES))
     if not len(move) or not passes or float(z.std()) <= 0:
         return np.repeat(out[None], len(PASSES), axis=0)
     norm = np.maximum(np.linalg.norm(x, axis=1), 1e-12)
@@ -121,6 +118,13 @@ def places_by_pass(readings: np.ndarray, places: np.ndarray, labelled: np.ndarra
                                   period if lattice else None)
         after.append(out)
     return np.stack(after + [out] * (len(PASSES) - len(after)))
+
+
+def _terms(coordinates: int, degree: int, norm_degree: int, lattice: bool) -> int:
+    """The number of terms of a pass's model in places of ``coordinates`` (1 or 2)."""
+    place = np.zeros((1, coordinates))
+    return ((norm_degree + 1) * _monomials(place, degree).shape[1]
+            + (_repeating(place, 1.0, place, 1.0).shape[1] if lattice else 0))
 
 
 def _repeating(z: np.ndarray, period: float, centre: np.ndarray, spread: float) -> np.ndarray:
