@@ -73,6 +73,15 @@ def test_the_coarse_then_fine_grid_search_places_every_press_where_the_whole_gri
     np.testing.assert_array_equal(shipped, refine_places(readings, scattered, labelled))
 
 
+def test_where_the_rig_puts_its_origin_changes_nothing_but_the_places_offset(presses) -> None:
+    readings, truth, labelled = presses
+    scattered = truth + np.random.default_rng(1).normal(0.0, 2.0, truth.shape) * ~labelled[:, None]
+    plain = refine_places(readings, scattered, labelled)
+    for offset in ([300.0, -300.0], [3000.0, 40.0]):  # a stage's frame far from the pad's centre
+        moved = refine_places(readings, scattered + offset, labelled) - offset
+        assert np.mean(np.abs(moved - plain) < 1e-6) > 0.99, offset
+
+
 def test_only_the_rows_asked_for_move(presses) -> None:
     readings, truth, labelled = presses
     scattered = truth + np.random.default_rng(2).normal(0.0, 1.0, truth.shape)
@@ -122,8 +131,8 @@ def test_too_few_readings_or_places_that_do_not_spread_are_returned_as_they_are(
     readings, truth, labelled = presses
     few = refine_places(readings[:100], truth[:100] + 1.0, labelled[:100])   # 100 rows, 45 terms
     np.testing.assert_array_equal(few, truth[:100] + 1.0)
-    still = np.zeros_like(truth)
-    np.testing.assert_array_equal(refine_places(readings, still, labelled), still)
+    for still in (np.zeros_like(truth), np.tile([300.0, -100.0], (len(truth), 1))):  # at the origin or off it
+        np.testing.assert_array_equal(refine_places(readings, still, labelled), still)
     everyone = np.ones(len(truth), bool)
     np.testing.assert_array_equal(refine_places(readings, truth, everyone), truth)
     with pytest.raises(ValueError, match="3 coordinates"):

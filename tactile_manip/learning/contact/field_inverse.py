@@ -99,7 +99,7 @@ def places_by_pass(readings: np.ndarray, places: np.ndarray, labelled: np.ndarra
         raise ValueError(f"places of {z.shape[1]} coordinates: the field model places in 1 or 2")
     # the passes, coarse to fine, up to the first whose model has more terms than the readings allow
     passes = list(itertools.takewhile(lambda spec: len(x) >= MIN_ROWS_PER_TERM * _terms(z.shape[1], *spec), PASSES))
-    if not len(move) or not passes or float(z.std()) <= 0:
+    if not len(move) or not passes or _frame(z)[1] <= 0:
         return np.repeat(out[None], len(PASSES), axis=0)
     norm = np.maximum(np.linalg.norm(x, axis=1), 1e-12)
     direction = x / norm[:, None]
@@ -118,6 +118,14 @@ def places_by_pass(readings: np.ndarray, places: np.ndarray, labelled: np.ndarra
                                   period if lattice else None)
         after.append(out)
     return np.stack(after + [out] * (len(PASSES) - len(after)))
+
+
+def _frame(z: np.ndarray) -> tuple[np.ndarray, float]:
+    """The centre (P,) and spread of places ``z`` (N, P) that the models scale the place by: the mean, and the
+    root mean square of each coordinate's deviation from its own mean, so that where the rig's frame puts its
+    origin changes nothing (a spread about one mean over both coordinates would grow with the origin's distance,
+    and the high powers of the scaled place would fall below the least-squares solver's cut-off)."""
+    return z.mean(axis=0), float(np.sqrt(np.mean(z.var(axis=0))))
 
 
 def _terms(coordinates: int, degree: int, norm_degree: int, lattice: bool) -> int:
@@ -144,7 +152,7 @@ def _lattice_period(direction: np.ndarray, z: np.ndarray, weight: np.ndarray, de
     """The period of ``LATTICE_PERIODS`` whose repeating terms, beside the polynomial of ``degree`` in the place,
     leave the least weighted residual of the direction at the places ``z``; None where no period fits twice
     within the places' extent."""
-    centre, spread = z.mean(axis=0), float(z.std())
+    centre, spread = _frame(z)
     base = _monomials((z - centre) / spread, degree)
     extent = float((z.max(axis=0) - z.min(axis=0)).min())
     best = None
@@ -164,7 +172,7 @@ def _one_pass(direction: np.ndarray, level: np.ndarray, z: np.ndarray, weight: n
     """The places (len(move), P) of the rows ``move``, on the model of ``degree`` in the place and
     ``norm_degree`` in the standardised log norm ``level`` fitted at the places ``z`` (N, P), plus the repeating
     terms at ``period`` where one is given."""
-    centre, spread = z.mean(axis=0), float(z.std())
+    centre, spread = _frame(z)
     scaled = (z - centre) / spread
     if norm_degree:
         at_places = _monomials(scaled, degree)
