@@ -215,6 +215,46 @@ def test_the_shrunk_fit_keeps_its_labels_steady_where_the_terms_nearly_outnumber
     assert shrunk.mean() < 0.75 * plain.mean() and np.all(shrunk < 1.05 * plain), errors
 
 
+def _one_ridge_of_least_leave_one_out(z, lab, y):
+    """The shrunk fit as one ridge weight of least leave-one-out error would give it (what averaging replaces)."""
+    from tactile_manip.learning.contact.fewlabel import RIDGE, SHRINK
+
+    a = np.hstack([np.ones((len(z), 1)), z])
+    penalty = np.r_[0.0, 0.0, np.ones(z.shape[1] - 1)]
+    fits = []
+    for weight in SHRINK:
+        inv = np.linalg.inv(a[lab].T @ a[lab] + np.diag(weight * penalty + RIDGE))
+        coef = inv @ a[lab].T @ y[lab]
+        held_out = (y[lab] - a[lab] @ coef) / (1.0 - np.einsum("ij,jk,ik->i", a[lab], inv, a[lab]))
+        fits.append((float(np.mean(held_out ** 2)), a @ coef))
+    return min(fits, key=lambda f: f[0])[1]
+
+
+def test_the_shrunk_fit_averages_its_ridge_weights_rather_than_betting_on_one() -> None:
+    from tactile_manip.learning.contact.fewlabel import _shrunk
+
+    errors = []
+    for seed in range(80):  # 8 labels, 6 terms of which 5 matter a little: how much to shrink is a close call
+        rng = np.random.default_rng(seed)
+        z = rng.normal(size=(400, 6))
+        y = 3.0 * z[:, 0] + z[:, 1:] @ (0.3 * rng.choice([-1.0, 1.0], 5)) + rng.normal(0, 0.5, 400)
+        lab = _labelled_mask(400, 8, seed=seed)
+        errors.append([float(np.sqrt(np.mean((p[~lab] - y[~lab]) ** 2)))
+                       for p in (_shrunk(z, free=1)(lab, y), _one_ridge_of_least_leave_one_out(z, lab, y))])
+    averaged, picked = np.array(errors).T
+    assert averaged.mean() < 0.97 * picked.mean(), (averaged.mean(), picked.mean())
+    assert np.all(averaged < 1.25 * picked), errors  # a blend of the fits, never far from the one picked
+
+
+def test_the_shrunk_fit_of_labels_it_fits_exactly_returns_them_exactly() -> None:
+    from tactile_manip.learning.contact.fewlabel import _shrunk
+
+    z = np.random.default_rng(0).normal(size=(200, 4))
+    y = 2.0 * z[:, 0] - 1.0  # only the free term: the unshrunk fit holds out with zero error
+    lab = _labelled_mask(200, 10)
+    np.testing.assert_allclose(_shrunk(z, free=1)(lab, y), y, atol=1e-6)
+
+
 def test_earlier_frames_of_another_shape_or_not_finite_are_refused() -> None:
     readings, earlier, force = _hysteretic_presses(cycles=2)
     lab = _labelled_mask(len(force), 10)

@@ -15,7 +15,8 @@ either, the fit chosen by leave-one-out error on the labels:
   only its size, moves as the elastomer is loaded) and, where the readings come with the frames before them, the
   norm's change since the oldest of those frames, alone and times the norm (an elastomer gives less force for the
   same field while it is pressed in than while it springs back, and the sign and speed of that change say which).
-  Every term but the norm's linear one is shrunk by a ridge whose weight is chosen by leave-one-out on the labels.
+  Every term but the norm's linear one is shrunk by a ridge; the fits of several ridge weights are averaged,
+  each weighted by how well it holds out on the labels (leave-one-out).
   The simpler fits of the norm are special cases of this one; offered beside it, they were chosen by the luck of
   the draw more than by their fit (on the eFlesh normal run, 30 draws of 25 labels: 0.76 N against 0.71 N), as
   were the maps' fits for the force.
@@ -224,7 +225,7 @@ def _map_fits(name: str, coords: np.ndarray) -> Iterator[tuple[str, Fit]]:
 def _norm_fit(norm: np.ndarray, change: np.ndarray | None, axes: np.ndarray) -> tuple[str, Fit]:
     # The fits of the field norm nest: a polynomial of the norm, its change, the readings' next principal axes.
     # Choosing among nested fits by leave-one-out on a handful of labels picks noise, so the norm is offered as
-    # one fit holding every term, all but the norm's linear one shrunk by a ridge chosen by leave-one-out.
+    # one fit holding every term, all but the norm's linear one shrunk by ridges averaged by leave-one-out.
     scaled = norm / norm.std()
     terms = [np.stack([scaled ** p for p in (1, 2, 3)], axis=1)]
     rate = change / change.std() if change is not None and change.std() > 0 else None  # loading or unloading
@@ -265,23 +266,29 @@ def _affine_kernel(z: np.ndarray, gamma: float) -> Fit:
 
 
 def _shrunk(z: np.ndarray, free: int) -> Fit:
-    """Affine in ``z`` (N, D), every term after the first ``free`` shrunk by a ridge whose weight (``SHRINK``) has
-    the lowest leave-one-out error on the labelled rows (closed form: the residual over one less the leverage)."""
+    """Affine in ``z`` (N, D), every term after the first ``free`` shrunk by a ridge: the fits of every ridge
+    weight in ``SHRINK``, averaged with weights that follow each one's leave-one-out error on the labelled rows
+    (closed form: the residual over one less the leverage). A fit with leave-one-out mean square error ``e`` out of
+    ``n`` labelled rows weighs ``e ** (-n / 2)``, the Gaussian likelihood of its held-out residuals, so a weight
+    that holds out clearly better dominates, and weights that hold out alike share. Picking the one weight of
+    least leave-one-out error instead picks by the luck of a handful of labels (on the eFlesh normal run, 100
+    draws of 25 labels: the unlabelled presses 0.711 N off that way, 0.695 N averaged)."""
     a = _design(z)
     penalty = np.ones(a.shape[1])
     penalty[:1 + free] = 0.0  # the intercept and the free terms are not shrunk
 
     def fit(lab: np.ndarray, y: np.ndarray) -> np.ndarray:
         al, yl = a[lab], y[lab]
-        best = None
+        coefs, errs = [], []
         for weight in SHRINK:
             gram = al.T @ al + np.diag(weight * penalty + RIDGE)
             coef = np.linalg.solve(gram, al.T @ yl)
             leverage = np.einsum("ij,ji->i", al, np.linalg.solve(gram, al.T))
-            err = float(np.mean(((yl - al @ coef) / np.maximum(1.0 - leverage, 1e-9)) ** 2))
-            if best is None or err < best[0]:
-                best = (err, coef)
-        return a @ best[1]
+            coefs.append(coef)
+            errs.append(float(np.mean(((yl - al @ coef) / np.maximum(1.0 - leverage, 1e-9)) ** 2)))
+        errs = np.maximum(np.array(errs), 1e-300)  # an exact fit holds out perfectly, not at log(0)
+        share = np.exp(-0.5 * len(yl) * np.log(errs / errs.min()))
+        return a @ (share @ np.array(coefs) / share.sum())
     return fit
 
 
