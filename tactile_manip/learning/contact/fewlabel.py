@@ -33,7 +33,9 @@ every map whose best fits are about as good as the best map's (``START_SPREAD``)
 coordinate. Each start leaves its own smooth bend between the labels, and the bends partly cancel (same run and
 labels, six passes: 1.57 to 1.48 mm over those 16 draws, closer in 12, and 1.62 to 1.47 mm over 24 draws not used
 for any choice, closer in 20; with three passes 1.64 to 1.55 and 1.69 to 1.55 mm; the map of the standardised
-reading fits 2-3 times worse there and starts none).
+reading fits 2-3 times worse there and starts none). Where the finest pass holds out best, each start's places
+then settle (:func:`~tactile_manip.learning.contact.field_inverse.settle`: the finer passes repeated with the
+places shaken, which takes out much of the bend the passes keep between the labels) before the mean is taken.
 The contact network then trains on them (``unlabelled = "manifold"`` in a contact training config). The
 leave-one-out RMSE of the chosen fit travels with the labels: the network's sigma is widened by it, since the
 network cannot be more exact than the labels it learnt from.
@@ -47,7 +49,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from tactile_manip.errors import DatasetError
-from tactile_manip.learning.contact.field_inverse import places_by_pass
+from tactile_manip.learning.contact.field_inverse import places_by_pass, settle
 
 MIN_LABELLED = 5          # below this, no fit is chosen by leave-one-out
 LANDMARKS = 1500          # readings whose graph distances to all others lay out the map
@@ -149,11 +151,15 @@ def pseudo_labels(readings: np.ndarray, targets: np.ndarray, labelled: np.ndarra
         starts = _starts(by_map, places, score)
         by_pass = _refined_loo(x, y[:, places], lab, starts)  # (passes, places)
         count = int(np.argmin(np.sum(by_pass ** 2, axis=1))) + 1  # the passes of least leave-one-out error
-        values[:, places] = _refit(x, y[:, places], lab, starts)[count - 1]
+        # where the finest pass holds out best, the places settle further; the leave-one-out stays that of the
+        # passes alone (holding the settling out too would cost four times the leave-one-out above)
+        finest = count == len(by_pass)
+        values[:, places] = (_refit(x, y[:, places], lab, starts, settled=True) if finest
+                             else _refit(x, y[:, places], lab, starts)[count - 1])
         loo[places] = by_pass[count - 1]
         for k in places:
-            methods[k] += (f", refined on the field model in {count} pass{'es' if count > 1 else ''} "
-                           f"(mean of {len(starts)} starts)")
+            methods[k] += (f", refined on the field model in {count} pass{'es' if count > 1 else ''}"
+                           f"{', settled' if finest else ''} (mean of {len(starts)} starts)")
     return PseudoLabels(values=values, loo_rmse=loo, methods=tuple(methods))
 
 
@@ -325,15 +331,18 @@ def _starts(by_map: dict[str, list[tuple[str, Fit]]], places: list[int],
             for rank in range(min(STARTS_PER_MAP, order.shape[1]))]
 
 
-def _refit(x: np.ndarray, y: np.ndarray, lab: np.ndarray, starts: list[list[Fit]]) -> np.ndarray:
+def _refit(x: np.ndarray, y: np.ndarray, lab: np.ndarray, starts: list[list[Fit]], *,
+           settled: bool = False) -> np.ndarray:
     """The places (passes, N, P) of every row after each pass of the field model's refit: from each start, the
     rows ``lab`` does not hold placed by its fits and refitted, the labelled rows at their labels ``y``; the mean
-    over the starts."""
+    over the starts. ``settled``: the places (N, P) after every pass and :func:`settle` (each start shaken by
+    its own seed), the mean over the starts."""
     placed = []
-    for fits in starts:
+    for seed, fits in enumerate(starts):
         first = np.stack([fit(lab, y[:, k]) for k, fit in enumerate(fits)], axis=1)
         first[lab] = y[lab]
-        placed.append(places_by_pass(x, first, lab))
+        by_pass = places_by_pass(x, first, lab)
+        placed.append(settle(x, by_pass[-1], lab, seed=seed) if settled else by_pass)
     return np.mean(placed, axis=0)
 
 
