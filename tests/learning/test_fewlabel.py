@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from tactile_manip.errors import DatasetError
-from tactile_manip.learning.contact.fewlabel import MIN_LABELLED, isomap, pseudo_labels, reading_maps
+from tactile_manip.learning.contact.fewlabel import MIN_LABELLED, isomap, pseudo_labels, reading_maps, recency_weights
 
 
 def _knn_rmse(x, y, lab, k=5):
@@ -170,7 +170,8 @@ def test_the_few_label_recipe_is_the_contact_recipe_with_the_unlabelled_presses_
     few = load_config("configs/train/contact_fewlabel.toml", ContactTrainConfig)
     full = load_config("configs/train/contact.toml", ContactTrainConfig)
     assert few.unlabelled == "manifold" and full.unlabelled == "ignore"
-    assert dataclasses.replace(few, unlabelled="ignore", threads=full.threads) == full
+    assert few.label_recency > 0   # acts on the labeller only, which the full recipe does not run
+    assert dataclasses.replace(few, unlabelled="ignore", threads=full.threads, label_recency=0.0) == full
 
 
 def _hysteretic_presses(cycles: int = 10, per_cycle: int = 80, seed: int = 4):
@@ -292,3 +293,98 @@ def test_training_hands_the_labeller_each_press_s_oldest_context_frame_and_the_t
     single = dataclasses.replace(cfg, context_frames=1)
     _pseudo_labels(data, labels, ["x_mm", "y_mm", "force_n"], single, dataset_windows(data, single))
     assert seen["earlier"] is None
+
+
+def test_recency_weights_rise_e_fold_per_unit_rate_over_each_run_to_one_at_its_last_press() -> None:
+    times = np.array([10.0, 12.0, 14.0, 100.0, 150.0, 200.0, 7.0])
+    runs = np.array([0, 0, 0, 1, 1, 1, 2])
+    w = recency_weights(times, 2.0, runs)
+    np.testing.assert_allclose(w, np.exp([-2.0, -1.0, 0.0, -2.0, -1.0, 0.0, 0.0]))   # a one-press run weighs 1
+    np.testing.assert_allclose(recency_weights(times[:3], 0.0), 1.0)
+    assert recency_weights(np.arange(5.0), 10.0).min() > 0   # the largest rate a config allows underflows nothing
+    with pytest.raises(DatasetError, match="finite times"):
+        recency_weights(np.array([0.0, np.nan, 2.0]), 1.0)
+    with pytest.raises(ValueError, match="rate"):
+        recency_weights(times, -1.0)
+
+
+def _softening_presses(n: int = 2000, seed: int = 6):
+    """Readings (N, 15), force (N,) and time (N,) of presses at one place on a skin that softens: the force for a
+    given field falls linearly by 8 % from the first press to the last."""
+    rng = np.random.default_rng(seed)
+    time = np.arange(n, dtype=np.float64)
+    depth = rng.uniform(0.05, 1.0, n)
+    direction = rng.normal(size=15)
+    readings = depth[:, None] * 1000.0 * direction / np.linalg.norm(direction) + rng.normal(0, 2.0, (n, 15))
+    force = 30.0 * depth * (1.0 - 0.08 * time / n) + rng.normal(0, 0.1, n)
+    return readings, force, time
+
+
+def test_weighing_later_labels_more_follows_a_skin_that_softens_to_the_presses_after_them() -> None:
+    readings, force, time = _softening_presses()
+    tail = time >= 0.8 * len(time)   # labels drawn before; scored on the presses after them
+    errs = []
+    for seed in range(6):
+        lab = np.zeros(len(time), bool)
+        lab[np.random.default_rng(seed).choice(np.flatnonzero(~tail), 25, replace=False)] = True
+        fits = [pseudo_labels(readings, force[:, None], lab, names=["force_n"], weights=w)
+                for w in (None, np.ones(len(time)), recency_weights(time, 2.0))]
+        assert "later labels weighted" in fits[2].methods[0]
+        assert "weighted" not in fits[0].methods[0]
+        np.testing.assert_array_equal(fits[1].values, fits[0].values)   # equal weights weigh nothing
+        errs.append([np.sqrt(np.mean((f.values[tail, 0] - force[tail]) ** 2)) for f in (fits[0], fits[2])])
+    errs = np.array(errs)
+    assert (errs[:, 1] < errs[:, 0]).all() and errs[:, 1].mean() < 0.9 * errs[:, 0].mean(), errs
+
+
+def test_label_weights_of_another_length_or_not_positive_on_a_labelled_press_are_refused() -> None:
+    readings, force, time = _softening_presses(300)
+    lab = _labelled_mask(300, 20)
+    with pytest.raises(DatasetError, match="label weights"):
+        pseudo_labels(readings, force[:, None], lab, names=["force_n"], weights=np.ones(299))
+    w = np.ones(300)
+    w[np.flatnonzero(lab)[3]] = 0.0
+    with pytest.raises(DatasetError, match="label weights"):
+        pseudo_labels(readings, force[:, None], lab, names=["force_n"], weights=w)
+    w[np.flatnonzero(lab)[3]] = np.nan
+    with pytest.raises(DatasetError, match="label weights"):
+        pseudo_labels(readings, force[:, None], lab, names=["force_n"], weights=w)
+    w = np.full(300, np.nan)
+    w[lab] = 1.0 + np.arange(lab.sum())   # the unlabelled rows' weights are not read
+    assert np.isfinite(pseudo_labels(readings, force[:, None], lab, names=["force_n"], weights=w).values).all()
+
+
+def test_training_weighs_the_labels_by_recency_per_run_only_when_the_config_asks(labelled_presses,
+                                                                                monkeypatch) -> None:
+    pytest.importorskip("torch", reason="training needs torch")
+    from tactile_manip.errors import ConfigError
+    from tactile_manip.learning.contact import fewlabel
+    from tactile_manip.learning.contact.train import ContactTrainConfig, _pseudo_labels, dataset_windows
+
+    data = _hide_labels(labelled_presses(200), 20)
+    data = dataclasses.replace(data, groups=(np.arange(200) >= 100).astype(np.int64))   # two runs
+    seen = {}
+    real = fewlabel.pseudo_labels
+
+    def spy(readings, targets, labelled, **kwargs):
+        seen["weights"] = kwargs["weights"]
+        return real(readings, targets, labelled, **kwargs)
+
+    monkeypatch.setattr(fewlabel, "pseudo_labels", spy)
+    rows = np.flatnonzero(np.isin(data.split, ["train", "unlabelled"]))
+    for rate in (0.0, 1.5):
+        cfg = ContactTrainConfig(unlabelled="manifold", context_frames=1, label_recency=rate)
+        labels = data.targets.astype(np.float64).copy()
+        found = _pseudo_labels(data, labels, ["x_mm", "y_mm", "force_n"], cfg, dataset_windows(data, cfg))
+        if rate == 0:
+            assert seen["weights"] is None
+            continue
+        t = data.extra("time_s")[rows]
+        expected = recency_weights(t, rate, data.groups[rows])
+        np.testing.assert_allclose(seen["weights"], expected)
+        first = rows < 100
+        assert seen["weights"][first].max() == 1.0 and seen["weights"][~first].max() == 1.0   # each run's last
+        assert "later labels weighted" in found["methods"][2] and "weighted" not in found["methods"][0]
+    for bad in (-0.5, 11.0, float("nan")):
+        with pytest.raises(ConfigError, match="label_recency"):
+            ContactTrainConfig(label_recency=bad)

@@ -16,7 +16,9 @@ either, the fit chosen by leave-one-out error on the labels:
   norm's change since the oldest of those frames, alone and times the norm (an elastomer gives less force for the
   same field while it is pressed in than while it springs back, and the sign and speed of that change say which).
   Every term but the norm's linear one is shrunk by a ridge; the fits of several ridge weights are averaged,
-  each weighted by how well it holds out on the labels (leave-one-out).
+  each weighted by how well it holds out on the labels (leave-one-out). Where the presses come with times, the
+  later labelled presses can weigh more (:func:`recency_weights`): a skin softens as it is pressed, so the force
+  for a given field drifts down over a run, and the presses a model meets next are most like the latest ones.
   The simpler fits of the norm are special cases of this one; offered beside it, they were chosen by the luck of
   the draw more than by their fit (on the eFlesh normal run, 30 draws of 25 labels: 0.76 N against 0.71 N), as
   were the maps' fits for the force.
@@ -77,7 +79,8 @@ class PseudoLabels:
 
 def pseudo_labels(readings: np.ndarray, targets: np.ndarray, labelled: np.ndarray, *, neighbours: int = 20,
                   earlier: np.ndarray | None = None, names: Sequence[str] | None = None,
-                  maps: dict[str, np.ndarray] | None = None, refine: bool = True) -> PseudoLabels:
+                  maps: dict[str, np.ndarray] | None = None, refine: bool = True,
+                  weights: np.ndarray | None = None) -> PseudoLabels:
     """Label every row of ``readings`` (N, ...) from the rows where ``labelled`` (N,) holds.
 
     ``targets`` (N, K) is read only on the labelled rows. ``earlier`` (N, ...): the reading a few frames before
@@ -89,8 +92,11 @@ def pseudo_labels(readings: np.ndarray, targets: np.ndarray, labelled: np.ndarra
     one set of readings can share them). ``refine``: the places (one or two place targets, named) are refitted from
     a smooth model of the field (:func:`~tactile_manip.learning.contact.field_inverse.places_by_pass`) in as many
     passes as give the least leave-one-out RMSE, and their leave-one-out RMSE is that of the refitted places. Raises
-    ``DatasetError`` with fewer than ``MIN_LABELLED`` labelled rows, a non-finite label or reading, fewer rows than
-    ``neighbours`` + 1, names that do not match the targets, or maps with other rows than the readings.
+    ``weights`` (N,): how much each labelled row counts in the fit of the field norm (:func:`recency_weights`: the
+    later presses of a run more, where the skin drifts); read on the labelled rows only, which must hold finite
+    positive weights. Raises ``DatasetError`` with fewer than ``MIN_LABELLED`` labelled rows, a non-finite label or
+    reading, fewer rows than ``neighbours`` + 1, names that do not match the targets, maps with other rows than the
+    readings, or weights of another length or not finite and positive on the labelled rows.
     """
     x = np.asarray(readings, np.float64).reshape(len(readings), -1)
     y = np.asarray(targets, np.float64).reshape(len(readings), -1)
@@ -108,6 +114,12 @@ def pseudo_labels(readings: np.ndarray, targets: np.ndarray, labelled: np.ndarra
         raise DatasetError(f"{len(x)} presses: the map of the readings needs more than {neighbours}")
     if maps is not None and any(np.shape(m)[:1] != (len(x),) for m in maps.values()):
         raise DatasetError(f"maps of {sorted({len(m) for m in maps.values()})} rows given for {len(x)} readings")
+    if weights is not None:
+        weights = np.asarray(weights, np.float64)
+        if weights.shape != (len(x),) or not (np.isfinite(weights[lab]) & (weights[lab] > 0)).all():
+            raise DatasetError(f"label weights of shape {weights.shape} for {len(x)} rows: each labelled row needs "
+                               f"a finite positive weight")
+        weights = np.where(lab, weights, 1.0) if np.ptp(weights[lab]) > 0 else None  # equal weights weigh nothing
     varies = x.std(axis=0) > 0
     x = x[:, varies]
     norm = np.linalg.norm(x, axis=1)
@@ -125,7 +137,8 @@ def pseudo_labels(readings: np.ndarray, targets: np.ndarray, labelled: np.ndarra
         by_map = _fits_by_map(reading_maps(x, neighbours) if maps is None else maps)
         fits["place"] = [named for group in by_map.values() for named in group]
     if any(kind != "place" for kind in kinds):
-        fits["load"] = [_norm_fit(norm, change, _principal_axes((x - x.mean(axis=0)) / x.std(axis=0), 3)[:, 1:])]
+        fits["load"] = [_norm_fit(norm, change, _principal_axes((x - x.mean(axis=0)) / x.std(axis=0), 3)[:, 1:],
+                                  weights)]
     values = np.empty((len(x), y.shape[1]))
     loo = np.empty(y.shape[1])
     methods = []
@@ -161,6 +174,25 @@ def pseudo_labels(readings: np.ndarray, targets: np.ndarray, labelled: np.ndarra
             methods[k] += (f", refined on the field model in {count} pass{'es' if count > 1 else ''}"
                            f"{', settled' if finest else ''} (mean of {len(starts)} starts)")
     return PseudoLabels(values=values, loo_rmse=loo, methods=tuple(methods))
+
+
+def recency_weights(times_s: np.ndarray, rate: float, groups: np.ndarray | None = None) -> np.ndarray:
+    """Weights (N,) for the labelled presses of a run that drifts: ``e ** (rate * f)``, ``f`` the share of its
+    run's time span (``groups``: the run of each row; one run without) elapsed at each row, from 0 at the run's
+    first row to 1 at its last; divided by the largest. An elastomer softens as it is pressed, so the presses a
+    model will meet next are most like the latest ones. ``rate`` 0 weighs every press alike."""
+    t = np.asarray(times_s, np.float64)
+    if t.ndim != 1 or not np.isfinite(t).all():
+        raise DatasetError(f"recency weights need finite times, one per row; got shape {t.shape}")
+    if not (np.isfinite(rate) and rate >= 0):
+        raise ValueError(f"the recency rate must be finite and >= 0, got {rate}")
+    runs = np.zeros(len(t), np.int64) if groups is None else np.asarray(groups)
+    share = np.zeros(len(t))
+    for g in np.unique(runs):
+        rows = runs == g
+        span = np.ptp(t[rows])
+        share[rows] = (t[rows] - t[rows].min()) / span if span > 0 else 1.0
+    return np.exp(rate * (share - 1.0))
 
 
 def reading_maps(readings: np.ndarray, neighbours: int = 20) -> dict[str, np.ndarray]:
@@ -228,7 +260,8 @@ def _map_fits(name: str, coords: np.ndarray) -> Iterator[tuple[str, Fit]]:
         yield f"{name} map, affine + kernel {gamma:g}", _affine_kernel(z[:, :2], gamma)
 
 
-def _norm_fit(norm: np.ndarray, change: np.ndarray | None, axes: np.ndarray) -> tuple[str, Fit]:
+def _norm_fit(norm: np.ndarray, change: np.ndarray | None, axes: np.ndarray,
+              weights: np.ndarray | None = None) -> tuple[str, Fit]:
     # The fits of the field norm nest: a polynomial of the norm, its change, the readings' next principal axes.
     # Choosing among nested fits by leave-one-out on a handful of labels picks noise, so the norm is offered as
     # one fit holding every term, all but the norm's linear one shrunk by ridges averaged by leave-one-out.
@@ -238,8 +271,10 @@ def _norm_fit(norm: np.ndarray, change: np.ndarray | None, axes: np.ndarray) -> 
     if rate is not None:
         terms.append(np.stack([rate, rate * scaled], axis=1))
     shrunk = np.hstack([*terms, axes])
-    return (("field norm, degree 3, + " + ("" if rate is None else "its change, ") + "reading axes 2-3, shrunk"),
-            _shrunk(shrunk / shrunk.std(axis=0).clip(1e-12), free=1))
+    weighted = weights is not None
+    return (("field norm, degree 3, + " + ("" if rate is None else "its change, ") + "reading axes 2-3, shrunk"
+             + (", later labels weighted" if weighted else "")),
+            _shrunk(shrunk / shrunk.std(axis=0).clip(1e-12), free=1, weights=weights if weighted else None))
 
 
 def _design(z: np.ndarray) -> np.ndarray:
@@ -271,20 +306,23 @@ def _affine_kernel(z: np.ndarray, gamma: float) -> Fit:
     return fit
 
 
-def _shrunk(z: np.ndarray, free: int) -> Fit:
+def _shrunk(z: np.ndarray, free: int, weights: np.ndarray | None = None) -> Fit:
     """Affine in ``z`` (N, D), every term after the first ``free`` shrunk by a ridge: the fits of every ridge
     weight in ``SHRINK``, averaged with weights that follow each one's leave-one-out error on the labelled rows
     (closed form: the residual over one less the leverage). A fit with leave-one-out mean square error ``e`` out of
     ``n`` labelled rows weighs ``e ** (-n / 2)``, the Gaussian likelihood of its held-out residuals, so a weight
     that holds out clearly better dominates, and weights that hold out alike share. Picking the one weight of
     least leave-one-out error instead picks by the luck of a handful of labels (on the eFlesh normal run, 100
-    draws of 25 labels: the unlabelled presses 0.711 N off that way, 0.695 N averaged)."""
+    draws of 25 labels: the unlabelled presses 0.711 N off that way, 0.695 N averaged). ``weights`` (N,): each
+    labelled row's weight in the least squares and in its leave-one-out error (weighted least squares: the rows and
+    targets scaled by the root of the weight, relative to the labelled rows' mean weight)."""
     a = _design(z)
     penalty = np.ones(a.shape[1])
     penalty[:1 + free] = 0.0  # the intercept and the free terms are not shrunk
 
     def fit(lab: np.ndarray, y: np.ndarray) -> np.ndarray:
-        al, yl = a[lab], y[lab]
+        root = np.ones(int(lab.sum())) if weights is None else np.sqrt(weights[lab] / weights[lab].mean())
+        al, yl = a[lab] * root[:, None], y[lab] * root
         coefs, errs = [], []
         for weight in SHRINK:
             gram = al.T @ al + np.diag(weight * penalty + RIDGE)

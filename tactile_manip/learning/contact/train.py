@@ -80,6 +80,8 @@ class ContactTrainConfig:
     unlabelled: Literal["ignore", "manifold"] = "ignore"  # the dataset's unlabelled training presses: left out,
                                   # or labelled from the labelled ones (.fewlabel)
     manifold_neighbours: int = 20  # neighbours per reading in that map
+    label_recency: float = 0.0    # the fit of the field norm weighs a labelled press by e ** (this x the share of
+                                  # its run elapsed before it): later presses count more where the skin drifts
     seed: int = 0
     threads: int = 0              # torch CPU threads (0: torch's default)
 
@@ -90,7 +92,7 @@ class ContactTrainConfig:
         if not 0 < self.val_fraction < 1:
             raise ValueError(f"val_fraction must be in (0, 1), got {self.val_fraction}")
         check_ranges(self, {"context_max_gap_s": (0.0, 3600.0), "threads": THREADS_RANGE,
-                            "manifold_neighbours": (3, 200)}, units={"context_max_gap_s": "s"})
+                            "manifold_neighbours": (3, 200), "label_recency": (0.0, 10.0)}, units={"context_max_gap_s": "s"})
         if self.redraw_noise and self.context_frames != 1:
             raise ValueError(f"redraw_noise draws the noise of one frame; it needs context_frames = 1, got "
                              f"{self.context_frames}")
@@ -229,15 +231,19 @@ def _pseudo_labels(data: PairedDataset, labels: np.ndarray, names: list[str], cf
     """Fill ``labels`` (N, K) of the targets ``names`` in place on the unlabelled training presses from the
     labelled ones (:func:`~tactile_manip.learning.contact.fewlabel.pseudo_labels`, given the oldest frame of each
     press's ``windows`` as its earlier reading); what was done, or None where nothing is unlabelled."""
-    from tactile_manip.learning.contact.fewlabel import pseudo_labels
+    from tactile_manip.learning.contact.fewlabel import pseudo_labels, recency_weights
 
     hidden = data.indices(UNLABELLED)
     if not len(hidden):
         return None
     rows = np.sort(np.concatenate([data.indices("train"), hidden]))
     labelled = np.isin(rows, data.indices("train"))
+    weights = None
+    if cfg.label_recency > 0 and data.has("time_s"):
+        weights = recency_weights(data.extra("time_s")[rows], cfg.label_recency,
+                                  None if data.groups is None else data.groups[rows])
     found = pseudo_labels(data.readings[rows], labels[rows], labelled, neighbours=cfg.manifold_neighbours,
-                          earlier=windows[rows, -1] if windows.shape[1] > 1 else None, names=names)
+                          earlier=windows[rows, -1] if windows.shape[1] > 1 else None, names=names, weights=weights)
     labels[rows] = found.values
     return {"labelled": int(labelled.sum()), "unlabelled": int(len(hidden)),
             "loo_rmse": [float(v) for v in found.loo_rmse], "methods": list(found.methods)}
