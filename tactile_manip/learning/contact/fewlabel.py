@@ -91,7 +91,7 @@ def pseudo_labels(readings: np.ndarray, targets: np.ndarray, labelled: np.ndarra
     ``neighbours``, where the caller has them (they depend on the readings alone, so several draws of labels on
     one set of readings can share them). ``refine``: the places (one or two place targets, named) are refitted from
     a smooth model of the field (:func:`~tactile_manip.learning.contact.field_inverse.places_by_pass`) in as many
-    passes as give the least leave-one-out RMSE, and their leave-one-out RMSE is that of the refitted places. Raises
+    passes as give the least leave-one-out RMSE, and their leave-one-out RMSE is that of the refitted places.
     ``weights`` (N,): how much each labelled row counts in the fit of the field norm (:func:`recency_weights`: the
     later presses of a run more, where the skin drifts); read on the labelled rows only, which must hold finite
     positive weights. Raises ``DatasetError`` with fewer than ``MIN_LABELLED`` labelled rows, a non-finite label or

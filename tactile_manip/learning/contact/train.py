@@ -230,7 +230,9 @@ def _pseudo_labels(data: PairedDataset, labels: np.ndarray, names: list[str], cf
                    windows: np.ndarray) -> dict[str, Any] | None:
     """Fill ``labels`` (N, K) of the targets ``names`` in place on the unlabelled training presses from the
     labelled ones (:func:`~tactile_manip.learning.contact.fewlabel.pseudo_labels`, given the oldest frame of each
-    press's ``windows`` as its earlier reading); what was done, or None where nothing is unlabelled."""
+    press's ``windows`` as its earlier reading, and, with ``label_recency`` above 0 and the presses' times, the
+    labelled presses weighed by :func:`~tactile_manip.learning.contact.fewlabel.recency_weights` per run); what was
+    done, or None where nothing is unlabelled."""
     from tactile_manip.learning.contact.fewlabel import pseudo_labels, recency_weights
 
     hidden = data.indices(UNLABELLED)
