@@ -35,8 +35,8 @@ every map whose best fits are about as good as the best map's (``START_SPREAD``)
 coordinate. Each start leaves its own smooth bend between the labels, and the bends partly cancel (same run and
 labels, six passes: 1.57 to 1.48 mm over those 16 draws, closer in 12, and 1.62 to 1.47 mm over 24 draws not used
 for any choice, closer in 20; with three passes 1.64 to 1.55 and 1.69 to 1.55 mm; the map of the standardised
-reading fits 2-3 times worse there and starts none). Where the finest pass holds out best, each start's places
-then settle (:func:`~tactile_manip.learning.contact.field_inverse.settle`: the finer passes repeated with the
+reading fits 2-3 times worse there and starts none). Where the leave-one-out keeps one of the finer passes that
+settling repeats (four passes or more), each start runs all six and its places then settle (:func:`~tactile_manip.learning.contact.field_inverse.settle`: the finer passes repeated with the
 places shaken, which takes out much of the bend the passes keep between the labels) before the mean is taken.
 The contact network then trains on them (``unlabelled = "manifold"`` in a contact training config). The
 leave-one-out RMSE of the chosen fit travels with the labels: the network's sigma is widened by it, since the
@@ -51,7 +51,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from tactile_manip.errors import DatasetError
-from tactile_manip.learning.contact.field_inverse import places_by_pass, settle
+from tactile_manip.learning.contact.field_inverse import SETTLE_PASSES, places_by_pass, settle
 
 MIN_LABELLED = 5          # below this, no fit is chosen by leave-one-out
 LANDMARKS = 1500          # readings whose graph distances to all others lay out the map
@@ -164,15 +164,17 @@ def pseudo_labels(readings: np.ndarray, targets: np.ndarray, labelled: np.ndarra
         starts = _starts(by_map, places, score)
         by_pass = _refined_loo(x, y[:, places], lab, starts)  # (passes, places)
         count = int(np.argmin(np.sum(by_pass ** 2, axis=1))) + 1  # the passes of least leave-one-out error
-        # where the finest pass holds out best, the places settle further; the leave-one-out stays that of the
-        # passes alone (holding the settling out too would cost four times the leave-one-out above)
-        finest = count == len(by_pass)
-        values[:, places] = (_refit(x, y[:, places], lab, starts, settled=True) if finest
+        # where the leave-one-out keeps a pass that settling repeats, the places run all the passes and settle; the
+        # leave-one-out stays that of the passes alone (holding the settling out too would cost four times the
+        # leave-one-out above)
+        settles = count > len(by_pass) - len(SETTLE_PASSES)
+        values[:, places] = (_refit(x, y[:, places], lab, starts, settled=True) if settles
                              else _refit(x, y[:, places], lab, starts)[count - 1])
         loo[places] = by_pass[count - 1]
+        done = (f"{len(by_pass)} passes, settled (leave-one-out least after {count})" if settles
+                else f"{count} pass{'es' if count > 1 else ''}")
         for k in places:
-            methods[k] += (f", refined on the field model in {count} pass{'es' if count > 1 else ''}"
-                           f"{', settled' if finest else ''} (mean of {len(starts)} starts)")
+            methods[k] += f", refined on the field model in {done} (mean of {len(starts)} starts)"
     return PseudoLabels(values=values, loo_rmse=loo, methods=tuple(methods))
 
 
