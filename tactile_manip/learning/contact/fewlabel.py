@@ -36,8 +36,9 @@ coordinate. Each start leaves its own smooth bend between the labels, and the be
 labels, six passes: 1.57 to 1.48 mm over those 16 draws, closer in 12, and 1.62 to 1.47 mm over 24 draws not used
 for any choice, closer in 20; with three passes 1.64 to 1.55 and 1.69 to 1.55 mm; the map of the standardised
 reading fits 2-3 times worse there and starts none). Where the leave-one-out keeps one of the finer passes that
-settling repeats (four passes or more), each start runs all six and its places then settle (:func:`~tactile_manip.learning.contact.field_inverse.settle`: the finer passes repeated with the
-places shaken, which takes out much of the bend the passes keep between the labels) before the mean is taken.
+settling repeats (four passes or more), each start runs all six and its places then settle
+(:func:`~tactile_manip.learning.contact.field_inverse.settle`: the finer passes repeated with the places shaken,
+which takes out much of the bend the passes keep between the labels) before the mean is taken.
 The contact network then trains on them (``unlabelled = "manifold"`` in a contact training config). The
 leave-one-out RMSE of the chosen fit travels with the labels: the network's sigma is widened by it, since the
 network cannot be more exact than the labels it learnt from.

@@ -92,7 +92,8 @@ class ContactTrainConfig:
         if not 0 < self.val_fraction < 1:
             raise ValueError(f"val_fraction must be in (0, 1), got {self.val_fraction}")
         check_ranges(self, {"context_max_gap_s": (0.0, 3600.0), "threads": THREADS_RANGE,
-                            "manifold_neighbours": (3, 200), "label_recency": (0.0, 10.0)}, units={"context_max_gap_s": "s"})
+                            "manifold_neighbours": (3, 200), "label_recency": (0.0, 10.0)},
+                     units={"context_max_gap_s": "s"})
         if self.redraw_noise and self.context_frames != 1:
             raise ValueError(f"redraw_noise draws the noise of one frame; it needs context_frames = 1, got "
                              f"{self.context_frames}")
