@@ -274,10 +274,9 @@ def _norm_fit(norm: np.ndarray, change: np.ndarray | None, axes: np.ndarray,
     if rate is not None:
         terms.append(np.stack([rate, rate * scaled], axis=1))
     shrunk = np.hstack([*terms, axes])
-    weighted = weights is not None
     return (("field norm, degree 3, + " + ("" if rate is None else "its change, ") + "reading axes 2-3, shrunk"
-             + (", later labels weighted" if weighted else "")),
-            _shrunk(shrunk / shrunk.std(axis=0).clip(1e-12), free=1, weights=weights if weighted else None))
+             + ("" if weights is None else ", later labels weighted")),
+            _shrunk(shrunk / shrunk.std(axis=0).clip(1e-12), free=1, weights=weights))
 
 
 def _design(z: np.ndarray) -> np.ndarray:
