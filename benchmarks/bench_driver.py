@@ -25,9 +25,9 @@ import numpy as np
 from benchmarks._common import machine_info, publish
 from tactile_manip.errors import SensorTimeoutError
 from tactile_manip.sensors import SerialSensor, SerialSensorConfig
-from tactile_manip.sensors.protocol import FrameDecoder, encode_frame
-from tactile_manip.sensors.wire import WIRE_FORMATS, make_decoder
-from tactile_manip.sensors.wire.anyskin import pack_frame
+from tactile_manip.wire.protocol import FrameDecoder, encode_frame
+from tactile_manip.wire import WIRE_FORMATS, make_decoder
+from tactile_manip.wire.anyskin import pack_frame
 from tactile_manip.sim.params import ChipParams
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -34,7 +34,7 @@ RATE_HZ = 125.0
 
 def make_recording(path: Path, seconds: float, seed: int = 0) -> Path:
     """A recording of ``seconds`` at 125 Hz: the simulated sensor's idle field, chip noise and one press."""
-    from tactile_manip.sensors.protocol import CountScale, encode_frame
+    from tactile_manip.wire.protocol import CountScale, encode_frame
     from tactile_manip.sensors.recording import RecordingWriter, recording_header
     from tactile_manip.sensors.simulated import SimulatedSensor
 

@@ -70,7 +70,7 @@ def bench_logging(seconds: float, frames: int) -> dict[str, Any]:
     import rerun as rr
 
     from tactile_manip.interop.rerun_log import RerunLogger
-    from tactile_manip.sensors.layout import SUPERMAG_4X4
+    from tactile_manip.boards.layout import SUPERMAG_4X4
 
     fields, depth = _fields(max(frames, int(seconds * RATE_HZ))), _depth()
     idle = _paced(seconds, lambda i: fields[i].sum())  # the loop itself, without logging

@@ -173,7 +173,7 @@ def contact_model_of_layout(tmp_path: Path) -> Callable[[str], Path]:
     import json
 
     from tactile_manip.perception.reconstruct import METADATA_KEY
-    from tactile_manip.sensors.layout import get_layout
+    from tactile_manip.boards.layout import get_layout
 
     def make(layout: str, **metadata) -> Path:
         proto = onnx.load(str(SHIPPED_CONTACT_MODEL))

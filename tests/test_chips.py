@@ -15,8 +15,8 @@ from tactile_manip.config import from_dict
 from tactile_manip.perception.reconstruct import READING_LIMIT_UT
 from tactile_manip.sensors.baseline import noise_thresholds_ut
 from tactile_manip.sensors.config import BaselineConfig, SerialSensorConfig
-from tactile_manip.sensors.protocol import CountScale
-from tactile_manip.sensors.wire import make_decoder
+from tactile_manip.wire.protocol import CountScale
+from tactile_manip.wire import make_decoder
 from tactile_manip.sim.params import ChipParams
 
 SHARED = ("lsb_xy_ut", "lsb_z_ut", "saturation_counts", "rate_hz", "noise_xy_ut", "noise_z_ut")

@@ -3,7 +3,7 @@
 ``load_board("eflesh")``, ``load_board("generic:10")`` or ``load_board("my_board.toml")`` gives a
 :class:`Board`: its chips in firmware order (reading cell, position in mm, axis map into the pad frame), chip
 model, wire format, and, for simulation, its magnetic body and compliant layer. The sensors layer turns a board
-into the :class:`~tactile_manip.sensors.layout.BoardLayout` that maps frames onto readings. numpy only.
+into the :class:`~tactile_manip.boards.layout.BoardLayout` that maps frames onto readings. numpy only.
 """
 
 from tactile_manip.boards.load import (

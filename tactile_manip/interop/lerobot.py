@@ -391,7 +391,7 @@ def _tactile_meta(episodes: list[Episode], grid: tuple[int, int], s: _Streams,
               "axes": "x, y, z of the pad frame; row 0 at +y, column 0 at -x", "unit": "uT"}
     if layout_name:
         try:
-            from tactile_manip.sensors.layout import get_layout
+            from tactile_manip.boards.layout import get_layout
 
             layout["pitch_mm"] = get_layout(layout_name).pitch_mm
         except ValueError:

@@ -22,7 +22,7 @@ def sensor_name(episode: Episode) -> str:
 
 def layout_of(episode: Episode):
     """The board layout named in ``meta["layout"]`` when it matches the frames' grid, else None."""
-    from tactile_manip.sensors.layout import LAYOUTS
+    from tactile_manip.boards.layout import LAYOUTS
 
     layout = LAYOUTS.get(str(episode.meta.get("layout", "")))
     return layout if layout is not None and tuple(layout.grid) == episode.grid else None

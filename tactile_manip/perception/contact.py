@@ -425,7 +425,7 @@ def _pad_half_size_mm(layout: str) -> tuple[float, float] | None:
     that is not known here."""
     if not layout:
         return None
-    from tactile_manip.sensors.layout import get_layout
+    from tactile_manip.boards.layout import get_layout
 
     try:
         board = get_layout(layout)

@@ -6,7 +6,7 @@ another board layout, another context length) would otherwise load and give numb
 :func:`check_metadata` refuses it with a :class:`ModelFileError` naming the file and the field:
 
 - every field has its type (``context.frames`` an integer, ``targets.names`` a list of strings, ...);
-- shapes are positive integers; the board layout's reading grid (``sensors/layout.py``; ``grid-RxC`` for
+- shapes are positive integers; the board layout's reading grid (``boards/layout.py``; ``grid-RxC`` for
   other grids) is the input's rows and columns;
 - a contact model's targets and units pair up by their suffixes (``x_mm`` in mm, ``force_n`` in N), its
   ``context.frames`` is the input's frame axis, within 1..:data:`MAX_CONTEXT_FRAMES`;
@@ -116,7 +116,7 @@ class _Checker:
 
 def _check_layout(check: _Checker, layout: Any, grid: tuple[int, int]) -> None:
     """The board layout's reading grid (a known board's, or ``grid-RxC``) must be the input's rows x cols."""
-    from tactile_manip.sensors.layout import get_layout
+    from tactile_manip.boards.layout import get_layout
 
     if layout is None:  # files from before board layouts: the loaders take them as SuperMag models
         return

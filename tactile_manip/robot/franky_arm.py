@@ -158,7 +158,7 @@ class FrankyArm(FR3Arm):
     """A real FR3 (or franky-sim) through franky-control; see the module docstring for frames and errors.
 
     Every method but ``connect`` and the limit properties raises
-    :class:`~tactile_manip.robot.twin.RobotNotConnectedError` before ``connect()``. Joint targets outside the
+    :class:`~tactile_manip.errors.RobotNotConnectedError` before ``connect()``. Joint targets outside the
     FR3 limits are refused with :class:`SafetyLimitError` before franky sees them (franky-sim does not enforce
     them). ``speed_factor`` multiplies the config's ``relative_dynamics_factor`` (franky's motion factor times
     its global factor); ``None`` means 1, i.e. the config's factor.

@@ -21,10 +21,10 @@ from typing import Any
 import numpy as np
 
 from tactile_manip.checks import check_array, check_finite_scalar
-from tactile_manip.errors import ArmFault, IKError, RobotNotConnectedError, SafetyLimitError  # noqa: F401
+from tactile_manip.errors import ArmFault, IKError, RobotNotConnectedError, SafetyLimitError
 from tactile_manip.extras import require
 from tactile_manip.robot.base import N_JOINTS, ArmState
-from tactile_manip.robot.fr3 import (FR3_DQ_MAX_RAD_S, FR3_HOME_Q_RAD, FR3_Q_MAX_RAD, FR3_Q_MIN_RAD,  # noqa: F401
+from tactile_manip.robot.fr3 import (FR3_DQ_MAX_RAD_S, FR3_HOME_Q_RAD, FR3_Q_MAX_RAD, FR3_Q_MIN_RAD,
                                      FR3Arm, check_fr3_configuration)
 from tactile_manip.robot.frames import rotation_about
 from tactile_manip.robot.safety import check_rigid_transform, pose_error

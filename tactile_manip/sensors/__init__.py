@@ -3,7 +3,7 @@
 - :class:`TactileSensor`: the contract (connect, ``read_latest``, ``wait_new``, ``window``, baseline, health);
 - backends :class:`SerialSensor` (pyserial, imported on connect), :class:`SimulatedSensor`,
   :class:`ReplaySensor`, each built from its config dataclass or by :func:`make_sensor`;
-- :mod:`~tactile_manip.sensors.layout`: board layouts; :mod:`~tactile_manip.sensors.drift`: baseline tracking,
+- :mod:`~tactile_manip.boards.layout`: board layouts; :mod:`~tactile_manip.sensors.drift`: baseline tracking,
   temperature, stray fields; :mod:`~tactile_manip.sensors.simulated.emulator`: the firmware emulator on a pty;
   :mod:`~tactile_manip.sensors.recording`: recording a live sensor to a crash-safe file.
 
@@ -33,7 +33,6 @@ from tactile_manip.sensors.config import (
     SimulatedSensorConfig,
     make_sensor,
 )
-from tactile_manip.sensors.layout import LAYOUTS, BoardLayout, ChipPlacement, get_layout
 from tactile_manip.sensors.recording import Recorder
 from tactile_manip.sensors.replay import ReplaySensor
 from tactile_manip.sensors.serial_sensor import SerialSensor
@@ -42,11 +41,8 @@ __all__ = [
     "BACKENDS",
     "Baseline",
     "BaselineConfig",
-    "BoardLayout",
-    "ChipPlacement",
     "ContactTimeline",
     "DriftConfig",
-    "LAYOUTS",
     "FrameSubscription",
     "Press",
     "Recorder",
@@ -62,7 +58,6 @@ __all__ = [
     "SimulatedSensor",
     "SimulatedSensorConfig",
     "TactileSensor",
-    "get_layout",
     "make_sensor",
     "parse_press",
     "read_recording",

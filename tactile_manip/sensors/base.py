@@ -25,7 +25,7 @@ from tactile_manip.errors import SensorDisconnectedError, SensorError, SensorTim
 from tactile_manip.sensors.baseline import Baseline, baseline_from_frames, noise_thresholds_ut
 from tactile_manip.sensors.config import BaselineConfig, DriftConfig
 from tactile_manip.sensors.drift import BaselineState
-from tactile_manip.sensors.layout import SUPERMAG_4X4, BoardLayout
+from tactile_manip.boards.layout import SUPERMAG_4X4, BoardLayout
 from tactile_manip.types import TactileReading
 
 RATE_WINDOW_S = 1.0  # the measured rate is taken over the last second of frames

@@ -111,7 +111,7 @@ class SerialSensorConfig:
     drift: DriftConfig = field(default_factory=DriftConfig)
 
     def __post_init__(self) -> None:
-        from tactile_manip.sensors.layout import get_layout
+        from tactile_manip.boards.layout import get_layout
         from tactile_manip.wire import DEFAULT_LAYOUTS, WIRE_FORMATS
 
         for name in ("port", "serial_number"):

@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from tactile_manip.sensors.config import DriftConfig
-from tactile_manip.sensors.layout import BoardLayout
+from tactile_manip.boards.layout import BoardLayout
 
 
 class BaselineState:

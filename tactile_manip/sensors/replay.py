@@ -20,7 +20,7 @@ from tactile_manip.chips import MLX90393, ChipModelSpec
 from tactile_manip.errors import RecordingError, SensorTimeoutError
 from tactile_manip.sensors.base import TactileSensor
 from tactile_manip.sensors.config import ReplaySensorConfig
-from tactile_manip.sensors.layout import get_layout
+from tactile_manip.boards.layout import get_layout
 from tactile_manip.logs.recording import Recording, read_recording
 from tactile_manip.types import TactileReading
 

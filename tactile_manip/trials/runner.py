@@ -4,8 +4,7 @@ The parts, each in its module: the presentations (:mod:`~tactile_manip.trials.pr
 estimators (:mod:`~tactile_manip.trials.methods`), the cells (:mod:`~tactile_manip.trials.cells`: the simulated
 one and the real FR3's operator cell), the log line of each task's result
 (:mod:`~tactile_manip.trials.task_records`), the log (:mod:`~tactile_manip.trials.log`) and the report
-(:mod:`~tactile_manip.trials.report`). This module runs them. Its names of those parts stay importable from
-here (``from tactile_manip.trials.runner import SimulatedCell, build_estimators, draw_presentation``).
+(:mod:`~tactile_manip.trials.report`). This module runs them.
 
 Each (trial, method) is appended to ``trials.jsonl`` and fsynced as soon as it completes; ``resume=True``
 skips the pairs already there, so a killed run loses no completed trial and can be continued.
@@ -27,22 +26,13 @@ from tactile_manip.perception.estimator import TactilePoseEstimator
 from tactile_manip.perception.pose import wrap_axial
 from tactile_manip.trials.record import TrialRecord
 from tactile_manip.trials.scene import TASK_TITLES, TrialScene
-from tactile_manip.trials.cells import SENSOR_DRAW_BASELINE_FRAMES, Cell, SimulatedCell, WorldTruth, make_cell
-from tactile_manip.trials.methods import (build_contact_estimator, build_contact_estimators, build_estimators,
-                                          build_tactile_estimators, resolve_model_path, resolve_scene_path)
-from tactile_manip.trials.presentation import Presentation, draw_presentation, pad_T_object
+from tactile_manip.trials.cells import Cell, make_cell
+from tactile_manip.trials.methods import (build_tactile_estimators)
+from tactile_manip.trials.presentation import Presentation, draw_presentation
 from tactile_manip.trials.task_records import make_grip_record, make_place_record, make_record
 
 if TYPE_CHECKING:
     from tactile_manip.perception.contact_pose import TactileEstimator
-
-# the parts' names, importable from here too
-__all__ = ["SENSOR_DRAW_BASELINE_FRAMES", "Cell", "Presentation", "SimulatedCell", "WorldTruth",
-           "build_contact_estimator", "build_contact_estimators", "build_estimators", "build_tactile_estimators",
-           "draw_presentation",
-           "make_cell", "make_grip_record", "make_place_record", "make_record", "pad_T_object",
-           "resolve_model_path", "resolve_scene_path", "run_scene", "run_trials"]
-
 
 def run_scene(scene: TrialScene, write: Callable[[TrialRecord], None], *,
               estimators: Mapping[str, TactilePoseEstimator | TactileEstimator],

@@ -11,7 +11,9 @@ from tactile_manip.behaviours.grip import GripConfig, GripResult, grip_to_force
 from tactile_manip.behaviours.reorient import ReorientConfig
 from tactile_manip.perception.contact import ContactState
 from tactile_manip.perception.contact_pose import TactileEstimate, TactileEstimator
-from tactile_manip.trials.runner import SimulatedCell, build_estimators, draw_presentation
+from tactile_manip.trials.cells import SimulatedCell
+from tactile_manip.trials.methods import build_estimators
+from tactile_manip.trials.presentation import draw_presentation
 from tactile_manip.trials.scene import MethodSpec, PresentationConfig, TrialObject, TrialScene
 
 pytest.importorskip("roboticstoolbox")

@@ -10,7 +10,9 @@ import pytest
 
 from tactile_manip.behaviours.place import Slot, place_in_slot, slot_errors
 from tactile_manip.robot.frames import hand_T_pad, transform
-from tactile_manip.trials.runner import SimulatedCell, build_estimators, draw_presentation
+from tactile_manip.trials.cells import SimulatedCell
+from tactile_manip.trials.methods import build_estimators
+from tactile_manip.trials.presentation import draw_presentation
 from tactile_manip.trials.scene import MethodSpec, PresentationConfig, TrialObject, TrialScene
 
 pytest.importorskip("roboticstoolbox")

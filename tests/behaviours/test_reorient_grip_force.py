@@ -11,7 +11,9 @@ import pytest
 
 from tactile_manip.behaviours.reorient import grasp_estimate_reorient
 from tactile_manip.shipped import shipped_model
-from tactile_manip.trials.runner import SimulatedCell, build_estimators, draw_presentation
+from tactile_manip.trials.cells import SimulatedCell
+from tactile_manip.trials.methods import build_estimators
+from tactile_manip.trials.presentation import draw_presentation
 from tactile_manip.trials.scene import MethodSpec, PresentationConfig, TrialObject, TrialScene
 
 pytest.importorskip("roboticstoolbox")

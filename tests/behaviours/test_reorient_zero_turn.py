@@ -7,7 +7,8 @@ import pytest
 
 from tactile_manip.behaviours.reorient import grasp_estimate_reorient
 from tactile_manip.trials.blind import BlindEstimator
-from tactile_manip.trials.runner import SimulatedCell, draw_presentation
+from tactile_manip.trials.cells import SimulatedCell
+from tactile_manip.trials.presentation import draw_presentation
 from tactile_manip.trials.scene import MethodSpec, PresentationConfig, TrialObject, TrialScene
 
 pytest.importorskip("roboticstoolbox")

@@ -10,7 +10,7 @@ from tactile_manip.boards import board_names, load_board
 from tactile_manip.boards.spec import axis_matrix
 from tactile_manip.cli import main
 from tactile_manip.errors import ConfigError
-from tactile_manip.sensors.layout import (
+from tactile_manip.boards.layout import (
     ANYSKIN_5,
     LAYOUTS,
     SUPERMAG_4X4,
@@ -220,7 +220,7 @@ def test_import_refuses_a_bad_board_file_in_one_line(tmp_path, capsys):
 
 def test_the_wire_formats_a_board_may_name_are_the_serial_backends():
     from tactile_manip.boards.spec import WIRE_FORMAT_NAMES
-    from tactile_manip.sensors.wire import WIRE_FORMATS
+    from tactile_manip.wire import WIRE_FORMATS
 
     assert set(WIRE_FORMAT_NAMES) == set(WIRE_FORMATS)
     for name in board_names():
@@ -229,7 +229,7 @@ def test_the_wire_formats_a_board_may_name_are_the_serial_backends():
 
 def test_the_emulator_streams_a_boards_chips_and_refuses_what_it_cannot(tmp_path, capsys):
     from tactile_manip.sensors.simulated.emulator import EmulatorConfig, FirmwareEmulator
-    from tactile_manip.sensors.wire import make_decoder
+    from tactile_manip.wire import make_decoder
 
     emulator = FirmwareEmulator(EmulatorConfig(wire_format="anyskin", board="eflesh"))
     decoder = make_decoder("anyskin", n_chips=5, chip=load_board("eflesh").chip)

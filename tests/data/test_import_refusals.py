@@ -118,7 +118,7 @@ def test_an_infinite_value_is_not_called_a_nan(tmp_path, capsys):
 
 def _damaged_recording(tmp_path):
     from tactile_manip.sensors.recording import RecordingWriter
-    from tactile_manip.sensors.wire.anyskin import pack_frame
+    from tactile_manip.wire.anyskin import pack_frame
 
     rng = np.random.default_rng(8)
     fields = rng.normal(0, 200, (60, 5, 3)).astype(np.float32)

@@ -9,7 +9,7 @@ import pytest
 from tactile_manip.data import from_probe_logs, load_dataset, save_dataset
 from tactile_manip.data.streams import Comparison, parse_comparison
 from tactile_manip.errors import DatasetError
-from tactile_manip.sensors.layout import ANYSKIN_5
+from tactile_manip.boards.layout import ANYSKIN_5
 
 LABELS = ["time_s", "x_mm", "y_mm", "z_mm", "force_gf"]
 
@@ -192,7 +192,7 @@ def test_anything_but_one_comparison_is_refused_naming_it(text):
 
 def test_a_recording_works_in_place_of_the_sensor_csv(tmp_path):
     from tactile_manip.sensors.recording import RecordingWriter
-    from tactile_manip.sensors.wire.anyskin import pack_frame
+    from tactile_manip.wire.anyskin import pack_frame
 
     rng = np.random.default_rng(8)
     fields = rng.normal(0, 200, (40, 5, 3)).astype(np.float32)

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tactile_manip.sensors.protocol import FRAME_LEN, FRAME_LEN_T, FrameDecoder, encode_frame
+from tactile_manip.wire.protocol import FRAME_LEN, FRAME_LEN_T, FrameDecoder, encode_frame
 
 FIRMWARE = Path(__file__).resolve().parents[2] / "firmware"
 

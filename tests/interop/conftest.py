@@ -48,7 +48,7 @@ RATE_HZ = 125.0
 
 def write_recording(path: Path, *, seconds: float = 10.0, seed: int = 0) -> Path:
     """A recording of ``seconds`` at 125 Hz through the recorder's own writer: idle chips, then a press."""
-    from tactile_manip.sensors.protocol import CountScale, encode_frame
+    from tactile_manip.wire.protocol import CountScale, encode_frame
     from tactile_manip.sensors.recording import RecordingWriter, recording_header
     from tactile_manip.sensors.simulated import SimulatedSensor
 

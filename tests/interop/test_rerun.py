@@ -15,7 +15,7 @@ from tactile_manip.interop.rerun_log import ARROW_MM_PER_UT, JOINTS, taxel_origi
 from tactile_manip.interop.rerun_read import read_entity  # noqa: E402
 from tactile_manip.interop.rerun_sink import grpc_url, viewer_command  # noqa: E402
 from tactile_manip.interop.timeline import episode_starts_s  # noqa: E402
-from tactile_manip.sensors.layout import SUPERMAG_4X4  # noqa: E402
+from tactile_manip.boards.layout import SUPERMAG_4X4  # noqa: E402
 
 
 def _frames(episodes):

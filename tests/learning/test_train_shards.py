@@ -11,7 +11,7 @@ import pytest
 pytest.importorskip("torch", reason="training tests need torch: pip install torch==2.13.0")
 import torch
 
-from tactile_manip.data import ChannelSpec, load_dataset, save_dataset, save_sharded
+from tactile_manip.data import ChannelSpec, load_dataset, save_sharded
 from tactile_manip.learning.cvae.data import (InputSpec, StreamedData, StreamedPairs, TensorPairs, open_training_data,
                                               select)
 from tactile_manip.learning.cvae.train import TrainConfig, evaluate_split, train

@@ -85,7 +85,7 @@ def test_calibrate_writes_a_calibration_beside_the_model_and_its_reliability_rep
 
 def test_trials_use_the_calibration_beside_the_model_and_build_the_escalation(rods, tmp_path) -> None:
     from tactile_manip.perception.symmetry import SymmetrizedReconstructor
-    from tactile_manip.trials.runner import build_estimators
+    from tactile_manip.trials.methods import build_estimators
     from tactile_manip.trials.scene import MethodSpec, PresentationConfig, TrialObject, TrialScene
 
     model = tmp_path / "m.onnx"

@@ -199,7 +199,7 @@ class _Frames:
     """What ``stream`` uses of a sensor: ``layout`` and ``wait_new`` (each frame once, then a timeout)."""
 
     def __init__(self, fields: np.ndarray, layout: str = "anyskin-5") -> None:
-        from tactile_manip.sensors.layout import get_layout
+        from tactile_manip.boards.layout import get_layout
 
         self.layout, self.fields, self.next = get_layout(layout), fields, 0
 

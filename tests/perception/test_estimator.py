@@ -269,7 +269,7 @@ class _FramesDuringEstimates:
     estimate runs: the reconstructor below publishes ``per_estimate`` frames each time it is called."""
 
     def __init__(self, fields: np.ndarray) -> None:
-        from tactile_manip.sensors.layout import get_layout
+        from tactile_manip.boards.layout import get_layout
 
         self.layout = get_layout("supermag-4x4")
         self.fields, self.published, self.seen = fields, 1, -1

@@ -19,7 +19,7 @@ import pytest
 from tactile_manip.errors import ArmFault, GripperError, RobotError, SafetyLimitError
 from tactile_manip.robot.franky_arm import (FrankyArm, FrankyConfig, FrankyGripper, FrankyMissingError,
                                             affine_from_matrix, import_franky, matrix_from_affine)
-from tactile_manip.robot.twin import RobotNotConnectedError
+from tactile_manip.errors import RobotNotConnectedError
 
 HOST = "172.16.0.2"
 HAND_TCP = np.array([[math.cos(-math.pi / 4), -math.sin(-math.pi / 4), 0.0, 0.0],

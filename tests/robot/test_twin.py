@@ -7,7 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from tactile_manip.errors import ArmFault, GripperError, IKError, SafetyLimitError
+from tactile_manip.errors import ArmFault, GripperError, IKError, RobotNotConnectedError, SafetyLimitError
+from tactile_manip.robot import fr3
 from tactile_manip.robot.base import GraspResult, GripperState
 from tactile_manip.robot.frames import angle_in_plane, hand_T_pad, rotate_pose_about, rotation_about, transform
 from tactile_manip.robot.safety import pose_error
@@ -28,7 +29,7 @@ def _lifted(base_T_hand: np.ndarray, dz_m: float) -> np.ndarray:
 
 def test_home_is_inside_the_fr3_limits_with_the_hand_pointing_down(twin, arm):
     s = arm.state()
-    assert np.all(s.q_rad >= twin.FR3_Q_MIN_RAD) and np.all(s.q_rad <= twin.FR3_Q_MAX_RAD)
+    assert np.all(s.q_rad >= fr3.FR3_Q_MIN_RAD) and np.all(s.q_rad <= fr3.FR3_Q_MAX_RAD)
     np.testing.assert_allclose(s.base_T_hand[:3, :3], np.diag([1.0, -1.0, -1.0]), atol=1e-9)
     np.testing.assert_allclose(s.base_T_hand[:3, 3], [0.4635, 0.0, 0.4028], atol=1e-4)
     assert not s.faulted and s.fault == ""
@@ -99,7 +100,7 @@ def test_joint_target_outside_the_limits_is_refused(arm):
 def test_modelled_duration_follows_the_slowest_joint(twin, arm):
     target = arm.home_q_rad + np.array([0.2, 0.0, 0.0, 0.0, 0.4, 0.0, 0.0])
     arm.move_joints(target, speed_factor=0.5)
-    expected_s = max(0.2 / (twin.FR3_DQ_MAX_RAD_S[0] * 0.5), 0.4 / (twin.FR3_DQ_MAX_RAD_S[4] * 0.5))
+    expected_s = max(0.2 / (fr3.FR3_DQ_MAX_RAD_S[0] * 0.5), 0.4 / (fr3.FR3_DQ_MAX_RAD_S[4] * 0.5))
     assert arm.last_move_duration_s == pytest.approx(expected_s)
 
 
@@ -120,9 +121,9 @@ def test_moves_are_deterministic(twin):
 
 def test_use_before_connect_is_refused(twin):
     arm = twin.KinematicArm()
-    with pytest.raises(twin.RobotNotConnectedError, match=r"connect\(\)"):
+    with pytest.raises(RobotNotConnectedError, match=r"connect\(\)"):
         arm.state()
-    with pytest.raises(twin.RobotNotConnectedError):
+    with pytest.raises(RobotNotConnectedError):
         arm.home()
 
 
@@ -269,5 +270,5 @@ def test_world_refuses_unknown_and_duplicate_objects(twin, world):
 
 
 def test_gripper_needs_connect(twin, arm, world):
-    with pytest.raises(twin.RobotNotConnectedError, match=r"connect\(\)"):
+    with pytest.raises(RobotNotConnectedError, match=r"connect\(\)"):
         twin.TwinGripper(arm, world).grasp(0.03, 10.0)

@@ -8,7 +8,7 @@ import pytest
 from tactile_manip.sensors import SerialSensorConfig, SimulatedSensor, SimulatedSensorConfig
 from tactile_manip.sensors.config import DriftConfig
 from tactile_manip.sensors.drift import BaselineState
-from tactile_manip.sensors.layout import ANYSKIN_5, SUPERMAG_4X4
+from tactile_manip.boards.layout import ANYSKIN_5, SUPERMAG_4X4
 
 
 def _state(**kw) -> BaselineState:

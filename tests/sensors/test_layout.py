@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tactile_manip.sensors.layout import (
+from tactile_manip.boards.layout import (
     ANYSKIN_5,
     SUPERMAG_4X4,
     BoardLayout,

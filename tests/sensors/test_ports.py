@@ -10,7 +10,7 @@ from tactile_manip.commands import serial_options
 from tactile_manip.errors import SensorDisconnectedError
 from tactile_manip.sensors import SerialSensor, SerialSensorConfig
 from tactile_manip.sensors.ports import PortInfo, device_for_serial_number, usb_kind
-from tactile_manip.sensors.wire import WIRE_FORMATS
+from tactile_manip.wire import WIRE_FORMATS
 
 
 def test_find_port_says_which_boards_need_dtr_high(monkeypatch, capsys):

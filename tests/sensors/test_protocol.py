@@ -11,7 +11,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from tactile_manip.errors import ProtocolError
-from tactile_manip.sensors.protocol import (
+from tactile_manip.wire.protocol import (
     FRAME_LEN,
     FRAME_LEN_T,
     SYNC,

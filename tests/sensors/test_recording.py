@@ -14,7 +14,7 @@ import pytest
 
 from tactile_manip.errors import RecordingError, SensorTimeoutError
 from tactile_manip.sensors import ReplaySensor, ReplaySensorConfig, RecordingWriter, read_recording
-from tactile_manip.sensors.protocol import encode_frame
+from tactile_manip.wire.protocol import encode_frame
 from tactile_manip.sensors.recording import MAGIC
 
 CHIP = {"lsb_xy_ut": 0.2, "lsb_z_ut": 0.323, "saturation_counts": 32767}

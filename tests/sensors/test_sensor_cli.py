@@ -202,7 +202,7 @@ def test_emulate_replaces_a_stale_pty_link_and_removes_only_its_own(tmp_path, ca
 
 def _recording(path, counts):
     from tactile_manip.sensors import RecordingWriter
-    from tactile_manip.sensors.protocol import encode_frame
+    from tactile_manip.wire.protocol import encode_frame
 
     chip = {"lsb_xy_ut": 0.2, "lsb_z_ut": 0.323, "saturation_counts": 32767, "rate_hz": 125.0}
     with RecordingWriter(path, {"source": "test", "chip": chip}) as w:

@@ -10,9 +10,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from tactile_manip.errors import ProtocolError
-from tactile_manip.sensors.layout import ANYSKIN_5, LAYOUTS
-from tactile_manip.sensors.wire import WIRE_FORMATS, make_decoder
-from tactile_manip.sensors.wire.anyskin import AnySkinDecoder, frame_length
+from tactile_manip.boards.layout import ANYSKIN_5, LAYOUTS
+from tactile_manip.wire import WIRE_FORMATS, make_decoder
+from tactile_manip.wire.anyskin import AnySkinDecoder, frame_length
 from tactile_manip.sim.params import ChipParams
 
 N_CHIPS = 5

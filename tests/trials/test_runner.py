@@ -18,7 +18,10 @@ import pytest
 from tactile_manip.errors import SimulationError
 from tactile_manip.robot.safety import SafetyLimits
 from tactile_manip.trials.log import read_trials
-from tactile_manip.trials.runner import SimulatedCell, build_estimators, draw_presentation, run_scene, run_trials
+from tactile_manip.trials.cells import SimulatedCell
+from tactile_manip.trials.methods import build_estimators
+from tactile_manip.trials.presentation import draw_presentation
+from tactile_manip.trials.runner import run_scene, run_trials
 from tactile_manip.trials.scene import (FaultPlan, MethodSpec, PresentationConfig, RobotConfig, TrialObject,
                                         TrialScene, load_scene)
 
@@ -264,7 +267,7 @@ class _ScriptedOperator:
     def ask(self, prompt: str) -> str:
         from tactile_manip.robot.frames import angle_in_plane, hand_T_finger_pad
         from tactile_manip.robot.twin import WorldObject
-        from tactile_manip.trials.runner import pad_T_object
+        from tactile_manip.trials.presentation import pad_T_object
 
         sim = self.sim
         if prompt.startswith("press Enter when it is in place"):
@@ -300,7 +303,7 @@ def test_the_operator_cell_runs_the_same_behaviour_with_a_person_in_the_loop() -
 
 def test_the_operator_cell_logs_the_grip_force_of_the_scenes_contact_model() -> None:
     from tactile_manip.trials.operator import OperatorCell
-    from tactile_manip.trials.runner import build_tactile_estimators
+    from tactile_manip.trials.methods import build_tactile_estimators
 
     scene = _scene(trials=2, methods=[MethodSpec("bilinear", "bilinear", output_px=16)],
                    contact_model=str(REPO / "models" / "contact_supermag.onnx"))

@@ -41,7 +41,7 @@ import numpy as np
 
 from tactile_manip.outputs import OutputPathError, check_writable_parent
 from tactile_manip.sensors.simulated.contacts import ContactTimeline, Press
-from tactile_manip.sensors.layout import ANYSKIN_5, BoardLayout, get_layout
+from tactile_manip.boards.layout import ANYSKIN_5, BoardLayout, get_layout
 from tactile_manip.wire.protocol import encode_frame
 from tactile_manip.wire.anyskin import pack_frame
 from tactile_manip.sim.pair import SensorPair

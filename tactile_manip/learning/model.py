@@ -1,4 +1,0 @@
-"""Moved to :mod:`tactile_manip.learning.cvae.model`; this name stays importable."""
-import sys
-from tactile_manip.learning.cvae import model as _moved
-sys.modules[__name__] = _moved
