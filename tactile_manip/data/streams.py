@@ -119,13 +119,13 @@ def read_reading_stream(path: str | Path) -> tuple[np.ndarray, np.ndarray, dict]
 
 
 def board_layout(layout: Any):
-    """A ``BoardLayout`` from its name (or itself); DatasetError naming the known layouts."""
-    from tactile_manip.boards.layout import BoardLayout, get_layout
+    """A ``Board`` from its name (or itself); DatasetError naming the known layouts."""
+    from tactile_manip.boards import Board, load_board
 
-    if isinstance(layout, BoardLayout):
+    if isinstance(layout, Board):
         return layout
     try:
-        return get_layout(str(layout))
+        return load_board(str(layout))
     except ValueError as e:
         raise DatasetError(str(e)) from None
 

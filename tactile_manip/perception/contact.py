@@ -425,10 +425,10 @@ def _pad_half_size_mm(layout: str) -> tuple[float, float] | None:
     that is not known here."""
     if not layout:
         return None
-    from tactile_manip.boards.layout import get_layout
+    from tactile_manip.boards import load_board
 
     try:
-        board = get_layout(layout)
+        board = load_board(layout)
     except (ValueError, OSError):  # a board of its own (a dataset's layout name): no geometry
         return None
     rows, cols = board.grid

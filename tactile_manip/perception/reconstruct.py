@@ -56,7 +56,7 @@ def out_of_range(field_ut: np.ndarray) -> np.ndarray:
 def _limit_for(shape: tuple[int, ...]) -> np.ndarray | float:
     """The per-axis limit for readings of ``shape`` (the largest one when the last axis is not x, y, z)."""
     return READING_LIMIT_UT if shape and shape[-1] == 3 else float(READING_LIMIT_UT.max())
-DEFAULT_BOARD_LAYOUT = "supermag-4x4"  # the board every shipped model was trained on (boards/layout.py)
+DEFAULT_BOARD_LAYOUT = "supermag-4x4"  # the board every shipped model was trained on (tactile_manip/boards)
 
 
 @dataclass(frozen=True, eq=False)
@@ -71,7 +71,7 @@ class Reconstruction:
 class Reconstructor(abc.ABC):
     """Reading (R, C, 3) microtesla, baseline-subtracted -> depth image (H, W) in mm.
 
-    ``board_layout`` names the sensor board (``tactile_manip.boards.layout``) whose readings it was made for;
+    ``board_layout`` names the sensor board (``tactile_manip.boards``) whose readings it was made for;
     :meth:`check_layout` refuses readings of another board. ``angle_head`` is the model file's angle head
     (:class:`~tactile_manip.perception.angle_head.AngleHead`: the contact's axis straight from the reading,
     from which the pose estimator takes the angle by default), or None.

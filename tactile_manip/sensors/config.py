@@ -111,7 +111,7 @@ class SerialSensorConfig:
     drift: DriftConfig = field(default_factory=DriftConfig)
 
     def __post_init__(self) -> None:
-        from tactile_manip.boards.layout import get_layout
+        from tactile_manip.boards import load_board
         from tactile_manip.wire import DEFAULT_LAYOUTS, WIRE_FORMATS
 
         for name in ("port", "serial_number"):
@@ -129,7 +129,7 @@ class SerialSensorConfig:
         # a chip given as the simulator's ChipParams keeps only its hardware part, what the driver reads
         object.__setattr__(self, "chip", as_chip_spec(self.chip))
         try:
-            n_chips = get_layout(self.layout).n_chips
+            n_chips = load_board(self.layout).n_chips
         except ValueError as e:
             raise ValueError(f"SerialSensorConfig.layout: {e}") from None
         n_coeff = len(self.drift.temperature_coeff_ut_per_c)

@@ -10,7 +10,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from tactile_manip.errors import ProtocolError
-from tactile_manip.boards.layout import ANYSKIN_5, LAYOUTS
+from tactile_manip.boards import board_names, load_board
 from tactile_manip.wire import WIRE_FORMATS, make_decoder
 from tactile_manip.wire.anyskin import AnySkinDecoder, frame_length
 from tactile_manip.sim.params import ChipParams
@@ -76,7 +76,7 @@ def test_the_format_table_names_importable_decoders():
         assert make_decoder(name, n_chips=n, chip=ChipParams()).name == name
     with pytest.raises(ValueError, match="known formats: supermag, anyskin"):
         make_decoder("reskin-ascii", n_chips=5, chip=ChipParams())
-    assert set(LAYOUTS) == {"supermag-4x4", "anyskin-5", "eflesh"} and ANYSKIN_5.n_chips == N_CHIPS
+    assert set(board_names()) == {"supermag-4x4", "anyskin-5", "eflesh"} and load_board("anyskin-5").n_chips == N_CHIPS
 
 
 @settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])

@@ -168,7 +168,7 @@ def _metadata(model: SuperMagCVAE, spec: InputSpec, payload: dict, pixel_mm: flo
                    "units": "mm of indentation, >= 0" if image["unit"] == "mm" else image["unit"],
                    "image": image, "pixel_mm": pixel_mm,
                    "layout": "pixel (0, 0) at the (-x, +y) corner of the pad"},
-        # the board whose readings the model takes (boards/layout.py); 4x4 data is the SuperMag board's
+        # the board whose readings the model takes (tactile_manip.boards); 4x4 data is the SuperMag board's
         "board_layout": ("supermag-4x4" if (cfg.taxel_rows, cfg.taxel_cols) == (4, 4)
                          else f"grid-{cfg.taxel_rows}x{cfg.taxel_cols}"),
         "preset": payload["train_config"]["preset"], "model_config": payload["model_config"],

@@ -41,7 +41,7 @@ import numpy as np
 
 from tactile_manip.outputs import OutputPathError, check_writable_parent
 from tactile_manip.sensors.simulated.contacts import ContactTimeline, Press
-from tactile_manip.boards.layout import ANYSKIN_5, BoardLayout, get_layout
+from tactile_manip.boards import Board, load_board
 from tactile_manip.wire.protocol import encode_frame
 from tactile_manip.wire.anyskin import pack_frame
 from tactile_manip.sim.pair import SensorPair
@@ -131,12 +131,12 @@ class EmulatorReport:
     last_seq: int = -1
 
 
-def frame_layout(config: EmulatorConfig) -> BoardLayout:
+def frame_layout(config: EmulatorConfig) -> Board:
     """The layout whose chips an AnySkin-format frame of ``config`` carries (its board, else anyskin-5)."""
-    return get_layout(config.board) if config.board else ANYSKIN_5
+    return load_board(config.board) if config.board else load_board("anyskin-5")
 
 
-def anyskin_frame(field_4x4_ut: np.ndarray, layout: BoardLayout, rng: np.random.Generator) -> bytes:
+def anyskin_frame(field_4x4_ut: np.ndarray, layout: Board, rng: np.random.Generator) -> bytes:
     """An AnySkin sketch frame of ``layout``'s chips from a (4, 4, 3) pad field at 5 mm pitch (interpolated)."""
     pos = layout.positions_mm()                              # (rows, cols, 2), NaN where no chip
     col = np.clip(np.nan_to_num(pos[..., 0]) / 5.0 + 1.5, 0.0, 3.0)  # fractional 4x4 grid coordinates
