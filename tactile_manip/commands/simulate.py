@@ -91,7 +91,7 @@ def run(args: argparse.Namespace) -> int:
     what = "pairs" if data.has_images else "presses (no images)"
     print(f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB): {len(data)} {what} ({counts}) in {seconds:.1f} s, "
           f"{len(data) / seconds:.1f} presses/s; targets {', '.join(data.target_names)}")
-    for note in _physics_notes(data, thickness_mm=cfg.sim.layer.thickness_mm):
+    for note in _physics_notes(data, thickness_mm=cfg.sensor_board().layer.thickness_mm):
         print(f"note: {note}")
     return 0
 
@@ -205,6 +205,6 @@ def _report_shards(data, path, cfg) -> int:
     size_mb = sum(f.stat().st_size for f in path.iterdir()) / 1e6
     print(f"wrote {path}/ ({data.shard_count} shards, {size_mb:.1f} MB): {len(data)} presses ({counts}) in "
           f"{seconds:.1f} s, {len(data) / seconds:.1f} presses/s; fingerprint {data.fingerprint()}")
-    for note in _physics_notes(data, thickness_mm=cfg.sim.layer.thickness_mm):
+    for note in _physics_notes(data, thickness_mm=cfg.sensor_board().layer.thickness_mm):
         print(f"note: {note}")
     return 0

@@ -163,20 +163,18 @@ class SimulatedCell:
         return not sample.bottomed_out
 
     def _pair_of(self, p: Presentation):
-        """The simulated sensor pair of ``p``'s sensor (drawn, or the nominal one); the last one is kept."""
+        """The simulated sensor pair of ``p``'s sensor (the scene's board, drawn or nominal); the last one is kept."""
         from tactile_manip.sim.pair import SensorPair
 
-        params = p.sensor_params()
+        params = p.sensor_params(self.scene.sensor.board)
         key = None if params is None else p.seed
         if key not in self._pairs:
-            self._pairs = {key: SensorPair(seed=self.scene.sensor.seed) if params is None
-                           else SensorPair(params, seed=self.scene.sensor.seed)}
+            self._pairs = {key: SensorPair(params, board=self.sensor.pair.board, seed=self.scene.sensor.seed)}
         return self._pairs[key]
 
     def _use_sensor_of(self, p: Presentation) -> None:
         """Swap in the trial's drawn sensor (or back to the nominal one) and take its baseline, pad unloaded."""
-        params = p.sensor_params()
-        key = None if params is None else p.seed
+        key = None if p.sensor_spread == 0 else p.seed
         if key == self._sensor_key:
             return
         self.sensor.replace_pair(self._pair_of(p))

@@ -238,9 +238,12 @@ def test_the_emulator_streams_a_boards_chips_and_refuses_what_it_cannot(tmp_path
     decoder = make_decoder("anyskin", n_chips=5, chip=load_board("eflesh").chip)
     frames = decoder.feed(emulator.frame_bytes(0, 0.0, np.random.default_rng(0)) * 3)
     assert frames and frames[-1].field_ut.shape == (5, 3)
-    with pytest.raises(ValueError, match="has no chip positions"):
+    with pytest.raises(ValueError, match="generic:5 has no geometry and cannot be simulated"):
         EmulatorConfig(wire_format="anyskin", board="generic:5")
+    with pytest.raises(ValueError, match=r"has no \[body\] and \[layer\]"):
+        EmulatorConfig(wire_format="anyskin", board=str(_write(tmp_path, TWO_CHIPS.replace(
+            "[board]", "[wire]\nformat = \"anyskin\"\n\n[board]"), "two.toml")))
     with pytest.raises(ValueError, match="supermag wire format carries the 16 chips"):
         EmulatorConfig(wire_format="supermag", board="eflesh")
     assert main(["emulate", "--board", "generic:5", "--frames", "1"]) == 2
-    assert_one_line_error(capsys.readouterr().err, "emulate", "has no chip positions")
+    assert_one_line_error(capsys.readouterr().err, "emulate", "has no geometry and cannot be simulated")

@@ -19,7 +19,7 @@ def test_supermag_4x4_is_the_identity_at_the_simulators_chip_positions():
     reading = SUPERMAG_4X4.reading_from_chips(chips)
     np.testing.assert_array_equal(reading, chips.reshape(4, 4, 3))
     assert np.shares_memory(reading, chips)                      # a reshape: no work on the default board
-    sim = chip_positions_mm(pitch_mm=5.0, thickness_mm=2.5, gap_mm=0.5)[..., :2]
+    sim = chip_positions_mm(SUPERMAG_4X4, thickness_mm=2.5, gap_mm=0.5)[:, :2].reshape(4, 4, 2)
     np.testing.assert_allclose(SUPERMAG_4X4.positions_mm(), sim)  # row 0 at +y, col 0 at -x
     assert SUPERMAG_4X4.positions_mm()[0, 0].tolist() == [-7.5, 7.5] and SUPERMAG_4X4.mask.all()
 
