@@ -41,7 +41,7 @@ from benchmarks._common import machine_info, publish  # noqa: E402
 from benchmarks.bench_pose import PERIOD_MS, rod_readings  # noqa: E402
 from tactile_manip.perception import TactilePoseEstimator, load_reconstructor, wrap_axial  # noqa: E402
 from tactile_manip.perception.contact import ContactEstimator  # noqa: E402
-from tactile_manip.perception.contact_pose import TactileEstimator  # noqa: E402
+from tactile_manip.perception.tactile_estimator import TactileEstimator  # noqa: E402
 from tactile_manip.shipped import shipped_model  # noqa: E402
 
 PADS = (1, 2, 4, 8, 16)

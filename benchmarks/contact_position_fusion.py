@@ -29,7 +29,7 @@ from benchmarks._common import machine_info, publish
 from tactile_manip.data import load_dataset
 from tactile_manip.perception.contact import ContactEstimator
 from tactile_manip.evaluation.contact import model_predictions
-from tactile_manip.perception.contact_pose import image_centroid_mm
+from tactile_manip.perception.tactile_estimator import image_centroid_mm
 from tactile_manip.perception.estimator import TactilePoseEstimator
 from tactile_manip.perception.reconstruct import OnnxReconstructor
 

@@ -17,7 +17,7 @@ models that read a short temporal context::
         ...
 
 With the pose estimator, one reading gives angle, location and force
-(:class:`~tactile_manip.perception.contact_pose.TactileEstimator`).
+(:class:`~tactile_manip.perception.tactile_estimator.TactileEstimator`).
 
 The context: frame k of the model's input is the k-th reading before the newest one given to this estimator,
 when it is at most the model's ``context["max_gap_s"]`` older (by ``TactileReading.t_host_s``, or the call's

@@ -191,6 +191,23 @@ class TactilePoseEstimator:
         self._plausible_ut = float(self.plausible_limits_ut.min())  # below it, one comparison says "plausible"
 
     @property
+    def input_shape(self) -> tuple[int, ...]:
+        """(R, C, A): the shape of a reading this estimator takes (its reconstructor's)."""
+        return tuple(self.reconstructor.input_shape)
+
+    @property
+    def board_layout(self) -> str:
+        """The board layout of the readings this estimator takes ("" for any: the interpolation baselines)."""
+        return self.reconstructor.board_layout
+
+    def check_layout(self, layout: str) -> None:
+        """Refuse a sensor of another board layout than the reconstructor's (ValueError naming both)."""
+        self.reconstructor.check_layout(layout)
+
+    def __repr__(self) -> str:
+        return f"TactilePoseEstimator({self.reconstructor.name!r}, angle_source={self.angle_source!r})"
+
+    @property
     def min_contact_area_mm2(self) -> float:
         """The smallest contact the image route measures (``params.min_contact_px`` pixels): an estimate's
         ``area_mm2`` below it holds no centroid, even where the angle head defined its angle."""

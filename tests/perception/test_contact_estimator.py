@@ -229,7 +229,7 @@ def test_one_reading_gives_angle_and_contact_with_the_pose_estimator(tmp_path, c
     from tactile_manip.learning.contact.export import export_contact_onnx
     from tactile_manip.learning.contact.train import ContactTrainConfig, train_contact
     from tactile_manip.perception import TactilePoseEstimator, load_reconstructor
-    from tactile_manip.perception.contact_pose import TactileEstimate, TactileEstimator, image_centroid_mm
+    from tactile_manip.perception.tactile_estimator import TactileEstimate, TactileEstimator, image_centroid_mm
     from tactile_manip.types import AngleEstimate
 
     rng = np.random.default_rng(0)
