@@ -65,7 +65,7 @@ def inverse_variance(sigma: np.ndarray, image_sigma_mm: float) -> np.ndarray:
 
 def compute(args: argparse.Namespace) -> dict[str, Any]:
     data = load_dataset(args.data, images=False)
-    pose = TactilePoseEstimator(OnnxReconstructor(args.pose))
+    pose = TactilePoseEstimator(OnnxReconstructor(args.pose, image_symmetry="stored"))  # as published
     contact = ContactEstimator(args.contact)
     weights = [float(w) for w in args.weights.split(",")]
     image_sigmas = [0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 1.0, 1.5]

@@ -37,6 +37,7 @@ two exists (an implausible estimate gives none).
 
 from __future__ import annotations
 
+import time
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -44,7 +45,7 @@ from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
 import numpy as np
 
-from tactile_manip.perception.estimator import NO_CONTACT_FIELD, StreamStats, _field, _fresh_frames
+from tactile_manip.perception.estimator import NO_CONTACT_FIELD, _field
 from tactile_manip.perception.pose import ISOTROPIC_REASON
 from tactile_manip.types import AngleEstimate, Deferred, DeferredField, TactileReading
 
@@ -53,6 +54,29 @@ if TYPE_CHECKING:
     from tactile_manip.sensors.base import TactileSensor
 
 Reading = TactileReading | np.ndarray  # (R, C, 3) uT, baseline-subtracted
+
+
+@dataclass
+class StreamStats:
+    """Counters of one :meth:`TactileEstimator.stream`, updated in place as it runs.
+
+    Attributes:
+        estimates: estimates yielded so far.
+        skipped_frames: frames between two estimated ones that were never estimated: they arrived while an
+            estimate was computed or consumed (the stream then takes the newest frame, not the stale ones
+            queued before it), or were lost on the wire (``sensor.health()`` tells those apart).
+        last_seq: sequence number of the last estimated frame (None before the first).
+    """
+
+    estimates: int = 0
+    skipped_frames: int = 0
+    last_seq: int | None = None
+
+    def count(self, seq: int) -> None:
+        """Record that frame ``seq`` is estimated next (a sequence restart skips nothing)."""
+        if self.last_seq is not None:
+            self.skipped_frames += max(0, seq - self.last_seq - 1)
+        self.last_seq = seq
 
 
 @dataclass(frozen=True)
@@ -205,9 +229,18 @@ class TactileEstimator:
         self._min_area_mm2 = float(getattr(pose, "min_contact_area_mm2", 0.0))
 
     @classmethod
-    def load(cls, pose_model: str | Path | None = None, contact_model: str | Path | None = "shipped", *,
+    def load(cls, pose_model: str | Path = "supermag", contact_model: str | Path | None = "contact", *,
              image_position_weight: float | None = None, **options: Any) -> TactileEstimator:
-        """An estimator from model files, in one call (see :func:`~tactile_manip.perception.loading.load_estimator`)."""
+        """An estimator from its model files, in one call: by default the shipped pose model
+        (``models/supermag.onnx``) and contact model (``models/contact_supermag.onnx``), found from any working
+        folder. ``pose_model``: a shipped model's name, an ``.onnx`` path, ``"bilinear"``, ``"bicubic"`` or
+        ``"blind"``; ``contact_model``: a name, a path or None; ``options``: the pose part's (threads, samples,
+        image_symmetry, angle_source, calibrated, ...). See :func:`~tactile_manip.perception.loading.load_estimator`.
+
+        Raises:
+            ModelFileError: a file is missing (the message says where it looked) or not a model of its kind.
+            ValueError: the two models read different boards, or an option is out of its range.
+        """
         from tactile_manip.perception.loading import load_estimator
 
         return load_estimator(pose_model, contact_model, image_position_weight=image_position_weight, **options)
@@ -309,3 +342,14 @@ def _stream(sensor: TactileSensor, estimate, timeout_s: float, max_estimates: in
         stats.estimates += 1
         count += 1
         yield est
+
+
+def _fresh_frames(sensor: TactileSensor, frames: int, timeout_s: float) -> list[TactileReading]:
+    """``frames`` consecutive readings that arrived after this call, oldest first."""
+    start_s = time.monotonic()
+    readings: list[TactileReading] = []
+    while len(readings) < frames:
+        reading = sensor.wait_new(timeout_s)
+        if reading.t_host_s >= start_s:
+            readings.append(reading)
+    return readings
