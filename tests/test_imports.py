@@ -57,7 +57,7 @@ def _heavy_modules_after(code: str) -> list[str]:
     "tactile_manip.collection.vbts_calibration, tactile_manip.collection.collect, tactile_manip.collection.collect_sim",
     "import tactile_manip.perception.reconstruct, tactile_manip.perception.pose",
     "import tactile_manip.perception",
-    "import tactile_manip.perception.contact, tactile_manip.perception.contact_pose",
+    "import tactile_manip.perception.contact, tactile_manip.perception.tactile_estimator",
     "import tactile_manip.evaluation",
     # the image metrics are numpy and scipy only; the gallery imports matplotlib inside its function, and the
     # contact baselines scikit-learn inside theirs
@@ -71,8 +71,8 @@ def _heavy_modules_after(code: str) -> list[str]:
     "import tactile_manip.behaviours.reorient, tactile_manip.behaviours.place",
     "import tactile_manip.trials.scene, tactile_manip.trials.runner, tactile_manip.trials.stats",
     # the registry of model kinds and the verbs' modules it names import torch only when a verb runs
-    "import tactile_manip.learning.kinds, tactile_manip.learning.cli, tactile_manip.learning.cvae.cli, "
-    "tactile_manip.learning.angle_head.cli, tactile_manip.learning.contact.cli",
+    "import tactile_manip.learning.kinds, tactile_manip.learning.verbs, tactile_manip.learning.cvae.verbs, "
+    "tactile_manip.learning.angle_head.verbs, tactile_manip.learning.contact.verbs",
     # the CLI parser imports every command module, and `--help` must stay fast
     "import tactile_manip.cli; tactile_manip.cli.build_parser()",
 ])
@@ -195,7 +195,7 @@ def test_perception_imports_nothing_from_evaluation():
 def test_perception_loads_no_evaluation_module():
     code = ("import tactile_manip.perception, tactile_manip.perception.reconstruct, "
             "tactile_manip.perception.pose, tactile_manip.perception.estimator, tactile_manip.perception.contact, "
-            "tactile_manip.perception.contact_pose, tactile_manip.perception.confidence, "
+            "tactile_manip.perception.tactile_estimator, tactile_manip.perception.confidence, "
             "tactile_manip.perception.symmetry, tactile_manip.perception.angle_head")
     assert _modules_after(code, "m.split('.')[:2] == ['tactile_manip', 'evaluation']") == []
 
@@ -227,6 +227,7 @@ def test_no_module_is_an_alias_of_another():
 
 def test_the_alias_scan_sees_an_alias(tmp_path):
     (tmp_path / "moved.py").write_text("import sys\nfrom tactile_manip import wire as _w\nsys.modules[__name__] = _w\n")
-    (tmp_path / "names.py").write_text('"""doc"""\nfrom tactile_manip.wire import make_decoder\n__all__ = ["make_decoder"]\n')
+    (tmp_path / "names.py").write_text('"""doc"""\nfrom tactile_manip.wire import make_decoder\n'
+                                       '__all__ = ["make_decoder"]\n')
     (tmp_path / "real.py").write_text("from tactile_manip.wire import make_decoder\n\ndef f():\n    return 1\n")
     assert [_is_alias(tmp_path / n) for n in ("moved.py", "names.py", "real.py")] == [True, True, False]

@@ -1,4 +1,5 @@
-"""Behaviours: tactile skills composed from an arm, a gripper, a tactile sensor and a pose estimator.
+"""Behaviours: tactile skills composed from an arm, a gripper, a tactile sensor and an estimator
+(:class:`~tactile_manip.perception.tactile_estimator.TactileEstimator`).
 
 - :mod:`~tactile_manip.behaviours.reorient`: grasp, estimate the in-hand angle, turn the object to a target
   angle about the pad normal (the paper's experiment).

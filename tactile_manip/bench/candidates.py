@@ -49,34 +49,21 @@ class ModelEntry:
 
 
 SHIPPED_MODEL = "models/supermag.onnx"  # the default model: the robust image graphs with an angle head inside
-FAST_MODEL = "experiments/model_variants/supermag_fast.onnx"  # a reference model, kept for the bench
-COMPACT_MODEL = "experiments/model_variants/supermag_compact.onnx"  # the accuracy reference, kept for the bench
-ROBUST_MODEL = "experiments/model_variants/supermag_robust.onnx"  # the default's image graphs, without its head
-RESEARCH_CANDIDATES = "experiments/speed_reports/research_candidates.toml"  # what --research adds
 
 
-def default_models(root: str | Path = ".", *, research: bool = False) -> list[ModelEntry]:
-    """The default model (``supermag``: its image graphs and angle head on onnxruntime; no torch row, the
-    checkpoint holds the image decoder only) and the reference models kept for the bench (``fast``, trained on
-    the paper's protocol only; ``compact``, the accuracy reference; ``robust``, the default's image graphs
-    without its head, on one thread: the fast model's graph), paths under ``root``.
+def default_models(root: str | Path = ".") -> list[ModelEntry]:
+    """The default model (``supermag``: its image graphs and angle head on onnxruntime, one pass and averaged over
+    the sensor's symmetries; no torch row, the checkpoint holds the image decoder only), path under ``root``.
 
-    With ``research`` also the study's training runs that ``root``'s
-    ``experiments/speed_reports/research_candidates.toml`` names (:func:`candidates_file`): how the published
-    speed reports were made."""
-    r = Path(root)
-    shipped = [ModelEntry("supermag", r / SHIPPED_MODEL, symmetrized=True),
-               ModelEntry("fast", r / FAST_MODEL, symmetrized=True),
-               ModelEntry("compact", r / COMPACT_MODEL, symmetrized=True),
-               ModelEntry("robust", r / ROBUST_MODEL, runtimes=("ort-1",))]
-    return candidates_file(r / RESEARCH_CANDIDATES, r, shipped) if research else shipped
+    Other models come from candidates files (:func:`candidates_file`) and ``--model``."""
+    return [ModelEntry("supermag", Path(root) / SHIPPED_MODEL, symmetrized=True)]
 
 
 def candidates_file(path: str | Path, root: str | Path = ".", models: list[ModelEntry] | None = None
                     ) -> list[ModelEntry]:
     """``models`` (default: none) and the models a candidates file names, paths under ``root``.
 
-    The file (TOML; ``experiments/speed_reports/research_candidates.toml`` is one) holds ``[checkpoints]``,
+    The file (TOML) holds ``[checkpoints]``,
     ``NAME = "RUN/best.pt"``: the torch-eager checkpoint of a model already in ``models``; ``[[model]]`` tables
     (``name``, ``path``, optional ``checkpoint``, ``untrained``: a preset or training config exported untrained
     when ``path`` is missing, ``runtimes``, ``symmetrized``); and ``[[runs]]`` tables: every training config
@@ -234,13 +221,15 @@ def _runtime_candidate(entry: ModelEntry, method: str, sym: bool, runtime: str, 
         if runtime == "ort-all" and threads == 1:
             return None  # one usable core: the same as ort-1
         label = f"onnxruntime {threads} thread" + ("s" if threads > 1 else "")
-        return Candidate(method, label, wrap(lambda n: load_reconstructor(path, threads=n)), fp32,
+        load = wrap(lambda n: load_reconstructor(path, threads=n, image_symmetry="stored"))  # the file's images
+        return Candidate(method, label, load, fp32,
                          threads=threads, accuracy_threads=usable_cores(), file_mb=_mb(path), path=str(path),
                          trial_spec=MethodSpec(method, str(path), symmetrize=sym))
     if runtime == "ort-int8":
         if int8 is None:
             return None
-        return Candidate(method, "onnxruntime int8 1 thread", wrap(lambda n: load_reconstructor(int8, threads=n)),
+        load = wrap(lambda n: load_reconstructor(int8, threads=n, image_symmetry="stored"))
+        return Candidate(method, "onnxruntime int8 1 thread", load,
                          f"{method}:int8", accuracy_threads=usable_cores(), file_mb=_mb(int8), path=str(int8),
                          trial_spec=MethodSpec(method, str(int8), symmetrize=sym))
     if runtime == "torch":

@@ -24,14 +24,13 @@ from tactile_manip.behaviours.place import PlaceResult
 from tactile_manip.behaviours.reorient import ReorientResult, grasp_estimate_reorient
 from tactile_manip.errors import ConfigError
 from tactile_manip.extras import require
-from tactile_manip.perception.estimator import TactilePoseEstimator
 from tactile_manip.robot.frames import hand_T_finger_pad
 from tactile_manip.sensors.config import SimulatedSensorConfig
 from tactile_manip.trials.presentation import Presentation, pad_T_object
 from tactile_manip.trials.scene import TrialScene
 
 if TYPE_CHECKING:
-    from tactile_manip.perception.contact_pose import TactileEstimator
+    from tactile_manip.perception.tactile_estimator import TactileEstimator
 
 
 class Cell(Protocol):
@@ -44,9 +43,9 @@ class Cell(Protocol):
 
     def run_one(self, p: Presentation, estimator, *, arm_fault: bool = False, sensor_stall: bool = False,
                 observer=None):
-        """Present ``p`` and run the scene's task with ``estimator`` (a pose estimator, or a
-        :class:`~tactile_manip.perception.contact_pose.TactileEstimator` with the method's contact model); the
-        task's result (never raises for a fault of the trial: it is an outcome)."""
+        """Present ``p`` and run the scene's task with ``estimator`` (a
+        :class:`~tactile_manip.perception.tactile_estimator.TactileEstimator`, with the method's contact model
+        where it has one); the task's result (never raises for a fault of the trial: it is an outcome)."""
 
     # A cell may also offer ``holds(p) -> bool``: whether it can hold presentation ``p`` at all. The runner then
     # draws a trial again where it cannot (see :func:`~tactile_manip.trials.presentation.draw_presentation`).
@@ -181,15 +180,14 @@ class SimulatedCell:
         self.sensor.calibrate_baseline(frames=SENSOR_DRAW_BASELINE_FRAMES)
         self._sensor_key = key
 
-    def run_one(self, p: Presentation, estimator: TactilePoseEstimator | TactileEstimator, *,
+    def run_one(self, p: Presentation, estimator: TactileEstimator, *,
                 arm_fault: bool = False, sensor_stall: bool = False,
                 observer=None) -> ReorientResult | PlaceResult | GripResult:
         """Present ``p``, run the scene's task with ``estimator``, release, reset.
 
-        ``estimator``: a pose estimator, or a :class:`~tactile_manip.perception.contact_pose.TactileEstimator`
-        whose contact model (of the sensor's board) estimates the grip force at the estimate step and closes
-        the "grip" task's loop. ``observer`` (a :class:`~tactile_manip.behaviours.reorient.PhaseObserver`) is
-        told each phase, the release included.
+        ``estimator``: its contact model (of the sensor's board), where it has one, estimates the grip force at
+        the estimate step and closes the "grip" task's loop. ``observer`` (a
+        :class:`~tactile_manip.behaviours.reorient.PhaseObserver`) is told each phase, the release included.
         """
         with self.presented(p, arm_fault=arm_fault, sensor_stall=sensor_stall) as (obj, truth):
             if self.scene.task == "place":
@@ -198,7 +196,7 @@ class SimulatedCell:
                 return self._grip(estimator, obj, truth)
             return run_reorientation(self, estimator, obj.width_m, truth, observer)
 
-    def _place(self, p: Presentation, estimator: TactilePoseEstimator, obj, truth: WorldTruth) -> PlaceResult:
+    def _place(self, p: Presentation, estimator: TactileEstimator, obj, truth: WorldTruth) -> PlaceResult:
         """The "place" task: a slot drawn from the presentation's seed, the rod put into it."""
         from tactile_manip.behaviours.place import draw_slot, place_in_slot
         from tactile_manip.robot.frames import hand_T_pad
@@ -208,9 +206,9 @@ class SimulatedCell:
         return place_in_slot(self.arm, self.gripper, self.sensor, estimator, slot, object_width_m=obj.width_m,
                              config=self.scene.behaviour, truth=truth)
 
-    def _grip(self, estimator: TactilePoseEstimator | TactileEstimator, obj, truth: WorldTruth) -> GripResult:
-        """The "grip" task: a TactileEstimator closes the loop on its force and position; the blind baseline, or
-        a method without a contact model, grips open loop."""
+    def _grip(self, estimator: TactileEstimator, obj, truth: WorldTruth) -> GripResult:
+        """The "grip" task: an estimator with a contact model closes the loop on its force and position; the
+        blind baseline, or a method without a contact model, grips open loop."""
         from tactile_manip.behaviours.grip import grip_to_force
 
         return grip_to_force(self.arm, self.gripper, self.sensor, estimator, object_width_m=obj.width_m,
@@ -249,11 +247,11 @@ def make_cell(scene: TrialScene):
     return OperatorCell(scene)
 
 
-def run_reorientation(cell, estimator: TactilePoseEstimator | TactileEstimator, object_width_m: float, truth,
+def run_reorientation(cell, estimator: TactileEstimator, object_width_m: float, truth,
                       observer=None) -> ReorientResult:
     """The scene's reorientation behaviour in ``cell`` (its arm, gripper, sensor and scene) on the held object;
     ``observer`` is told each phase, the release included (the cell opens the gripper when the trial ends); a
-    TactileEstimator's contact model estimates the grip force at the estimate step."""
+    contact model of the estimator, where it has one, estimates the grip force at the estimate step."""
     result = grasp_estimate_reorient(cell.arm, cell.gripper, cell.sensor, estimator, object_width_m=object_width_m,
                                      target_angle_rad=math.radians(cell.scene.target_deg),
                                      config=cell.scene.behaviour, truth=truth, observer=observer)

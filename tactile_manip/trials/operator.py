@@ -26,7 +26,6 @@ import numpy as np
 from tactile_manip.behaviours.reorient import ReorientResult
 from tactile_manip.errors import ConfigError
 from tactile_manip.extras import require
-from tactile_manip.perception.estimator import TactilePoseEstimator
 from tactile_manip.robot.base import Arm, Gripper
 from tactile_manip.robot.frames import hand_T_pad
 from tactile_manip.sensors.base import TactileSensor
@@ -35,7 +34,7 @@ from tactile_manip.trials.cells import run_reorientation
 from tactile_manip.trials.scene import TrialScene
 
 if TYPE_CHECKING:
-    from tactile_manip.perception.contact_pose import TactileEstimator
+    from tactile_manip.perception.tactile_estimator import TactileEstimator
 
 
 @dataclass(frozen=True)
@@ -132,7 +131,7 @@ class OperatorCell:
             self.gripper.open()
             self._ask("take the object out of the hand, then press Enter ")
 
-    def run_one(self, p, estimator: TactilePoseEstimator | TactileEstimator, *, arm_fault: bool = False,
+    def run_one(self, p, estimator: TactileEstimator, *, arm_fault: bool = False,
                 sensor_stall: bool = False, observer=None) -> ReorientResult:
         """Present ``p``, run the reorientation behaviour, ask for the measured final angle (``estimator`` and
         ``observer``: see :meth:`~tactile_manip.trials.cells.SimulatedCell.run_one`)."""

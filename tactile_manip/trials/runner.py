@@ -22,7 +22,6 @@ from typing import TYPE_CHECKING
 from tactile_manip.behaviours.grip import GripResult
 from tactile_manip.behaviours.place import PlaceResult
 from tactile_manip.behaviours.reorient import ReorientResult
-from tactile_manip.perception.estimator import TactilePoseEstimator
 from tactile_manip.perception.pose import wrap_axial
 from tactile_manip.trials.record import TrialRecord
 from tactile_manip.trials.scene import TASK_TITLES, TrialScene
@@ -32,18 +31,17 @@ from tactile_manip.trials.presentation import Presentation, draw_presentation
 from tactile_manip.trials.task_records import make_grip_record, make_place_record, make_record
 
 if TYPE_CHECKING:
-    from tactile_manip.perception.contact_pose import TactileEstimator
+    from tactile_manip.perception.tactile_estimator import TactileEstimator
 
 def run_scene(scene: TrialScene, write: Callable[[TrialRecord], None], *,
-              estimators: Mapping[str, TactilePoseEstimator | TactileEstimator],
+              estimators: Mapping[str, TactileEstimator],
               skip: set[tuple[int, str]] = frozenset(), progress: bool = True, cell: Cell | None = None,
               trial_observer=None, frames_dir: str | Path | None = None) -> int:
     """Run every (trial, method) of ``scene`` not in ``skip``; ``write`` each record.
 
     ``estimators``: what each method's behaviour is handed, by method name (:func:`build_tactile_estimators`:
-    a method with a contact model gets a :class:`~tactile_manip.perception.contact_pose.TactileEstimator`, so its
-    records carry the grip force it estimated, and the "grip" task servoes on it; :func:`build_estimators`: the
-    pose estimators alone).
+    one :class:`~tactile_manip.perception.tactile_estimator.TactileEstimator` each; with a method's contact model,
+    its records carry the grip force it estimated, and the "grip" task servoes on it).
 
     ``cell`` (default: built from ``scene.robot.backend``: :class:`SimulatedCell` for the twin,
     :class:`~tactile_manip.trials.operator.OperatorCell` for a real FR3) provides ``connected()`` and ``run_one``.
