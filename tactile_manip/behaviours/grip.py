@@ -198,11 +198,12 @@ def _centre(arm: Arm, gripper: Gripper, sensor: TactileSensor, estimator: Tactil
 
 def _axis_offset_mm(est: TactileEstimate) -> tuple[float, float] | None:
     """The shortest move (pad frame, mm) that puts the pad centre on the object's axis: across the axis where
-    the angle is defined (the position is a point on it), else to the contact's position; None without one."""
+    the angle is measured (the position is a point on it), else (no angle, or the blind prior's, which no reading
+    made) to the contact's position; None without one."""
     if est.position_mm is None:
         return None
     p = np.asarray(est.position_mm, np.float64)
-    if est.angle.defined:
+    if est.angle.defined and est.angle.source != "prior":
         axis = np.array([math.cos(est.angle.angle_rad), math.sin(est.angle.angle_rad)])
         p = p - float(p @ axis) * axis
     return float(p[0]), float(p[1])
