@@ -230,7 +230,7 @@ class TrialScene:
             its defaults). In a scene file they are the table named after the task (e.g. ``[grip]``).
     """
 
-    name: str = "reorient"
+    name: str = "scene"
     trials: int = 100
     seed: int = 0
     tolerance_deg: float = 5.0
@@ -283,7 +283,7 @@ class TrialScene:
 def load_scene(path: str | Path) -> TrialScene:
     """Read a scene TOML file (raises ConfigError naming the file and the key on any problem).
 
-    The task's settings are the file's table named after the task (``[grip]`` for ``task = "grip"``)."""
+    The task's settings are the file's table named after the task (``Task.name``), e.g. ``[wipe]``."""
     raw = read_toml(path)
     ref = raw.get("task", DEFAULT_TASK)
     if isinstance(ref, str) and "task_config" not in raw:
