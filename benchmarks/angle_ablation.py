@@ -29,19 +29,24 @@ import argparse
 import dataclasses
 import math
 from collections.abc import Callable, Sequence
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from benchmarks._common import machine_info, publish
 from tactile_manip.data import load_dataset
-from tactile_manip.perception import TactilePoseEstimator, load_reconstructor, wrap_axial
+from tactile_manip.evaluation.images import ELONGATED
+from tactile_manip.perception import (
+    TactilePoseEstimator,
+    load_reconstructor,
+    wrap_axial,
+)
 from tactile_manip.perception.angle_head import within_probability
 from tactile_manip.perception.confidence import load_calibration_beside
-from tactile_manip.evaluation.images import ELONGATED
 from tactile_manip.perception.pose import angle_from_image
-from tactile_manip.shipped import shipped_model
 
+REFERENCES = Path(__file__).resolve().parents[1] / "experiments" / "model_variants"  # the reference models
 FORCE_BANDS_N = ((2.0, 5.0), (5.0, 8.0), (8.0, 11.0), (11.0, 15.0))
 RELIABILITY_BINS = ((0.0, 0.5), (0.5, 0.8), (0.8, 0.95), (0.95, 1.0001))
 
@@ -71,7 +76,7 @@ def route_estimates(path: str, readings: np.ndarray) -> dict[str, tuple[np.ndarr
     if model.angle_head is not None:
         routes["head (the default)"] = TactilePoseEstimator(
             model, calibration=calibration if calibration is not None and calibration.route == "head" else None)
-        image_cal = load_calibration_beside(shipped_model("robust"))  # the same image graphs, fitted on their angles
+        image_cal = load_calibration_beside(REFERENCES / "supermag_robust.onnx")  # the same image graphs, fitted on their angles
         if image_cal is not None:  # the image's probability is its calibrated confidence
             routes["likelier of image and head"] = TactilePoseEstimator(
                 model, calibration=dataclasses.replace(image_cal, route="likelier"), angle_source="likelier")

@@ -3,7 +3,6 @@
     from tactile_manip.shipped import shipped_model
     model = load_reconstructor(shipped_model())            # models/supermag.onnx, the default
     contact = ContactEstimator(shipped_model("contact"))   # models/contact_supermag.onnx
-    fast = load_reconstructor(shipped_model("fast"))       # experiments/model_variants/supermag_fast.onnx
 
 The default, ``supermag`` (``models/supermag.onnx``), is the one model every shipped scene, task, example and
 doc uses: the image graphs of the decoder trained on the paper's protocol and on 2-15 N presses of drawn
@@ -11,11 +10,7 @@ sensors, with an angle head inside (the contact's axis read straight from the re
 :class:`~tactile_manip.perception.estimator.TactilePoseEstimator` takes the angle by default). ``models/``
 holds it and the contact model of the same board only (``contact``: position, depth and force of a press).
 
-The others are research records in ``experiments/model_variants/``, kept only as references for
-``tactile-manip bench`` and the published results: ``fast`` (the same decoder trained on the paper's protocol
-only), ``robust`` (the default's image graphs without the angle head) and ``compact`` (the larger decoder
-shipped before them, the accuracy reference). Each sits there with its card, training config, calibration and
-training history.
+Other models (a study's variants, your own) are files: every loader takes a path.
 
 The models live beside the package in a source checkout (``pip install -e .``); a wheel does not carry them.
 """
@@ -24,18 +19,13 @@ from __future__ import annotations
 
 from pathlib import Path
 
-# name -> file name: the default in models/, the references in experiments/model_variants/
+# name -> file name in models/
 SHIPPED_MODELS: dict[str, str] = {
     "supermag": "supermag.onnx",  # the default: every scene, task, example and doc
     "contact": "contact_supermag.onnx",  # the contact model of the SuperMag board (ContactEstimator)
-    "fast": "supermag_fast.onnx",  # bench reference: the decoder trained on the paper's protocol only
-    "robust": "supermag_robust.onnx",  # bench reference: the default's image graphs, without its angle head
-    "compact": "supermag_compact.onnx",  # bench reference: the larger decoder, the accuracy reference
 }
 DEFAULT_MODEL = "supermag"
 CONTACT_MODEL = "contact"
-MODELS_IN_MODELS_DIR = (DEFAULT_MODEL, CONTACT_MODEL)  # the rest are references in experiments/model_variants/
-REFERENCE_MODELS: tuple[str, ...] = ("fast", "robust", "compact")  # kept for the bench, not for tasks
 
 
 def _checkout() -> Path:
@@ -48,21 +38,9 @@ def models_dir() -> Path:
     return _checkout() / "models"
 
 
-def variants_dir() -> Path:
-    """The checkout's ``experiments/model_variants/`` folder: the reference models kept for the bench."""
-    return _checkout() / "experiments" / "model_variants"
-
-
-def model_folder(name: str) -> Path:
-    """The folder that holds the shipped model ``name``: ``models/`` for the default and the contact model, else
-    ``experiments/model_variants/``."""
-    return models_dir() if name in MODELS_IN_MODELS_DIR else variants_dir()
-
-
 def shipped_model(name: str = DEFAULT_MODEL) -> Path:
     """Absolute path of a shipped model file: ``"supermag"`` (the default) or ``"contact"`` (the board's contact
-    model), both in ``models/``, or a bench reference (``"fast"``, ``"robust"``, ``"compact"``, in
-    ``experiments/model_variants/``).
+    model), both in ``models/``.
 
     Raises:
         ValueError: ``name`` is not a shipped model.
@@ -70,10 +48,8 @@ def shipped_model(name: str = DEFAULT_MODEL) -> Path:
     """
     if name not in SHIPPED_MODELS:
         raise ValueError(f"unknown shipped model {name!r}: expected one of {', '.join(SHIPPED_MODELS)}")
-    path = model_folder(name) / SHIPPED_MODELS[name]
+    path = models_dir() / SHIPPED_MODELS[name]
     if not path.is_file():
-        where = (f"the {name} model is in the source checkout's models/ folder" if name in MODELS_IN_MODELS_DIR else
-                 "the reference models are in the source checkout's experiments/model_variants/ folder")
-        raise FileNotFoundError(f"shipped model not found: {path} ({where}: clone the repository and "
-                                "`pip install -e .` from it)")
+        raise FileNotFoundError(f"shipped model not found: {path} (the {name} model is in the source checkout's "
+                                "models/ folder: clone the repository and `pip install -e .` from it)")
     return path

@@ -7,6 +7,11 @@ Import them as ``from checks import ...`` (``tests/`` is on ``sys.path``: see ``
 from __future__ import annotations
 
 import math
+from pathlib import Path
+
+# The reference models of the studies (experiments/model_variants/): files the tests read by path.
+REFERENCE_MODELS_DIR = Path(__file__).resolve().parents[1] / "experiments" / "model_variants"
+REFERENCE_MODELS = ("supermag_fast.onnx", "supermag_robust.onnx", "supermag_compact.onnx")
 
 # The reason every torch-dependent test skips with (``pytest.importorskip("torch", reason=TORCH_MISSING)``);
 # tests/conftest.py counts these skips and says so loudly.

@@ -71,8 +71,8 @@ def _heavy_modules_after(code: str) -> list[str]:
     "import tactile_manip.behaviours.reorient, tactile_manip.behaviours.place",
     "import tactile_manip.trials.scene, tactile_manip.trials.runner, tactile_manip.trials.stats",
     # the registry of model kinds and the verbs' modules it names import torch only when a verb runs
-    "import tactile_manip.learning.kinds, tactile_manip.learning.cli, tactile_manip.learning.cvae.cli, "
-    "tactile_manip.learning.angle_head.cli, tactile_manip.learning.contact.cli",
+    "import tactile_manip.learning.kinds, tactile_manip.learning.verbs, tactile_manip.learning.cvae.verbs, "
+    "tactile_manip.learning.angle_head.verbs, tactile_manip.learning.contact.verbs",
     # the CLI parser imports every command module, and `--help` must stay fast
     "import tactile_manip.cli; tactile_manip.cli.build_parser()",
 ])
@@ -227,6 +227,7 @@ def test_no_module_is_an_alias_of_another():
 
 def test_the_alias_scan_sees_an_alias(tmp_path):
     (tmp_path / "moved.py").write_text("import sys\nfrom tactile_manip import wire as _w\nsys.modules[__name__] = _w\n")
-    (tmp_path / "names.py").write_text('"""doc"""\nfrom tactile_manip.wire import make_decoder\n__all__ = ["make_decoder"]\n')
+    (tmp_path / "names.py").write_text('"""doc"""\nfrom tactile_manip.wire import make_decoder\n'
+                                       '__all__ = ["make_decoder"]\n')
     (tmp_path / "real.py").write_text("from tactile_manip.wire import make_decoder\n\ndef f():\n    return 1\n")
     assert [_is_alias(tmp_path / n) for n in ("moved.py", "names.py", "real.py")] == [True, True, False]

@@ -49,34 +49,21 @@ class ModelEntry:
 
 
 SHIPPED_MODEL = "models/supermag.onnx"  # the default model: the robust image graphs with an angle head inside
-FAST_MODEL = "experiments/model_variants/supermag_fast.onnx"  # a reference model, kept for the bench
-COMPACT_MODEL = "experiments/model_variants/supermag_compact.onnx"  # the accuracy reference, kept for the bench
-ROBUST_MODEL = "experiments/model_variants/supermag_robust.onnx"  # the default's image graphs, without its head
-RESEARCH_CANDIDATES = "experiments/speed_reports/research_candidates.toml"  # what --research adds
 
 
-def default_models(root: str | Path = ".", *, research: bool = False) -> list[ModelEntry]:
-    """The default model (``supermag``: its image graphs and angle head on onnxruntime; no torch row, the
-    checkpoint holds the image decoder only) and the reference models kept for the bench (``fast``, trained on
-    the paper's protocol only; ``compact``, the accuracy reference; ``robust``, the default's image graphs
-    without its head, on one thread: the fast model's graph), paths under ``root``.
+def default_models(root: str | Path = ".") -> list[ModelEntry]:
+    """The default model (``supermag``: its image graphs and angle head on onnxruntime, one pass and averaged over
+    the sensor's symmetries; no torch row, the checkpoint holds the image decoder only), path under ``root``.
 
-    With ``research`` also the study's training runs that ``root``'s
-    ``experiments/speed_reports/research_candidates.toml`` names (:func:`candidates_file`): how the published
-    speed reports were made."""
-    r = Path(root)
-    shipped = [ModelEntry("supermag", r / SHIPPED_MODEL, symmetrized=True),
-               ModelEntry("fast", r / FAST_MODEL, symmetrized=True),
-               ModelEntry("compact", r / COMPACT_MODEL, symmetrized=True),
-               ModelEntry("robust", r / ROBUST_MODEL, runtimes=("ort-1",))]
-    return candidates_file(r / RESEARCH_CANDIDATES, r, shipped) if research else shipped
+    Other models come from candidates files (:func:`candidates_file`) and ``--model``."""
+    return [ModelEntry("supermag", Path(root) / SHIPPED_MODEL, symmetrized=True)]
 
 
 def candidates_file(path: str | Path, root: str | Path = ".", models: list[ModelEntry] | None = None
                     ) -> list[ModelEntry]:
     """``models`` (default: none) and the models a candidates file names, paths under ``root``.
 
-    The file (TOML; ``experiments/speed_reports/research_candidates.toml`` is one) holds ``[checkpoints]``,
+    The file (TOML) holds ``[checkpoints]``,
     ``NAME = "RUN/best.pt"``: the torch-eager checkpoint of a model already in ``models``; ``[[model]]`` tables
     (``name``, ``path``, optional ``checkpoint``, ``untrained``: a preset or training config exported untrained
     when ``path`` is missing, ``runtimes``, ``symmetrized``); and ``[[runs]]`` tables: every training config

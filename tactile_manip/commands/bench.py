@@ -1,13 +1,10 @@
 """``tactile-manip bench``: speed against error of every method on this machine, in one report.
 
-Runs the baselines and the shipped models (the default model, one pass and symmetry-averaged; the reference
-models kept for the bench; with ``--candidates FILE`` the models a candidates file names, and with
-``--research`` the study's training runs that ``experiments/speed_reports/research_candidates.toml`` names: the
-small, compact and large presets on one 8-epoch recipe, the paper preset, the decoder candidates) on
-onnxruntime with 1 thread and
-all threads, on a dynamically int8-quantised copy, and in torch eager from the checkpoint, through the same
-readings. Writes ``OUT/report.md``, ``report.json`` and ``pareto.png`` and prints the table. Missing model
-files are skipped with a note.
+Runs the baselines and the default model (one pass and symmetry-averaged), with ``--candidates FILE`` the models
+a candidates file names (a repository's reference models, a study's training runs, your own) and with ``--model``
+single files, on onnxruntime with 1 thread and all threads, on a dynamically int8-quantised copy, and in torch
+eager from the checkpoint, through the same readings. Writes ``OUT/report.md``, ``report.json`` and
+``pareto.png`` and prints the table. Missing model files are skipped with a note.
 """
 
 from __future__ import annotations
@@ -26,8 +23,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--methods", default=None,
                    help="comma-separated subset of methods (default: all found): the baselines bilinear and "
                         "bicubic, the default model supermag and supermag_sym (averaged over the sensor's 8 "
-                        "symmetries), the references fast, fast_sym, robust, compact and compact_sym, and any "
-                        "--model NAME; e.g. 'bilinear,supermag'")
+                        "symmetries), the models of --candidates (with _sym where symmetrized) and of --model; e.g. "
+                        "'bilinear,supermag'")
     p.add_argument("--runtimes", default=None,
                    help="comma-separated subset of ort-1,ort-all,ort-int8,torch for the models (default: all)")
     p.add_argument("--data", default="data/supermag.npz",
@@ -41,12 +38,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="readings per test object (default: all of the test split; quick 3)")
     p.add_argument("--root", default=".", help="repository root the default model paths are under (default: .)")
     p.add_argument("--candidates", action="append", default=[], metavar="FILE",
-                   help="also the models this TOML names (repeatable; paths under --root; the format: "
-                        "experiments/speed_reports/research_candidates.toml)")
-    p.add_argument("--research", action="store_true",
-                   help="--candidates experiments/speed_reports/research_candidates.toml: the study's training "
-                        "runs under ROOT/runs/ (size variants, paper preset, decoder candidates, torch rows from "
-                        "checkpoints), how the published speed reports were made")
+                   help="also the models this TOML names (repeatable, read in order: a file's [checkpoints] may name "
+                        "the models of an earlier one; paths under --root): [[model]] tables (name, path, optional "
+                        "checkpoint, symmetrized, runtimes, untrained), [[runs]] tables of training configs, "
+                        "[checkpoints] NAME = \"RUN/best.pt\"")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -63,15 +58,15 @@ def run(args: argparse.Namespace) -> int:
         settings = dataclasses.replace(settings, trials=args.trials)
     if args.per_object is not None:
         settings = dataclasses.replace(settings, per_object=args.per_object)
-    models = default_models(args.root, research=args.research)
+    models = default_models(args.root)
     for path in args.candidates:
         models = candidates_file(path, args.root, models)
     models += [parse_model_spec(s) for s in args.model]
     taken = [e.name for e in models]
     repeated = sorted({n for n in taken if taken.count(n) > 1})
     if repeated:
-        raise ValueError(f"the bench's models are named more than once: {', '.join(repeated)} (--candidates, "
-                         "--research and --model each add models; name each once)")
+        raise ValueError(f"the bench's models are named more than once: {', '.join(repeated)} (--candidates and "
+                         "--model each add models; name each once)")
     runtimes = _split(args.runtimes) or list(RUNTIMES)
     report = run_bench(settings=settings, models=models, runtimes=runtimes, data_path=args.data,
                        dataset_config=args.dataset_config, scene_path=args.scene, methods=_split(args.methods),

@@ -138,7 +138,7 @@ def _export_checkpoint(args: argparse.Namespace) -> int:
 
     require_torch()
     from tactile_manip.extras import require
-    from tactile_manip.learning.kinds import kind_of_checkpoint
+    from tactile_manip.learning.kinds import ExportRequest, kind_of_checkpoint
 
     require("onnx", "export")
     require("onnxruntime", "export's parity check")
@@ -148,7 +148,11 @@ def _export_checkpoint(args: argparse.Namespace) -> int:
         if getattr(args, name) is not None and kind.name not in owner:
             raise ValueError(f"--{name.replace('_', '-')} is for {whose} checkpoint; {args.checkpoint} is a "
                              f"{kind.name} checkpoint")
-    return kind.run_export(args)
+    return kind.run_export(ExportRequest(
+        checkpoint=args.checkpoint, out=args.out, force=args.force, data=tuple(args.data or ()), metrics=args.metrics,
+        pixel_mm=args.pixel_mm, card=args.card, history=args.history, table=args.table, latency=args.latency,
+        attach_to=args.attach_to, head_symmetries=args.head_symmetries, image_symmetry=args.image_symmetry,
+        image_position_weight=args.image_position_weight))
 
 
 def _check_model_outputs(args: argparse.Namespace) -> None:

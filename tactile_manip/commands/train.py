@@ -41,8 +41,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from tactile_manip.learning.import_check import require_torch
-    from tactile_manip.learning.kinds import kind_of_config
+    from tactile_manip.learning.kinds import TrainRequest, kind_of_config
 
     kind = kind_of_config(args.config)  # an unknown kind is one line naming the file and the known kinds
     require_torch()
-    return kind.run_train(args)
+    return kind.run_train(TrainRequest(
+        config=args.config, data=tuple(args.data), out=args.out, resume=args.resume, force=args.force, init=args.init,
+        epochs=args.epochs, seed=args.seed, threads=args.threads, device=args.device, max_minutes=args.max_minutes))

@@ -10,7 +10,6 @@ names its functions as ``"module:function"`` and they are imported only when a v
 
 from __future__ import annotations
 
-import argparse
 import importlib
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -22,11 +21,76 @@ DEFAULT_KIND = "cvae"  # the kind of a config or checkpoint that names none
 
 
 @dataclass(frozen=True)
+class TrainRequest:
+    """What ``tactile-manip train`` asks of a kind: the config, the data, the run folder and the overrides.
+
+    Attributes:
+        config: the training TOML (its ``kind`` chose the entry).
+        data: dataset files or shard folders, trained on as one.
+        out: the run folder (checkpoints, history, plots).
+        resume: continue ``out``'s own checkpoint.
+        force: start over in an ``out`` that holds a run, replacing it.
+        init: fine-tune from this checkpoint's weights (image models), or None.
+        epochs, seed, threads: the config's values replaced where not None.
+        device: the config's device replaced (image models), or None.
+        max_minutes: the config's wall-time cap replaced, min (image models), or None.
+    """
+
+    config: str
+    data: tuple[str, ...]
+    out: str
+    resume: bool = False
+    force: bool = False
+    init: str | None = None
+    epochs: int | None = None
+    seed: int | None = None
+    threads: int | None = None
+    device: str | None = None
+    max_minutes: float | None = None
+
+
+@dataclass(frozen=True)
+class ExportRequest:
+    """What ``export --checkpoint`` / ``export-model`` asks of a kind: the checkpoint, the ONNX file to write and
+    the options that go with it (None: not given; each kind refuses the options that are not its own).
+
+    Attributes:
+        checkpoint: the training checkpoint (``RUN/best.pt``).
+        out: the .onnx file to write.
+        force: replace an earlier export at ``out`` (and ``card``).
+        data: the training dataset(s): real readings for the parity check, pixel size and provenance.
+        metrics: a ``results.json`` of ``tactile-manip evaluate`` to store inside.
+        pixel_mm: image models: the output pixel size, mm.
+        card, history, table, latency: image models: the model card to write and what goes into it.
+        attach_to: angle heads: the pose model (.onnx) to copy to ``out`` with the head inside.
+        head_symmetries: angle heads: symmetric copies read per reading (1 or 8).
+        image_symmetry: image models and angle heads: the decoder's symmetric average ("none", "rotations",
+            "all"), or None for the default.
+        image_position_weight: contact models: the reconstructed image's share in the fused position.
+    """
+
+    checkpoint: str
+    out: str
+    force: bool = False
+    data: tuple[str, ...] = ()
+    metrics: str | None = None
+    pixel_mm: float | None = None
+    card: str | None = None
+    history: str | None = None
+    table: str | None = None
+    latency: str | None = None
+    attach_to: str | None = None
+    head_symmetries: int = 8
+    image_symmetry: str | None = None
+    image_position_weight: float | None = None
+
+
+@dataclass(frozen=True)
 class ModelKind:
     """One kind of model and the functions the verbs run for it.
 
-    ``train`` and ``export`` are ``"module:function"`` names of functions that take the parsed command line
-    (``tactile-manip train``'s; ``export --checkpoint``'s or ``export-model``'s) and return the exit status.
+    ``train`` and ``export`` are ``"module:function"`` names of functions that take a :class:`TrainRequest` or an
+    :class:`ExportRequest` and return the exit status.
     """
 
     name: str         # the `kind` of a training config and of its checkpoints
@@ -41,28 +105,28 @@ class ModelKind:
                 raise ValueError(f"ModelKind {self.name!r}: {field} must be 'module:function', got "
                                  f"{getattr(self, field)!r}")
 
-    def run_train(self, args: argparse.Namespace) -> int:
-        """Train on ``args.config`` (of this kind) as ``tactile-manip train`` does; the exit status."""
-        return _resolve(self.train)(args)
+    def run_train(self, request: TrainRequest) -> int:
+        """Train on ``request.config`` (of this kind) as ``tactile-manip train`` does; the exit status."""
+        return _resolve(self.train)(request)
 
-    def run_export(self, args: argparse.Namespace) -> int:
-        """Write ``args.checkpoint`` (of this kind) to ``args.out`` as ``export --checkpoint`` does; the exit
+    def run_export(self, request: ExportRequest) -> int:
+        """Write ``request.checkpoint`` (of this kind) to ``request.out`` as ``export --checkpoint`` does; the exit
         status."""
-        return _resolve(self.export)(args)
+        return _resolve(self.export)(request)
 
 
 KINDS: dict[str, ModelKind] = {kind.name: kind for kind in (
     ModelKind("cvae", "SuperMag's conditional VAE: a depth image (mean and spread) from one reading",
-              train="tactile_manip.learning.cvae.cli:run_train",
-              export="tactile_manip.learning.cvae.cli:run_export"),
+              train="tactile_manip.learning.cvae.verbs:run_train",
+              export="tactile_manip.learning.cvae.verbs:run_export"),
     ModelKind("angle_head", "the pose model's angle head: the contact's in-plane axis and its concentration from "
                             "one reading, attached to a pose model's ONNX file",
-              train="tactile_manip.learning.angle_head.cli:run_train",
-              export="tactile_manip.learning.angle_head.cli:run_export"),
+              train="tactile_manip.learning.angle_head.verbs:run_train",
+              export="tactile_manip.learning.angle_head.verbs:run_export"),
     ModelKind("contact", "the contact network: contact targets (position, depth, force) with a sigma each from a "
                          "short window of readings",
-              train="tactile_manip.learning.contact.cli:run_train",
-              export="tactile_manip.learning.contact.cli:run_export"),
+              train="tactile_manip.learning.contact.verbs:run_train",
+              export="tactile_manip.learning.contact.verbs:run_export"),
 )}
 
 
@@ -109,6 +173,6 @@ def kind_of_checkpoint(path: str | Path) -> ModelKind:
     return model_kind(str(read_checkpoint(path).get("kind", DEFAULT_KIND)), source=path)
 
 
-def _resolve(target: str) -> Callable[[argparse.Namespace], int]:
+def _resolve(target: str) -> Callable[[TrainRequest | ExportRequest], int]:
     module, _, function = target.partition(":")
     return getattr(importlib.import_module(module), function)

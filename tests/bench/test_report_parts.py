@@ -159,15 +159,30 @@ def test_pose_table_compares_each_runtime_with_the_paper_preset_on_the_same_runt
     assert lines[4].endswith("| 1% | - |")
 
 
-def test_without_research_the_bench_measures_the_shipped_models_and_no_training_runs() -> None:
+REFERENCES = "experiments/model_variants/bench.toml"
+RESEARCH = "experiments/speed_reports/research_candidates.toml"
+
+
+def test_the_bench_measures_the_default_model_and_its_references_from_their_file() -> None:
     from pathlib import Path
 
-    from tactile_manip.bench.candidates import default_models
+    from tactile_manip.bench.candidates import candidates_file, default_models
 
     root = Path(__file__).resolve().parents[2]
-    entries = default_models(root)
+    assert [e.name for e in default_models(root)] == ["supermag"]
+    entries = candidates_file(root / REFERENCES, root, default_models(root))
     assert [e.name for e in entries] == ["supermag", "fast", "compact", "robust"]
     assert all(e.path.is_file() and e.checkpoint is None for e in entries)   # nothing under runs/
+
+
+def test_shipped_code_names_no_path_under_experiments() -> None:
+    """The package finds only what it ships; a study's files reach it as arguments (``--candidates``)."""
+    from pathlib import Path
+
+    package = Path(__file__).resolve().parents[2] / "tactile_manip"
+    offenders = [p.relative_to(package).as_posix() for p in sorted(package.rglob("*.py"))
+                 if "experiments/" in p.read_text()]
+    assert offenders == []
 
 
 def test_default_models_include_the_decoder_candidates_on_one_thread_only(tiny_model, tmp_path) -> None:
@@ -176,7 +191,10 @@ def test_default_models_include_the_decoder_candidates_on_one_thread_only(tiny_m
     from tactile_manip.bench.candidates import ModelEntry, default_models, model_candidates
 
     root = Path(__file__).resolve().parents[2]
-    entries = {e.name: e for e in default_models(root, research=True)}
+    from tactile_manip.bench.candidates import candidates_file
+
+    references = candidates_file(root / REFERENCES, root, default_models(root))
+    entries = {e.name: e for e in candidates_file(root / RESEARCH, root, references)}
     configs = sorted(p.stem for p in (root / "experiments" / "decoder_candidates").glob("decoder_*.toml"))
     assert configs and all(entries[c].runtimes == ("ort-1",) for c in configs)
     assert entries[configs[0]].untrained_preset.endswith(f"{configs[0]}.toml")  # timed untrained until trained

@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 import pytest
-from checks import TORCH_MISSING, assert_one_line_error
+from checks import REFERENCE_MODELS_DIR, TORCH_MISSING, assert_one_line_error
 
 torch = pytest.importorskip("torch", reason=TORCH_MISSING)
 pytest.importorskip("onnx", reason="attaching a head needs onnx")
@@ -22,9 +22,8 @@ from tactile_manip.learning.cvae.export import ExportError  # noqa: E402
 from tactile_manip.perception import load_reconstructor, wrap_axial  # noqa: E402
 from tactile_manip.perception.reconstruct import read_metadata  # noqa: E402
 from tactile_manip.perception.symmetry import transform_reading  # noqa: E402
-from tactile_manip.shipped import shipped_model  # noqa: E402
 
-BASE = shipped_model("robust")
+BASE = REFERENCE_MODELS_DIR / "supermag_robust.onnx"
 
 
 def _bar_readings(angle_rad: np.ndarray, rng: np.random.Generator, noise_ut: float | np.ndarray = 1.0

@@ -3,13 +3,13 @@
 import json
 
 import pytest
+from checks import REFERENCE_MODELS_DIR
 
 from tactile_manip.learning.card import model_card
 from tactile_manip.perception.reconstruct import read_metadata
-from tactile_manip.shipped import shipped_model
 
 # a reference model shipped with its training history (the default model's image graphs are the robust one's)
-SHIPPED_MODEL = shipped_model("fast")
+SHIPPED_MODEL = REFERENCE_MODELS_DIR / "supermag_fast.onnx"
 
 
 @pytest.fixture(scope="module")

@@ -4,16 +4,16 @@ import json
 from pathlib import Path
 
 import pytest
+from checks import REFERENCE_MODELS, REFERENCE_MODELS_DIR
 
 from tactile_manip.learning.card import model_card
 from tactile_manip.perception.reconstruct import read_metadata
-from tactile_manip.shipped import REFERENCE_MODELS, SHIPPED_MODELS, shipped_model
 
 pytest.importorskip("onnx", reason="reading the shipped model's metadata needs onnx (extra 'train')")
 
 
 def test_card_title_names_the_model():
-    path = shipped_model("fast")  # a reference model with its training history beside it
+    path = REFERENCE_MODELS_DIR / "supermag_fast.onnx"  # a reference model with its training history beside it
     history = json.loads(path.with_suffix(".history.json").read_text())
     meta = read_metadata(path)
     titles = {model_card(meta, history, name=n).splitlines()[0] for n in ("supermag_fast", "other")}
@@ -23,8 +23,8 @@ def test_card_title_names_the_model():
 
 
 def test_shipped_cards_have_their_own_titles():
-    files = [SHIPPED_MODELS[n] for n in REFERENCE_MODELS]  # the cards of the models trained on their own
-    titles = [shipped_model(n).with_suffix(".md").read_text().splitlines()[0] for n in REFERENCE_MODELS]
+    files = REFERENCE_MODELS  # the cards of the models trained on their own
+    titles = [(REFERENCE_MODELS_DIR / n).with_suffix(".md").read_text().splitlines()[0] for n in REFERENCE_MODELS]
     assert len(set(titles)) == len(titles), titles
     for file, title in zip(files, titles):
         assert f"`{Path(file).stem}`" in title

@@ -23,7 +23,7 @@ def test_the_registry_holds_each_model_once_and_its_verbs_resolve():
 
 def test_an_entry_names_its_functions_as_module_and_function():
     with pytest.raises(ValueError, match="train must be 'module:function'"):
-        ModelKind("x", "a model", train="tactile_manip.learning.x.cli", export="m:f")
+        ModelKind("x", "a model", train="tactile_manip.learning.x.verbs", export="m:f")
 
 
 def test_an_unknown_kind_names_the_source_and_the_known_kinds(tmp_path):

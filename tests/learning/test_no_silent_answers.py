@@ -99,7 +99,8 @@ def test_every_shipped_training_config_still_loads():
         if {"model", "runs", "checkpoints"} & set(data):  # the bench's candidates (experiments/speed_reports/)
             from tactile_manip.bench.candidates import candidates_file, default_models
 
-            assert candidates_file(path, ROOT, default_models(ROOT))
+            references = candidates_file(ROOT / "experiments/model_variants/bench.toml", ROOT, default_models(ROOT))
+            assert candidates_file(path, ROOT, references)
             continue
         loaders.get(data.get("kind", "cvae"), load_train_config)(path)
 

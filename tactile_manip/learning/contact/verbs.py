@@ -3,19 +3,23 @@ on its config and ``export --checkpoint`` / ``export-model`` of its checkpoint."
 
 from __future__ import annotations
 
-import argparse
+from typing import TYPE_CHECKING
+
 import json
 
+if TYPE_CHECKING:
+    from tactile_manip.learning.kinds import TrainRequest, ExportRequest
 
-def run_train(args: argparse.Namespace) -> int:
+
+def run_train(request: TrainRequest) -> int:
     """Train the contact network (:mod:`.train`; targets from labelled presses); the CVAE-only flags are
     refused."""
     from tqdm import tqdm
 
-    from tactile_manip.learning.cli import small_net_config
+    from tactile_manip.learning.verbs import small_net_config
     from tactile_manip.learning.contact.train import load_contact_config, train_contact
 
-    cfg = small_net_config(args, 'a contact model (kind = "contact")', load_contact_config)
+    cfg = small_net_config(request, 'a contact model (kind = "contact")', load_contact_config)
     bars = []
 
     def start(total: int) -> None:
@@ -26,7 +30,7 @@ def run_train(args: argparse.Namespace) -> int:
         bars[0].set_postfix(member=row["member"], loss=f"{row['loss']:.3f}", val_rmse=f"{row['val_rmse']:.3f}")
 
     try:
-        summary = train_contact(cfg, args.data, args.out, progress=progress, on_start=start)
+        summary = train_contact(cfg, list(request.data), request.out, progress=progress, on_start=start)
     finally:
         for bar in bars:
             bar.close()
@@ -39,29 +43,29 @@ def run_train(args: argparse.Namespace) -> int:
               f"of each target's fit on the labelled: {loo}")
         rmse += " against those labels"
     print(f"validation RMSE {rmse} ({summary['val_samples']} samples; {summary['train_seconds'] / 60:.1f} min); "
-          f"wrote {args.out}/best.pt, history.json")
+          f"wrote {request.out}/best.pt, history.json")
     return 0
 
 
-def run_export(args: argparse.Namespace) -> int:
-    """Export a contact model (:mod:`.export`); --data gives real windows to check it on."""
+def run_export(request: ExportRequest) -> int:
+    """Export a contact model (:mod:`.export`); ``data`` gives real windows to check it on."""
     from tactile_manip.data import load_datasets
     from tactile_manip.learning.contact.export import export_contact_onnx, load_contact_checkpoint
     from tactile_manip.learning.contact.train import dataset_windows
 
-    if args.card or args.pixel_mm is not None:
+    if request.card or request.pixel_mm is not None:
         raise ValueError("--card and --pixel-mm are for image models; a contact model keeps its validation "
                          "figures in its metadata")
     windows = None
-    if args.data:
-        _, payload = load_contact_checkpoint(args.checkpoint)
-        data = load_datasets(args.data, images=False)
+    if request.data:
+        _, payload = load_contact_checkpoint(request.checkpoint)
+        data = load_datasets(list(request.data), images=False)
         windows = dataset_windows(data, payload["input"]["context"])[data.indices("test")]
-    metrics = json.loads(open(args.metrics).read()) if args.metrics else {}
-    meta = export_contact_onnx(args.checkpoint, args.out, metrics=metrics, check_windows=windows,
-                               image_position_weight=args.image_position_weight)
+    metrics = json.loads(open(request.metrics).read()) if request.metrics else {}
+    meta = export_contact_onnx(request.checkpoint, request.out, metrics=metrics, check_windows=windows,
+                               image_position_weight=request.image_position_weight)
     targets = ", ".join(f"{n} [{u}]" for n, u in zip(meta["targets"]["names"], meta["targets"]["units"]))
-    print(f"wrote {args.out}: contact model, {meta['parameters']:,} parameters, targets {targets}, "
+    print(f"wrote {request.out}: contact model, {meta['parameters']:,} parameters, targets {targets}, "
           f"{meta['context']['frames']} frame(s) of context, ONNX vs torch max |diff| "
           f"{meta['parity_max_abs']:.2e} target spreads")
     return 0

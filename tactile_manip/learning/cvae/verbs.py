@@ -3,27 +3,32 @@ and ``export --checkpoint`` / ``export-model`` of its checkpoint, with the model
 
 from __future__ import annotations
 
-import argparse
+from typing import TYPE_CHECKING
+
 import json
 
+if TYPE_CHECKING:
+    from tactile_manip.learning.kinds import TrainRequest, ExportRequest
 
-def run_train(args: argparse.Namespace) -> int:
+
+def run_train(request: TrainRequest) -> int:
     """Train the CVAE (:mod:`.train`) with a progress bar; print the best validation PSNR."""
     from tqdm import tqdm
 
     from tactile_manip.data import check_dataset_file
     from tactile_manip.errors import ConfigError
-    from tactile_manip.learning.cli import check_run_folder
+    from tactile_manip.learning.verbs import check_run_folder
     from tactile_manip.learning.cvae.train import load_train_config, resolve_device, train, with_overrides
 
-    check_run_folder(args)
-    for path in args.data:
+    check_run_folder(request)
+    for path in request.data:
         check_dataset_file(path)  # before the progress bar: a missing file is one line
-    if args.init and args.resume:
+    if request.init and request.resume:
         raise ConfigError("--init starts a new run from a checkpoint's weights; --resume continues this run's own "
                           "checkpoint: give one of them")
-    cfg = with_overrides(load_train_config(args.config), epochs=args.epochs, seed=args.seed, threads=args.threads,
-                         device=args.device, max_minutes=args.max_minutes)
+    cfg = with_overrides(load_train_config(request.config), epochs=request.epochs, seed=request.seed,
+                         threads=request.threads,
+                         device=request.device, max_minutes=request.max_minutes)
     resolve_device(cfg.device)  # a missing GPU is one line before any progress bar or output folder
     bars = []  # the bar starts once data, model and checkpoint are loaded, so their errors stay one line
 
@@ -35,54 +40,54 @@ def run_train(args: argparse.Namespace) -> int:
         bars[0].set_postfix(loss=f"{row['loss']:.0f}", val_psnr=f"{row['val_psnr']:.2f}")
 
     try:
-        summary = train(cfg, args.data, args.out, resume=args.resume, init=args.init, progress=progress,
-                        on_start=start)
+        summary = train(cfg, list(request.data), request.out, resume=request.resume, init=request.init,
+                        progress=progress, on_start=start)
     finally:
         for bar in bars:
             bar.close()
     if summary:
         print(f"best validation PSNR {summary['best_val_psnr']:.2f} dB at epoch {summary['best_epoch']} "
-              f"({summary['epochs_run']} epochs, {summary['train_seconds'] / 60:.1f} min); wrote {args.out}/")
+              f"({summary['epochs_run']} epochs, {summary['train_seconds'] / 60:.1f} min); wrote {request.out}/")
     return 0
 
 
-def run_export(args: argparse.Namespace) -> int:
-    """Write the checkpoint as ONNX (:mod:`.export`); --data gives real readings, pixel size and provenance,
+def run_export(request: ExportRequest) -> int:
+    """Write the checkpoint as ONNX (:mod:`.export`); ``data`` gives real readings, pixel size and provenance,
     --card a model card."""
     from tactile_manip.data import load_datasets
     from tactile_manip.learning.cvae.export import export_onnx
     from tactile_manip.outputs import check_output_file
 
-    if args.card:
-        check_output_file(args.card, force=args.force)
-    readings, pixel_mm, extra = None, args.pixel_mm or 0.1, {}
-    if args.data:
-        data = load_datasets(args.data)
+    if request.card:
+        check_output_file(request.card, force=request.force)
+    readings, pixel_mm, extra = None, request.pixel_mm or 0.1, {}
+    if request.data:
+        data = load_datasets(list(request.data))
         data.require_images("export of an image model with --data")
         readings = data.readings[data.indices("val")]
-        pixel_mm = args.pixel_mm or data.image.pixel_mm or 0.1
+        pixel_mm = request.pixel_mm or data.image.pixel_mm or 0.1
         trained_on = sorted(set(data.objects(data.indices("train")).tolist()))
-        extra["training_data"] = {"path": " ".join(args.data), "fingerprint": data.fingerprint(), "pairs": len(data),
+        extra["training_data"] = {"path": " ".join(request.data), "fingerprint": data.fingerprint(), "pairs": len(data),
                                   "objects": sorted(set(data.objects().tolist())),
                                   "objects_with_train_split": trained_on, "source": data.provenance.get("source"),
                                   "image": data.image.to_dict(),
                                   "code_version": data.provenance.get("code_version")}
-    metrics = json.loads(open(args.metrics).read()) if args.metrics else {}
-    meta = export_onnx(args.checkpoint, args.out, pixel_mm=pixel_mm, metrics=metrics, extra=extra,
-                       check_readings=readings, image_symmetry=args.image_symmetry or "none")
-    print(f"wrote {args.out}: {meta['parameters']:,} inference parameters, preset {meta['preset']}, "
+    metrics = json.loads(open(request.metrics).read()) if request.metrics else {}
+    meta = export_onnx(request.checkpoint, request.out, pixel_mm=pixel_mm, metrics=metrics, extra=extra,
+                       check_readings=readings, image_symmetry=request.image_symmetry or "none")
+    print(f"wrote {request.out}: {meta['parameters']:,} inference parameters, preset {meta['preset']}, "
           f"ONNX vs torch max |diff| {meta['parity_max_abs_mm']:.2e} mm")
-    if args.card:
+    if request.card:
         from pathlib import Path
 
         from tactile_manip.learning.card import write_model_card
 
-        history = args.history or str(Path(args.checkpoint).with_name("history.json"))
-        table = Path(args.table).read_text() if args.table else ""
-        latency = Path(args.latency).read_text() if args.latency else ""
-        write_model_card(args.card, meta, history, name=Path(args.out).stem, table_md=table, machine=_cpu_name(),
-                         commands=_commands(args), latency=latency)
-        print(f"wrote {args.card}")
+        history = request.history or str(Path(request.checkpoint).with_name("history.json"))
+        table = Path(request.table).read_text() if request.table else ""
+        latency = Path(request.latency).read_text() if request.latency else ""
+        write_model_card(request.card, meta, history, name=Path(request.out).stem, table_md=table, machine=_cpu_name(),
+                         commands=_commands(request), latency=latency)
+        print(f"wrote {request.card}")
     return 0
 
 
@@ -99,12 +104,12 @@ def _cpu_name() -> str:
     return f"{os.cpu_count()} cores"
 
 
-def _commands(args: argparse.Namespace) -> list[str]:
+def _commands(request: ExportRequest) -> list[str]:
     from pathlib import Path
 
-    run = Path(args.checkpoint).parent
-    data = [Path(d) for d in (args.data or ["data/supermag.npz"])]
+    run = Path(request.checkpoint).parent
+    data = [Path(d) for d in (request.data or ["data/supermag.npz"])]
     files = " ".join(map(str, data))
     return [*(f"tactile-manip simulate --config configs/dataset/{d.stem}.toml --out {d}" for d in data),
             f"tactile-manip train --config configs/train/{run.name}.toml --data {files} --out {run}",
-            f"tactile-manip export --checkpoint {args.checkpoint} --out {args.out} --data {files} --force"]
+            f"tactile-manip export --checkpoint {request.checkpoint} --out {request.out} --data {files} --force"]
