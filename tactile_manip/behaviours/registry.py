@@ -53,11 +53,13 @@ def task_root(cls: type[Task]) -> str | None:
     top = cls.__module__.split(".")[0]
     if top == __name__.split(".")[0]:
         return None
-    file = getattr(sys.modules.get(top), "__file__", None)
-    if not file:
-        return None
-    path = Path(file).resolve()
-    return str(path.parent.parent if path.name == "__init__.py" else path.parent)
+    module = sys.modules.get(top)
+    file = getattr(module, "__file__", None)
+    if file:
+        path = Path(file).resolve()
+        return str(path.parent.parent if path.name == "__init__.py" else path.parent)
+    folders = list(getattr(module, "__path__", []))  # a folder without __init__.py (a namespace package)
+    return str(Path(folders[0]).resolve().parent) if folders else None
 
 
 def _import(module_name: str, ref: str):
@@ -66,8 +68,8 @@ def _import(module_name: str, ref: str):
     except ModuleNotFoundError as e:
         top = module_name.split(".")[0]
         here = os.getcwd()
-        if e.name != top or here in sys.path or not (Path(here) / top).exists() and \
-                not (Path(here) / f"{top}.py").exists():
+        in_here = (Path(here) / top).is_dir() or (Path(here) / f"{top}.py").is_file()
+        if e.name != top or here in sys.path or not in_here:
             raise ValueError(f"task {ref!r}: cannot import {module_name} ({e}); install it, or run from the "
                              "folder that holds it") from None
         sys.path.insert(0, here)  # the console script leaves the working directory off the path
