@@ -227,7 +227,10 @@ class TrialScene:
             drawn per presentation; grip servoes the grip force, centred, from the contact model), or
             ``"module:Class"`` for a task of your own (docs/your_task.md). The records and the summary name it.
         task_config: the task's settings, an instance of the task's ``Config`` (a dict is read into one; None:
-            its defaults). In a scene file they are the table named after the task (e.g. ``[grip]``).
+            its defaults). In a scene file they are the table named after the task (e.g. ``[wipe]``).
+
+    ``settings`` (not a field) is the task's settings in use: ``task_config``, or the defaults of the task's
+    ``Config`` where it is None.
     """
 
     name: str = "scene"
@@ -272,12 +275,9 @@ class TrialScene:
         if self.contact_model and not self.contact_model.endswith(".onnx"):
             raise ValueError(f"contact_model must be an exported .onnx contact model or \"\" (none), got "
                              f"{self.contact_model!r}")
+        # the task's settings: task_config, or the defaults of the task's Config where it is None
+        object.__setattr__(self, "settings", self.task_config if self.task_config is not None else cls.Config())
         cls.check_scene(self)
-
-    @property
-    def settings(self) -> Any:
-        """The task's settings: ``task_config``, or the defaults of the task's ``Config`` where it is None."""
-        return self.task_config if self.task_config is not None else task_class(self.task).Config()
 
 
 def load_scene(path: str | Path) -> TrialScene:

@@ -21,8 +21,8 @@ EXAMPLE = REPO / "examples" / "your_task"
 
 def _rows(run: Path) -> list[tuple]:
     rows = [json.loads(line) for line in (run / "trials.jsonl").read_text().splitlines()]
-    return [(r["trial"], r["method"], r["task"], r["outcome"], r["error_rad"] is not None and abs(r["error_rad"]) < 0.05)
-            for r in rows]
+    return [(r["trial"], r["method"], r["task"], r["outcome"],
+             r["error_rad"] is not None and abs(r["error_rad"]) < 0.05) for r in rows]
 
 
 def test_a_task_module_outside_the_package_runs_on_ray_as_locally(tmp_path, monkeypatch) -> None:
