@@ -3,10 +3,16 @@
 A command that would fail on its output only after minutes of simulation, or that would silently replace a
 file it did not create, calls one of these first. Each raises :class:`OutputPathError` (one line at the CLI)
 that names the path and what to do.
+
+A command that writes a folder of named files owns it: :func:`claim_folder` creates it with an owner file
+(``.tactile-manip.json``, naming the command) when the command starts writing, and :func:`check_command_folder`
+refuses, before any work, a folder the command does not own: one that holds anything without that mark, or one
+another command marked. ``--force`` then replaces only the command's own files in a folder it owns.
 """
 
 from __future__ import annotations
 
+import json
 import os
 import tempfile
 from collections.abc import Iterable, Sequence
@@ -64,6 +70,58 @@ def check_report_folder(out: str | Path, files: Sequence[str], *, force: bool,
     held = [name for name in files if (out / name).exists()]
     if held and not force:
         raise OutputPathError(f"{out} already holds {', '.join(held)} of an earlier run: {hint}")
+    return out
+
+
+OWNER_FILE = ".tactile-manip.json"  # names the command that created the folder it sits in
+
+
+def folder_owner(path: str | Path) -> str | None:
+    """The command that created the folder ``path`` (its owner file), or None when it has no readable one."""
+    try:
+        owner = json.loads((Path(path) / OWNER_FILE).read_text()).get("command")
+    except (OSError, ValueError, AttributeError):
+        return None
+    return owner if isinstance(owner, str) else None
+
+
+def check_command_folder(out: str | Path, command: str, files: Sequence[str], *, force: bool,
+                         also: Sequence[str] = (),
+                         hint: str = "pass --force to replace them, or give another --out") -> Path:
+    """Return ``out`` after checking that ``command`` may write ``files`` there: ``out`` does not exist yet, is an
+    empty folder, or is a folder ``command`` (or one of ``also``) created; and, unless ``force``, holds none of
+    ``files`` (an earlier run's).
+
+    Raises:
+        OutputPathError: ``out`` is a file or cannot be written into; it holds files without the owner mark
+            (with or without ``force``: they are not the command's to replace); another command created it; or
+            it holds some of ``files`` and ``force`` is False (``hint`` says what to do then).
+    """
+    out = check_output_dir(out)
+    if out.is_dir():
+        owner = folder_owner(out)
+        if owner is None:
+            held = sorted(p.name for p in out.iterdir())
+            if held:
+                shown = ", ".join(held[:3]) + (f" and {len(held) - 3} more" if len(held) > 3 else "")
+                raise OutputPathError(f"{out} holds files that tactile-manip {command} did not write ({shown}); "
+                                      "refusing to write there, with or without --force: give a new or empty folder")
+        elif owner != command and owner not in also:
+            raise OutputPathError(f"{out} is a folder of tactile-manip {owner}, not of {command}; refusing to write "
+                                  "there: give another folder")
+    return check_report_folder(out, files, force=force, hint=hint)
+
+
+def claim_folder(out: str | Path, command: str) -> Path:
+    """Create ``out`` (and its parents) as ``command``'s folder, with the owner file; a folder it already owns is
+    kept as it is. Call it when the command starts writing, after :func:`check_command_folder`."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    marker = out / OWNER_FILE
+    if folder_owner(out) is None:
+        tmp = out / f".{OWNER_FILE}.tmp-{os.getpid()}"
+        tmp.write_text(json.dumps({"command": command}) + "\n")
+        os.replace(tmp, marker)
     return out
 
 

@@ -134,3 +134,27 @@ def test_run_folders_started_in_the_same_second_stay_apart(tmp_path, monkeypatch
     assert second != first and second.name == "scene-20260101T000000Z-2"
     second.mkdir()
     assert unique_folder(first).name == "scene-20260101T000000Z-3"
+
+
+def test_a_command_folder_is_claimed_once_and_refused_to_others(tmp_path):
+    from tactile_manip.outputs import OWNER_FILE, OutputPathError, check_command_folder, claim_folder, folder_owner
+
+    out = tmp_path / "a" / "b"
+    assert check_command_folder(out, "bench", ["report.md"], force=False) == out and not out.exists()
+    claim_folder(out, "bench")
+    assert folder_owner(out) == "bench" and (out / OWNER_FILE).is_file()
+    (out / "report.md").write_text("x")
+    claim_folder(out, "bench")  # kept as it is
+    with pytest.raises(OutputPathError, match="report.md of an earlier run"):
+        check_command_folder(out, "bench", ["report.md"], force=False)
+    assert check_command_folder(out, "bench", ["report.md"], force=True) == out
+    with pytest.raises(OutputPathError, match="is a folder of tactile-manip bench, not of evaluate"):
+        check_command_folder(out, "evaluate", ["table.md"], force=True)
+    assert check_command_folder(out, "score", ["summary.md"], force=False, also=("bench",)) == out
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "notes.txt").write_text("n")
+    with pytest.raises(OutputPathError, match=r"holds files that tactile-manip bench did not write \(notes.txt\)"):
+        check_command_folder(mine, "bench", ["report.md"], force=True)
+    (mine / OWNER_FILE).write_text("not json")  # an unreadable mark is no mark
+    assert folder_owner(mine) is None

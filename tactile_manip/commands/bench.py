@@ -50,9 +50,9 @@ def run(args: argparse.Namespace) -> int:
     from tactile_manip.bench.candidates import RUNTIMES, candidates_file, default_models, parse_model_spec
     from tactile_manip.bench.report import markdown_table, pose_table, write_report
     from tactile_manip.bench.suite import BenchSettings, run_bench
-    from tactile_manip.commands import check_report_folder
+    from tactile_manip.outputs import check_command_folder, claim_folder
 
-    check_report_folder(args.out, ("report.md", "report.json", "pareto.png"), force=args.force)
+    check_command_folder(args.out, "bench", ("report.md", "report.json", "pareto.png"), force=args.force)
     settings = BenchSettings.quick_settings() if args.quick else BenchSettings()
     if args.trials is not None:
         settings = dataclasses.replace(settings, trials=args.trials)
@@ -71,7 +71,7 @@ def run(args: argparse.Namespace) -> int:
     report = run_bench(settings=settings, models=models, runtimes=runtimes, data_path=args.data,
                        dataset_config=args.dataset_config, scene_path=args.scene, methods=_split(args.methods),
                        log=lambda line: print(line, file=sys.stderr, flush=True))
-    paths = write_report(args.out, report)
+    paths = write_report(claim_folder(args.out, "bench"), report)
     print(markdown_table(report["rows"]), end="")
     print("\nReading -> angle, one and two pads:\n" + pose_table(report["rows"]), end="")
     for note in report["notes"]:

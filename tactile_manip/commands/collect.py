@@ -173,10 +173,10 @@ def _calibrate(args: argparse.Namespace) -> int:
 
 def _record(args: argparse.Namespace) -> int:
     import numpy as np
-    from tqdm import tqdm
 
     from tactile_manip.collection.collect import CollectConfig
     from tactile_manip.collection.vbts_calibration import VbtsCalibration
+    from tactile_manip.progress import progress_bar
 
     from tactile_manip.data import dataset_path
 
@@ -195,7 +195,7 @@ def _record(args: argparse.Namespace) -> int:
     def progress(s) -> None:
         nonlocal bar, shown
         if bar is None:  # created once the streams run, so the solve time does not count as collecting
-            bar = tqdm(total=args.presses, unit="press", desc="collecting")
+            bar = progress_bar(total=args.presses, unit="press", desc="collecting")
         if (s.complete_presses, s.pairs, s.unpaired) != shown:
             shown = (s.complete_presses, s.pairs, s.unpaired)
             bar.update(s.complete_presses - bar.n)

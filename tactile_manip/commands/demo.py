@@ -29,11 +29,12 @@ def run(args: argparse.Namespace) -> int:
     from tactile_manip.sim.shapes import make_indenter
     from tactile_manip.sim.pair import SensorPair
 
-    from tactile_manip.commands import check_report_folder
+    from tactile_manip.outputs import check_command_folder, claim_folder
 
-    out = check_report_folder(args.out, [f"{name}.png" for name, _ in DEMO_OBJECTS], force=args.force)
+    out = check_command_folder(args.out, "demo", [f"{name}.png" for name, _ in DEMO_OBJECTS], force=args.force)
     rng = np.random.default_rng(args.seed)
     pair = SensorPair()
+    claim_folder(out, "demo")
     print(f"{'object':<14}{'gel mm':>8}{'skin mm':>9}{'depth max':>11}{'|dB| max uT':>13}{'ms':>7}")
     for name, kwargs in DEMO_OBJECTS:
         pose = IndenterPose(x_mm=rng.uniform(-2, 2), y_mm=rng.uniform(-2, 2), yaw_rad=rng.uniform(-math.pi, math.pi))

@@ -16,7 +16,7 @@ import argparse
 
 import numpy as np
 
-from tactile_manip.commands import check_report_folder
+from tactile_manip.outputs import check_command_folder, claim_folder
 from tactile_manip.extras import require
 
 REPORT_FILES = ("table.md", "results.json", "gallery.png")
@@ -60,7 +60,7 @@ def run(args: argparse.Namespace) -> int:
     data = load_dataset(args.data)
     if _contact_models(args.model, data, args.data) or (not data.has_images and data.has_targets):
         return _run_contact(args, data)
-    check_report_folder(args.out, REPORT_FILES, force=args.force)
+    check_command_folder(args.out, "evaluate", REPORT_FILES, force=args.force)
     data.require_images(f"evaluate's image metrics (PSNR, SSIM, angle) on {args.data}")
     if not len(data.indices(args.split)):
         raise DatasetError(f"{args.data} has no {args.split} split to evaluate (its splits: "
@@ -85,12 +85,10 @@ def run(args: argparse.Namespace) -> int:
             methods[label] = SymmetrizedReconstructor(model) if option == "--symmetrized" else model
     results, _ = evaluate_methods(data, methods, split=args.split, inception_onnx=args.inception_onnx)
     rows = _gallery_rows(data, args.split, "val")
-    write_report(args.out, results, {"data": str(args.data), "split": args.split,
-                                     "data_fingerprint": data.fingerprint(),
-                                     "baseline_fits": {k: methods[k].to_dict() for k in ("Bilinear", "Bicubic")
-                                                       if k in methods},
-                                     "psnr_data_range": data.image.data_range, "image_unit": data.image.unit,
-                                     "gallery_rows": rows})
+    write_report(claim_folder(args.out, "evaluate"), results,
+                 {"data": str(args.data), "split": args.split, "data_fingerprint": data.fingerprint(),
+                  "baseline_fits": {k: methods[k].to_dict() for k in ("Bilinear", "Bicubic") if k in methods},
+                  "psnr_data_range": data.image.data_range, "image_unit": data.image.unit, "gallery_rows": rows})
     skipped = gallery(f"{args.out}/gallery.png", data, methods, rows)
     print(markdown_table(results), end="")
     if skipped:
@@ -166,7 +164,7 @@ def _run_contact(args: argparse.Namespace, data) -> int:
                              ("--baseline-objects", args.baseline_objects)) if v]
     if unused:
         raise ValueError(f"{', '.join(unused)}: for image datasets; {args.data} holds labelled presses")
-    check_report_folder(args.out, CONTACT_REPORT_FILES, force=args.force)
+    check_command_folder(args.out, "evaluate", CONTACT_REPORT_FILES, force=args.force)
     if not len(data.indices(args.split)):
         raise DatasetError(f"{args.data} has no {args.split} split to evaluate (its splits: "
                            f"{', '.join(sorted(set(data.split.tolist())))}); choose one with --split")
@@ -177,8 +175,9 @@ def _run_contact(args: argparse.Namespace, data) -> int:
             raise ValueError(f"--model must be LABEL=PATH, got {spec!r}")
         models[label] = ContactEstimator(path, threads=args.threads)
     report = evaluate_contact(data, models, split=args.split, baselines=not args.no_baselines)
-    write_contact_report(args.out, report, {"data": str(args.data), "data_fingerprint": data.fingerprint(),
-                                            "models": {k: str(m.path) for k, m in models.items()}})
+    write_contact_report(claim_folder(args.out, "evaluate"), report,
+                         {"data": str(args.data), "data_fingerprint": data.fingerprint(),
+                          "models": {k: str(m.path) for k, m in models.items()}})
     print(markdown_table(report), end="")
     print(f"wrote {args.out}/table.md, results.json, contact.png")
     return 0

@@ -26,7 +26,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    from tactile_manip.commands import check_report_folder
+    from tactile_manip.outputs import check_command_folder, check_report_folder, claim_folder
     from tactile_manip.errors import ConfigError
     from tactile_manip.trials.log import TrialLogError, read_run_info, read_trials, trials_path
     from tactile_manip.trials.report import tolerance_tag, write_report
@@ -39,13 +39,19 @@ def run(args: argparse.Namespace) -> int:
         raise TrialLogError(f"no run directory at {run_dir}")
     tolerance_rad = math.radians(tol_deg)
     tag = tolerance_tag(tolerance_rad)
-    out = check_report_folder(args.out or run_dir, [f"summary{tag}.md", f"summary{tag}.json", f"errors{tag}.png",
-                                                     f"success_vs_tolerance{tag}.png"], force=args.force)
+    files = [f"summary{tag}.md", f"summary{tag}.json", f"errors{tag}.png", f"success_vs_tolerance{tag}.png"]
+    in_run = args.out is None or Path(args.out).resolve() == run_dir.resolve()
+    if in_run and read_run_info(run_dir) is not None:  # the run's own folder (its run.json: trials wrote it)
+        out = check_report_folder(run_dir, files, force=args.force)
+    else:
+        out = check_command_folder(args.out or run_dir, "score", files, force=args.force, also=("trials",))
     file = trials_path(run_dir)
     records = read_trials(file)
     if not records:
         raise TrialLogError(f"{file} holds no trial records yet: nothing to score")
     try:
+        if not in_run:
+            claim_folder(out, "score")
         write_report(out, records, tolerance_rad, title=args.title, tag=tag, run_info=read_run_info(run_dir))
     except ValueError as e:  # duplicated trials or unpaired seeds: the log is not a consistent run
         raise TrialLogError(f"{file}: {e}") from e

@@ -11,6 +11,8 @@ from __future__ import annotations
 import argparse
 import os
 
+from tactile_manip.progress import progress_bar
+
 DEFAULT_CONFIG = "configs/dataset/supermag.toml"
 
 
@@ -26,6 +28,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="multiply every object count (e.g. 0.05 for a quick small dataset)")
     p.add_argument("--seed", type=int, default=None, help="override the config's base seed")
     p.add_argument("--force", action="store_true", help="overwrite an existing output file")
+    p.add_argument("--quiet", action="store_true",
+                   help="no progress display (off a terminal it is a line per stage anyway)")
     p.add_argument("--ray", nargs="?", const="local", default=None, metavar="ADDRESS",
                    help="run the presses as Ray tasks: 'local' (the default without ADDRESS: a private instance on "
                         "this machine with --workers CPUs), 'auto' (the cluster this machine joined) or HOST:PORT; "
@@ -46,8 +50,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     import dataclasses
-
-    from tqdm import tqdm
 
     from tactile_manip.outputs import check_output_file
     from tactile_manip.sim.dataset import generate, load_dataset_config
@@ -79,7 +81,8 @@ def run(args: argparse.Namespace) -> int:
         if args.block_size is not None:
             raise ValueError("--block-size applies to --ray runs only")
         workers = args.workers or os.cpu_count() or 1
-        with tqdm(total=total, unit="pair", desc=f"simulating ({workers} workers)") as bar:
+        with progress_bar(total=total, unit="pair", desc=f"simulating ({workers} workers)",
+                      quiet=args.quiet) as bar:
             data = generate(cfg, workers=workers, progress=bar.update)
     path = save_dataset(out, data)
     if args.ray is not None:
@@ -97,8 +100,6 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _generate_on_ray(args: argparse.Namespace, cfg, out, total: int):
-    from tqdm import tqdm
-
     from tactile_manip.cluster.connect import check_address, preflight
     from tactile_manip.cluster.simulate import DEFAULT_BLOCK_SIZE, block_bounds, generate_on_ray
 
@@ -110,7 +111,8 @@ def _generate_on_ray(args: argparse.Namespace, cfg, out, total: int):
                          "uses all of its own")
     preflight(address)  # an unreachable cluster fails here, before the progress bar
     where = "a local Ray instance" if address is None else f"Ray at {address}"
-    with tqdm(total=total, unit="pair", desc=f"simulating on {where}") as bar:
+    with progress_bar(total=total, unit="pair", desc=f"simulating on {where}",
+                      quiet=args.quiet) as bar:
         return generate_on_ray(cfg, out, address=address, num_cpus=args.workers or None, block_size=block_size,
                                progress=bar.update)
 
@@ -134,8 +136,6 @@ def _physics_notes(data, *, thickness_mm: float) -> list[str]:
 
 def _simulate_board(args: argparse.Namespace) -> int:
     """``--board``: probe presses on any simulatable board, checked before any press."""
-    from tqdm import tqdm
-
     from tactile_manip.boards import load_board
     from tactile_manip.data import SPLITS, dataset_path, save_dataset
     from tactile_manip.outputs import check_output_file
@@ -152,7 +152,8 @@ def _simulate_board(args: argparse.Namespace) -> int:
     plan = ProbePlan(tip=args.tip, tip_diameter_mm=args.tip_diameter_mm, max_force_n=args.max_force_n)
     if not 1 <= args.presses <= 1_000_000:
         raise ValueError(f"--presses must be from 1 to 1000000, got {args.presses}")
-    with tqdm(total=args.presses, unit="press", desc=f"pressing {board.name}") as bar:
+    with progress_bar(total=args.presses, unit="press", desc=f"pressing {board.name}",
+                      quiet=args.quiet) as bar:
         data = probe_press_dataset(board, args.presses, plan=plan, seed=0 if args.seed is None else args.seed,
                                    progress=bar.update)
     path = save_dataset(out, data)
@@ -187,13 +188,12 @@ def _save_ray_shards(args: argparse.Namespace, cfg, out, data) -> int:
 def _simulate_shards(args: argparse.Namespace, cfg, out) -> int:
     """Simulate into a shard folder, each shard written as its samples finish (the dataset is never whole in
     memory)."""
-    from tqdm import tqdm
-
     from tactile_manip.data import ShardedDataset
     from tactile_manip.sim.dataset import generate_shards
 
     workers = args.workers or os.cpu_count() or 1
-    with tqdm(total=sum(o.count for o in cfg.objects), unit="pair", desc=f"simulating ({workers} workers)") as bar:
+    with progress_bar(total=sum(o.count for o in cfg.objects), unit="pair",
+                      desc=f"simulating ({workers} workers)", quiet=args.quiet) as bar:
         path = generate_shards(cfg, out, shard_size=args.shard_size, workers=workers, progress=bar.update,
                                force=args.force)
     return _report_shards(ShardedDataset(path), path, cfg)

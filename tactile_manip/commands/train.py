@@ -37,6 +37,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--device", default=None, help="override the config's device: auto, cpu, cuda or cuda:N")
     p.add_argument("--max-minutes", type=float, default=None,
                    help="override the config's wall-time cap in minutes (0: none)")
+    p.add_argument("--quiet", action="store_true",
+                   help="no progress display (off a terminal it is a line per stage anyway); the summary is printed")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -47,4 +49,5 @@ def run(args: argparse.Namespace) -> int:
     require_torch()
     return kind.run_train(TrainRequest(
         config=args.config, data=tuple(args.data), out=args.out, resume=args.resume, force=args.force, init=args.init,
-        epochs=args.epochs, seed=args.seed, threads=args.threads, device=args.device, max_minutes=args.max_minutes))
+        epochs=args.epochs, seed=args.seed, threads=args.threads, device=args.device, max_minutes=args.max_minutes,
+        quiet=args.quiet))

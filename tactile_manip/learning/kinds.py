@@ -34,6 +34,7 @@ class TrainRequest:
         epochs, seed, threads: the config's values replaced where not None.
         device: the config's device replaced (image models), or None.
         max_minutes: the config's wall-time cap replaced, min (image models), or None.
+        quiet: no progress display (the closing summary line is still printed).
     """
 
     config: str
@@ -47,6 +48,7 @@ class TrainRequest:
     threads: int | None = None
     device: str | None = None
     max_minutes: float | None = None
+    quiet: bool = False
 
 
 @dataclass(frozen=True)

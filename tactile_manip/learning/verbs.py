@@ -13,11 +13,22 @@ if TYPE_CHECKING:
 RUN_FILES = ("checkpoint.pt", "best.pt")  # what a run folder holds that a new run would replace
 
 
-def check_run_folder(request: TrainRequest) -> None:
-    """Refuse, before any work, an OUT that cannot be written or whose run would be replaced unasked."""
-    from tactile_manip.outputs import check_report_folder
+def start_run(request: TrainRequest, *, total: int, desc: str, initial: int = 0):
+    """The run begins (its data loaded and checked): ``request.out`` becomes train's folder, and the progress
+    display of ``total`` epochs starts."""
+    from tactile_manip.outputs import claim_folder
+    from tactile_manip.progress import progress_bar
 
-    check_report_folder(request.out, RUN_FILES, force=request.resume or request.force,
+    claim_folder(request.out, "train")
+    return progress_bar(total=total, initial=initial, unit="epoch", desc=desc, quiet=request.quiet)
+
+
+def check_run_folder(request: TrainRequest) -> None:
+    """Refuse, before any work, an OUT that cannot be written, that train did not create (it may hold a user's
+    files), or whose run would be replaced unasked."""
+    from tactile_manip.outputs import check_command_folder
+
+    check_command_folder(request.out, "train", RUN_FILES, force=request.resume or request.force,
                         hint="pass --resume to continue it, --force to start over (replacing it), or give a new --out")
 
 

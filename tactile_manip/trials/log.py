@@ -35,7 +35,7 @@ from typing import Any
 
 from tactile_manip.config import config_differences
 from tactile_manip.errors import TactileManipError
-from tactile_manip.outputs import fsync_dir, unique_folder
+from tactile_manip.outputs import check_command_folder, claim_folder, fsync_dir, unique_folder
 from tactile_manip.trials.record import RECORD_VERSION, TrialRecord
 
 TRIALS_FILE = "trials.jsonl"
@@ -224,6 +224,9 @@ class TrialLog:
             raise TrialLogError(f"{self.path} exists without {RUN_FILE}: cannot tell which config made it; "
                                 f"use a new run directory")
         if existing is None:
+            # a new run: into a folder trials made (or a new one), never over files it did not write
+            check_command_folder(self.run_dir, "trials", (TRIALS_FILE, RUN_FILE), force=False,
+                                 hint="pass --resume to continue that run, or give another --out")
             info = {"format": FORMAT, "format_version": FORMAT_VERSION, "record_version": RECORD_VERSION,
                     "run_id": self._run_id or f"{time.strftime('%Y%m%dT%H%M%SZ', time.gmtime())}-"
                                              f"{uuid.uuid4().hex[:6]}",
@@ -232,7 +235,7 @@ class TrialLog:
         else:
             info = self._check_resume(existing)
             info = {**info, "resumes": [*info.get("resumes", []), {"started_utc": now, "code_version": version}]}
-        self.run_dir.mkdir(parents=True, exist_ok=True)
+        claim_folder(self.run_dir, "trials")
         self._file = _open_locked(self.path)
         try:
             self._repair_tail()

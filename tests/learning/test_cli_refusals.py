@@ -155,13 +155,39 @@ def test_export_stores_what_an_image_model_averages_its_images_over(run, capsys)
 
 def test_evaluate_refuses_to_replace_an_earlier_report_without_force(tiny_data, tmp_path, capsys):
     out = tmp_path / "eval"
-    out.mkdir()
-    (out / "results.json").write_text("{}")
+    assert main(["evaluate", "--data", str(tiny_data), "--out", str(out)]) == 0
+    (out / "results.json").write_text("{}")  # the earlier report, marked
+    capsys.readouterr()
     assert main(["evaluate", "--data", str(tiny_data), "--out", str(out)]) == 2
     assert_one_line_error(capsys.readouterr().err, "evaluate", "results.json")
     assert (out / "results.json").read_text() == "{}"
     assert main(["evaluate", "--data", str(tiny_data), "--out", str(out), "--force"]) == 0
     assert (out / "results.json").read_text() != "{}"
+
+
+@pytest.mark.parametrize("command", ["evaluate", "train"])
+def test_a_folder_the_command_did_not_make_is_refused_even_with_force(command, run, tiny_data, tmp_path, capsys):
+    """A user's folder holding a file of the very name the command writes (history.json, results.json) is not
+    the command's to replace: one line, exit 2, the file untouched, with or without --force."""
+    out = tmp_path / "mine"
+    out.mkdir()
+    name = {"evaluate": "results.json", "train": "history.json"}[command]
+    (out / name).write_text("my notes")
+    args = {"evaluate": ["evaluate", "--data", str(tiny_data), "--out", str(out)],
+            "train": ["train", "--config", str(run / "tiny.toml"), "--data", str(tiny_data), "--out", str(out)]}[command]
+    for extra in ([], ["--force"]):
+        assert main([*args, *extra]) == 2
+        assert_one_line_error(capsys.readouterr().err, command, str(out), "did not write", name)
+        assert sorted(p.name for p in out.iterdir()) == [name] and (out / name).read_text() == "my notes"
+
+
+def test_a_folder_of_another_command_is_refused(run, tiny_data, tmp_path, capsys):
+    out = tmp_path / "eval"
+    assert main(["evaluate", "--data", str(tiny_data), "--out", str(out)]) == 0
+    capsys.readouterr()
+    assert main(["train", "--config", str(run / "tiny.toml"), "--data", str(tiny_data), "--out", str(out),
+                 "--force"]) == 2
+    assert_one_line_error(capsys.readouterr().err, "train", "a folder of tactile-manip evaluate")
 
 
 def test_train_refuses_fewer_training_samples_than_one_batch(tiny_data, tmp_path, capsys):

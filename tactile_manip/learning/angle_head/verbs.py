@@ -6,22 +6,20 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from tactile_manip.learning.kinds import TrainRequest, ExportRequest
+    from tactile_manip.learning.kinds import ExportRequest, TrainRequest
 
 
 
 def run_train(request: TrainRequest) -> int:
     """Train the pose model's angle head on simulated presses (:mod:`.train`); the CVAE-only flags are refused."""
-    from tqdm import tqdm
-
     from tactile_manip.learning.angle_head.train import load_angle_config, train_angle_head
-    from tactile_manip.learning.verbs import small_net_config
+    from tactile_manip.learning.verbs import small_net_config, start_run
 
     cfg = small_net_config(request, 'an angle head (kind = "angle_head")', load_angle_config)
     bars = []
 
     def start(total: int) -> None:
-        bars.append(tqdm(total=total, unit="epoch", desc="training angle head"))
+        bars.append(start_run(request, total=total, desc="training angle head"))
 
     def progress(row: dict) -> None:
         bars[0].update(1)

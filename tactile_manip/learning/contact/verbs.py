@@ -3,27 +3,24 @@ on its config and ``export --checkpoint`` / ``export-model`` of its checkpoint."
 
 from __future__ import annotations
 
+import json
 from typing import TYPE_CHECKING
 
-import json
-
 if TYPE_CHECKING:
-    from tactile_manip.learning.kinds import TrainRequest, ExportRequest
+    from tactile_manip.learning.kinds import ExportRequest, TrainRequest
 
 
 def run_train(request: TrainRequest) -> int:
     """Train the contact network (:mod:`.train`; targets from labelled presses); the CVAE-only flags are
     refused."""
-    from tqdm import tqdm
-
-    from tactile_manip.learning.verbs import small_net_config
     from tactile_manip.learning.contact.train import load_contact_config, train_contact
+    from tactile_manip.learning.verbs import small_net_config, start_run
 
     cfg = small_net_config(request, 'a contact model (kind = "contact")', load_contact_config)
     bars = []
 
     def start(total: int) -> None:
-        bars.append(tqdm(total=total, unit="epoch", desc=f"training contact x{cfg.members}"))
+        bars.append(start_run(request, total=total, desc=f"training contact x{cfg.members}"))
 
     def progress(row: dict) -> None:
         bars[0].update(1)

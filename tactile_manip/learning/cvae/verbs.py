@@ -3,22 +3,19 @@ and ``export --checkpoint`` / ``export-model`` of its checkpoint, with the model
 
 from __future__ import annotations
 
+import json
 from typing import TYPE_CHECKING
 
-import json
-
 if TYPE_CHECKING:
-    from tactile_manip.learning.kinds import TrainRequest, ExportRequest
+    from tactile_manip.learning.kinds import ExportRequest, TrainRequest
 
 
 def run_train(request: TrainRequest) -> int:
     """Train the CVAE (:mod:`.train`) with a progress bar; print the best validation PSNR."""
-    from tqdm import tqdm
-
     from tactile_manip.data import check_dataset_file
     from tactile_manip.errors import ConfigError
-    from tactile_manip.learning.verbs import check_run_folder
     from tactile_manip.learning.cvae.train import load_train_config, resolve_device, train, with_overrides
+    from tactile_manip.learning.verbs import check_run_folder, start_run
 
     check_run_folder(request)
     for path in request.data:
@@ -33,7 +30,7 @@ def run_train(request: TrainRequest) -> int:
     bars = []  # the bar starts once data, model and checkpoint are loaded, so their errors stay one line
 
     def start(done: int) -> None:
-        bars.append(tqdm(total=cfg.epochs, initial=done, unit="epoch", desc=f"training {cfg.preset}"))
+        bars.append(start_run(request, total=cfg.epochs, initial=done, desc=f"training {cfg.preset}"))
 
     def progress(row: dict) -> None:
         bars[0].update(1)
