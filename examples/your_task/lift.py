@@ -4,11 +4,12 @@ angle read after the lift against the true one (docs/your_task.md builds it step
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from tactile_manip.behaviours.skills import Abort, approach, grasp, read_pad
-from tactile_manip.behaviours.task import ReportSection, Task, fmt2, percentile
+from tactile_manip.behaviours.task import ReportSection, Task, TaskResult, fmt2, percentile
 from tactile_manip.checks import check_finite_scalar
 from tactile_manip.perception.pose import wrap_axial
 
@@ -28,18 +29,12 @@ class LiftConfig:
 
 
 @dataclass
-class LiftResult:
-    """What one lift did: the outcome, the estimates before and after the lift, the timings."""
+class LiftResult(TaskResult):
+    """What one lift did: ``estimate`` is the reading after the lift (what the trial is scored on), ``before`` the
+    one before it; the outcome, detail and timings as every result has them."""
 
-    outcome: str
-    detail: str = ""
-    estimate: object = None  # the estimate after the lift (what the trial is scored on)
-    before: object = None    # the estimate before it
+    before: Any = None
     true_angle_rad: float | None = None
-    timings_s: dict = None
-
-    def __post_init__(self) -> None:
-        self.timings_s = self.timings_s or {}
 
 
 class Lift(Task):

@@ -9,7 +9,8 @@ none of them knows a task by name. What a subclass states:
   ``[<name>]``), and the heading of its reports;
 - ``Config``: the dataclass of those settings (:class:`NoSettings` for none), validated as every config is;
 - :meth:`run`: one trial, on a :class:`Trial` (arm, gripper, sensor, estimator, the object, the seed, the truth),
-  returning a result (any object with ``outcome``, ``detail``, ``estimate`` and ``timings_s``);
+  returning a result (a :class:`TaskResult`, or any object with its ``outcome``, ``detail``, ``estimate`` and
+  ``timings_s``);
 - :meth:`failed`: the result of a trial that raised (the runner records it and goes on);
 - :meth:`record`: the fields its trials add to the log line (:class:`~tactile_manip.trials.record.TrialRecord`
   keyword arguments, ``extra`` merged into the line's ``extra``);
@@ -68,6 +69,25 @@ class Trial:
     presentation: Any = None
     truth: Any = None
     observer: Any = None
+
+
+@dataclass
+class TaskResult:
+    """What one trial of a task did: a result a task may return as it is, or subclass with its own fields.
+
+    Attributes:
+        outcome: one of the trial log's outcomes ("done", "abstained", "grasp_failed", "sensor_stale",
+            "ik_failed", "arm_fault", "safety_refused", "unmeasured", "error").
+        detail: what happened, for any outcome but "done".
+        estimate: the angle estimate the log line shows (an ``AngleEstimate``, or what the estimator read: its
+            ``angle`` is logged), or None.
+        timings_s: named durations of the trial's phases, s.
+    """
+
+    outcome: str
+    detail: str = ""
+    estimate: Any = None
+    timings_s: dict[str, float] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)

@@ -28,7 +28,7 @@ from tactile_manip.trials.methods import build_tactile_estimators
 from tactile_manip.trials.presentation import Presentation, draw_presentation
 from tactile_manip.trials.record import TrialRecord
 from tactile_manip.trials.scene import TrialScene
-from tactile_manip.trials.task_records import make_record
+from tactile_manip.trials.task_records import error_record, make_record
 
 
 def run_scene(scene: TrialScene, write: Callable[[TrialRecord], None], *,
@@ -76,8 +76,11 @@ def run_scene(scene: TrialScene, write: Callable[[TrialRecord], None], *,
                                           sensor_stall=i in faults.sensor_stall_trials, **kwargs)
             except Exception as exc:  # noqa: BLE001 - a broken trial is recorded, the run goes on
                 result = task.failed("error", f"{type(exc).__name__}: {exc}")
-            result.timings_s.setdefault("trial", time.perf_counter() - t0)
-            record = make_record(p, method, task, result)
+            try:
+                result.timings_s.setdefault("trial", time.perf_counter() - t0)
+                record = make_record(p, method, task, result)
+            except Exception as exc:  # noqa: BLE001 - the task's result or its log fields are broken: recorded
+                record = error_record(p, method, task, f"{type(exc).__name__} while logging the trial: {exc}")
             write(record)
             if trial_observer is not None:
                 trial_observer.trial_finished(record)

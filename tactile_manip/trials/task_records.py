@@ -14,8 +14,8 @@ from tactile_manip.trials.record import TrialRecord
 def make_record(p: Presentation, method: str, task: Task, result: Any) -> TrialRecord:
     """The log line of one trial of ``task`` (``result``: what its ``run`` or ``failed`` returned)."""
     fields = dict(task.record(result))
-    extra = fields.pop("extra", {})
-    est = result.estimate
+    extra = fields.pop("extra", None) or {}
+    est = getattr(result.estimate, "angle", result.estimate)  # what an estimator read carries its angle
     return TrialRecord(
         trial=p.trial, seed=p.seed, method=method, object=p.obj.display_name, true_angle_rad=p.angle_rad,
         offset_mm=p.offset_mm, target_angle_rad=fields.pop("target_angle_rad", 0.0),
@@ -26,6 +26,13 @@ def make_record(p: Presentation, method: str, task: Task, result: Any) -> TrialR
         extra={"force_n": round(p.force_n, 4), **_sensor_extra(p), **extra,
                "escalated": bool(est is not None and getattr(est, "escalated", False))},
         task=task.name, **fields)
+
+
+def error_record(p: Presentation, method: str, task: Task, detail: str) -> TrialRecord:
+    """The log line of a trial whose task could not make one (its ``record`` raised): outcome "error"."""
+    return TrialRecord(trial=p.trial, seed=p.seed, method=method, object=p.obj.display_name,
+                       true_angle_rad=p.angle_rad, offset_mm=p.offset_mm, target_angle_rad=0.0, outcome="error",
+                       detail=detail, extra={"force_n": round(p.force_n, 4), **_sensor_extra(p)}, task=task.name)
 
 
 def _sensor_extra(p: Presentation) -> dict:
