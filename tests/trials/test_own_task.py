@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import re
+import sys
 from pathlib import Path
 
 import pytest
@@ -41,7 +42,12 @@ def workspace(tmp_path, monkeypatch):
     scene = scene.replace('"models/supermag.onnx"', f'"{REPO / "models" / "supermag.onnx"}"')
     (tmp_path / "lift.toml").write_text(scene.replace("trials = 6", "trials = 2"))
     monkeypatch.chdir(tmp_path)
-    return tmp_path
+    for name in [m for m in sys.modules if m.split(".")[0] == "my_lab"]:  # another test's my_lab
+        monkeypatch.delitem(sys.modules, name)
+    monkeypatch.setattr(sys, "path", list(sys.path))
+    yield tmp_path
+    for name in [m for m in sys.modules if m.split(".")[0] == "my_lab"]:
+        del sys.modules[name]
 
 
 def test_a_task_module_outside_the_package_runs_through_trials_and_score(workspace) -> None:
@@ -82,3 +88,15 @@ def test_a_bad_task_or_setting_is_one_line_naming_the_file(workspace, capsys, ch
     assert main(["trials", "--config", "bad.toml", "--out", "run", "--quiet"]) == 2
     assert_one_line_error(capsys.readouterr().err, "trials", message)
     assert not (workspace / "run").exists()
+
+
+def test_a_task_whose_log_fields_break_records_an_error_and_the_run_goes_on(workspace) -> None:
+    (workspace / "my_lab" / "broken.py").write_text(
+        "from my_lab.lift_task import Lift\n\n\nclass Broken(Lift):\n"
+        "    def record(self, result):\n        raise KeyError('no such field')\n")
+    scene = (workspace / "lift.toml").read_text().replace('"my_lab.lift_task:Lift"', '"my_lab.broken:Broken"')
+    (workspace / "broken.toml").write_text(scene)
+    assert main(["trials", "--config", "broken.toml", "--out", "run", "--quiet"]) == 0
+    lines = [json.loads(line) for line in (workspace / "run" / "trials.jsonl").read_text().splitlines()]
+    assert len(lines) == 4 and all(r["outcome"] == "error" and r["task"] == "lift" for r in lines)
+    assert all("KeyError while logging the trial" in r["detail"] for r in lines)
