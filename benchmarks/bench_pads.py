@@ -12,7 +12,7 @@ so that a large decode does not leave the light calls a cold cache):
 - ``angle + centroids``: the same call, then every pad's centroid read (the images decoded in one batched run);
 - ``image route``: an estimator with ``angle_source = "image"``, the paper's route (every image decoded and
   post-processed: the cost of the whole pipeline before the head), and the same with each image decoded once
-  (``image_symmetry="none"``; the default model averages four passes);
+  (``image_symmetry="none"``, the runtime default; the model file's ``"rotations"`` averages four passes);
 - ``angle + force``: a ``TactileEstimator`` of the same pose estimator and the shipped contact model, its
   ``estimate_many`` (angles and contact states, each in one batched run; no position read);
 - per pad, the stages of the ``angle`` call (the head's batched run, the rest) and of the decode.
@@ -41,14 +41,14 @@ from benchmarks._common import machine_info, publish  # noqa: E402
 from benchmarks.bench_pose import PERIOD_MS, rod_readings  # noqa: E402
 from tactile_manip.perception import TactilePoseEstimator, load_reconstructor, wrap_axial  # noqa: E402
 from tactile_manip.perception.contact import ContactEstimator  # noqa: E402
-from tactile_manip.perception.contact_pose import TactileEstimator  # noqa: E402
+from tactile_manip.perception.tactile_estimator import TactileEstimator  # noqa: E402
 from tactile_manip.shipped import shipped_model  # noqa: E402
 
 PADS = (1, 2, 4, 8, 16)
 
 
 def measure(model: str, contact: str, readings: int, repeats: int, seed: int) -> dict[str, Any]:
-    rec = load_reconstructor(model, threads=1)
+    rec = load_reconstructor(model, threads=1, image_symmetry="stored")  # the default model's four passes per image
     fast = TactilePoseEstimator(rec)
     image = TactilePoseEstimator(rec, angle_source="image")
     once = TactilePoseEstimator(load_reconstructor(model, threads=1, image_symmetry="none"), angle_source="image")

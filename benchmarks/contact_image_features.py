@@ -76,7 +76,7 @@ def compute(args: argparse.Namespace) -> dict[str, Any]:
     flat = data.readings.reshape(len(data), -1).astype(np.float32)
     reading = np.concatenate([flat, np.log1p(np.linalg.norm(data.readings, axis=-1).reshape(len(data), -1))], 1)
     start = time.perf_counter()
-    image = pooled_images(OnnxReconstructor(args.pose), data.readings)
+    image = pooled_images(OnnxReconstructor(args.pose, image_symmetry="stored"), data.readings)  # as published
     out: dict[str, Any] = {"machine": machine_info(), "data": list(args.data), "pose": args.pose,
                            "train": int(len(train)), "val": int(len(val)), "test": int(len(test)),
                            "reconstruct_s": round(time.perf_counter() - start, 1), "results": {}}

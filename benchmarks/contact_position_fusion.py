@@ -29,7 +29,7 @@ from benchmarks._common import machine_info, publish
 from tactile_manip.data import load_dataset
 from tactile_manip.perception.contact import ContactEstimator
 from tactile_manip.evaluation.contact import model_predictions
-from tactile_manip.perception.contact_pose import image_centroid_mm
+from tactile_manip.perception.tactile_estimator import image_centroid_mm
 from tactile_manip.perception.estimator import TactilePoseEstimator
 from tactile_manip.perception.reconstruct import OnnxReconstructor
 
@@ -65,7 +65,7 @@ def inverse_variance(sigma: np.ndarray, image_sigma_mm: float) -> np.ndarray:
 
 def compute(args: argparse.Namespace) -> dict[str, Any]:
     data = load_dataset(args.data, images=False)
-    pose = TactilePoseEstimator(OnnxReconstructor(args.pose))
+    pose = TactilePoseEstimator(OnnxReconstructor(args.pose, image_symmetry="stored"))  # as published
     contact = ContactEstimator(args.contact)
     weights = [float(w) for w in args.weights.split(",")]
     image_sigmas = [0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 1.0, 1.5]

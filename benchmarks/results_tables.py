@@ -33,6 +33,7 @@ TABLE1 = "experiments/model_variants/eval/results.json"  # the same evaluation o
 TABLE1_MD = "experiments/model_variants/eval/table.md"
 TABLE1_ROBUST = "experiments/robust_training/robust_b48/table1.json"  # the same evaluation of the robust model
 NETWORK_LATENCY = "experiments/model_variants/eval/latency.json"  # python -m benchmarks.bench_model
+DEPTH = "docs/results/benchmarks/depth.json"  # python -m benchmarks.bench_depth: the default's image, per symmetry
 BENCH = "experiments/speed_reports/bench_2026-11-25_one_reading/report.json"  # tactile-manip bench
 BENCH_DEFAULT = "docs/results/bench_2026-11-28_default/report.json"  # tactile-manip bench of the default model
 ABLATIONS = {"data/robust.npz": "docs/results/angle_head/ablation_robust.json",  # python -m benchmarks.angle_ablation
@@ -410,7 +411,39 @@ def latency(root: Path, doc: str) -> list[str]:
     lines += _table(["model", "parameters", "threads", "p50 / p99 ms", "batch of 64, ms per reading"],
                     [[r["label"], f"{r['parameters']:,}", str(r["threads"]), f"{r['p50_ms']:.2f} / {r['p99_ms']:.2f}",
                       f"{r['batch_ms_per_reading']:.2f}"] for r in net["results"]])
-    return lines
+    return lines + depth_choices(root, doc)
+
+
+def depth_choices(root: Path, doc: str) -> list[str]:
+    """The default model's reading -> depth image per ``image_symmetry`` (cost against image and angle error),
+    and the default estimator's acceptance rows, from ``benchmarks/bench_depth.py``."""
+    d = _json(root, DEPTH)
+    m = d["machine"]
+    lines = ["", f"The default model's depth image, one thread, by what each image averages (`python -m "
+             f"benchmarks.bench_depth`, {m['time_utc'][:10]}; {m['cpu_model']}, {m['usable_cores']} cores shared with "
+             f"other jobs, load average {m['load_average'][0]:.1f}; {d['readings']} unseen-rod readings x "
+             f"{d['repeats']}; {_link('depth.md', DEPTH.replace('.json', '.md'), doc)}). Wall p99 is mostly the time "
+             "the thread waited for a core on that busy machine; best p99 (each reading's fastest of the passes) "
+             "and CPU p99 (the thread's CPU time) are the cost itself. The default decodes once "
+             "(`image_symmetry=\"none\"`); the file's four-pass average (`\"stored\"`) is what the trials, "
+             "`evaluate` (Table I), `calibrate` and `export --depth` decode, where an image's quality pays and its "
+             "latency does not.", ""]
+    rows = []
+    for name, c in d["choices"].items():
+        label = f"`{name}`" + (" (default)" if name == "none" else " (the file's)" if name == d["stored"] else "")
+        rows.append([label, str(c["passes"]), f"{c['p50_ms']:.2f} / {c['p99_ms']:.2f}",
+                     f"{c['best_of_passes_p99_ms']:.2f}", f"{c['cpu_p99_ms']:.2f}", f"{c['psnr_db']:.2f}",
+                     f"{c['ssim']:.3f}", f"{c['image_route_median_deg']:.2f} / {c['image_route_p95_deg']:.2f}"])
+    lines += _table(["image_symmetry", "decoder passes", "reading -> image, wall p50 / p99", "best p99", "CPU p99",
+                     "PSNR dB", "SSIM", "image-route angle median / p95 deg"], rows)
+    budget = d["budget_p99_ms"]
+    rows = [[label, f"{e['p50_ms']:.2f} / {e['p99_ms']:.2f}", f"{e['best_of_passes_p99_ms']:.2f}",
+             f"{e['cpu_p99_ms']:.2f}", f"{budget[key]} ms" if key in budget else ""]
+            for key, label in (("angle", "reading -> angle"), ("angle_contact", "reading -> angle, contact, position"),
+                               ("pads", "16 pads -> angles"))
+            for e in [d["estimator"][key]]]
+    return lines + [""] + _table(["`TactileEstimator.load()`", "wall p50 / p99", "best p99", "CPU p99",
+                                  "p99 budget"], rows)
 
 
 def robust(root: Path, doc: str) -> list[str]:

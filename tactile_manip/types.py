@@ -101,7 +101,7 @@ class AngleEstimate:
         escalated: the first pass was below the estimator's ``escalate_below`` and this estimate comes from its
             ``escalation`` reconstructor (extra inference: prior samples, symmetry averaging).
         source: where the angle comes from: "prior" (a method without tactile input, which answers the pad's x
-            axis: :mod:`tactile_manip.trials.blind`), "image" (the principal axis of the reconstructed image) or
+            axis: :mod:`tactile_manip.perception.baselines`), "image" (the principal axis of the reconstructed image) or
             "head" (the model's angle head, read straight from the reading, where it was the more likely).
         plausible: False when the reading holds a value beyond what the chip can report as a change, or far
             beyond the field of a press the model was made for (2000 uT on the SuperMag board: see

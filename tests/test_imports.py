@@ -57,7 +57,7 @@ def _heavy_modules_after(code: str) -> list[str]:
     "tactile_manip.collection.vbts_calibration, tactile_manip.collection.collect, tactile_manip.collection.collect_sim",
     "import tactile_manip.perception.reconstruct, tactile_manip.perception.pose",
     "import tactile_manip.perception",
-    "import tactile_manip.perception.contact, tactile_manip.perception.contact_pose",
+    "import tactile_manip.perception.contact, tactile_manip.perception.tactile_estimator",
     "import tactile_manip.evaluation",
     # the image metrics are numpy and scipy only; the gallery imports matplotlib inside its function, and the
     # contact baselines scikit-learn inside theirs
@@ -195,7 +195,7 @@ def test_perception_imports_nothing_from_evaluation():
 def test_perception_loads_no_evaluation_module():
     code = ("import tactile_manip.perception, tactile_manip.perception.reconstruct, "
             "tactile_manip.perception.pose, tactile_manip.perception.estimator, tactile_manip.perception.contact, "
-            "tactile_manip.perception.contact_pose, tactile_manip.perception.confidence, "
+            "tactile_manip.perception.tactile_estimator, tactile_manip.perception.confidence, "
             "tactile_manip.perception.symmetry, tactile_manip.perception.angle_head")
     assert _modules_after(code, "m.split('.')[:2] == ['tactile_manip', 'evaluation']") == []
 

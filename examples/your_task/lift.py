@@ -30,8 +30,8 @@ class LiftConfig:
 
 @dataclass
 class LiftResult(TaskResult):
-    """What one lift did: ``estimate`` is the reading after the lift (what the trial is scored on), ``before`` the
-    one before it; the outcome, detail and timings as every result has them."""
+    """What one lift did: ``estimate`` is the angle read after the lift (what the trial is scored on), ``before``
+    the one read before it; the outcome, detail and timings as every result has them."""
 
     before: Any = None
     true_angle_rad: float | None = None
@@ -49,9 +49,9 @@ class Lift(Task):
         result = LiftResult(outcome="error", true_angle_rad=trial.presentation.angle_rad)
         try:
             grasp(trial.arm, trial.gripper, trial.object_width_m, self.behaviour)
-            result.before = read_pad(trial.sensor, trial.estimator, self.behaviour)
+            result.before = read_pad(trial.sensor, trial.estimator, self.behaviour).angle
             approach(trial.arm, np.array([0.0, 0.0, self.config.height_mm * 1e-3]), self.behaviour, "lift")
-            result.estimate = read_pad(trial.sensor, trial.estimator, self.behaviour)
+            result.estimate = read_pad(trial.sensor, trial.estimator, self.behaviour).angle
             result.outcome = "done"
         except Abort as stop:
             result.outcome, result.detail = stop.outcome, stop.detail
@@ -61,7 +61,7 @@ class Lift(Task):
         return LiftResult(outcome=outcome, detail=detail)
 
     def record(self, result: LiftResult) -> dict:
-        est, before = _angle(result.estimate), _angle(result.before)
+        est, before = result.estimate, result.before
         done = result.outcome == "done" and est is not None and est.defined
         outcome = result.outcome if done or result.outcome != "done" else "abstained"
         error = float(wrap_axial(est.angle_rad - result.true_angle_rad)) if done else None
@@ -85,7 +85,3 @@ class Lift(Task):
     def success_rule(cls, records) -> str:
         return "Success: outcome `done` and |angle read after the lift - true angle| <="
 
-
-def _angle(estimate):
-    """The angle estimate of what the estimator read (a TactileEstimate carries it as ``angle``)."""
-    return getattr(estimate, "angle", estimate)

@@ -1,4 +1,5 @@
-"""Behaviours: the tasks trials run, each composed from an arm, a gripper, a tactile sensor and an estimator.
+"""Behaviours: the tasks trials run, each composed from an arm, a gripper, a tactile sensor and an estimator
+(:class:`~tactile_manip.perception.tactile_estimator.TactileEstimator`).
 
 - :mod:`~tactile_manip.behaviours.task`: what a task is (:class:`~tactile_manip.behaviours.task.Task`: its
   settings, one trial, the fields it logs, its report sections) and what it is handed per trial.

@@ -7,7 +7,7 @@ itself. The behaviour:
 
 1. closes on the object at the target force;
 2. reads the sensor (``frames`` frames averaged) through one estimator that gives the in-hand angle, the contact
-   state and the contact's position (:class:`~tactile_manip.perception.contact_pose.TactileEstimator`);
+   state and the contact's position (:class:`~tactile_manip.perception.tactile_estimator.TactileEstimator`);
 3. **centres**: where the object's axis is more than ``centre_tolerance_mm`` from the pad centre, opens, moves
    the hand in the pad plane so the pad centre comes onto the axis, and closes again (up to ``max_recentres``);
 4. **servoes the force**: the gripper's force gain (felt / commanded) is estimated from every reading so far,
@@ -18,10 +18,10 @@ itself. The behaviour:
    than the gripper alone by much;
 5. reports the last estimate: angle, contact state and position.
 
-Without a contact model (the estimator is a pose estimator alone, or the blind baseline) steps 3 and 4 are
-skipped: the grasp stays at the commanded force wherever the object sits, which is what a gripper without touch
-does. A rod's contact is a line across the pad; its position estimate is a point on that line, so centring moves
-the pad centre onto the rod's axis (across it), never along it.
+Without a contact model (the estimates' ``contact`` is None: the blind baseline, or an estimator given none)
+steps 3 and 4 are skipped: the grasp stays at the commanded force wherever the object sits, which is what a
+gripper without touch does. A rod's contact is a line across the pad; its position estimate is a point on that
+line, so centring moves the pad centre onto the rod's axis (across it), never along it.
 
 Scored on the truth (simulation): the force the object feels against the target, the distance from the pad
 centre to the rod's axis, and the estimated in-hand angle against the true one.
@@ -49,7 +49,7 @@ from tactile_manip.types import AngleEstimate
 
 if TYPE_CHECKING:
     from tactile_manip.perception.contact import ContactState
-    from tactile_manip.perception.contact_pose import TactileEstimate, TactileEstimator
+    from tactile_manip.perception.tactile_estimator import TactileEstimate, TactileEstimator
 
 # one force step scales the command by at most this factor either way: a wild reading cannot slam the fingers
 MAX_FORCE_STEP_RATIO = 2.0
@@ -124,23 +124,23 @@ class GripResult:
     timings_s: dict[str, float] = field(default_factory=dict)
 
 
-def grip_to_force(arm: Arm, gripper: Gripper, sensor: TactileSensor, estimator, *, object_width_m: float,
-                  config: BehaviourConfig | None = None, grip: GripConfig | None = None,
+def grip_to_force(arm: Arm, gripper: Gripper, sensor: TactileSensor, estimator: TactileEstimator, *,
+                  object_width_m: float, config: BehaviourConfig | None = None, grip: GripConfig | None = None,
                   truth: GripTruth | None = None) -> GripResult:
     """Grasp the object, centre it and servo the grip force to ``config.force_n`` (module docstring).
 
-    ``estimator``: a :class:`~tactile_manip.perception.contact_pose.TactileEstimator` (angle, contact and
-    position: the closed loop), or anything with a pose estimator's ``read(sensor, frames=, timeout_s=)``
-    (open loop: the grasp stays as commanded). Every fault ends in an outcome of the result, never an escape.
+    ``estimator``: its estimates give the angle, the contact state and the position: the closed loop; where
+    they carry no contact state (no contact model) the loop stays open (the grasp stays as commanded). Every
+    fault ends in an outcome of the result, never an escape.
     """
     cfg = config or BehaviourConfig()
     spec = grip or GripConfig()
     result = GripResult(outcome="error", commanded_force_n=cfg.force_n)
-    closed_loop = hasattr(estimator, "contact") and hasattr(estimator, "pose")
     t0 = time.perf_counter()
     try:
         _, width_m = grasp(arm, gripper, object_width_m, cfg)
         est = read_pad(sensor, estimator, cfg)
+        closed_loop = est.contact is not None
         if closed_loop:
             est = _centre(arm, gripper, sensor, estimator, width_m, cfg, spec, result, est)
             est = _servo_force(gripper, sensor, estimator, width_m, cfg, spec, result, est)
@@ -156,11 +156,11 @@ def grip_to_force(arm: Arm, gripper: Gripper, sensor: TactileSensor, estimator, 
     return result
 
 
-def _keep(result: GripResult, est, closed_loop: bool) -> None:
+def _keep(result: GripResult, est: TactileEstimate, closed_loop: bool) -> None:
     if closed_loop:
         result.estimate, result.contact, result.position_mm = est.angle, est.contact, est.position_mm
     else:
-        result.estimate = est
+        result.estimate = est.angle
 
 
 def _centre(arm: Arm, gripper: Gripper, sensor: TactileSensor, estimator: TactileEstimator, width_m: float,

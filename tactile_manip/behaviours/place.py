@@ -16,20 +16,21 @@ import math
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
-from tactile_manip.behaviours.reorient import split_estimator
 from tactile_manip.behaviours.skills import Abort, BehaviourConfig, approach, grasp, move_hand, read_pad
 from tactile_manip.behaviours.task import ReportSection, Task, Trial, lateral_section, rounded
 from tactile_manip.checks import check_array, check_finite_scalar
-from tactile_manip.perception.estimator import TactilePoseEstimator
 from tactile_manip.perception.pose import wrap_axial
 from tactile_manip.robot.base import Arm, Gripper
 from tactile_manip.robot.frames import angle_in_plane, hand_T_finger_pad, hand_T_pad, rotate_pose_about
 from tactile_manip.sensors.base import TactileSensor
 from tactile_manip.types import AngleEstimate
+
+if TYPE_CHECKING:
+    from tactile_manip.perception.tactile_estimator import TactileEstimator
 
 
 @dataclass(frozen=True)
@@ -71,7 +72,7 @@ class PlaceResult:
                 and abs(self.angle_error_rad) <= angle_tolerance_rad and self.lateral_error_m <= clearance_m)
 
 
-def place_in_slot(arm: Arm, gripper: Gripper, sensor: TactileSensor, estimator: TactilePoseEstimator, slot: Slot, *,
+def place_in_slot(arm: Arm, gripper: Gripper, sensor: TactileSensor, estimator: TactileEstimator, slot: Slot, *,
                   object_width_m: float, config: BehaviourConfig | None = None,
                   truth: PoseTruth | None = None) -> PlaceResult:
     """Grasp the rod between the fingers, measure it, and move it into ``slot`` (see the module docstring).
@@ -79,7 +80,6 @@ def place_in_slot(arm: Arm, gripper: Gripper, sensor: TactileSensor, estimator: 
     An undefined estimate aborts ("abstained"): without an axis there is nothing to align.
     """
     cfg = config or BehaviourConfig()
-    estimator = split_estimator(estimator)[0]  # a TactileEstimator's pose estimator: the angle and the centroid
     result = PlaceResult(outcome="error")
     t0 = time.perf_counter()
     normal = (arm.state().base_T_hand @ hand_T_pad())[:3, 2]
@@ -89,7 +89,7 @@ def place_in_slot(arm: Arm, gripper: Gripper, sensor: TactileSensor, estimator: 
     try:
         base_T_hand, width_m = grasp(arm, gripper, object_width_m, cfg)
         base_T_pad = base_T_hand @ hand_T_finger_pad(width_m)
-        est = read_pad(sensor, estimator, cfg)
+        est = read_pad(sensor, estimator, cfg).angle  # the rod's axis and the contact centroid, a point on it
         result.estimate = est
         if not est.defined:
             raise Abort("abstained", f"no rod axis to align: {est.reason}")

@@ -4,8 +4,8 @@ The object is between the open fingers. The gripper closes to the force threshol
 read, the estimator gives the in-hand angle and its confidence, and the arm turns the hand (and with it the
 object) about the pad normal through the contact by ``target - estimate``, so the object ends at the target
 angle in the pad frame the grasp started in. Low confidence follows a policy: act anyway, re-grasp and read
-again, or abstain. Given a :class:`~tactile_manip.perception.contact_pose.TactileEstimator` (the pose
-estimator and a contact model of the sensor's board), the estimate step also reads the grip force from the
+again, or abstain. The estimator is a :class:`~tactile_manip.perception.tactile_estimator.TactileEstimator`;
+where it holds a contact model of the sensor's board, the estimate step also reads the grip force from the
 newest frame of the final grasp.
 
 The behaviour receives its hardware (any :class:`~tactile_manip.robot.base.Arm`,
@@ -28,7 +28,6 @@ from tactile_manip.behaviours.skills import Abort, BehaviourConfig, close_on, gr
 from tactile_manip.behaviours.task import Task, Trial, rounded
 from tactile_manip.checks import check_finite_scalar
 from tactile_manip.errors import ArmFault, IKError, SafetyLimitError, SensorError
-from tactile_manip.perception.estimator import TactilePoseEstimator
 from tactile_manip.perception.pose import wrap_axial
 from tactile_manip.robot.base import Arm, Gripper
 from tactile_manip.robot.frames import angle_in_plane, hand_T_finger_pad, rotate_pose_about
@@ -37,7 +36,7 @@ from tactile_manip.types import AngleEstimate
 
 if TYPE_CHECKING:
     from tactile_manip.perception.contact import ContactEstimator, ContactState
-    from tactile_manip.perception.contact_pose import TactileEstimator
+    from tactile_manip.perception.tactile_estimator import TactileEstimator
 
 NO_TURN_RAD = 1e-6  # a correction smaller than this is not made (0.00006 deg)
 
@@ -92,17 +91,17 @@ class ReorientResult:
 
 
 def grasp_estimate_reorient(arm: Arm, gripper: Gripper, sensor: TactileSensor,
-                            estimator: TactilePoseEstimator | TactileEstimator, *, object_width_m: float,
+                            estimator: TactileEstimator, *, object_width_m: float,
                             target_angle_rad: float, config: BehaviourConfig | None = None,
                             truth: GroundTruth | None = None, pad_T: np.ndarray | None = None,
                             observer: PhaseObserver | None = None) -> ReorientResult:
     """Run the behaviour once on the object between the fingers (see the module docstring).
 
     Args:
-        estimator: a pose estimator, or a :class:`~tactile_manip.perception.contact_pose.TactileEstimator`: its
-            pose estimator gives the angle; after the angle estimate, its contact model reads the newest frame of
-            the final grasp into ``result.contact`` (the grip force and its sigma; None when no frame is fresh).
-            A contact model of another board layout than the sensor's raises ValueError before anything moves.
+        estimator: gives the angle; after the angle estimate, its contact model (where it has one) reads the
+            newest frame of the final grasp into ``result.contact`` (the grip force and its sigma; None when no
+            frame is fresh). An estimator of another board layout than the sensor's raises ValueError before
+            anything moves.
         object_width_m: nominal width of the object across the fingers, m.
         target_angle_rad: commanded final angle of the object's axis in the pad frame at grasp.
         truth: scores the final angle when given (``final_angle_rad`` and ``error_rad`` stay None otherwise).
@@ -115,9 +114,8 @@ def grasp_estimate_reorient(arm: Arm, gripper: Gripper, sensor: TactileSensor,
     """
     cfg = config or BehaviourConfig()
     observer = observer or _Silent()
-    estimator, contact = split_estimator(estimator)
-    if contact is not None:
-        contact.check_layout(sensor.layout.name)
+    contact = estimator.contact
+    estimator.check_layout(sensor.layout.name)
     target = float(wrap_axial(check_finite_scalar("target_angle_rad", target_angle_rad)))
     result = ReorientResult(outcome="error")
     timings = result.timings_s
@@ -157,16 +155,6 @@ def grasp_estimate_reorient(arm: Arm, gripper: Gripper, sensor: TactileSensor,
     return result
 
 
-def split_estimator(estimator) -> tuple[TactilePoseEstimator, ContactEstimator | None]:
-    """(pose estimator, contact model) of what a behaviour was given: a
-    :class:`~tactile_manip.perception.contact_pose.TactileEstimator` is both; anything else is the pose
-    estimator, without a contact model."""
-    pose, model = getattr(estimator, "pose", None), getattr(estimator, "contact", None)
-    if pose is None or model is None:
-        return estimator, None
-    return pose, model
-
-
 def _grip_contact(sensor: TactileSensor, contact: ContactEstimator, cfg: BehaviourConfig,
                   observer: PhaseObserver) -> ContactState | None:
     """The contact model's state of the newest frame (the last one the angle estimate read: the object is
@@ -189,9 +177,9 @@ def _confident(est: AngleEstimate, cfg: BehaviourConfig) -> bool:
     return est.defined and est.confidence >= cfg.min_confidence
 
 
-def _estimate_with_policy(gripper: Gripper, sensor: TactileSensor, estimator: TactilePoseEstimator, width_m: float,
+def _estimate_with_policy(gripper: Gripper, sensor: TactileSensor, estimator: TactileEstimator, width_m: float,
                           cfg: BehaviourConfig, result: ReorientResult, observer: PhaseObserver) -> AngleEstimate:
-    est = read_pad(sensor, estimator, cfg, observer)
+    est = read_pad(sensor, estimator, cfg, observer).angle
     if _confident(est, cfg) or cfg.low_confidence == "act":
         return est
     if cfg.low_confidence == "abstain":
@@ -205,7 +193,7 @@ def _estimate_with_policy(gripper: Gripper, sensor: TactileSensor, estimator: Ta
         release(gripper, width_m, "re-grasp")
         close_on(gripper, width_m, cfg, "re-grasp")
         observer.phase("estimate")
-        est = read_pad(sensor, estimator, cfg, observer)
+        est = read_pad(sensor, estimator, cfg, observer).angle
         if est.defined and (not best.defined or est.confidence > best.confidence):
             best = est
     return best

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-from typing import Any, Literal, Protocol
+from typing import TYPE_CHECKING, Any, Literal, Protocol
 
 import numpy as np
 
@@ -27,6 +27,9 @@ from tactile_manip.checks import check_choice, check_finite_scalar
 from tactile_manip.errors import ArmFault, GripperError, IKError, SafetyLimitError, SensorError
 from tactile_manip.robot.base import Arm, Gripper
 from tactile_manip.sensors.base import TactileSensor
+
+if TYPE_CHECKING:
+    from tactile_manip.perception.tactile_estimator import TactileEstimate, TactileEstimator
 
 POLICIES = ("act", "regrasp", "abstain")
 RELEASE_MARGIN_M = 0.01  # a release opens the fingers this much wider than the object
@@ -85,7 +88,7 @@ class EstimateObserver(Protocol):
     """Told each estimate a skill reads (a trial's frame recorder); it must not move anything."""
 
     def estimate(self, est: Any) -> None:
-        """An estimate was read."""
+        """An angle estimate was read."""
 
 
 def close_on(gripper: Gripper, width_m: float, cfg: BehaviourConfig, what: str, *,
@@ -162,9 +165,11 @@ def approach(arm: Arm, shift_base_m: np.ndarray, cfg: BehaviourConfig, what: str
     move_hand(arm, target, cfg, what)
 
 
-def read_pad(sensor: TactileSensor, estimator, cfg: BehaviourConfig, observer: EstimateObserver | None = None):
-    """Wait ``cfg.settle_s``, then read ``cfg.frames`` fresh frames through ``estimator`` (its
-    ``read(sensor, frames=, timeout_s=)``); returns what it reads, after telling ``observer``.
+def read_pad(sensor: TactileSensor, estimator: TactileEstimator, cfg: BehaviourConfig,
+             observer: EstimateObserver | None = None) -> TactileEstimate:
+    """Wait ``cfg.settle_s``, then read ``cfg.frames`` fresh frames through ``estimator``; returns its
+    :class:`~tactile_manip.perception.tactile_estimator.TactileEstimate` (``angle``; ``contact`` and
+    ``position_mm`` where the estimator has a contact model, else None), after telling ``observer`` the angle.
 
     Raises:
         Abort: "sensor_stale" when the sensor has no fresh frame within ``cfg.sensor_timeout_s``.
@@ -176,5 +181,5 @@ def read_pad(sensor: TactileSensor, estimator, cfg: BehaviourConfig, observer: E
     except SensorError as exc:
         raise Abort("sensor_stale", f"tactile sensor: {exc}") from None
     if observer is not None:
-        observer.estimate(est)
+        observer.estimate(est.angle)
     return est

@@ -131,15 +131,17 @@ def trial_success(scene, method: str, *, spec=None, reconstructor: Reconstructor
     """Run ``scene`` for one method (``spec``: a MethodSpec, as the trials command; or a ready
     ``reconstructor``) and score it at the scene's tolerance."""
     from tactile_manip.perception.estimator import TactilePoseEstimator
-    from tactile_manip.trials.methods import build_estimators
+    from tactile_manip.perception.tactile_estimator import TactileEstimator
+    from tactile_manip.trials.methods import build_pose_estimators
     from tactile_manip.trials.runner import run_scene
     from tactile_manip.trials.stats import summarise
 
     if spec is not None:
         scene = dataclasses.replace(scene, methods=[spec])
-        estimators = build_estimators(scene, Path(scene_path) if scene_path else None)
+        poses = build_pose_estimators(scene, Path(scene_path) if scene_path else None)
     else:
-        estimators = {method: TactilePoseEstimator(reconstructor)}
+        poses = {method: TactilePoseEstimator(reconstructor)}
+    estimators = {name: TactileEstimator(pose) for name, pose in poses.items()}  # the angle alone: no contact model
     records: list = []
     run_scene(scene, records.append, estimators=estimators, progress=False)
     s = next(iter(summarise(records, math.radians(scene.tolerance_deg)).methods.values()))

@@ -221,13 +221,15 @@ def _runtime_candidate(entry: ModelEntry, method: str, sym: bool, runtime: str, 
         if runtime == "ort-all" and threads == 1:
             return None  # one usable core: the same as ort-1
         label = f"onnxruntime {threads} thread" + ("s" if threads > 1 else "")
-        return Candidate(method, label, wrap(lambda n: load_reconstructor(path, threads=n)), fp32,
+        load = wrap(lambda n: load_reconstructor(path, threads=n, image_symmetry="stored"))  # the file's images
+        return Candidate(method, label, load, fp32,
                          threads=threads, accuracy_threads=usable_cores(), file_mb=_mb(path), path=str(path),
                          trial_spec=MethodSpec(method, str(path), symmetrize=sym))
     if runtime == "ort-int8":
         if int8 is None:
             return None
-        return Candidate(method, "onnxruntime int8 1 thread", wrap(lambda n: load_reconstructor(int8, threads=n)),
+        load = wrap(lambda n: load_reconstructor(int8, threads=n, image_symmetry="stored"))
+        return Candidate(method, "onnxruntime int8 1 thread", load,
                          f"{method}:int8", accuracy_threads=usable_cores(), file_mb=_mb(int8), path=str(int8),
                          trial_spec=MethodSpec(method, str(int8), symmetrize=sym))
     if runtime == "torch":

@@ -68,7 +68,9 @@ def run(args: argparse.Namespace) -> int:
     out.parent.mkdir(parents=True, exist_ok=True)
     for path in (args.fit, args.report):
         check_dataset_file(path)
-    reconstructor = load_reconstructor(args.model, **({} if baseline else {"samples": args.samples}))
+    # the images as the model file says (the trials' estimators decode them so)
+    reconstructor = load_reconstructor(args.model, **({} if baseline else {"samples": args.samples,
+                                                                          "image_symmetry": "stored"}))
     if args.symmetrized:
         reconstructor = SymmetrizedReconstructor(reconstructor)
     # the image's confidence alone: the estimator maps it before weighing a model's angle head against it

@@ -81,7 +81,7 @@ def run(args: argparse.Namespace) -> int:
             label, sep, path = spec.partition("=")
             if not sep or not label or not path:
                 raise ValueError(f"{option} must be LABEL=PATH, got {spec!r}")
-            model = OnnxReconstructor(path, threads=args.threads)
+            model = OnnxReconstructor(path, threads=args.threads, image_symmetry="stored")  # the file's images
             methods[label] = SymmetrizedReconstructor(model) if option == "--symmetrized" else model
     results, _ = evaluate_methods(data, methods, split=args.split, inception_onnx=args.inception_onnx)
     rows = _gallery_rows(data, args.split, "val")

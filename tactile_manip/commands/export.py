@@ -55,9 +55,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     data.add_argument("--format", choices=sorted(WRITERS), default=None,
                       help="lerobot (a LeRobotDataset v3.0 folder), rrd (Rerun) or mcap")
     data.add_argument("--ros2", action="store_true", help="with --format mcap: a rosbag2-compatible profile")
-    data.add_argument("--depth", nargs="?", const="models/supermag.onnx", default=None, metavar="MODEL",
-                      help="include each frame's reconstructed depth from MODEL (default models/supermag.onnx; or "
-                           "bilinear, bicubic)")
+    data.add_argument("--depth", nargs="?", const="supermag", default=None, metavar="MODEL",
+                      help="include each frame's reconstructed depth from MODEL (default: the shipped supermag "
+                           "model, found from any folder; or a .onnx path, bilinear, bicubic)")
     add_model_arguments(p.add_argument_group("writing a trained model as ONNX (also `tactile-manip export-model`)"),
                         required=False)
 

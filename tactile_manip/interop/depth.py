@@ -18,7 +18,8 @@ BATCH = 256            # readings per model run
 
 
 def add_depth(episodes: list[Episode], model: str) -> dict[str, Any]:
-    """Set ``depth_mm`` of every frame of ``episodes`` from ``model`` (an .onnx path, "bilinear" or "bicubic").
+    """Set ``depth_mm`` of every frame of ``episodes`` from ``model`` (an .onnx path, a shipped model's name,
+    "bilinear" or "bicubic").
 
     Returns:
         The model's facts for the export's metadata (name, path, metadata of an ONNX file, output shape).
@@ -30,7 +31,9 @@ def add_depth(episodes: list[Episode], model: str) -> dict[str, Any]:
     """
     from tactile_manip.perception.reconstruct import load_reconstructor, read_metadata
 
-    reconstructor = load_reconstructor(model)
+    # offline: each image as the model file says (the default model: averaged over the 4 quarter turns)
+    reconstructor = load_reconstructor(model, **({} if str(model) in ("bilinear", "bicubic") else
+                                                 {"image_symmetry": "stored"}))
     for e in episodes:
         fields = np.stack([f.field_ut for f in e.frames]).astype(np.float32)
         if e.meta.get("source") == "recording":
@@ -39,10 +42,12 @@ def add_depth(episodes: list[Episode], model: str) -> dict[str, Any]:
                                 for i in range(0, len(fields), BATCH)])
         for f, d in zip(e.frames, depth):
             f.depth_mm = np.asarray(d, np.float32)
+    path = getattr(reconstructor, "path", None)  # the file an ONNX model was found at (a name resolved)
     facts: dict[str, Any] = {"model": str(model), "output_shape": list(reconstructor.output_shape),
                              "pixel_mm": reconstructor.pixel_mm}
-    if str(model).endswith(".onnx"):
-        facts["metadata"] = read_metadata(model)
+    if path is not None:
+        facts["path"] = str(path)
+        facts["metadata"] = read_metadata(path)
     return facts
 
 

@@ -9,15 +9,15 @@ each, calibrated on held-out samples where the model carries a map
 models that read a short temporal context::
 
     from tactile_manip.perception.contact import ContactEstimator
-    contact = ContactEstimator("models/contact.onnx")
+    contact = ContactEstimator("contact")         # the shipped models/contact_supermag.onnx, or a path
     state = contact.estimate(field_ut)            # (R, C, 3) uT -> ContactState
     if state.in_contact and state.force_n is not None:
         print(state.force_n, "+-", state.force_sigma_n)
-    for state in contact.stream(sensor):         # one state per new frame, like TactilePoseEstimator.stream
-        ...
 
-With the pose estimator, one reading gives angle, location and force
-(:class:`~tactile_manip.perception.contact_pose.TactileEstimator`).
+It reads no sensor: it is the contact part of the
+:class:`~tactile_manip.perception.tactile_estimator.TactileEstimator` users take (``TactileEstimator.load()``:
+the shipped pose and contact models), whose ``read`` and ``stream`` give angle, location and force of a
+sensor's frames.
 
 The context: frame k of the model's input is the k-th reading before the newest one given to this estimator,
 when it is at most the model's ``context["max_gap_s"]`` older (by ``TactileReading.t_host_s``, or the call's
@@ -57,24 +57,22 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from tactile_manip.extras import require
 from tactile_manip.perception.confidence import SigmaCalibration
 from tactile_manip.perception.contact_context import ContextBuffer
-from tactile_manip.perception.estimator import StreamStats, implausible_field, plausible_limits_ut, stream_estimates
+from tactile_manip.perception.estimator import implausible_field, plausible_limits_ut
 from tactile_manip.perception.model_metadata import check_metadata
 from tactile_manip.perception.onnx_session import session_options
 from tactile_manip.perception.reconstruct import ModelFileError, read_metadata
+from tactile_manip.shipped import resolve_model_path
 from tactile_manip.types import TactileReading
-
-if TYPE_CHECKING:
-    from tactile_manip.sensors.base import TactileSensor
 
 # ContactState field of each standard target, and of its sigma
 STATE_FIELDS = {"x_mm": "x_sigma_mm", "y_mm": "y_sigma_mm", "depth_mm": "depth_sigma_mm",
@@ -149,7 +147,7 @@ class ContactEstimator:
     def __init__(self, path: str | Path, *, threads: int = 1, min_field_ut: float = 20.0) -> None:
         if not (np.isfinite(min_field_ut) and min_field_ut >= 0):
             raise ValueError(f"min_field_ut must be a finite value >= 0, got {min_field_ut!r}")
-        self.path = Path(path)
+        self.path = resolve_model_path(path)  # a shipped model's name, or a checkout's path from any folder
         self.metadata = read_metadata(self.path)  # ModelFileError: missing, not ONNX, not ours
         if self.metadata.get("kind") != "contact":
             raise ModelFileError(f"{self.path}: not a contact model (kind {self.metadata.get('kind', 'image')!r}); "
@@ -329,17 +327,6 @@ class ContactEstimator:
             else:
                 states.append(self._state_of(mean[rows[i]].tolist(), sigma[rows[i]].tolist(), peak_ut, latency, 1))
         return states
-
-    def stream(self, sensor: TactileSensor, *, timeout_s: float = 0.1, max_estimates: int | None = None,
-               stats: StreamStats | None = None) -> Iterator[ContactState]:
-        """Yield one state per new frame of ``sensor``, always from the newest frame (stale ones are skipped,
-        as :meth:`TactilePoseEstimator.stream <tactile_manip.perception.TactilePoseEstimator.stream>` does).
-
-        Raises SensorTimeoutError when the sensor stalls, ValueError when its board layout is not the model's.
-        """
-        self.check_layout(sensor.layout.name)
-        return stream_estimates(sensor, self.estimate, timeout_s=timeout_s, max_estimates=max_estimates,
-                                stats=stats)
 
     def _check(self, field_ut: np.ndarray) -> tuple[np.ndarray, float, str]:
         """The reading as float32 (R, C, A), its largest |value| (uT) and why it is implausible ("" when it is

@@ -1,21 +1,20 @@
-"""The tactile pose API: one magnetic reading in, the contact's in-plane angle out.
+"""The pose part of an estimator: one magnetic reading in, the contact's in-plane angle out.
 
 :class:`TactilePoseEstimator` composes a :class:`~tactile_manip.perception.reconstruct.Reconstructor`
 (SuperMag ONNX model or an interpolation baseline) with the paper's post-processing and PCA
 (:func:`~tactile_manip.perception.pose.angle_from_image`). It takes a (4, 4, 3) reading (an array in
 microtesla or a :class:`~tactile_manip.types.TactileReading`) and returns an
 :class:`~tactile_manip.types.AngleEstimate` with angle, confidence, defined flag, contact centroid and area,
-and per-stage timings. It can average several consecutive frames, estimate several pads' readings in one
-batched model run (:meth:`TactilePoseEstimator.estimate_many`), and stream estimates from any
-:class:`~tactile_manip.sensors.base.TactileSensor` at the sensor's rate, always from the newest frame::
+and per-stage timings. It can average several consecutive frames (:meth:`TactilePoseEstimator.estimate_frames`)
+and estimate several pads' readings in one batched model run (:meth:`TactilePoseEstimator.estimate_many`).
+It reads no sensor: users, behaviours and trial cells take the
+:class:`~tactile_manip.perception.tactile_estimator.TactileEstimator` it is the pose part of, whose ``read``
+and ``stream`` take frames from any :class:`~tactile_manip.sensors.base.TactileSensor`::
 
-    from tactile_manip.perception import StreamStats, TactilePoseEstimator, load_reconstructor
-    estimator = TactilePoseEstimator(load_reconstructor("models/supermag.onnx"))
-    stats = StreamStats()
-    for est in estimator.stream(sensor, stats=stats):   # one estimate per new frame; stale ones skipped
-        if est.defined and est.confidence > 0.5:
-            print(math.degrees(est.angle_rad), stats.skipped_frames)
-    left, right = estimator.estimate_many([left_reading, right_reading])   # two pads, one model run
+    from tactile_manip import TactileEstimator
+    estimator = TactileEstimator.load(contact_model=None)     # the shipped pose model alone
+    pose = estimator.pose                                     # this class
+    left, right = pose.estimate_many([left_reading, right_reading])   # two pads, one model run
 
 Confidence: the PCA's ``1 - lambda_minor / lambda_major``; when the reconstructor draws several prior samples
 (``OnnxReconstructor(samples=K)``), it is multiplied by the samples' agreement on the contact,
@@ -61,9 +60,9 @@ from __future__ import annotations
 import math
 import threading
 import time
-from collections.abc import Callable, Iterator, Mapping, Sequence
-from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING, Any, TypeVar
+from collections.abc import Mapping, Sequence
+from dataclasses import replace
+from typing import Any
 
 import numpy as np
 
@@ -74,7 +73,6 @@ from tactile_manip.perception.reconstruct import (READING_LIMIT_UT, ModelFileErr
                                                    out_of_range)
 from tactile_manip.types import IMPLAUSIBLE_READING, AngleEstimate, Deferred, TactileReading
 
-T = TypeVar("T")
 ANGLE_SOURCES = ("auto", "image", "head", "likelier")
 NO_CONTACT_FIELD = "no contact field"  # the reason of a reading whose field is below the estimator's min_field_ut
 #: with a chip flagged saturated, the (calibrated) confidence is at most this times the fraction of chips without:
@@ -92,32 +90,6 @@ CHANGE_LIMIT_UT = 2.0 * READING_LIMIT_UT
 #: it: 51 pressed through the whole skin (flagged bottomed out: the elastic model ends there and the image
 #: model's training drops them) and 5 sharp tips at 2-3 N right above one chip.
 PLAUSIBLE_FIELD_UT: dict[str, float] = {"supermag-4x4": 2000.0}
-
-if TYPE_CHECKING:  # the sensors layer is only needed for type hints here
-    from tactile_manip.sensors.base import TactileSensor
-
-
-@dataclass
-class StreamStats:
-    """Counters of one :meth:`TactilePoseEstimator.stream`, updated in place as it runs.
-
-    Attributes:
-        estimates: estimates yielded so far.
-        skipped_frames: frames between two estimated ones that were never estimated: they arrived while an
-            estimate was computed or consumed (the stream then takes the newest frame, not the stale ones
-            queued before it), or were lost on the wire (``sensor.health()`` tells those apart).
-        last_seq: sequence number of the last estimated frame (None before the first).
-    """
-
-    estimates: int = 0
-    skipped_frames: int = 0
-    last_seq: int | None = None
-
-    def count(self, seq: int) -> None:
-        """Record that frame ``seq`` is estimated next (a sequence restart skips nothing)."""
-        if self.last_seq is not None:
-            self.skipped_frames += max(0, seq - self.last_seq - 1)
-        self.last_seq = seq
 
 
 class TactilePoseEstimator:
@@ -189,6 +161,23 @@ class TactilePoseEstimator:
             _model_metadata(reconstructor), channels=int(reconstructor.input_shape[-1]),
             board_layout=reconstructor.board_layout, magnetic_ut=reconstructor.magnetic_ut)
         self._plausible_ut = float(self.plausible_limits_ut.min())  # below it, one comparison says "plausible"
+
+    @property
+    def input_shape(self) -> tuple[int, ...]:
+        """(R, C, A): the shape of a reading this estimator takes (its reconstructor's)."""
+        return tuple(self.reconstructor.input_shape)
+
+    @property
+    def board_layout(self) -> str:
+        """The board layout of the readings this estimator takes ("" for any: the interpolation baselines)."""
+        return self.reconstructor.board_layout
+
+    def check_layout(self, layout: str) -> None:
+        """Refuse a sensor of another board layout than the reconstructor's (ValueError naming both)."""
+        self.reconstructor.check_layout(layout)
+
+    def __repr__(self) -> str:
+        return f"TactilePoseEstimator({self.reconstructor.name!r}, angle_source={self.angle_source!r})"
 
     @property
     def min_contact_area_mm2(self) -> float:
@@ -411,50 +400,6 @@ class TactilePoseEstimator:
         return self._estimates([np.mean(stacked, axis=0)], [np.logical_or.reduce(flags)], [_dated(readings[-1])], t0,
                                why=[why])[0][0]
 
-    def read(self, sensor: TactileSensor, *, frames: int = 1, timeout_s: float = 0.1) -> AngleEstimate:
-        """Estimate from the next ``frames`` new frames of ``sensor`` (frames that arrived before the call are
-        not used, so a contact made just before is seen as it is now).
-
-        Raises:
-            SensorTimeoutError: a frame did not arrive within ``timeout_s`` (a stalled sensor).
-        """
-        if not isinstance(frames, int) or frames < 1:
-            raise ValueError(f"frames must be a positive integer, got {frames!r}")
-        self.reconstructor.check_layout(sensor.layout.name)
-        readings = _fresh_frames(sensor, frames, timeout_s)
-        return self.estimate_frames(readings)
-
-    def stream(self, sensor: TactileSensor, *, timeout_s: float = 0.1, max_estimates: int | None = None,
-               stats: StreamStats | None = None) -> Iterator[AngleEstimate]:
-        """Yield one estimate per new frame of ``sensor``, at the sensor's rate, always from the newest frame.
-
-        Frames that arrive while an estimate is computed (or while the caller holds the previous one) are
-        skipped, not queued, so the stream never falls behind: when processing is slower than the sensor,
-        every estimate is of the frame that is newest when the previous one is done. ``stats`` (a
-        :class:`StreamStats`), when given, counts the estimates and the skipped frames as the stream runs.
-
-        Stops after ``max_estimates`` (None: never); raises SensorTimeoutError when the sensor stalls, and
-        ValueError (naming both) when the sensor's board layout is not the reconstructor's.
-        """
-        self.reconstructor.check_layout(sensor.layout.name)
-        return stream_estimates(sensor, self.estimate, timeout_s=timeout_s, max_estimates=max_estimates,
-                                stats=stats)
-
-
-def stream_estimates(sensor: TactileSensor, estimate: Callable[[TactileReading], T], *, timeout_s: float = 0.1,
-                     max_estimates: int | None = None, stats: StreamStats | None = None) -> Iterator[T]:
-    """``estimate`` of each new frame of ``sensor``, always the newest one (frames that arrive meanwhile are
-    skipped, not queued); the loop behind every estimator's ``stream``. Raises SensorTimeoutError on a stall."""
-    stats = StreamStats() if stats is None else stats
-    count = 0
-    while max_estimates is None or count < max_estimates:
-        reading = sensor.wait_new(timeout_s)  # the newest frame not returned before
-        stats.count(reading.seq)
-        est = estimate(reading)
-        stats.estimates += 1
-        count += 1
-        yield est
-
 
 class _PendingImages:
     """The images of one call's estimates whose angle the head gave: decoded together, in one batched run, when
@@ -501,17 +446,6 @@ def _saturated(reading: TactileReading | np.ndarray) -> np.ndarray | None:
 
 def _dated(reading: TactileReading | np.ndarray) -> TactileReading | None:
     return reading if isinstance(reading, TactileReading) else None
-
-
-def _fresh_frames(sensor: TactileSensor, frames: int, timeout_s: float) -> list[TactileReading]:
-    """``frames`` consecutive readings that arrived after this call, oldest first."""
-    start_s = time.monotonic()
-    readings: list[TactileReading] = []
-    while len(readings) < frames:
-        reading = sensor.wait_new(timeout_s)
-        if reading.t_host_s >= start_s:
-            readings.append(reading)
-    return readings
 
 
 def plausible_limits_ut(metadata: Mapping[str, Any], *, channels: int, board_layout: str,

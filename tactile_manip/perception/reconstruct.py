@@ -33,6 +33,7 @@ from tactile_manip.perception.model_metadata import ModelFileError, check_metada
 from tactile_manip.perception.one_reading import open_one_reading
 from tactile_manip.perception.onnx_session import session_options
 from tactile_manip.extras import require
+from tactile_manip.shipped import SHIPPED_MODELS, missing_model_message, resolve_model_path
 
 METADATA_KEY = "tactile_manip"
 SYMMETRY_CHUNK = 64  # readings per batch of symmetric copies (4 or 8 images each)
@@ -170,19 +171,22 @@ class OnnxReconstructor(Reconstructor):
             sessions taking turns fight over the cores (p99 5 ms against 1.1 ms at 2 threads on 2 cores).
         angle_head: open the file's angle head when it has one (:attr:`angle_head`); False leaves it out (the
             pose estimator then reads the angle from the image alone).
-        image_symmetry: what each image is averaged over (None: what the file says, ``"none"`` for files that
-            say nothing): ``"rotations"`` decodes the reading in its 4 quarter turns and averages the turned-back
-            images (exactly equivariant under the turns, sharper on unseen shapes: +0.41 dB PSNR for the default
-            model's decoder on the unseen presses of ``data/supermag.npz``, 25.16 against 24.75 dB), ``"all"``
-            in its 8 symmetric copies, ``"none"`` once. Each copy is a decoder pass: 4 or 8 times the image's
-            cost, which only callers of the image pay (the angle head reads the reading, not the image).
+        image_symmetry: what each image is averaged over: ``"none"`` (the default) decodes the reading once
+            (the default model: p99 within 2.5 ms on one thread); ``"rotations"`` decodes it in its 4 quarter
+            turns and averages the turned-back images (exactly equivariant under the turns, sharper on unseen
+            shapes: +0.41 dB PSNR for the default model's decoder on the unseen presses of
+            ``data/supermag.npz``, 25.16 against 24.75 dB), ``"all"`` in its 8 symmetric copies; ``"stored"``
+            takes what the file says (``"none"`` for files that say nothing; ``models/supermag.onnx`` says
+            ``"rotations"``: its published image figures are of that average). Each copy is a decoder pass: 4 or
+            8 times the image's cost, which only callers of the image pay (the angle head reads the reading).
+            ``benchmarks/bench_depth.py`` measures each choice.
     """
 
     def __init__(self, path: str | Path, *, threads: int = 1, providers: tuple[str, ...] = ("CPUExecutionProvider",),
                  samples: int = 1, seed: int = 0, one_reading_graph: bool = True, angle_head: bool = True,
-                 image_symmetry: str | None = None) -> None:
+                 image_symmetry: str = "none") -> None:
         ort = require("onnxruntime", "OnnxReconstructor")
-        self.path = Path(path)
+        self.path = resolve_model_path(path)  # a shipped model's name, or a checkout's path from any folder
         if samples < 1:
             raise ValueError(f"samples must be >= 1, got {samples}")
         self.metadata = read_metadata(self.path)
@@ -210,7 +214,7 @@ class OnnxReconstructor(Reconstructor):
         # models exported before board layouts existed were all trained on the SuperMag board
         self.board_layout = str(self.metadata.get("board_layout", DEFAULT_BOARD_LAYOUT))
         self._check_graph()
-        self.image_symmetry = str(self.metadata.get("image_symmetry", "none")) if image_symmetry is None \
+        self.image_symmetry = str(self.metadata.get("image_symmetry", "none")) if image_symmetry == "stored" \
             else image_symmetry
         self._image_group = image_subgroup(self.input_shape, self.output_shape, self.image_symmetry)
         self._one = None
@@ -318,8 +322,7 @@ def read_metadata(path: str | Path) -> dict[str, Any]:
     Raises :class:`ModelFileError`."""
     path = Path(path)
     if not path.is_file():
-        raise ModelFileError(f"model file not found: {path} (export one with `tactile-manip export`, or use "
-                             "the shipped models/supermag.onnx)")
+        raise ModelFileError(missing_model_message(path))
     try:
         import onnx
 
@@ -474,6 +477,7 @@ def load_reconstructor(name_or_path: str | Path, **kwargs: Any) -> Reconstructor
             pad_mm = fit["output_shape"][1] * fit["pixel_mm"]
             fit["output_shape"], fit["pixel_mm"] = (size, size), pad_mm / size
         return BASELINES[key](**fit)
-    if not key.endswith(".onnx") and not Path(key).exists():
-        raise ModelFileError(f"unknown reconstructor {key!r}: use 'bilinear', 'bicubic' or a path to an .onnx model")
+    if not key.endswith(".onnx") and not resolve_model_path(key).exists():
+        raise ModelFileError(f"unknown reconstructor {key!r}: use 'bilinear', 'bicubic', a shipped model's name "
+                             f"({', '.join(SHIPPED_MODELS)}) or a path to an .onnx model")
     return OnnxReconstructor(key, **kwargs)

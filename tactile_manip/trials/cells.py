@@ -16,7 +16,7 @@ from __future__ import annotations
 import contextlib
 import math
 from collections.abc import Callable, Iterator
-from typing import Protocol
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
@@ -28,6 +28,9 @@ from tactile_manip.robot.frames import hand_T_finger_pad
 from tactile_manip.sensors.config import SimulatedSensorConfig
 from tactile_manip.trials.presentation import Presentation, pad_T_object
 from tactile_manip.trials.scene import TrialScene
+
+if TYPE_CHECKING:
+    from tactile_manip.perception.tactile_estimator import TactileEstimator
 
 
 class Cell(Protocol):
@@ -180,8 +183,8 @@ class SimulatedCell:
         self.sensor.calibrate_baseline(frames=SENSOR_DRAW_BASELINE_FRAMES)
         self._sensor_key = key
 
-    def run_one(self, p: Presentation, estimator, *, arm_fault: bool = False, sensor_stall: bool = False,
-                observer=None):
+    def run_one(self, p: Presentation, estimator: TactileEstimator, *, arm_fault: bool = False,
+                sensor_stall: bool = False, observer=None):
         """Present ``p``, run the scene's task with ``estimator``, release, reset.
 
         ``observer`` (a :class:`~tactile_manip.behaviours.reorient.PhaseObserver`) is handed to the task.
@@ -227,7 +230,8 @@ def make_task(scene: TrialScene) -> Task:
     return task_class(scene.task)(scene)
 
 
-def trial_of(cell, p: Presentation, estimator, object_width_m: float, truth, observer=None) -> Trial:
+def trial_of(cell, p: Presentation, estimator: TactileEstimator, object_width_m: float, truth,
+             observer=None) -> Trial:
     """What the task is handed for trial ``p`` in ``cell`` (its arm, gripper and sensor)."""
     return Trial(arm=cell.arm, gripper=cell.gripper, sensor=cell.sensor, estimator=estimator,
                  object_width_m=object_width_m, seed=p.seed, presentation=p, truth=truth, observer=observer)

@@ -1,9 +1,10 @@
-"""A scene's methods made ready to run: each method's pose estimator (model, baseline or the blind one) and
-contact model, every file found and checked before the first trial.
+"""A scene's methods made ready to run: each method's estimator, every file found and checked before the first
+trial.
 
-:func:`build_tactile_estimators` gives what each method's behaviour is handed: its pose estimator joined with
-its contact model as one :class:`~tactile_manip.perception.contact_pose.TactileEstimator`, or the pose
-estimator alone (a method without a contact model, and the blind baseline, which has no tactile input)."""
+:func:`build_tactile_estimators` gives what each method's behaviour is handed: one
+:class:`~tactile_manip.perception.tactile_estimator.TactileEstimator` whose pose part is the method's model, an
+interpolation baseline or the blind baseline (:func:`build_pose_estimators`), with the method's contact model
+where it has one (the blind baseline, which has no tactile input, never has)."""
 
 from __future__ import annotations
 
@@ -11,12 +12,10 @@ import dataclasses
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from tactile_manip.perception.estimator import TactilePoseEstimator
-from tactile_manip.perception.pose import PoseParams
-from tactile_manip.perception.reconstruct import load_reconstructor
-from tactile_manip.perception.confidence import load_calibration_beside
-from tactile_manip.perception.symmetry import SymmetrizedReconstructor
-from tactile_manip.trials.blind import BLIND, BlindEstimator
+from tactile_manip.perception.baselines import BLIND, BlindPoseEstimator
+from tactile_manip.perception.loading import load_pose_estimator
+from tactile_manip.perception.reconstruct import BASELINES
+from tactile_manip.perception.tactile_estimator import PoseEstimator, TactileEstimator
 from tactile_manip.trials.scene import MethodSpec, TrialScene
 
 if TYPE_CHECKING:
@@ -40,7 +39,7 @@ def resolve_scene_path(name: str, scene_path: Path | None) -> str:
     for candidate in candidates:
         if candidate.exists():
             return str(candidate)
-    return str(path)  # the loader raises the clear "missing model" error
+    return str(path)  # the loader looks in the source checkout, else names it missing
 
 
 def build_contact_estimator(scene: TrialScene, scene_path: Path | None = None, *,
@@ -83,51 +82,32 @@ def build_contact_estimators(scene: TrialScene, scene_path: Path | None = None, 
     return out
 
 
-def build_estimators(scene: TrialScene, scene_path: Path | None = None) -> dict[str, TactilePoseEstimator]:
-    """One estimator per method (models are loaded once, before the first trial)."""
-    out = {}
+def build_pose_estimators(scene: TrialScene, scene_path: Path | None = None) -> dict[str, PoseEstimator]:
+    """Each method's pose part (models are loaded once, before the first trial): a
+    :class:`~tactile_manip.perception.estimator.TactilePoseEstimator`, or the blind baseline's
+    (:func:`~tactile_manip.perception.loading.load_pose_estimator` of the method's options). A model's images are
+    decoded as its file says (``image_symmetry = "stored"``: the default model's four passes), which is how
+    every published trial figure was measured."""
+    out: dict[str, PoseEstimator] = {}
     for spec in scene.methods:
-        if spec.reconstructor == BLIND:  # the baseline without tactile input
-            out[spec.name] = BlindEstimator()
-            continue
-        target = resolve_model_path(spec, scene_path)
-        if target in ("bilinear", "bicubic"):
-            kwargs = {"output_px": spec.output_px} if spec.output_px else {}
-        else:
-            kwargs = {"threads": spec.threads, "samples": spec.samples}
-        base = load_reconstructor(target, **kwargs)
-        reconstructor = SymmetrizedReconstructor(base) if spec.symmetrize else base
-        model = target not in ("bilinear", "bicubic")
-        calibration = load_calibration_beside(target) if model and spec.calibrated else None
-        params = PoseParams()  # the estimator's pose parameters, which the calibration must have been fitted with
-        route = spec.angle_source
-        if route == "auto":
-            route = "head" if base.angle_head is not None else "image"
-        if calibration is not None and not calibration.fits(prior_samples=spec.samples, symmetrized=spec.symmetrize,
-                                                            aperture=params.aperture, route=route):
-            calibration = None  # fitted for another estimator: its map would not give this one's probability
-        escalation = None
-        if spec.escalate_below > 0 and spec.escalation == "symmetry":
-            escalation = SymmetrizedReconstructor(base)
-        elif spec.escalate_below > 0:  # "samples" (MethodSpec refuses it for baselines)
-            escalation = load_reconstructor(target, threads=spec.threads, samples=spec.escalation_samples)
-            if spec.symmetrize:
-                escalation = SymmetrizedReconstructor(escalation, spread=True)
-        out[spec.name] = TactilePoseEstimator(reconstructor, params, calibration=calibration, escalation=escalation,
-                                              escalate_below=spec.escalate_below, angle_source=spec.angle_source)
+        target = spec.reconstructor if spec.reconstructor == BLIND else resolve_model_path(spec, scene_path)
+        model = target not in (BLIND, *BASELINES)
+        out[spec.name] = load_pose_estimator(
+            target, threads=spec.threads, samples=spec.samples, symmetrize=spec.symmetrize,
+            calibrated=spec.calibrated, angle_source=spec.angle_source, escalate_below=spec.escalate_below,
+            escalation=spec.escalation, escalation_samples=spec.escalation_samples, output_px=spec.output_px,
+            image_symmetry="stored" if model else "none")
     return out
 
 
 def build_tactile_estimators(scene: TrialScene, scene_path: Path | None = None, *,
-                             layout: str | None = None) -> dict:
-    """What each method's behaviour is handed: its pose estimator (:func:`build_estimators`) joined with its
-    contact model (:func:`build_contact_estimators`, checked against the board ``layout``) as one
-    :class:`~tactile_manip.perception.contact_pose.TactileEstimator`; the pose estimator alone for a method
-    without a contact model and for the blind baseline (no tactile input)."""
-    from tactile_manip.perception.contact_pose import TactileEstimator
-
-    poses = build_estimators(scene, scene_path)
+                             layout: str | None = None) -> dict[str, TactileEstimator]:
+    """What each method's behaviour is handed: a
+    :class:`~tactile_manip.perception.tactile_estimator.TactileEstimator` of its pose part
+    (:func:`build_pose_estimators`) and its contact model (:func:`build_contact_estimators`, checked against
+    the board ``layout``); without one for a method that has no contact model and for the blind baseline (no
+    tactile input)."""
+    poses = build_pose_estimators(scene, scene_path)
     contacts = build_contact_estimators(scene, scene_path, layout=layout)
-    return {name: TactileEstimator(pose, contacts[name])
-            if contacts[name] is not None and isinstance(pose, TactilePoseEstimator) else pose
+    return {name: TactileEstimator(pose, None if isinstance(pose, BlindPoseEstimator) else contacts[name])
             for name, pose in poses.items()}

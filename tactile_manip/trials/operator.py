@@ -19,6 +19,7 @@ import contextlib
 import math
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -30,6 +31,9 @@ from tactile_manip.sensors.base import TactileSensor
 from tactile_manip.sensors.config import SerialSensorConfig
 from tactile_manip.trials.cells import make_task, trial_of
 from tactile_manip.trials.scene import TrialScene
+
+if TYPE_CHECKING:
+    from tactile_manip.perception.tactile_estimator import TactileEstimator
 
 
 @dataclass(frozen=True)
@@ -127,7 +131,8 @@ class OperatorCell:
             self.gripper.open()
             self._ask("take the object out of the hand, then press Enter ")
 
-    def run_one(self, p, estimator, *, arm_fault: bool = False, sensor_stall: bool = False, observer=None):
+    def run_one(self, p, estimator: TactileEstimator, *, arm_fault: bool = False, sensor_stall: bool = False,
+                observer=None):
         """Present ``p``, run the scene's task, ask for the measured final angle (``estimator`` and
         ``observer``: see :meth:`~tactile_manip.trials.cells.SimulatedCell.run_one`)."""
         if arm_fault or sensor_stall:

@@ -20,7 +20,7 @@ import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 from tactile_manip.perception.pose import wrap_axial
 from tactile_manip.trials.cells import Cell, make_cell
@@ -30,9 +30,12 @@ from tactile_manip.trials.record import TrialRecord
 from tactile_manip.trials.scene import TrialScene
 from tactile_manip.trials.task_records import error_record, make_record
 
+if TYPE_CHECKING:
+    from tactile_manip.perception.tactile_estimator import TactileEstimator
+
 
 def run_scene(scene: TrialScene, write: Callable[[TrialRecord], None], *,
-              estimators: Mapping[str, Any],
+              estimators: Mapping[str, TactileEstimator],
               skip: set[tuple[int, str]] = frozenset(), progress: bool = True, cell: Cell | None = None,
               trial_observer=None, frames_dir: str | Path | None = None) -> int:
     """Run every (trial, method) of ``scene`` not in ``skip``; ``write`` each record.
@@ -121,7 +124,7 @@ class TrialWork:
     scene: TrialScene
     scene_path: Path | None
     cell: Any
-    estimators: Mapping[str, Any]
+    estimators: Mapping[str, TactileEstimator]
     skip: set[tuple[int, str]] = field(default_factory=set)
     frames_dir: Path | None = None
     progress: bool = True

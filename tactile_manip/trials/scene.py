@@ -31,7 +31,7 @@ class MethodSpec:
     Attributes:
         name: label in the logs and plots, e.g. "supermag".
         reconstructor: "bilinear", "bicubic", "blind" (no tactile input: the baseline every task is scored
-            against, :mod:`tactile_manip.trials.blind`) or a path to an exported .onnx model (relative paths are
+            against, :mod:`tactile_manip.perception.baselines`) or a path to an exported .onnx model (relative paths are
             resolved against the working directory, then against the scene file's repository).
         output_px: baselines only: square output size (16 = the paper's 4x4 -> 16x16 trial baseline; 0 keeps
             the shipped 200x200).

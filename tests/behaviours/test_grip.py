@@ -10,9 +10,9 @@ import pytest
 from tactile_manip.behaviours.grip import GripConfig, GripResult, grip_to_force
 from tactile_manip.behaviours.skills import BehaviourConfig
 from tactile_manip.perception.contact import ContactState
-from tactile_manip.perception.contact_pose import TactileEstimate, TactileEstimator
+from tactile_manip.perception.tactile_estimator import TactileEstimate, TactileEstimator
 from tactile_manip.trials.cells import SimulatedCell
-from tactile_manip.trials.methods import build_estimators
+from tactile_manip.trials.methods import build_pose_estimators, build_tactile_estimators
 from tactile_manip.trials.presentation import draw_presentation
 from tactile_manip.trials.scene import MethodSpec, PresentationConfig, TrialObject, TrialScene
 
@@ -35,15 +35,15 @@ def cell():
 
 
 class OracleForce:
-    """The pose estimator's angle and position with the force the cell really applies: what a perfect contact
+    """An estimator's angle and position with the force the cell really applies: what a perfect contact
     model would read, so the servo and the centring are tested apart from any model's error."""
 
-    def __init__(self, cell: SimulatedCell, pose) -> None:
-        self.cell, self.pose, self.contact = cell, pose, None
+    def __init__(self, cell: SimulatedCell, estimator: TactileEstimator) -> None:
+        self.cell, self.estimator = cell, estimator
         self.reads: list[float] = []
 
     def read(self, sensor, *, frames: int = 1, timeout_s: float = 0.1) -> TactileEstimate:
-        angle = self.pose.read(sensor, frames=frames, timeout_s=timeout_s)
+        angle = self.estimator.read(sensor, frames=frames, timeout_s=timeout_s).angle
         force = self.cell.applied_force_n
         self.reads.append(force)
         return TactileEstimate(angle=angle, contact=ContactState(in_contact=True, force_n=force, force_sigma_n=0.1),
@@ -69,7 +69,7 @@ def _grip(cell, p, estimator, grip: GripConfig | None = None) -> GripResult:
 
 def test_the_servo_brings_the_felt_force_to_the_target_and_centres_the_rod(cell) -> None:
     p = _presentation_off_target(cell, 2.0)
-    oracle = OracleForce(cell, build_estimators(cell.scene)["supermag"])
+    oracle = OracleForce(cell, build_tactile_estimators(cell.scene)["supermag"])
     grip = GripConfig(force_tolerance_n=1.0, force_deadband_n=0.2, centre_tolerance_mm=0.3)
     result = _grip(cell, p, oracle, grip)
     assert result.outcome == "done", result.detail
@@ -82,8 +82,9 @@ def test_the_servo_brings_the_felt_force_to_the_target_and_centres_the_rod(cell)
 
 def test_without_a_contact_model_the_grip_stays_as_commanded(cell) -> None:
     p = _presentation_off_target(cell, 2.0)
-    pose = build_estimators(cell.scene)["supermag"]
-    result = _grip(cell, p, pose)
+    plain = build_tactile_estimators(cell.scene)["supermag"]  # the scene names no contact model
+    assert plain.contact is None
+    result = _grip(cell, p, plain)
     assert result.outcome == "done" and result.force_steps == 0 and result.recentres == 0
     assert result.commanded_force_n == TARGET_N and result.contact is None
     assert result.force_error_n == pytest.approx(p.force_n - TARGET_N)
@@ -94,7 +95,7 @@ def test_without_a_contact_model_the_grip_stays_as_commanded(cell) -> None:
 def test_the_shipped_contact_model_closes_the_loop(cell) -> None:
     from tactile_manip.perception.contact import ContactEstimator
 
-    both = TactileEstimator(build_estimators(cell.scene)["supermag"],
+    both = TactileEstimator(build_pose_estimators(cell.scene)["supermag"],
                             ContactEstimator(MODELS / "contact_supermag.onnx"))
     p = _presentation_off_target(cell, 2.0)
     result = _grip(cell, p, both)
@@ -108,9 +109,9 @@ def test_the_shipped_contact_model_closes_the_loop(cell) -> None:
 
 
 def test_a_sensor_that_stops_ends_the_grip_as_stale(cell) -> None:
-    pose = build_estimators(cell.scene)["supermag"]
+    plain = build_tactile_estimators(cell.scene)["supermag"]
     with cell.presented(draw_presentation(cell.scene, 0), sensor_stall=True) as (obj, truth):
-        result = grip_to_force(cell.arm, cell.gripper, cell.sensor, pose, object_width_m=obj.width_m,
+        result = grip_to_force(cell.arm, cell.gripper, cell.sensor, plain, object_width_m=obj.width_m,
                                config=cell.scene.behaviour, truth=truth)
     assert isinstance(result, GripResult)
     assert result.outcome == "sensor_stale" and result.force_error_n is None
@@ -149,7 +150,7 @@ def test_the_gripper_prior_weighs_an_unsure_reading_down(cell) -> None:
                                    position_mm=est.position_mm)
 
     p = _presentation_off_target(cell, 2.0)
-    unsure = Unsure(cell, build_estimators(cell.scene)["supermag"])
+    unsure = Unsure(cell, build_tactile_estimators(cell.scene)["supermag"])
     grip = GripConfig(force_deadband_n=0.01, max_force_steps=1, command_sigma_n=2.0)
     result = _grip(cell, p, unsure, grip)
     gain = (1.0 + p.force_n / TARGET_N) / 2  # equal weights: the prior's gain 1 and the reading's
@@ -160,8 +161,8 @@ def test_the_gripper_prior_weighs_an_unsure_reading_down(cell) -> None:
 def test_a_contact_state_that_is_no_answer_leaves_the_grip_as_commanded(cell) -> None:
     """An implausible state has no force: the servo does not act on it (nor on a non-positive force)."""
     class NoAnswer(OracleForce):
-        def __init__(self, cell, pose, state: ContactState) -> None:
-            super().__init__(cell, pose)
+        def __init__(self, cell, estimator, state: ContactState) -> None:
+            super().__init__(cell, estimator)
             self.state = state
 
         def read(self, sensor, *, frames: int = 1, timeout_s: float = 0.1) -> TactileEstimate:
@@ -171,7 +172,7 @@ def test_a_contact_state_that_is_no_answer_leaves_the_grip_as_commanded(cell) ->
     p = _presentation_off_target(cell, 2.0)
     for state in (ContactState(in_contact=True, plausible=False, implausible_reason="a chip beyond its range"),
                   ContactState(in_contact=True, force_n=-0.3, force_sigma_n=0.5)):
-        estimator = NoAnswer(cell, build_estimators(cell.scene)["supermag"], state)
+        estimator = NoAnswer(cell, build_tactile_estimators(cell.scene)["supermag"], state)
         result = _grip(cell, p, estimator)
         assert result.outcome == "done" and result.force_steps == 0 and result.commanded_force_n == TARGET_N
         assert result.force_error_n == pytest.approx(p.force_n - TARGET_N)

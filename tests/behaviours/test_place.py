@@ -11,7 +11,7 @@ import pytest
 from tactile_manip.behaviours.place import Slot, place_in_slot, slot_errors
 from tactile_manip.robot.frames import hand_T_pad, transform
 from tactile_manip.trials.cells import SimulatedCell
-from tactile_manip.trials.methods import build_estimators
+from tactile_manip.trials.methods import build_tactile_estimators
 from tactile_manip.trials.presentation import draw_presentation
 from tactile_manip.trials.scene import MethodSpec, PresentationConfig, TrialObject, TrialScene
 
@@ -37,7 +37,7 @@ def _slot(base_T_pad: np.ndarray, angle_rad: float) -> Slot:
 
 @pytest.mark.parametrize("trial, slot_deg", [(0, 70.0), (1, -20.0), (2, 5.0)])
 def test_the_rod_ends_in_the_slot(cell, trial, slot_deg) -> None:
-    estimator = build_estimators(cell.scene)["supermag"]
+    estimator = build_tactile_estimators(cell.scene)["supermag"]
     with cell.presented(draw_presentation(cell.scene, trial)) as (obj, truth):
         base_T_pad = cell.arm.state().base_T_hand @ hand_T_pad()
         slot = _slot(base_T_pad, math.radians(slot_deg))
@@ -50,7 +50,7 @@ def test_the_rod_ends_in_the_slot(cell, trial, slot_deg) -> None:
 
 
 def test_a_slot_out_of_the_pad_plane_is_refused_before_grasping(cell) -> None:
-    estimator = build_estimators(cell.scene)["supermag"]
+    estimator = build_tactile_estimators(cell.scene)["supermag"]
     with cell.presented(draw_presentation(cell.scene, 0)) as (obj, _):
         normal = (cell.arm.state().base_T_hand @ hand_T_pad())[:3, 2]
         with pytest.raises(ValueError, match="pad plane"):

@@ -12,7 +12,7 @@ import pytest
 from tactile_manip.behaviours.reorient import grasp_estimate_reorient
 from tactile_manip.shipped import shipped_model
 from tactile_manip.trials.cells import SimulatedCell
-from tactile_manip.trials.methods import build_estimators
+from tactile_manip.trials.methods import build_pose_estimators
 from tactile_manip.trials.presentation import draw_presentation
 from tactile_manip.trials.scene import MethodSpec, PresentationConfig, TrialObject, TrialScene
 
@@ -47,11 +47,9 @@ def cell():
 
 
 def _run(cell, contact, observer=None):
-    from tactile_manip.perception.contact_pose import TactileEstimator
+    from tactile_manip.perception.tactile_estimator import TactileEstimator
 
-    estimator = build_estimators(cell.scene)["bilinear"]
-    if contact is not None:
-        estimator = TactileEstimator(estimator, contact)
+    estimator = TactileEstimator(build_pose_estimators(cell.scene)["bilinear"], contact)
     with cell.presented(draw_presentation(cell.scene, 0)) as (obj, truth):
         return grasp_estimate_reorient(cell.arm, cell.gripper, cell.sensor, estimator, object_width_m=obj.width_m,
                                        target_angle_rad=0.0, truth=truth, observer=observer)
@@ -73,15 +71,14 @@ def test_the_estimate_step_reads_the_grip_force_of_the_final_grasp(cell) -> None
 
 
 def test_a_contact_model_of_another_board_is_refused_before_the_gripper_closes(cell, contact_model_of_layout) -> None:
-    from types import SimpleNamespace
-
     from tactile_manip.perception.contact import ContactEstimator
-    from tactile_manip.perception.contact_pose import TactileEstimator
+    from tactile_manip.perception.tactile_estimator import TactileEstimator
 
-    pose, model = build_estimators(cell.scene)["bilinear"], ContactEstimator(contact_model_of_layout("anyskin-5"))
+    pose, model = build_pose_estimators(cell.scene)["bilinear"], ContactEstimator(contact_model_of_layout("anyskin-5"))
     with pytest.raises(ValueError, match="use models of one board"):
         TactileEstimator(pose, model)
-    foreign = SimpleNamespace(pose=pose, contact=model)  # one built around that check: the behaviour checks again
+    foreign = TactileEstimator(pose)
+    foreign.contact = model  # one built around that check: the behaviour checks again
     open_width = cell.gripper.state().width_m
     with cell.presented(draw_presentation(cell.scene, 1)) as (obj, truth):
         q = np.array(cell.arm.state().q_rad)
@@ -93,12 +90,12 @@ def test_a_contact_model_of_another_board_is_refused_before_the_gripper_closes(c
 
 def test_a_tactile_estimator_gives_both_the_angle_and_the_grip_force(cell) -> None:
     from tactile_manip.perception.contact import ContactEstimator
-    from tactile_manip.perception.contact_pose import TactileEstimator
+    from tactile_manip.perception.tactile_estimator import TactileEstimator
 
     # the default model's pose: the 16x16 bilinear image of a 3 mm rod is at times too small to give an axis,
     # and whether it is depends on the chip noise of the frames read
     scene = dataclasses.replace(cell.scene, methods=[MethodSpec("supermag", str(shipped_model()))])
-    both = TactileEstimator(build_estimators(scene)["supermag"], ContactEstimator(CONTACT_MODEL))
+    both = TactileEstimator(build_pose_estimators(scene)["supermag"], ContactEstimator(CONTACT_MODEL))
     with cell.presented(draw_presentation(cell.scene, 0)) as (obj, truth):
         result = grasp_estimate_reorient(cell.arm, cell.gripper, cell.sensor, both, object_width_m=obj.width_m,
                                          target_angle_rad=0.0, truth=truth)

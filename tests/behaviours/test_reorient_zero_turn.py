@@ -6,7 +6,7 @@ from __future__ import annotations
 import pytest
 
 from tactile_manip.behaviours.reorient import grasp_estimate_reorient
-from tactile_manip.trials.blind import BlindEstimator
+from tactile_manip.perception.baselines import blind_estimator
 from tactile_manip.trials.cells import SimulatedCell
 from tactile_manip.trials.presentation import draw_presentation
 from tactile_manip.trials.scene import MethodSpec, PresentationConfig, TrialObject, TrialScene
@@ -35,7 +35,7 @@ def test_a_zero_correction_moves_nothing() -> None:
     with cell.connected(), cell.presented(draw_presentation(scene, 0)) as (obj, truth):
         arm = CountingArm(cell.arm)
         before = arm.state().base_T_hand
-        result = grasp_estimate_reorient(arm, cell.gripper, cell.sensor, BlindEstimator(), object_width_m=obj.width_m,
-                                         target_angle_rad=0.0, truth=truth)  # the blind answer is the target
+        result = grasp_estimate_reorient(arm, cell.gripper, cell.sensor, blind_estimator(),  # answers the target
+                                         object_width_m=obj.width_m, target_angle_rad=0.0, truth=truth)
         assert result.outcome == "done" and result.correction_rad == 0.0
         assert arm.cartesian_moves == 0 and (arm.state().base_T_hand == before).all()

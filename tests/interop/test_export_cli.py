@@ -114,6 +114,23 @@ def test_depth_from_a_model_becomes_an_image_feature(recording, tmp_path) -> Non
     assert ours["episodes"][0]["baseline_for_depth"].startswith("mean of the first 125 frames")
 
 
+def test_depth_without_a_model_takes_the_shipped_one_from_any_folder(recording, tmp_path, monkeypatch,
+                                                                     capsys) -> None:
+    pytest.importorskip("onnxruntime", reason="the shipped model runs on onnxruntime")
+    from pathlib import Path
+
+    monkeypatch.chdir(tmp_path)  # not the repository root: models/ is not here
+    assert main(["export", str(recording), "--format", "lerobot", "--out", "DS", "--depth"]) == 0
+    ours = json.loads((tmp_path / "DS" / "meta" / "tactile.json").read_text())["source"]["depth_model"]
+    shipped = Path(__file__).resolve().parents[2] / "models" / "supermag.onnx"
+    assert ours["model"] == "supermag" and ours["path"] == str(shipped)
+    assert ours["metadata"]["image_symmetry"] == "rotations"  # offline: the file's four-pass average
+    capsys.readouterr()
+    assert main(["export", str(recording), "--format", "lerobot", "--out", "DS2", "--depth", "models/none.onnx"]) == 2
+    line = _error_line(capsys)  # names the file it looked for, where, and the shipped default by its full path
+    assert "models/none.onnx (looked in " in line and str(shipped) in line
+
+
 @pytest.mark.parametrize("argv, message", [
     (["REC", "--out", "DS"], "SOURCE needs --format"),
     (["REC", "--format", "lerobot", "--checkpoint", "best.pt", "--out", "DS"], "either SOURCE"),

@@ -215,7 +215,7 @@ def test_the_commands_train_and_attach_and_refuse_what_does_not_fit(trained, tmp
     assert main(["export", "--checkpoint", str(run / "best.pt"), "--attach-to", str(BASE), "--out", str(turned),
                  "--image-symmetry", "rotations"]) == 0
     assert read_metadata(turned)["image_symmetry"] == "rotations"  # the pose model's images, averaged over turns
-    assert load_reconstructor(turned).image_symmetry == "rotations"
+    assert load_reconstructor(turned, image_symmetry="stored").image_symmetry == "rotations"
     assert main(["export", "--checkpoint", str(run / "best.pt"), "--attach-to", str(tmp_path / "missing.onnx"),
                  "--out", str(tmp_path / "n.onnx")]) == 2
     assert_one_line_error(capsys.readouterr().err, "export", "missing.onnx")

@@ -85,7 +85,7 @@ def test_calibrate_writes_a_calibration_beside_the_model_and_its_reliability_rep
 
 def test_trials_use_the_calibration_beside_the_model_and_build_the_escalation(rods, tmp_path) -> None:
     from tactile_manip.perception.symmetry import SymmetrizedReconstructor
-    from tactile_manip.trials.methods import build_estimators
+    from tactile_manip.trials.methods import build_pose_estimators
     from tactile_manip.trials.scene import MethodSpec, PresentationConfig, TrialObject, TrialScene
 
     model = tmp_path / "m.onnx"
@@ -98,7 +98,7 @@ def test_trials_use_the_calibration_beside_the_model_and_build_the_escalation(ro
                                 MethodSpec("c", "bilinear", output_px=16),
                                 MethodSpec("d", str(model), symmetrize=True)],
                        presentation=PresentationConfig(objects=[TrialObject("cylinder", "c3", {"size_mm": 3.0})]))
-    est = build_estimators(scene)
+    est = build_pose_estimators(scene)
     assert est["a"].calibration == fitted
     assert isinstance(est["a"].escalation, SymmetrizedReconstructor) and est["a"].escalate_below == 0.5
     assert est["b"].calibration is None and est["b"].escalation.samples == 4
@@ -106,7 +106,7 @@ def test_trials_use_the_calibration_beside_the_model_and_build_the_escalation(ro
     # the head reads the reading whatever reconstructs the image: symmetry averaging does not change its angles
     assert est["d"].calibration == fitted
     ConfidenceCalibration((0.2, 0.9), (0.1, 0.95), 5.0, 100).save(calibration_path(model))   # the image's route
-    assert build_estimators(scene)["a"].calibration is None   # fitted for another route: not applied
+    assert build_pose_estimators(scene)["a"].calibration is None   # fitted for another route: not applied
     for bad in ({"escalate_below": 1.5}, {"escalation": "more"}, {"escalation_samples": 1},
                 {"symmetrize": True, "escalate_below": 0.5},
                 {"reconstructor": "bilinear", "escalate_below": 0.5, "escalation": "samples"}):

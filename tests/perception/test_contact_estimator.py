@@ -212,11 +212,12 @@ class _Frames:
 
 
 def test_stream_yields_one_state_per_frame_and_refuses_another_board(contact_model_files, labelled_presses) -> None:
-    from tactile_manip.perception import StreamStats
+    from tactile_manip.perception import StreamStats, TactileEstimator
+    from tactile_manip.perception.baselines import BlindPoseEstimator
 
-    est = ContactEstimator(contact_model_files[2])
+    est = TactileEstimator(BlindPoseEstimator(), ContactEstimator(contact_model_files[2]))  # the contact part alone
     stats = StreamStats()
-    states = list(est.stream(_Frames(labelled_presses().readings[:5]), max_estimates=5, stats=stats))
+    states = [e.contact for e in est.stream(_Frames(labelled_presses().readings[:5]), max_estimates=5, stats=stats)]
     assert len(states) == 5 and stats.estimates == 5 and stats.skipped_frames == 0
     assert [s.context_frames for s in states] == [1, 2, 3, 3, 3]
     with pytest.raises(ValueError, match="anyskin-5"):
@@ -229,7 +230,7 @@ def test_one_reading_gives_angle_and_contact_with_the_pose_estimator(tmp_path, c
     from tactile_manip.learning.contact.export import export_contact_onnx
     from tactile_manip.learning.contact.train import ContactTrainConfig, train_contact
     from tactile_manip.perception import TactilePoseEstimator, load_reconstructor
-    from tactile_manip.perception.contact_pose import TactileEstimate, TactileEstimator, image_centroid_mm
+    from tactile_manip.perception.tactile_estimator import TactileEstimate, TactileEstimator, image_centroid_mm
     from tactile_manip.types import AngleEstimate
 
     rng = np.random.default_rng(0)

@@ -6,7 +6,7 @@ from __future__ import annotations
 import pytest
 
 from tactile_manip.perception.contact import ContactState
-from tactile_manip.perception.contact_pose import fused_position_mm, image_centroid_mm
+from tactile_manip.perception.tactile_estimator import fused_position_mm, image_centroid_mm
 from tactile_manip.perception.estimator import NO_CONTACT_FIELD
 from tactile_manip.perception.pose import ISOTROPIC_REASON, angle_from_image
 from tactile_manip.types import AngleEstimate
@@ -65,7 +65,7 @@ def test_without_a_share_for_the_image_the_position_decodes_no_image() -> None:
 
     from tactile_manip.perception import TactilePoseEstimator, load_reconstructor
     from tactile_manip.perception.contact import ContactEstimator
-    from tactile_manip.perception.contact_pose import TactileEstimator
+    from tactile_manip.perception.tactile_estimator import TactileEstimator
     from tactile_manip.shipped import shipped_model
     from tactile_manip.sim.objects import IndenterPose
     from tactile_manip.sim.pair import SensorPair

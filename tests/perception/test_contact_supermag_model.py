@@ -53,7 +53,7 @@ def test_simulated_cylinder_presses_give_forces_that_rise_with_the_press() -> No
 
 def test_with_the_pose_model_the_position_lies_between_the_image_and_the_model_and_is_none_on_an_empty_pad() -> None:
     from tactile_manip.perception import TactilePoseEstimator, load_reconstructor
-    from tactile_manip.perception.contact_pose import TactileEstimator
+    from tactile_manip.perception.tactile_estimator import TactileEstimator
     from tactile_manip.sim.objects import IndenterPose
     from tactile_manip.sim.pair import SensorPair
     from tactile_manip.sim.shapes import make_indenter
@@ -77,7 +77,7 @@ def test_with_the_pose_model_the_position_lies_between_the_image_and_the_model_a
 
 def test_several_pads_through_one_tactile_estimator_equal_each_pad_alone() -> None:
     from tactile_manip.perception import TactilePoseEstimator, load_reconstructor
-    from tactile_manip.perception.contact_pose import TactileEstimator
+    from tactile_manip.perception.tactile_estimator import TactileEstimator
     from tactile_manip.sim.objects import IndenterPose
     from tactile_manip.sim.pair import SensorPair
     from tactile_manip.sim.shapes import make_indenter
@@ -136,7 +136,7 @@ def test_a_pads_position_is_measured_when_read_and_travels_as_a_value() -> None:
     import pickle
 
     from tactile_manip.perception import TactilePoseEstimator, load_reconstructor
-    from tactile_manip.perception.contact_pose import TactileEstimator
+    from tactile_manip.perception.tactile_estimator import TactileEstimator
     from tactile_manip.sim.objects import IndenterPose
     from tactile_manip.sim.pair import SensorPair
     from tactile_manip.sim.shapes import make_indenter

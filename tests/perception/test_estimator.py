@@ -10,7 +10,7 @@ import pytest
 from checks import assert_sane_estimate
 
 from tactile_manip.errors import SensorTimeoutError
-from tactile_manip.perception import PoseParams, TactilePoseEstimator, load_reconstructor, wrap_axial
+from tactile_manip.perception import PoseParams, TactileEstimator, TactilePoseEstimator, load_reconstructor, wrap_axial
 from tactile_manip.sim.objects import IndenterPose
 from tactile_manip.sim.pair import SensorPair
 from tactile_manip.sim.shapes import make_indenter
@@ -125,28 +125,32 @@ def sensor():
 def test_read_uses_only_frames_after_the_call(supermag, sensor) -> None:
     rod = make_indenter("cylinder", size_mm=3.0)
     sensor.set_contact(rod, IndenterPose(0.0, 0.0, math.radians(-40.0)), 10.0)
-    est = supermag.read(sensor, frames=3, timeout_s=0.5)
+    both = TactileEstimator(supermag)
+    got = both.read(sensor, frames=3, timeout_s=0.5)
+    est = got.angle
+    assert got.contact is None and got.position_mm is not None  # no contact model: the image's centroid
     assert est.defined and _axial_error_deg(est.angle_rad, math.radians(-40.0)) < 3.0
     assert est.timings_s["age"] >= 0.0
     sensor.clear_contact()
-    assert not supermag.read(sensor, timeout_s=0.5).defined
+    assert not both.read(sensor, timeout_s=0.5).angle.defined
 
 
 def test_stream_yields_one_estimate_per_new_frame(supermag, sensor) -> None:
     sensor.set_contact(make_indenter("square_bar", size_mm=2.5), IndenterPose(yaw_rad=0.3), 10.0)
-    estimates = list(supermag.stream(sensor, timeout_s=0.5, max_estimates=4))
+    estimates = list(TactileEstimator(supermag).stream(sensor, timeout_s=0.5, max_estimates=4))
     assert len(estimates) == 4
-    assert all(math.isfinite(e.angle_rad) for e in estimates)
+    assert all(math.isfinite(e.angle.angle_rad) and e.contact is None for e in estimates)
 
 
 def test_a_stalled_sensor_raises_instead_of_returning_stale_estimates(supermag, sensor) -> None:
     sensor.stall()
+    both = TactileEstimator(supermag)
     with pytest.raises(SensorTimeoutError):
-        supermag.read(sensor, timeout_s=0.05)
+        both.read(sensor, timeout_s=0.05)
     with pytest.raises(SensorTimeoutError):
-        next(supermag.stream(sensor, timeout_s=0.05))
+        next(both.stream(sensor, timeout_s=0.05))
     sensor.resume()
-    assert supermag.read(sensor, timeout_s=0.5) is not None
+    assert both.read(sensor, timeout_s=0.5) is not None
 
 
 def test_saturated_chips_lower_the_confidence(supermag, pair) -> None:
@@ -305,12 +309,13 @@ def test_a_stream_that_falls_behind_takes_the_newest_frame_and_counts_the_skippe
             return bilinear._run(fields_ut)
 
     stats = StreamStats()
-    estimates = list(TactilePoseEstimator(SlowerThanTheSensor()).stream(sensor, max_estimates=4, stats=stats))
+    estimates = list(TactileEstimator(TactilePoseEstimator(SlowerThanTheSensor())).stream(sensor, max_estimates=4,
+                                                                                          stats=stats))
     assert len(estimates) == 4 and stats.estimates == 4
     assert stats.last_seq == 9 and stats.skipped_frames == 6  # frames 0, 3, 6, 9 estimated; 1-2, 4-5, 7-8 not
     np.testing.assert_array_equal(np.stack(used), fields[[0, 3, 6, 9]].astype(np.float32))
     with pytest.raises(SensorTimeoutError):  # nothing newer than frame 9: a stale frame is never re-used
-        next(TactilePoseEstimator(SlowerThanTheSensor()).stream(sensor))
+        next(TactileEstimator(TactilePoseEstimator(SlowerThanTheSensor())).stream(sensor))
 
 
 def test_a_slow_estimator_on_the_simulated_sensor_skips_frames_instead_of_queueing_them(sensor) -> None:
@@ -330,9 +335,9 @@ def test_a_slow_estimator_on_the_simulated_sensor_skips_frames_instead_of_queuei
 
     stats = StreamStats()
     slow = TactilePoseEstimator(FortyMilliseconds(), min_field_ut=0.0)  # reconstructs even the empty pad's readings
-    for est in slow.stream(sensor, timeout_s=0.5, max_estimates=4, stats=stats):
+    for est in TactileEstimator(slow).stream(sensor, timeout_s=0.5, max_estimates=4, stats=stats):
         seqs.append(stats.last_seq)
-        assert math.isfinite(est.angle_rad)
+        assert math.isfinite(est.angle.angle_rad)
     gaps = np.diff(seqs)
     assert (gaps >= 1).all() and stats.skipped_frames == int((gaps - 1).sum()) >= 1
 

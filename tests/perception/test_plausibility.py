@@ -18,7 +18,7 @@ pytest.importorskip("onnxruntime", reason="the shipped models run on onnxruntime
 from tactile_manip.perception import TactilePoseEstimator, load_reconstructor  # noqa: E402
 from tactile_manip.perception.confidence import load_calibration_beside  # noqa: E402
 from tactile_manip.perception.contact import STATE_FIELDS, ContactEstimator, ContactState  # noqa: E402
-from tactile_manip.perception.contact_pose import TactileEstimator  # noqa: E402
+from tactile_manip.perception.tactile_estimator import TactileEstimator  # noqa: E402
 from tactile_manip.perception.estimator import (CHANGE_LIMIT_UT, PLAUSIBLE_FIELD_UT,  # noqa: E402
                                                 SATURATED_CONFIDENCE_CAP, implausible_field, plausible_limits_ut)
 from tactile_manip.perception.reconstruct import ModelFileError  # noqa: E402

@@ -359,6 +359,7 @@ def test_metadata_copied_onto_another_graph_is_refused(graph_with_shipped_metada
 
 def test_models_name_their_board_layout_and_refuse_another(onnx_4x4, onnx_5x6):
     from tactile_manip.perception.estimator import TactilePoseEstimator
+    from tactile_manip.perception.tactile_estimator import TactileEstimator
     from tactile_manip.sensors import SerialSensor, SerialSensorConfig
 
     model = OnnxReconstructor(onnx_4x4.path)
@@ -371,7 +372,7 @@ def test_models_name_their_board_layout_and_refuse_another(onnx_4x4, onnx_5x6):
     # the estimator checks the sensor's layout before reading a frame (this sensor is never connected)
     anyskin = SerialSensor(SerialSensorConfig(port="/dev/null-x", wire_format="anyskin"))
     with pytest.raises(ValueError, match="anyskin-5"):
-        TactilePoseEstimator(load_reconstructor("bilinear")).read(anyskin)
+        TactileEstimator(TactilePoseEstimator(load_reconstructor("bilinear"))).read(anyskin)
 
 
 def test_a_model_without_a_board_layout_in_its_metadata_is_a_supermag_model(onnx_4x4, tmp_path):

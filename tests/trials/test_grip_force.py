@@ -148,20 +148,21 @@ def test_a_scene_names_an_onnx_contact_model_or_none() -> None:
 
 def test_each_method_is_handed_one_estimator_with_its_own_contact_model_or_none() -> None:
     pytest.importorskip("onnxruntime", reason="the contact model runs on onnxruntime")
-    from tactile_manip.perception.contact_pose import TactileEstimator
+    from tactile_manip.perception.tactile_estimator import TactileEstimator
+    from tactile_manip.perception.baselines import BlindPoseEstimator
     from tactile_manip.perception.estimator import TactilePoseEstimator
-    from tactile_manip.trials.blind import BlindEstimator
     from tactile_manip.trials.methods import build_tactile_estimators
 
     contact = str(REPO / "models" / "contact_supermag.onnx")
     scene = _scene(contact_model=contact, methods=[MethodSpec("bilinear", "bilinear", output_px=16),
                                                    MethodSpec("blind", "blind")])
     handed = build_tactile_estimators(scene, layout="supermag-4x4")
-    assert isinstance(handed["bilinear"], TactileEstimator) and isinstance(handed["blind"], BlindEstimator)
+    assert all(isinstance(e, TactileEstimator) for e in handed.values())
     assert isinstance(handed["bilinear"].pose, TactilePoseEstimator)
     assert handed["bilinear"].contact.path.name == "contact_supermag.onnx"
+    assert isinstance(handed["blind"].pose, BlindPoseEstimator) and handed["blind"].contact is None  # no touch
     plain = build_tactile_estimators(_scene(), layout="supermag-4x4")["bilinear"]
-    assert isinstance(plain, TactilePoseEstimator)  # no contact model: the pose estimator alone
+    assert isinstance(plain.pose, TactilePoseEstimator) and plain.contact is None  # the scene names no model
     with pytest.raises(ValueError, match="contact_model: .*'supermag-4x4' board layout"):
         build_tactile_estimators(scene, layout="anyskin-5")
 

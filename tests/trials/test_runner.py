@@ -19,7 +19,7 @@ from tactile_manip.errors import SimulationError
 from tactile_manip.robot.safety import SafetyLimits
 from tactile_manip.trials.log import read_trials
 from tactile_manip.trials.cells import SimulatedCell
-from tactile_manip.trials.methods import build_estimators
+from tactile_manip.trials.methods import build_pose_estimators, build_tactile_estimators
 from tactile_manip.trials.presentation import draw_presentation
 from tactile_manip.trials.runner import run_scene, run_trials
 from tactile_manip.trials.scene import (FaultPlan, MethodSpec, PresentationConfig, RobotConfig, TrialObject,
@@ -43,7 +43,7 @@ def _scene(**changes) -> TrialScene:
 
 def _run(scene: TrialScene) -> list:
     records = []
-    run_scene(scene, records.append, estimators=build_estimators(scene), progress=False)
+    run_scene(scene, records.append, estimators=build_tactile_estimators(scene), progress=False)
     return records
 
 
@@ -84,14 +84,14 @@ def test_the_simulated_cell_refuses_a_press_through_its_layer_and_the_run_redraw
     crushing = dataclasses.replace(p, force_n=60.0)
     assert not cell.holds(crushing)
     with cell.connected(), pytest.raises(SimulationError, match="bottoms out"):  # what the trial would meet
-        cell.run_one(crushing, build_estimators(scene)["bilinear"])
+        cell.run_one(crushing, build_tactile_estimators(scene)["bilinear"])
     scene = _scene(trials=2, presentation=PresentationConfig(objects=[bar], force_n=(10.0, 60.0)))
     cell = SimulatedCell(scene)
     held = [draw_presentation(scene, i, holds=cell.holds) for i in range(2)]
     assert all(cell.holds(p) for p in held)
     assert not any(cell.holds(draw_presentation(scene, i)) for i in range(2))  # both first draws were refused
     records = []
-    run_scene(scene, records.append, estimators=build_estimators(scene), progress=False, cell=cell)
+    run_scene(scene, records.append, estimators=build_tactile_estimators(scene), progress=False, cell=cell)
     assert [r.seed for r in records] == [p.seed for p in held for _ in range(2)]
     assert all(r.outcome != "error" for r in records)
 
@@ -195,7 +195,7 @@ def test_the_real_robot_scene_parses_into_the_simulated_scenes_trials_on_franky_
 def test_the_shipped_scenes_use_the_calibration_beside_their_model(scene_file) -> None:
     """The calibration files shipped beside the models fit the trials' estimators (prior samples, symmetry,
     the pose aperture); one that did not would be dropped and the re-grasp policy would read raw confidence."""
-    estimators = build_estimators(load_scene(REPO / scene_file))
+    estimators = build_pose_estimators(load_scene(REPO / scene_file))
     assert estimators["supermag"].calibration is not None
     assert estimators["bilinear"].calibration is None
 
@@ -295,7 +295,7 @@ def test_the_operator_cell_runs_the_same_behaviour_with_a_person_in_the_loop() -
     person = _ScriptedOperator(sim, answer_blank_on={2})
     cell = OperatorCell(scene, arm=sim.arm, gripper=sim.gripper, sensor=sim.sensor, ask=person.ask, say=person.say)
     records = []
-    run_scene(scene, records.append, estimators=build_estimators(scene), progress=False, cell=cell)
+    run_scene(scene, records.append, estimators=build_tactile_estimators(scene), progress=False, cell=cell)
     assert [r.outcome for r in records] == ["done", "done", "unmeasured"], [r.detail for r in records]
     assert all(abs(r.error_rad) < math.radians(5.0) for r in records[:2])
     assert any("between the fingers" in s for s in person.said)
@@ -303,7 +303,6 @@ def test_the_operator_cell_runs_the_same_behaviour_with_a_person_in_the_loop() -
 
 def test_the_operator_cell_logs_the_grip_force_of_the_scenes_contact_model() -> None:
     from tactile_manip.trials.operator import OperatorCell
-    from tactile_manip.trials.methods import build_tactile_estimators
 
     scene = _scene(trials=2, methods=[MethodSpec("bilinear", "bilinear", output_px=16)],
                    contact_model=str(REPO / "models" / "contact_supermag.onnx"))
@@ -363,7 +362,7 @@ def test_a_model_whose_graph_does_not_match_its_metadata_stops_the_run_before_th
 
 def test_a_method_names_where_its_angle_comes_from_and_the_main_job_runs_the_papers_route() -> None:
     scene = _scene(methods=[MethodSpec("supermag", MODEL), MethodSpec("paper_route", MODEL, angle_source="image")])
-    est = build_estimators(scene)
+    est = build_pose_estimators(scene)
     assert est["supermag"].angle_head is not None and est["supermag"].angle_source == "head"  # "auto": the head
     assert est["paper_route"].angle_head is None and est["paper_route"].angle_source == "image"
     main = {m.name: m for m in load_scene(REPO / "configs" / "scenes" / "reorient_sim.toml").methods}
@@ -405,7 +404,7 @@ def test_a_reorientation_run_names_its_task_and_a_bad_task_is_refused(tmp_path) 
 
 def test_the_blind_baseline_reads_the_sensor_and_answers_the_prior(tmp_path) -> None:
     scene = _scene(trials=3, methods=[MethodSpec("blind", "blind")])
-    est = build_estimators(scene)["blind"]
+    est = build_pose_estimators(scene)["blind"]
     assert est.calibration is None and est.angle_head is None
     records = _run(scene)
     assert [r.method for r in records] == ["blind"] * 3

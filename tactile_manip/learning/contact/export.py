@@ -50,7 +50,7 @@ def export_contact_onnx(checkpoint: str | Path, out: str | Path, *, metrics: dic
 
     ``check_windows`` (N, T, R, C, A): real input windows for the parity check (random ones are added).
     ``image_position_weight``: the image centroid's share in the position of a
-    :class:`~tactile_manip.perception.contact_pose.TactileEstimator` built with this model (stored in the
+    :class:`~tactile_manip.perception.tactile_estimator.TactileEstimator` built with this model (stored in the
     metadata; chosen with ``benchmarks/contact_position_fusion.py``); none: the model's own position.
     ``plausible_field_ut``: the largest |field| (uT) of a reading the model answers for (none: its board's bound,
     :data:`~tactile_manip.perception.estimator.PLAUSIBLE_FIELD_UT`). ``target_ranges``: the range [low, high] of
