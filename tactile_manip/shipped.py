@@ -61,7 +61,7 @@ def shipped_model(name: str = DEFAULT_MODEL) -> Path:
 
 
 def resolve_model_path(name_or_path: str | Path) -> Path:
-    """The model file a loader was given: a shipped model's name (``"supermag"``, ``"contact"``, ...) is its file
+    """The model file a loader was given: a shipped model's name (``"supermag"``, ``"contact"``) is its file
     (:func:`shipped_model`); a path that exists is itself; a relative path that does not exist from the working
     folder but does from the source checkout's root (``models/supermag.onnx`` run from another folder) is the
     checkout's file; any other path is returned as given, for the loader to name as missing

@@ -25,7 +25,7 @@ def copy(tmp_path):
              rt.TABLE1_ROBUST.replace(".json", ".md"), *rt.ABLATIONS.values(),
              *(p.replace(".json", ".md") for p in rt.ABLATIONS.values()), *rt.SINGLE_FRAMES, *rt.CALIBRATIONS.values(),
              *(run.summary for run in rt.TRIAL_RUNS), *(rt._readable(run.summary, ROOT) for run in rt.TRIAL_RUNS),
-             rt.FEWLABEL, *(f"{rt.TABLES_DIR}/{name}" for name in rt.TABLES)}
+             rt.FEWLABEL, rt.DEPTH, rt.DEPTH.replace(".json", ".md"), *(f"{rt.TABLES_DIR}/{name}" for name in rt.TABLES)}
     for path in paths:
         (tmp_path / path).parent.mkdir(parents=True, exist_ok=True)
         shutil.copy(ROOT / path, tmp_path / path)

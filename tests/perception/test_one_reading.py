@@ -115,7 +115,7 @@ def test_a_one_reading_graph_that_does_not_belong_to_its_file_is_refused(onnx_4x
 
 def test_shipped_models_carry_their_one_reading_graph() -> None:
     pytest.importorskip("onnxruntime")
-    for path in (shipped_model(), REFERENCE_MODELS_DIR / "supermag_fast.onnx",
+    for path in (shipped_model("supermag"), REFERENCE_MODELS_DIR / "supermag_fast.onnx",
                  REFERENCE_MODELS_DIR / "supermag_robust.onnx"):
         assert OnnxReconstructor(path).one_reading, path  # one pass: the runtime default
     # the default model's file averages each image over the reading's 4 turns: one batch of copies, not the graph
