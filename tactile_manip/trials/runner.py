@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
 
 from tactile_manip.perception.pose import wrap_axial
-from tactile_manip.trials.cells import Cell, make_cell
+from tactile_manip.trials.cells import Cell, make_cell, make_task
 from tactile_manip.trials.methods import build_tactile_estimators
 from tactile_manip.trials.presentation import Presentation, draw_presentation
 from tactile_manip.trials.record import TrialRecord
@@ -56,7 +56,7 @@ def run_scene(scene: TrialScene, write: Callable[[TrialRecord], None], *,
     from tqdm.auto import tqdm
 
     cell = cell if cell is not None else make_cell(scene)
-    task = cell.task
+    task = getattr(cell, "task", None) or make_task(scene)  # a cell of one's own may leave the task to the runner
     code = _code_version() if frames_dir is not None else None
     todo = [(i, m) for i in range(scene.trials) for m in estimators if (i, m) not in skip]
     faults = scene.faults
