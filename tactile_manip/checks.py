@@ -37,9 +37,13 @@ def check_array(name: str, value: object, *, shape: Sequence[int | None] | None 
     """Return ``value`` as an array of ``dtype`` after checking its shape and finiteness.
 
     ``shape`` may hold ``None`` for an axis of any length. NaN is refused unless ``allow_nan``; infinities
-    are always refused.
+    are always refused, and so are complex and boolean values where real numbers are asked for (their
+    conversion would drop the imaginary part, or read True as 1).
     """
-    arr = np.asarray(value, dtype=dtype)
+    raw = np.asarray(value)
+    if raw.dtype.kind in "cb" and np.dtype(dtype).kind not in "cb":
+        raise ValueError(f"{name}: expected real numbers, got dtype {raw.dtype}")
+    arr = raw.astype(dtype, copy=False)
     if shape is not None:
         ok = arr.ndim == len(shape) and all(s is None or s == n for s, n in zip(shape, arr.shape))
         if not ok:

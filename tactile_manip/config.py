@@ -22,6 +22,7 @@ else:  # pragma: no cover - exercised on Python 3.10 only
 from tactile_manip.errors import ConfigError
 
 T = TypeVar("T")
+UTF8_BOM = b"\xef\xbb\xbf"
 
 
 def load_config(path: str | Path, cls: type[T]) -> T:
@@ -29,7 +30,7 @@ def load_config(path: str | Path, cls: type[T]) -> T:
 
     Raises:
         ConfigError: the file is missing, a directory, unreadable, not UTF-8, not valid TOML, or does not fit
-            ``cls``.
+            ``cls`` (a UTF-8 byte-order mark at its start is read past).
     """
     return from_dict(cls, read_toml(path), where=str(path))
 
@@ -42,8 +43,9 @@ def read_toml(path: str | Path) -> dict[str, Any]:
     """
     path = Path(path)
     try:
-        with path.open("rb") as f:
-            return tomllib.load(f)
+        data = path.read_bytes()
+        # a byte-order mark (some editors write one) is no part of the text
+        return tomllib.loads(data.removeprefix(UTF8_BOM).decode("utf-8"))
     except FileNotFoundError as e:
         raise ConfigError(f"config file not found: {path}") from e
     except IsADirectoryError as e:

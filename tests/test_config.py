@@ -295,3 +295,17 @@ def test_config_differences_name_dotted_keys_and_stop_at_a_limit():
     assert config_differences(saved, saved) == []
     many = config_differences({f"k{i}": i for i in range(20)}, {}, limit=3)
     assert len(many) == 4 and many[-1] == "..."
+
+
+def test_a_byte_order_mark_is_read_past_and_other_bytes_are_named(tmp_path):
+    """An editor's UTF-8 byte-order mark is no TOML error; a file that is not UTF-8 says which byte is not."""
+    from tactile_manip.boards.load import load_board
+
+    text = (Path(__file__).resolve().parents[1] / "tactile_manip" / "boards" / "eflesh.toml").read_bytes()
+    marked = tmp_path / "mine.toml"
+    marked.write_bytes(b"\xef\xbb\xbf" + text.replace(b'name = "eflesh"', b'name = "my-cube"', 1))
+    assert load_board(marked).name == "my-cube"
+    latin = tmp_path / "latin.toml"
+    latin.write_bytes(b"# caf\xe9\n" + text)
+    with pytest.raises(ConfigError, match=r"latin.toml: not a text \(UTF-8\) TOML file: byte 5 is not UTF-8"):
+        load_board(latin)

@@ -52,6 +52,7 @@ def run(args: argparse.Namespace) -> int:
     from tactile_manip.perception.confidence import (ConfidenceCalibration, calibration_path, reliability_figure,
                                                      reliability_table)
     from tactile_manip.perception.symmetry import SymmetrizedReconstructor
+    from tactile_manip.shipped import resolve_model_path
 
     tol = args.tolerance_deg
     if not (math.isfinite(tol) and 0.0 < tol <= MAX_TOLERANCE_DEG):
@@ -60,7 +61,8 @@ def run(args: argparse.Namespace) -> int:
     if args.samples < 1 or (baseline and args.samples != 1):
         raise ConfigError(f"--samples must be >= 1, and 1 for a baseline; got {args.samples} for {args.model}")
     require("sklearn.isotonic", "fitting a calibration")   # before any inference or file
-    out = Path(args.out) if args.out else calibration_path(args.model)
+    # beside the model file (a shipped model's name, or a checkout path run from another folder, found first)
+    out = Path(args.out) if args.out else calibration_path(args.model if baseline else resolve_model_path(args.model))
     stem = out.with_suffix("")
     report_files = [out] + [Path(f"{stem}.reliability.{ext}") for ext in ("md", "json", "png")]
     for path in report_files:

@@ -156,12 +156,13 @@ def _run_probe_logs(args: argparse.Namespace, out) -> int:
     path = save_dataset(out, data)
     d = data.describe()
     units = ", ".join(f"{n} [{u}]" for n, u in d["targets"].items())
-    held = (f", {d['splits']['unlabelled']} more training presses without their labels (--labelled "
+    splits = {name: d["splits"].get(name, 0) for name in ("train", "val", "test", "unlabelled")}
+    held = (f", {splits['unlabelled']} more training presses without their labels (--labelled "
             f"{data.provenance['labelled']['presses']}, seed {data.provenance['labelled']['seed']})"
             if "labelled" in data.provenance else "")
     print(f"wrote {path}: {d['samples']} {'presses' if held else 'labelled presses'} in "
           f"{len(data.provenance['runs'])} run(s) "
-          f"({d['splits']['train']} train / {d['splits']['val']} val / {d['splits']['test']} test{held}), "
+          f"({splits['train']} train / {splits['val']} val / {splits['test']} test{held}), "
           f"targets {units}, "
           f"layout {data.provenance['layout']} ({d['grid'][0]}x{d['grid'][1]} cells), fingerprint {d['fingerprint']}")
     return 0

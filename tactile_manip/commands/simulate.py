@@ -13,6 +13,8 @@ import os
 
 from tactile_manip.progress import progress_bar
 
+MIN_PROBE_PRESSES = 3  # --board: one press each for the train, val and test splits
+
 DEFAULT_CONFIG = "configs/dataset/supermag.toml"
 
 
@@ -145,13 +147,17 @@ def _simulate_board(args: argparse.Namespace) -> int:
                                       ("--shard-size", args.shard_size is not None), ("--scale", args.scale != 1.0),
                                       ("--block-size", args.block_size is not None)) if given]
     if other:
-        raise ValueError(f"--board presses a probe on one board; {', '.join(other)} belong to a dataset config")
+        options = " and ".join(other)
+        raise ValueError(f"--board presses a probe on one board, in this process; {options} "
+                         f"{'is an option' if len(other) == 1 else 'are options'} of a dataset config (--config), "
+                         "not of --board")
+    if not MIN_PROBE_PRESSES <= args.presses <= 1_000_000:  # checked before any press
+        raise ValueError(f"--presses must be from {MIN_PROBE_PRESSES} to 1000000 (a press each for validation and "
+                         f"test, and one to train on), got {args.presses}")
     out = check_output_file(dataset_path(args.out), force=args.force)
     board = load_board(args.board)
     board.require_simulation()
     plan = ProbePlan(tip=args.tip, tip_diameter_mm=args.tip_diameter_mm, max_force_n=args.max_force_n)
-    if not 1 <= args.presses <= 1_000_000:
-        raise ValueError(f"--presses must be from 1 to 1000000, got {args.presses}")
     with progress_bar(total=args.presses, unit="press", desc=f"pressing {board.name}",
                       quiet=args.quiet) as bar:
         data = probe_press_dataset(board, args.presses, plan=plan, seed=0 if args.seed is None else args.seed,

@@ -89,6 +89,7 @@ def from_probe_logs(readings: Sequence[ReadingStream], labels: Sequence[LabelStr
                            f"streams")
     if match not in MATCHES:
         raise DatasetError(f"match must be one of {', '.join(MATCHES)}, got {match!r}")
+    _check_seconds(time_offset_s=time_offset_s, tolerance_s=tolerance_s, baseline_s=baseline_s)
     if split not in PROBE_SPLITS:
         raise DatasetError(f"split must be one of {', '.join(PROBE_SPLITS)}, got {split!r}")
     for name, f in (("test_fraction", test_fraction), ("val_fraction", val_fraction)):
@@ -120,6 +121,26 @@ def from_probe_logs(readings: Sequence[ReadingStream], labels: Sequence[LabelStr
                          channels=ChannelSpec(), groups=np.concatenate([np.full(len(r), i, np.int64)
                                                                        for i, r in enumerate(runs)]),
                          extras=extras, provenance=prov, targets=targets, target_names=plan.names)
+
+
+MAX_TOLERANCE_S = 10.0  # a sensor row matched to a label farther than this in time is no pair of one press
+
+
+def _check_seconds(*, time_offset_s: float, tolerance_s: float | None, baseline_s: float | None) -> None:
+    """Refuse a non-finite clock shift, a matching tolerance that is not a short positive time, and a baseline
+    window that is not a positive time (each checked on its own, so the message names the value at fault)."""
+    if not _finite(time_offset_s):
+        raise DatasetError(f"time_offset_s (--time-offset-s) must be a finite number of seconds, got {time_offset_s}")
+    if tolerance_s is not None and not (_finite(tolerance_s) and 0.0 < tolerance_s <= MAX_TOLERANCE_S):
+        raise DatasetError(f"tolerance_s (--tolerance-s) must be in (0, {MAX_TOLERANCE_S:g}] s: a sensor row is "
+                           f"paired with a label at most that far in time; got {tolerance_s}")
+    if baseline_s is not None and not (_finite(baseline_s) and baseline_s > 0.0):
+        raise DatasetError(f"baseline_s (--baseline-s) must be a positive number of seconds, got {baseline_s}")
+
+
+def _finite(value: object) -> bool:
+    return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool) and bool(
+        np.isfinite(value))
 
 
 def hold_back_labels(split: np.ndarray, targets: np.ndarray, extras: dict[str, np.ndarray], labelled: int,

@@ -25,6 +25,7 @@ from tactile_manip.errors import DatasetError
 
 RECORDING_SUFFIX = ".tmrec"
 TIME_COLUMN = "time_s"
+BASELINE_SHARE = 0.25  # a baseline window longer than this share of a run takes in its presses
 ReadingStream = str | Path | np.ndarray | tuple  # a file, a (M, 1 + V) array, or (t_s, values)
 LabelStream = str | Path | np.ndarray | Mapping  # a CSV file, a (L, K) array, or {column: (L,) array}
 _OPS: dict[str, Callable[[np.ndarray, float], np.ndarray]] = {
@@ -164,6 +165,12 @@ def reading_stream(item: ReadingStream, board: Any, offset_s: float, baseline_s:
     check_times(t, where)
     t = t + float(offset_s)
     if baseline_s is not None:
+        span_s = float(np.nanmax(t) - np.nanmin(t))
+        if baseline_s > BASELINE_SHARE * span_s:
+            raise DatasetError(f"{where}: a baseline of the first {baseline_s:g} s would take in "
+                               f"{min(baseline_s / span_s, 1.0):.0%} of the run's {span_s:.3g} s, presses and all; "
+                               f"the baseline is the free pad at the start: give at most "
+                               f"{BASELINE_SHARE * span_s:.3g} s (a few seconds before the first press)")
         first = np.isfinite(t) & (t <= np.nanmin(t) + baseline_s) & np.isfinite(readings).all(axis=(1, 2, 3))
         if not first.any():
             raise DatasetError(f"{where}: no finite reading in the first {baseline_s:g} s to take a baseline from")

@@ -61,6 +61,43 @@ class BlindPoseEstimator:
         return _prior(time.perf_counter())
 
 
+NO_POSE_MODEL = "no pose model"  # the reason of every angle of an estimator without a pose model
+
+
+class NoPoseEstimator:
+    """The pose part of an estimator whose board has a contact model and no pose model (an AnySkin or eFlesh
+    board, say): every angle is undefined (``reason`` :data:`NO_POSE_MODEL`, confidence 0), so nothing acts on
+    one, and the estimates' ``position_mm`` is the contact model's. Reads any board's readings."""
+
+    name = "none"
+    calibration = None
+    angle_head = None
+    angle_source = "none"
+    input_shape = None  # any reading
+    board_layout = ""  # any board
+    min_contact_area_mm2 = 0.0
+
+    def __repr__(self) -> str:
+        return "NoPoseEstimator()"
+
+    def check_layout(self, layout: str) -> None:
+        """Any board's sensor is read (the contact model checks its own layout)."""
+
+    def estimate(self, reading: TactileReading | np.ndarray) -> AngleEstimate:
+        """No angle."""
+        return AngleEstimate(0.0, 0.0, False, reason=NO_POSE_MODEL, source="none")
+
+    def estimate_many(self, readings: Sequence[TactileReading | np.ndarray]) -> list[AngleEstimate]:
+        """No angle, for each reading."""
+        return [self.estimate(r) for r in readings]
+
+    def estimate_frames(self, readings: Sequence[TactileReading | np.ndarray]) -> AngleEstimate:
+        """No angle (ValueError for no reading, as every pose part)."""
+        if len(readings) == 0:
+            raise ValueError("estimate_frames needs at least one reading")
+        return self.estimate(readings[-1])
+
+
 def _prior(t0: float) -> AngleEstimate:
     return AngleEstimate(angle_rad=0.0, confidence=1.0, defined=True, centroid_mm=(0.0, 0.0), source="prior",
                          timings_s={"total": time.perf_counter() - t0})

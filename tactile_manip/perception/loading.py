@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from tactile_manip.perception.baselines import BLIND, BlindPoseEstimator
+from tactile_manip.perception.baselines import BLIND, BlindPoseEstimator, NoPoseEstimator
 from tactile_manip.perception.confidence import load_calibration_beside
 from tactile_manip.perception.estimator import TactilePoseEstimator
 from tactile_manip.perception.pose import PoseParams
@@ -87,20 +87,23 @@ def load_pose_estimator(model: str | Path = DEFAULT_MODEL, *, threads: int = 1, 
                                 escalation=escalating, escalate_below=escalate_below, angle_source=angle_source)
 
 
-def load_estimator(pose_model: str | Path = DEFAULT_MODEL, contact_model: str | Path | None = CONTACT_MODEL, *,
-                   image_position_weight: float | None = None, **options) -> TactileEstimator:
+def load_estimator(pose_model: str | Path | None = DEFAULT_MODEL, contact_model: str | Path | None = CONTACT_MODEL,
+                   *, image_position_weight: float | None = None, **options) -> TactileEstimator:
     """A :class:`~tactile_manip.perception.tactile_estimator.TactileEstimator` from its files, in one call.
 
-    ``pose_model``: the pose part (:func:`load_pose_estimator`, which takes ``options``); ``contact_model``: the
-    contact model of the same board (a shipped model's name or an ``.onnx`` path, on ``options["threads"]``
-    threads), or None for none (the blind baseline never has one). The defaults are the shipped SuperMag models,
-    found from any working folder.
+    ``pose_model``: the pose part (:func:`load_pose_estimator`, which takes ``options``), or None for a board
+    with a contact model alone (:class:`~tactile_manip.perception.baselines.NoPoseEstimator`: no angle);
+    ``contact_model``: the contact model of the same board (a shipped model's name or an ``.onnx`` path, on
+    ``options["threads"]`` threads), or None for none (the blind baseline never has one). The defaults are the
+    shipped SuperMag models, found from any working folder.
 
     Raises:
         ModelFileError: a file is missing (the message says where it looked) or not a model of its kind.
         ValueError: the two models read different boards, or an option is out of its range.
     """
-    pose = load_pose_estimator(pose_model, **options)
+    if pose_model is None and contact_model is None:
+        raise ValueError("an estimator needs a pose model, a contact model or both; both are None")
+    pose = NoPoseEstimator() if pose_model is None else load_pose_estimator(pose_model, **options)
     contact = None
     if contact_model is not None and not isinstance(pose, BlindPoseEstimator):  # no tactile input, no contact
         from tactile_manip.perception.contact import ContactEstimator

@@ -229,12 +229,13 @@ class TactileEstimator:
         self._min_area_mm2 = float(getattr(pose, "min_contact_area_mm2", 0.0))
 
     @classmethod
-    def load(cls, pose_model: str | Path = "supermag", contact_model: str | Path | None = "contact", *,
+    def load(cls, pose_model: str | Path | None = "supermag", contact_model: str | Path | None = "contact", *,
              image_position_weight: float | None = None, **options: Any) -> TactileEstimator:
         """An estimator from its model files, in one call: by default the shipped pose model
         (``models/supermag.onnx``) and contact model (``models/contact_supermag.onnx``), found from any working
         folder. ``pose_model``: a shipped model's name, an ``.onnx`` path, ``"bilinear"``, ``"bicubic"`` or
-        ``"blind"``; ``contact_model``: a name, a path or None; ``options``: the pose part's (threads, samples,
+        ``"blind"``, or None (a board with a contact model alone: no angle); ``contact_model``: a name, a path or
+        None; ``options``: the pose part's (threads, samples,
         image_symmetry, angle_source, calibrated, ...). See :func:`~tactile_manip.perception.loading.load_estimator`.
 
         Raises:

@@ -169,3 +169,29 @@ def test_array_values_beyond_float32_are_refused_not_stored_as_inf(tmp_path, cap
     assert_one_line_error(capsys.readouterr().err, "import", "readings: 1 values beyond float32's range",
                           "(2, 1, 1, 2)")
     assert not out.exists()
+
+
+@pytest.mark.parametrize("option, value, needles", [
+    ("--time-offset-s", "nan", ("--time-offset-s", "finite", "nan")),
+    ("--tolerance-s", "inf", ("--tolerance-s", "(0, 10] s", "inf")),
+    ("--tolerance-s", "0", ("--tolerance-s", "(0, 10] s")),
+    ("--baseline-s", "nan", ("--baseline-s", "positive", "nan")),
+    ("--baseline-s", "-1", ("--baseline-s", "positive")),
+    ("--baseline-s", "1e9", ("a baseline of the first 1e+09 s", "100% of the run", "free pad at the start")),
+])
+def test_seconds_that_cannot_be_meant_are_refused_naming_the_option(option, value, needles, tmp_path, capsys):
+    """A NaN clock shift is named as such (not blamed on the tolerance); an infinite tolerance would pair every
+    row with a label however far; a baseline over the whole run would subtract its presses."""
+    sensor, labels, _ = _rig(tmp_path)
+    s, lab = _write(tmp_path, sensor, labels)
+    _refused(capsys, tmp_path, ["--readings-csv", s, "--labels-csv", lab, "--label-columns", COLUMNS,
+                                "--targets", "x_mm", option, value], *needles)
+
+
+def test_complex_and_boolean_values_are_not_read_as_numbers():
+    from tactile_manip.checks import check_array
+
+    for bad in (np.ones((4, 4, 3), complex), np.ones((4, 4, 3), bool)):
+        with pytest.raises(ValueError, match=f"reading: expected real numbers, got dtype {bad.dtype}"):
+            check_array("reading", bad, shape=(4, 4, 3))
+    assert check_array("reading", np.ones((4, 4, 3), np.int16), shape=(4, 4, 3)).dtype == np.float64

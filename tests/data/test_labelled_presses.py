@@ -95,3 +95,19 @@ def test_labelled_belongs_to_probe_logs(tmp_path, capsys):
     assert main(["import", "--readings", str(tmp_path / "r.npy"), "--images", str(tmp_path / "i.npy"),
                  "--labelled", "2", "--out", str(tmp_path / "d.npz")]) == 2
     assert_one_line_error(capsys.readouterr().err, "import", "--labelled go with probe logs")
+
+
+@pytest.mark.parametrize("labelled, counts", [(160, "(160 train / 0 val / 40 test, 0 more training presses"),
+                                              (0, "(0 train / 0 val / 40 test, 160 more training presses")])
+def test_the_ends_of_the_labelled_range_import_and_say_what_they_hold(labelled, counts, tmp_path, capsys):
+    """Every training row labelled (no 'unlabelled' split at all), or none: both are inside the range, so both
+    import and print their counts."""
+    sensor, labels = _logs()
+    np.savetxt(tmp_path / "sensor.csv", sensor, delimiter=",")
+    np.savetxt(tmp_path / "states.csv", labels, delimiter=",")
+    assert main(["import", "--readings-csv", str(tmp_path / "sensor.csv"), "--labels-csv",
+                 str(tmp_path / "states.csv"), "--label-columns", ",".join(COLUMNS), "--targets", "x_mm,y_mm",
+                 "--board", "eflesh", "--labelled", str(labelled), "--out", str(tmp_path / "d.npz")]) == 0
+    out, err = capsys.readouterr()
+    assert counts in out and "Traceback" not in err
+    assert len(load_dataset(tmp_path / "d.npz").indices("train")) == labelled

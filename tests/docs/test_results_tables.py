@@ -19,8 +19,7 @@ def test_committed_tables_match_the_result_files():
 @pytest.fixture()
 def copy(tmp_path):
     """The result files, tables and README in a scratch root."""
-    paths = {rt.TABLE1_DEFAULT, rt.TABLE1_DEFAULT.replace("results.json", "table.md"), rt.TABLE1, rt.TABLE1_MD, rt.TABLE1_ROBUST, rt.NETWORK_LATENCY, rt.DEPTH,
-             rt.DEPTH.replace(".json", ".md"), rt.BENCH, rt.INFORMATION, rt.README,
+    paths = {rt.TABLE1_DEFAULT, rt.TABLE1_DEFAULT.replace("results.json", "table.md"), rt.TABLE1, rt.TABLE1_MD, rt.TABLE1_ROBUST, rt.NETWORK_LATENCY, rt.BENCH, rt.INFORMATION, rt.README,
              rt.BENCH.replace("report.json", "report.md"), rt.BENCH_DEFAULT, rt.BENCH_DEFAULT.replace(".json", ".md"),
              rt.TABLE1_ROBUST.replace(".json", ".md"), *rt.ABLATIONS.values(),
              *(p.replace(".json", ".md") for p in rt.ABLATIONS.values()), *rt.SINGLE_FRAMES, *rt.CALIBRATIONS.values(),

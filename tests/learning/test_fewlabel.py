@@ -138,7 +138,9 @@ def few_label_runs(tmp_path_factory, labelled_presses):
     base = ContactTrainConfig(targets=["x_mm", "y_mm"], hidden=32, members=1, epochs=30, patience=30, batch_size=64,
                               lr=5e-3, threads=1)
     manifold = train_contact(dataclasses.replace(base, unlabelled="manifold"), [root / "few.npz"], root / "m")
-    ignore = train_contact(base, [root / "few.npz"], root / "i")
+    # "ignore" leaves the 3 validation presses of the 30 labels: sigma's calibration on them is warned about
+    with pytest.warns(UserWarning, match=r"sigma is calibrated on 3 validation sample\(s\), fewer than 20"):
+        ignore = train_contact(base, [root / "few.npz"], root / "i")
     return root, manifold, ignore
 
 
@@ -388,3 +390,12 @@ def test_training_weighs_the_labels_by_recency_per_run_only_when_the_config_asks
     for bad in (-0.5, 11.0, float("nan")):
         with pytest.raises(ConfigError, match="label_recency"):
             ContactTrainConfig(label_recency=bad)
+
+
+def test_the_manifold_run_has_enough_validation_samples_to_calibrate_sigma(few_label_runs) -> None:
+    """The manifold run validates on its pseudo-labelled presses too: enough of them, where "ignore" (warned
+    about in the fixture) has 3."""
+    from tactile_manip.learning.contact.train import MIN_SIGMA_SAMPLES
+
+    _, manifold, ignore = few_label_runs
+    assert ignore["val_samples"] < MIN_SIGMA_SAMPLES <= manifold["val_samples"]

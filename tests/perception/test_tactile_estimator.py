@@ -141,3 +141,15 @@ def test_load_passes_the_pose_options_and_refuses_bad_ones() -> None:
         TactileEstimator.load(escalation="more")
     with pytest.raises(ValueError, match="'samples' escalation"):
         TactileEstimator.load("bilinear", None, escalate_below=0.5, escalation="samples")
+
+
+def test_a_board_with_a_contact_model_alone_gives_no_angle_and_the_models_position(rod_reading) -> None:
+    from tactile_manip.perception.baselines import NO_POSE_MODEL, NoPoseEstimator
+
+    est = TactileEstimator.load(pose_model=None)  # the shipped contact model, no pose model
+    assert isinstance(est.pose, NoPoseEstimator) and isinstance(est, Estimator)
+    e = est.estimate(rod_reading)
+    assert not e.angle.defined and e.angle.confidence == 0.0 and e.angle.reason == NO_POSE_MODEL
+    assert e.contact.plausible and e.position_mm == e.contact.position_mm  # nothing else says where it is
+    with pytest.raises(ValueError, match="both are None"):
+        TactileEstimator.load(None, None)

@@ -60,4 +60,13 @@ def test_simulate_board_writes_a_dataset_and_refuses_generic_boards_in_one_line(
     assert_one_line_error(capsys.readouterr().err, "simulate", "board generic:10 has no geometry")
     assert not (tmp_path / "g.npz").exists()
     assert main(["simulate", "--board", "eflesh", "--shard-size", "2", "--out", str(tmp_path / "s")]) == 2
-    assert_one_line_error(capsys.readouterr().err, "simulate", "--shard-size belong to a dataset config")
+    assert_one_line_error(capsys.readouterr().err, "simulate", "--shard-size is an option of a dataset config")
+    assert main(["simulate", "--board", "eflesh", "--ray", "--shard-size", "2", "--out", str(tmp_path / "s")]) == 2
+    assert_one_line_error(capsys.readouterr().err, "simulate", "--ray and --shard-size are options of a dataset config")
+
+
+def test_too_few_presses_for_the_splits_are_refused_before_any_press(tmp_path, capsys):
+    assert main(["simulate", "--board", "eflesh", "--presses", "2", "--out", str(tmp_path / "p.npz")]) == 2
+    err = capsys.readouterr().err
+    assert_one_line_error(err, "simulate", "--presses must be from 3 to 1000000", "got 2")
+    assert "pressing" not in err and not (tmp_path / "p.npz").exists()

@@ -28,6 +28,7 @@ import functools
 import json
 import math
 import time
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -167,9 +168,15 @@ def train_contact(cfg: ContactTrainConfig, data_paths: list[str | Path], out: st
     check_training_rows(data, data_name(data_paths))
     check_finite_readings(data, np.arange(len(data)), data_name(data_paths))  # any row may be a context frame
     labels = np.stack([data.target(n) for n in names], axis=1)
+    labelling = cfg.unlabelled == "manifold" and len(data.indices(UNLABELLED)) > 0
+    train_idx, val_idx = split_indices(data, cfg.val_fraction, unlabelled=labelling)
+    if cfg.calibrate_sigma and len(val_idx) < MIN_SIGMA_SAMPLES:  # said before the labelling and the training
+        warnings.warn(f"{data_name(data_paths)}: sigma is calibrated on {len(val_idx)} validation sample(s), fewer "
+                      f"than {MIN_SIGMA_SAMPLES}: a 68.3 % quantile of so few errors says little, so the sigmas may "
+                      "not hold their promise; give more validation presses (import --val-fraction, or a larger "
+                      "val_fraction), or set calibrate_sigma = false", UserWarning, stacklevel=2)
     windows = dataset_windows(data, cfg)
-    pseudo = _pseudo_labels(data, labels, names, cfg, windows) if cfg.unlabelled == "manifold" else None
-    train_idx, val_idx = split_indices(data, cfg.val_fraction, unlabelled=pseudo is not None)
+    pseudo = _pseudo_labels(data, labels, names, cfg, windows) if labelling else None
     if len(train_idx) < 2:
         raise DatasetError(f"{len(train_idx)} training sample(s): too few to train on")
     windows = torch.from_numpy(windows)
@@ -337,6 +344,7 @@ def fit_sigma_scale(model: ContactModel, windows: torch.Tensor, targets: torch.T
 
 
 SIGMA_MAP_RUN = 40      # validation samples per knot of a sigma map
+MIN_SIGMA_SAMPLES = 20  # fewest validation samples whose errors calibrate sigma (5 % steps of the quantile)
 
 
 @torch.no_grad()

@@ -64,5 +64,5 @@ def run_export(request: ExportRequest) -> int:
     targets = ", ".join(f"{n} [{u}]" for n, u in zip(meta["targets"]["names"], meta["targets"]["units"]))
     print(f"wrote {request.out}: contact model, {meta['parameters']:,} parameters, targets {targets}, "
           f"{meta['context']['frames']} frame(s) of context, ONNX vs torch max |diff| "
-          f"{meta['parity_max_abs']:.2e} target spreads")
+          f"{meta['parity_max_abs']:.2e} (relative to each target's spread)")
     return 0
