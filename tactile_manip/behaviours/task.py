@@ -6,12 +6,12 @@ runner, the cells, the log, the report, ``tactile-manip score`` and the Ray driv
 none of them knows a task by name. What a subclass states:
 
 - ``name``, ``title``: the name each trial record carries (and the scene's table of the task's settings,
-  ``[<name>]``), and the heading of its reports;
+  ``[<name>]``; default: the class's name in lower case), and the heading of its reports;
 - ``Config``: the dataclass of those settings (:class:`NoSettings` for none), validated as every config is;
 - :meth:`run`: one trial, on a :class:`Trial` (arm, gripper, sensor, estimator, the object, the seed, the truth),
   returning a result (a :class:`TaskResult`, or any object with its ``outcome``, ``detail``, ``estimate`` and
   ``timings_s``);
-- :meth:`failed`: the result of a trial that raised (the runner records it and goes on);
+- :meth:`failed` (optional): the result of a trial that raised (the runner records it and goes on);
 - :meth:`record`: the fields its trials add to the log line (:class:`~tactile_manip.trials.record.TrialRecord`
   keyword arguments, ``extra`` merged into the line's ``extra``);
 - :meth:`report` and :meth:`success_rule`: the report's sections of its own and the sentence that says when
@@ -111,6 +111,13 @@ class Task(abc.ABC):
     streams_frames: ClassVar[bool] = False  # whether the trial's frame recorder suits it (a turn to a target angle)
     simulated_only: ClassVar[str] = ""      # why the task runs only in the simulated cell ("" where it does not)
 
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        if not isinstance(getattr(cls, "name", None), str):  # a task that names itself not: its class's name
+            cls.name = cls.__name__.lower()
+        if cls.title == Task.title:
+            cls.title = f"{cls.name.capitalize()} trials"
+
     def __init__(self, scene: Any) -> None:
         self.scene = scene
         self.config = scene.settings
@@ -129,9 +136,10 @@ class Task(abc.ABC):
         is an outcome, never an escape (catch :class:`~tactile_manip.behaviours.skills.Abort`); the cell opens
         the gripper and resets after it."""
 
-    @abc.abstractmethod
     def failed(self, outcome: str, detail: str) -> Any:
-        """The result of a trial that raised (``outcome`` "error", ``detail`` the exception)."""
+        """The result of a trial that raised (``outcome`` "error", ``detail`` the exception); by default a
+        :class:`TaskResult`."""
+        return TaskResult(outcome=outcome, detail=detail)
 
     @abc.abstractmethod
     def record(self, result: Any) -> dict[str, Any]:

@@ -226,8 +226,16 @@ def make_cell(scene: TrialScene):
 
 
 def make_task(scene: TrialScene) -> Task:
-    """The task ``scene`` runs, built on it (its settings, the behaviour's parameters)."""
-    return task_class(scene.task)(scene)
+    """The task ``scene`` runs, built on it (its settings, the behaviour's parameters).
+
+    Raises:
+        ConfigError: the task class cannot be built (a method it must define is missing).
+    """
+    cls = task_class(scene.task)
+    try:
+        return cls(scene)
+    except TypeError as e:
+        raise ConfigError(f"task {scene.task!r}: {e}") from None
 
 
 def trial_of(cell, p: Presentation, estimator: TactileEstimator, object_width_m: float, truth,

@@ -13,7 +13,7 @@ from tactile_manip.trials.record import TrialRecord
 
 def make_record(p: Presentation, method: str, task: Task, result: Any) -> TrialRecord:
     """The log line of one trial of ``task`` (``result``: what its ``run`` or ``failed`` returned)."""
-    fields = dict(task.record(result))
+    fields = dict(task.record(result) or {})
     extra = fields.pop("extra", None) or {}
     est = getattr(result.estimate, "angle", result.estimate)  # what an estimator read carries its angle
     return TrialRecord(

@@ -100,3 +100,45 @@ def test_a_task_whose_log_fields_break_records_an_error_and_the_run_goes_on(work
     lines = [json.loads(line) for line in (workspace / "run" / "trials.jsonl").read_text().splitlines()]
     assert len(lines) == 4 and all(r["outcome"] == "error" and r["task"] == "lift" for r in lines)
     assert all("KeyError while logging the trial" in r["detail"] for r in lines)
+
+
+SQUEEZE = '''from tactile_manip.behaviours.skills import Abort, grasp, read_pad
+from tactile_manip.behaviours.task import Task, TaskResult
+
+
+class Squeeze(Task):
+    def run(self, trial):
+        result = TaskResult("error")
+        try:
+            grasp(trial.arm, trial.gripper, trial.object_width_m, self.behaviour)
+            result.estimate = read_pad(trial.sensor, trial.estimator, self.behaviour).angle
+            result.outcome = "done"
+        except Abort as stop:
+            result.outcome, result.detail = stop.outcome, stop.detail
+        return result
+'''
+RECORD = '''
+    def record(self, result):
+        return {"error_rad": 0.0 if result.outcome == "done" else None}
+'''
+
+
+def _squeeze_scene(workspace, source: str) -> None:
+    (workspace / "my_lab" / "squeeze.py").write_text(source)
+    scene = (workspace / "lift.toml").read_text().replace('"my_lab.lift_task:Lift"', '"my_lab.squeeze:Squeeze"')
+    (workspace / "squeeze.toml").write_text(scene.replace("[lift]", "").replace("height_mm = 20.0", ""))
+
+
+def test_a_task_is_run_and_record_alone_named_after_its_class(workspace) -> None:
+    _squeeze_scene(workspace, SQUEEZE + RECORD)
+    assert main(["trials", "--config", "squeeze.toml", "--out", "run", "--quiet", "--methods", "supermag"]) == 0
+    lines = [json.loads(line) for line in (workspace / "run" / "trials.jsonl").read_text().splitlines()]
+    assert [(r["task"], r["outcome"]) for r in lines] == [("squeeze", "done")] * 2
+    assert json.loads((workspace / "run" / "summary.json").read_text())["title"] == "Squeeze trials: lift_sim"
+
+
+def test_a_task_without_its_log_fields_is_one_line_before_the_run_folder(workspace, capsys) -> None:
+    _squeeze_scene(workspace, SQUEEZE)
+    assert main(["trials", "--config", "squeeze.toml", "--out", "run", "--quiet"]) == 2
+    assert_one_line_error(capsys.readouterr().err, "trials", "task 'my_lab.squeeze:Squeeze'", "record")
+    assert not (workspace / "run").exists()
