@@ -12,10 +12,11 @@ another command marked. ``--force`` then replaces only the command's own files i
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import tempfile
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from pathlib import Path
 
 from tactile_manip.errors import TactileManipError
@@ -174,6 +175,18 @@ def _probe(folder: Path, target: Path) -> None:
             pass
     except OSError as e:
         raise OutputPathError(f"cannot write {target}: cannot create files in {folder} ({e.strerror})") from e
+
+
+@contextlib.contextmanager
+def unfinished(path: str | Path) -> Iterator[Path]:
+    """The block writes ``path`` (a temporary name, renamed into place at its end); should the block fail, or be
+    interrupted, ``path`` is removed, so no half-written file is left for a loader to find."""
+    path = Path(path)
+    try:
+        yield path
+    except BaseException:
+        path.unlink(missing_ok=True)
+        raise
 
 
 def unique_folder(path: str | Path) -> Path:
