@@ -56,6 +56,7 @@ def run(args: argparse.Namespace) -> int:
     import sys
     import threading
 
+    from tactile_manip.lifeline import Lifeline
     from tactile_manip.sensors.simulated.contacts import parse_press
     from tactile_manip.sensors.simulated.emulator import EmulatorConfig, FaultConfig, FirmwareEmulator
 
@@ -74,9 +75,16 @@ def run(args: argparse.Namespace) -> int:
                          disconnects=tuple(args.disconnect))
     emulator = FirmwareEmulator(config, presses=[parse_press(s) for s in args.press], faults=faults)
     stop = threading.Event()
-    previous = {sig: signal.signal(sig, lambda *_: stop.set()) for sig in (signal.SIGTERM, signal.SIGINT)}
+    stopped_by: list[int] = []
+
+    def stop_on(sig: int, _frame) -> None:
+        stopped_by.append(sig)
+        stop.set()
+
+    previous = {sig: signal.signal(sig, stop_on) for sig in (signal.SIGTERM, signal.SIGINT)}
     try:
-        with emulator:
+        # the link goes with this process even when it is killed outright (SIGKILL): a watchdog removes it
+        with emulator, Lifeline(links=[(emulator.path, emulator.device)] if config.link else []):
             print(emulator.path, flush=True)
             print(f"emulate: streaming {config.rate_hz:g} Hz on {emulator.path}"
                   + (f" (-> {emulator.device})" if config.link else "") + "; Ctrl-C to stop",
@@ -87,4 +95,7 @@ def run(args: argparse.Namespace) -> int:
     finally:
         for sig, handler in previous.items():
             signal.signal(sig, handler)
+    if stopped_by:  # stopped by a signal: the shell's code for it (130 for Ctrl-C, 143 for SIGTERM)
+        print(f"emulate: stopped by {signal.Signals(stopped_by[0]).name}", file=sys.stderr, flush=True)
+        return 128 + stopped_by[0]
     return 0

@@ -53,7 +53,13 @@ def run(args: argparse.Namespace) -> int:
         sensor = SerialSensor(config)
     presses = [parse_press(s) for s in args.press]
     stop = threading.Event()
-    previous = signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    terminated: list[bool] = []
+
+    def on_sigterm(*_) -> None:  # the recording ends cleanly, then the command exits 143
+        terminated.append(True)
+        stop.set()
+
+    previous = signal.signal(signal.SIGTERM, on_sigterm)
 
     def status(h) -> None:
         if not args.quiet:
@@ -71,8 +77,11 @@ def run(args: argparse.Namespace) -> int:
                                                                        on_health=status)
     except KeyboardInterrupt:
         print(f"record: stopped; {out} is complete up to the interrupt", file=sys.stderr)
-        return 0
+        raise  # Ctrl-C: the CLI exits 130
     finally:
         signal.signal(signal.SIGTERM, previous)
     print(f"wrote {summary.frames} frames ({summary.seconds:.1f} s) to {out}")
+    if terminated:
+        print("record: stopped by SIGTERM", file=sys.stderr)
+        return 143
     return 0

@@ -14,6 +14,13 @@ import os
 from tactile_manip.progress import progress_bar
 
 MIN_PROBE_PRESSES = 3  # --board: one press each for the train, val and test splits
+SIMULATED_WHAT = "dataset written by tactile-manip simulate"  # the only file --force replaces
+
+
+def _simulated(path) -> bool:
+    from tactile_manip.data.io import dataset_source
+
+    return (dataset_source(path) or "").startswith(("tactile-manip simulate", "tactile_manip.sim."))
 
 DEFAULT_CONFIG = "configs/dataset/supermag.toml"
 
@@ -62,7 +69,7 @@ def run(args: argparse.Namespace) -> int:
     if args.shard_size is not None and args.shard_size < 1:
         raise ValueError(f"--shard-size must be >= 1, got {args.shard_size}")
     out = (_check_shard_folder(args.out, force=args.force) if args.shard_size else  # checked before the work
-           check_output_file(dataset_path(args.out), force=args.force))
+           check_output_file(dataset_path(args.out), force=args.force, ours=_simulated, what=SIMULATED_WHAT))
     if args.workers < 0:
         raise ValueError(f"--workers must be >= 0, got {args.workers}")
     if not 0 < args.scale <= 100:
@@ -154,7 +161,7 @@ def _simulate_board(args: argparse.Namespace) -> int:
     if not MIN_PROBE_PRESSES <= args.presses <= 1_000_000:  # checked before any press
         raise ValueError(f"--presses must be from {MIN_PROBE_PRESSES} to 1000000 (a press each for validation and "
                          f"test, and one to train on), got {args.presses}")
-    out = check_output_file(dataset_path(args.out), force=args.force)
+    out = check_output_file(dataset_path(args.out), force=args.force, ours=_simulated, what=SIMULATED_WHAT)
     board = load_board(args.board)
     board.require_simulation()
     plan = ProbePlan(tip=args.tip, tip_diameter_mm=args.tip_diameter_mm, max_force_n=args.max_force_n)

@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from tactile_manip.interop.rerun_log import APPLICATION_ID, require_rerun
+from tactile_manip.lifeline import Lifeline
 
 DEFAULT_PORT = 9876          # Rerun's own default gRPC port
 LOCALHOST = "127.0.0.1"
@@ -88,6 +89,7 @@ class LiveSink:
     process: subprocess.Popen | None = None
     stop_process: bool = False
     notes: list[str] = field(default_factory=list)
+    lifeline: Lifeline | None = None  # stops the server should this process die without closing the sink
 
     def close(self) -> None:
         try:
@@ -96,6 +98,8 @@ class LiveSink:
         finally:
             if self.process is not None and self.stop_process:
                 stop_process_group(self.process)
+            if self.lifeline is not None:
+                self.lifeline.release()
 
     def __enter__(self) -> LiveSink:
         return self
@@ -133,13 +137,18 @@ def open_live(*, save: str | Path | None = None, spawn: bool = False, serve: boo
     if spawn and display_problem():
         raise OSError(display_problem())
     proc = _start(viewer_command(serve=serve, bind=bind, port=port))
+    # a server goes with this process, SIGKILL included (a viewer is the user's window and stays)
+    lifeline = Lifeline(groups=[proc.pid]) if serve and not _WINDOWS else None
     try:
         _wait_listening(bind, port, proc)
         rr.connect_grpc(url, default_blueprint=default_blueprint, recording=rec)
     except BaseException:  # not listening, or Ctrl-C meanwhile: the process we started goes too
         stop_process_group(proc)
+        if lifeline is not None:
+            lifeline.release()
         raise
-    sink = LiveSink(rec, f"{'serving' if serve else 'viewer'} at {url}", process=proc, stop_process=serve)
+    sink = LiveSink(rec, f"{'serving' if serve else 'viewer'} at {url}", process=proc, stop_process=serve,
+                    lifeline=lifeline)
     if serve:
         sink.notes.append(f"connect a viewer with: rerun --connect {url}")
     if bind not in (LOCALHOST, "::1"):

@@ -38,7 +38,7 @@ def stream_to_rerun(sensor, *, save: str | Path | None = None, spawn: bool = Fal
     estimator = load_estimator(model, sensor.layout.name)  # a bad model fails before a viewer starts
     if save is None and not serve:
         spawn = True
-    logger = None
+    logger, interrupted = None, None
     with open_live(save=save, spawn=spawn, serve=serve, bind=bind, port=port, recording_name=f"view {sensor.source}",
                    default_blueprint=blueprint(EntityPaths(name))) as sink:  # closed (a server stopped) however we end
         print(f"view: {sensor.source} -> Rerun, {sink.description}" + "".join(f"\nview: {n}" for n in sink.notes),
@@ -46,13 +46,15 @@ def stream_to_rerun(sensor, *, save: str | Path | None = None, spawn: bool = Fal
         try:
             logger = RerunLogger(sink.recording, name=name, grid=sensor.layout.grid, layout=sensor.layout)
             _log_frames(sensor, logger, estimator, estimate_hz=estimate_hz, seconds=seconds)
-        except KeyboardInterrupt:  # Ctrl-C (or SIGTERM, raised as one by the CLI) ends the stream, not an error
-            pass
+        except KeyboardInterrupt as e:  # Ctrl-C (or SIGTERM, raised as one by the CLI) ends the stream
+            interrupted = e
         finally:
             if logger is not None:
                 logger.flush()
     frames = 0 if logger is None else logger.frames
     print(f"view: logged {frames} frames to Rerun ({sink.description})", file=sys.stderr)
+    if interrupted is not None:  # the file finished and the server stopped: the CLI exits 130 (143 for SIGTERM)
+        raise interrupted
     return 0 if frames else 1
 
 

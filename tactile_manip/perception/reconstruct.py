@@ -316,11 +316,17 @@ def _describe(tensors: dict) -> str:
                            for n, (d, t) in tensors.items()) + ")"
 
 
+PARTIAL_SUFFIX = ".partial"  # what an export's file is called until its parity check passed
+
+
 def read_metadata(path: str | Path) -> dict[str, Any]:
     """The ``tactile_manip`` metadata of an exported model, validated in itself
     (:func:`~tactile_manip.perception.model_metadata.check_metadata`; the loaders compare it with the graph).
     Raises :class:`ModelFileError`."""
     path = Path(path)
+    if path.name.endswith(PARTIAL_SUFFIX):
+        raise ModelFileError(f"{path}: an unfinished export (export writes {PARTIAL_SUFFIX} while it checks the "
+                             "model, and renames it only once the check passed): export the model again")
     if not path.is_file():
         raise ModelFileError(missing_model_message(path))
     try:

@@ -87,7 +87,7 @@ def test_view_serve_stops_its_server_when_done():
     _assert_nothing_left(port)
 
 
-@pytest.mark.parametrize("sig, status", [(signal.SIGINT, 0), (signal.SIGTERM, 0)])
+@pytest.mark.parametrize("sig, status", [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
 def test_view_serve_stops_its_server_on_ctrl_c_and_sigterm(sig, status):
     port = _free_port()
     proc = _cli("view", "--sim", "--rerun", "--serve", "--rerun-port", str(port), "--baseline-frames", "25")
@@ -101,6 +101,27 @@ def test_view_serve_stops_its_server_on_ctrl_c_and_sigterm(sig, status):
             proc.kill()
     assert proc.returncode == status, err
     assert "logged" in err
+    _assert_nothing_left(port)
+
+
+def test_view_serve_killed_outright_leaves_no_server():
+    """SIGKILL runs no cleanup of the command: its watchdog (tactile_manip.lifeline) stops the server."""
+    port = _free_port()
+    proc = _cli("view", "--sim", "--rerun", "--serve", "--rerun-port", str(port), "--baseline-frames", "25")
+    try:
+        _wait_serving(proc, port)
+        time.sleep(1.0)
+        proc.send_signal(signal.SIGKILL)
+        proc.communicate(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == -signal.SIGKILL
+    _assert_nothing_left(port)
+    again = _cli("view", "--sim", "--rerun", "--serve", "--rerun-port", str(port), "--baseline-frames", "25",
+                 "--seconds", "1")
+    _, err = again.communicate(timeout=60)
+    assert again.returncode == 0, err  # the port is free for the next server
     _assert_nothing_left(port)
 
 

@@ -243,3 +243,61 @@ def test_view_replay_says_what_damage_it_skipped(tmp_path, capsys):
                  "--no-baseline"]) == 0
     err = capsys.readouterr().err
     assert "skipped 126 damaged bytes in 1 place(s); replaying the 39 intact frames" in err
+
+
+def _emulate_on_link(link, *argv):
+    import os
+    import time
+
+    proc = subprocess.Popen([sys.executable, "-m", "tactile_manip.cli", "emulate", "--link", str(link),
+                             "--duration-s", "60", *argv], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 60
+    while not os.path.islink(link) and time.monotonic() < deadline and proc.poll() is None:
+        time.sleep(0.05)
+    assert os.path.islink(link), proc.communicate(timeout=10)
+    return proc
+
+
+@pytest.mark.parametrize("sig, status", [("SIGTERM", 143), ("SIGINT", 130)])
+def test_emulate_stopped_by_a_signal_exits_with_its_code_and_removes_its_link(sig, status, tmp_path):
+    import os
+    import signal
+
+    link = tmp_path / "board"
+    proc = _emulate_on_link(link)
+    proc.send_signal(getattr(signal, sig))
+    _, err = proc.communicate(timeout=30)
+    assert proc.returncode == status and f"emulate: stopped by {sig}" in err, err
+    assert not os.path.lexists(link)
+
+
+def test_emulate_killed_outright_leaves_no_link(tmp_path):
+    """SIGKILL runs none of the command's cleanup: the watchdog it started removes the link."""
+    import os
+    import signal
+    import time
+
+    link = tmp_path / "board"
+    proc = _emulate_on_link(link)
+    proc.send_signal(signal.SIGKILL)
+    proc.communicate(timeout=30)
+    deadline = time.monotonic() + 10
+    while os.path.lexists(link) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not os.path.lexists(link)
+
+
+def test_record_stopped_by_sigterm_keeps_its_file_and_exits_143(tmp_path):
+    import signal
+    import time
+
+    out = tmp_path / "r.tmrec"
+    proc = subprocess.Popen([sys.executable, "-m", "tactile_manip.cli", "record", "--sim", "--out", str(out)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 60
+    while not (out.exists() and out.stat().st_size > 4096) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=30)
+    assert proc.returncode == 143 and "record: stopped by SIGTERM" in err, err
+    assert len(read_recording(out).seq) > 0
