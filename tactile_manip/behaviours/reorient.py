@@ -115,7 +115,7 @@ def grasp_estimate_reorient(arm: Arm, gripper: Gripper, sensor: TactileSensor,
     cfg = config or BehaviourConfig()
     observer = observer or _Silent()
     contact = estimator.contact
-    estimator.check_layout(sensor.layout.name)
+    estimator.check_layout(sensor.layout)
     target = float(wrap_axial(check_finite_scalar("target_angle_rad", target_angle_rad)))
     result = ReorientResult(outcome="error")
     timings = result.timings_s

@@ -13,6 +13,7 @@ Boards come from board files (:func:`~tactile_manip.boards.load.load_board`); nu
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -101,6 +102,20 @@ class Board:
     @property
     def generic(self) -> bool:
         return self.name.startswith(GENERIC_PREFIX)
+
+    @functools.cached_property
+    def record(self) -> dict:
+        """Name, fingerprint and identity (:mod:`tactile_manip.boards.identity`): what datasets and models of this
+        board carry, and what a reading of another board is told apart by."""
+        from tactile_manip.boards.identity import board_record
+
+        return board_record(self)
+
+    @property
+    def fingerprint(self) -> str:
+        """16 hex of what this board's readings depend on (grid, chips' cells, places and turns, LSB sizes, wire
+        format and unit); not its name."""
+        return self.record["fingerprint"]
 
     @property
     def simulatable(self) -> bool:

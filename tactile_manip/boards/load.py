@@ -91,9 +91,24 @@ def board_from_file(path: str | Path) -> Board:
     if spec.body is not None and spec.layer is not None:
         _check_magnets(where, spec.body, spec.layer)
     head = spec.board
-    return Board(name=head.name, grid=head.grid, pitch_mm=head.pitch_mm, chips=chips, chip=spec.chip,
-                 wire=spec.wire, body=spec.body, layer=spec.layer, description=head.description,
-                 source=head.source, path=path)
+    board = Board(name=head.name, grid=head.grid, pitch_mm=head.pitch_mm, chips=chips, chip=spec.chip,
+                  wire=spec.wire, body=spec.body, layer=spec.layer, description=head.description,
+                  source=head.source, path=path)
+    _check_name(where, board, path)
+    return board
+
+
+def _check_name(where: str, board: Board, path: Path) -> None:
+    """A file may take a shipped board's name only with that board's contents (its own copy, say): a name is how
+    people and files refer to a board, and a second board under it would pass for the first."""
+    if board.name not in board_names() or path.resolve() == (BOARD_DIR / f"{board.name}.toml").resolve():
+        return
+    shipped = _shipped(board.name)
+    fields = ("grid", "pitch_mm", "chips", "chip", "wire", "body", "layer")
+    differ = [f for f in fields if getattr(board, f) != getattr(shipped, f)]
+    if differ:
+        raise ConfigError(f"{where}: board.name {board.name!r} is a shipped board's, but this file's "
+                          f"{', '.join(differ)} differ from it; give your board a name of its own")
 
 
 def _check_chips(where: str, head: BoardHeader, chips: tuple[ChipSpec, ...]) -> None:

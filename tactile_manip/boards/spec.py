@@ -23,6 +23,7 @@ numpy only, like every core module.
 from __future__ import annotations
 
 import math
+import unicodedata
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -213,6 +214,9 @@ class BoardHeader:
     def __post_init__(self) -> None:
         if not self.name or self.name != self.name.strip() or any(c in self.name for c in "/\\\n"):
             raise ValueError(f"board.name must be a plain name, got {self.name!r}")
+        if not self.name.isprintable() or any(unicodedata.category(c) in ("Cf", "Cc", "Zl", "Zp") for c in self.name):
+            raise ValueError(f"board.name must be printable, without control or formatting characters, got "
+                             f"{self.name.encode('unicode_escape').decode()!r}")
         if not all(isinstance(v, int) and not isinstance(v, bool) and 1 <= v <= 64 for v in self.grid):
             raise ValueError(f"board.grid must be two integers from 1 to 64, got {list(self.grid)}")
         _finite("board.pitch_mm", self.pitch_mm, low=0.0, high=1000.0)

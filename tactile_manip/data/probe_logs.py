@@ -104,7 +104,7 @@ def from_probe_logs(readings: Sequence[ReadingStream], labels: Sequence[LabelStr
     split_arr = _split(runs, split, test_fraction, val_fraction, held_out_run)
     prov = {"source": "tactile_manip.data.from_probe_logs", "code_version": code_version(),
             "created_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()), "layout": board.name,
-            "targets": plan.describe(), "contact": None if cond is None else str(cond),
+            "board": board.record, "targets": plan.describe(), "contact": None if cond is None else str(cond),
             "contact_use": None if cond is None else ("target" if plan.flag else "filter"),
             "missing": missing if not isinstance(missing, Mapping) else dict(missing),
             "split": split, "test_fraction": test_fraction, "val_fraction": val_fraction,

@@ -55,6 +55,8 @@ allocated but the returned state. An estimator keeps its history and these array
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import math
 import time
 from collections.abc import Mapping, Sequence
@@ -64,6 +66,7 @@ from typing import Any
 
 import numpy as np
 
+from tactile_manip.boards.identity import check_board_of
 from tactile_manip.extras import require
 from tactile_manip.perception.confidence import SigmaCalibration
 from tactile_manip.perception.contact_context import ContextBuffer
@@ -73,6 +76,9 @@ from tactile_manip.perception.onnx_session import session_options
 from tactile_manip.perception.reconstruct import ModelFileError, read_metadata
 from tactile_manip.shipped import resolve_model_path
 from tactile_manip.types import TactileReading
+
+if TYPE_CHECKING:
+    from tactile_manip.boards.board import Board
 
 # ContactState field of each standard target, and of its sigma
 STATE_FIELDS = {"x_mm": "x_sigma_mm", "y_mm": "y_sigma_mm", "depth_mm": "depth_sigma_mm",
@@ -268,8 +274,11 @@ class ContactEstimator:
         """Forget the readings kept for context (the next estimate reads its reading alone)."""
         self._history.clear()
 
-    def check_layout(self, layout: str) -> None:
-        """Refuse a sensor of another board layout than the model's."""
+    def check_layout(self, layout: str | Board) -> None:
+        """Refuse a sensor of another board layout (a name, or a sensor's Board) than the model's."""
+        if check_board_of(self.path.name, self.metadata, layout):
+            return
+        layout = getattr(layout, "name", layout)
         if self.board_layout and layout != self.board_layout:
             raise ValueError(f"{self.path.name} takes readings of the {self.board_layout!r} board layout, but the "
                              f"sensor has the {layout!r} layout: train a contact model for that board")

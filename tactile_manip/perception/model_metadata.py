@@ -38,7 +38,7 @@ TOP_LEVEL = {"format_version": int, "kind": str, "package_version": str, "board_
              "data_fingerprint": str, "parameters": int, "input": dict, "output": dict, "noise": dict,
              "context": dict, "targets": dict, "normalisation": dict, "sigma_calibration": dict,
              "model_config": dict, "train_config": dict, "training": dict, "training_data": dict, "metrics": dict,
-             "one_reading": dict, "image_position_weight": _NUMBER, "image_symmetry": str}
+             "one_reading": dict, "image_position_weight": _NUMBER, "image_symmetry": str, "board": dict}
 _GRID_NAME = re.compile(r"grid-(\d+)x(\d+)")
 
 

@@ -14,6 +14,8 @@ the confidence.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import abc
 import json
 import math
@@ -26,6 +28,7 @@ from typing import Any
 import numpy as np
 from scipy import ndimage
 
+from tactile_manip.boards.identity import check_board_of
 from tactile_manip.chips import MLX90393, full_scale_ut
 from tactile_manip.perception.angle_head import AngleHead, open_angle_head
 from tactile_manip.perception.board_symmetry import average_images, image_subgroup
@@ -34,6 +37,9 @@ from tactile_manip.perception.one_reading import open_one_reading
 from tactile_manip.perception.onnx_session import session_options
 from tactile_manip.extras import require
 from tactile_manip.shipped import SHIPPED_MODELS, missing_model_message, resolve_model_path
+
+if TYPE_CHECKING:
+    from tactile_manip.boards.board import Board
 
 METADATA_KEY = "tactile_manip"
 SYMMETRY_CHUNK = 64  # readings per batch of symmetric copies (4 or 8 images each)
@@ -102,9 +108,12 @@ class Reconstructor(abc.ABC):
         """Readings (N, R, C, 3) as the model reads them (see :meth:`checked`)."""
         return self._check(fields_ut, batch=True)
 
-    def check_layout(self, layout: str) -> None:
-        """Refuse readings of board layout ``layout`` unless it is the one this reconstructor was made for."""
-        if layout != self.board_layout:
+    def check_layout(self, layout: str | Board) -> None:
+        """Refuse readings of board layout ``layout`` (a name, or a sensor's :class:`~tactile_manip.boards.Board`,
+        told apart by what its readings depend on) unless it is the one this reconstructor was made for."""
+        if check_board_of(self.name, getattr(self, "metadata", {"board_layout": self.board_layout}), layout):
+            return
+        if getattr(layout, "name", layout) != self.board_layout:
             raise ValueError(f"{self.name} takes readings of the {self.board_layout!r} board layout, but the sensor "
                              f"has the {layout!r} layout: train or export a model for that board")
 

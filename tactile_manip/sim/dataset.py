@@ -333,7 +333,7 @@ def _assemble(cfg: DatasetConfig, tasks: list[_Task], results: list[dict[str, An
     names = [o.display_name for o in cfg.objects]
     unique = list(dict.fromkeys(names))
     provenance = {"source": "tactile-manip simulate", "config": to_dict(cfg), "layout": cfg.sensor_board().name,
-                  "code_version": code_version(),
+                  "board": cfg.sensor_board().record, "code_version": code_version(),
                   "created_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
                   "generation_seconds": round(seconds, 2), "workers": workers}
     extras = {"field_raw_ut": stack("field_raw_ut", np.float32),

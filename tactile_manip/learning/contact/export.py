@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from tactile_manip.boards.identity import record_of_name
 from tactile_manip.config import to_dict
 from tactile_manip.data.targets import target_unit
 from tactile_manip.learning.checkpoint import load_net_checkpoint
@@ -111,6 +112,7 @@ def contact_metadata(model: ContactModel, payload: dict[str, Any], metrics: dict
                   "layout": "[frame, row, col, channel]; frame 0 the newest reading, frame k the reading k frames "
                             "before it", "channels": inp["channels"]},
         "board_layout": inp["layout"],
+        **({"board": board} if (board := inp.get("board") or record_of_name(inp["layout"])) is not None else {}),
         "context": inp["context"],
         "targets": {"names": names, "units": [target_unit(n) for n in names]},
         "output": {"names": ["mean", "sigma"], "shape": ["batch", len(names)],
