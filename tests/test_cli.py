@@ -93,11 +93,11 @@ def test_simulate_refuses_to_overwrite_without_force(at_root, dataset, capsys):
     assert dataset.read_bytes() == before
 
 
-def test_simulate_force_overwrites(at_root, tmp_path, capsys):
+def test_simulate_force_overwrites_its_own_dataset(at_root, tmp_path, capsys):
     out = tmp_path / "y.npz"
-    out.write_bytes(b"old")
-    rc = main(["simulate", "--config", CONFIG, "--scale", "0.0001", "--workers", "1", "--out", str(out),
-               "--seed", "5", "--force"])
+    args = ["simulate", "--config", CONFIG, "--scale", "0.0001", "--workers", "1", "--out", str(out)]
+    assert main([*args, "--seed", "4"]) == 0
+    rc = main([*args, "--seed", "5", "--force"])
     assert rc == 0
     data = load_dataset(out)
     assert len(data) == 11 and data.provenance["config"]["seed"] == 5
