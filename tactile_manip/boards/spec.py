@@ -83,6 +83,9 @@ class ChipSpec:
         for i, v in enumerate(self.position_mm):
             if not (isinstance(v, (int, float)) and (math.isfinite(v) or math.isnan(v))):
                 raise ValueError(f"position_mm[{i}] must be a number, got {v!r}")
+        if sum(math.isnan(v) for v in self.position_mm) == 1:
+            raise ValueError(f"position_mm must be two finite numbers (x, y in mm), or both nan for a chip whose "
+                             f"place is unknown; got [{', '.join(repr(float(v)) for v in self.position_mm)}]")
         _finite("rotation_deg", self.rotation_deg, low=-360.0, high=360.0, low_open=False)
         if self.axes is not None:
             if self.rotation_deg:

@@ -97,3 +97,23 @@ def test_a_sensor_of_another_board_is_refused_by_the_models(tmp_path):
     with pytest.raises(BoardMismatchError, match="the sensor of board 'anyskin-5'"):
         contact.check_layout(load_board("anyskin-5"))
     assert record_of_metadata(contact.metadata)["name"] == "eflesh"
+
+
+def test_a_chip_place_half_unknown_is_named_as_such(tmp_path):
+    text = (BOARDS / "eflesh.toml").read_text().replace('name = "eflesh"', 'name = "mine"')
+    text = text.replace("position_mm = [0.0, 0.0]", "position_mm = [nan, 0.0]", 1)
+    with pytest.raises(ConfigError, match=r"position_mm must be two finite numbers .* got \[nan, 0.0\]"):
+        load_board(_board_file(tmp_path, "half.toml", text))
+
+
+def test_export_refuses_data_of_another_reading_grid_before_any_work(contact_model_files, tmp_path, capsys):
+    """A checkpoint of a (3, 3) board handed (4, 4) readings: one line naming both shapes, nothing written."""
+    pytest.importorskip("torch")
+    _, run, _ = contact_model_files
+    data = tmp_path / "supermag.npz"
+    assert main(["simulate", "--board", "supermag-4x4", "--presses", "4", "--out", str(data)]) == 0
+    capsys.readouterr()
+    out = tmp_path / "m.onnx"
+    assert main(["export", "--checkpoint", str(run / "best.pt"), "--data", str(data), "--out", str(out)]) == 2
+    assert_one_line_error(capsys.readouterr().err, "export", "holds (4, 4, 3) readings", "reads (3, 3, 3)")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["supermag.npz"]
