@@ -20,8 +20,9 @@ def test_bench_writes_report_json_and_plot_and_prints_the_table(bench_data, tmp_
     pytest.importorskip("onnxruntime")
     monkeypatch.chdir(ROOT)  # the default model paths are relative to the repository root
     out = tmp_path / "bench"
-    rc = main(["bench", "--out", str(out), "--quick", "--data", str(bench_data),
-               "--methods", "bilinear,bicubic,compact", "--runtimes", "ort-1", "--trials", "1"])
+    rc = main(["bench", "--out", str(out), "--quick", "--data", str(bench_data), "--candidates",
+               "experiments/model_variants/bench.toml", "--methods", "bilinear,bicubic,compact", "--runtimes", "ort-1",
+               "--trials", "1"])
     assert rc == 0
     printed = capsys.readouterr().out
     assert printed.startswith("| method | runtime |") and "| compact | onnxruntime 1 thread |" in printed
