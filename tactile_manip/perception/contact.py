@@ -67,7 +67,7 @@ import numpy as np
 from tactile_manip.extras import require
 from tactile_manip.perception.confidence import SigmaCalibration
 from tactile_manip.perception.contact_context import ContextBuffer
-from tactile_manip.perception.estimator import implausible_field, plausible_limits_ut
+from tactile_manip.perception.estimator import implausible_field, plausible_limits_ut, real_field
 from tactile_manip.perception.model_metadata import check_metadata
 from tactile_manip.perception.onnx_session import session_options
 from tactile_manip.perception.reconstruct import ModelFileError, read_metadata
@@ -332,8 +332,9 @@ class ContactEstimator:
         """The reading as float32 (R, C, A), its largest |value| (uT) and why it is implausible ("" when it is
         not); ValueError for a wrong shape or a NaN or infinite value. One reduction decides for a plausible
         reading: NaN and inf carry through the maximum, and a peak below every limit is plausible."""
-        if getattr(field_ut, "dtype", None) == np.float32:
-            arr = np.asarray(field_ut)
+        field_ut = real_field(field_ut)  # ValueError for complex, boolean or text values
+        if field_ut.dtype == np.float32:
+            arr = field_ut
         else:
             with np.errstate(over="ignore"):  # a float64 beyond float32's range is judged below, not warned about
                 arr = np.asarray(field_ut, dtype=np.float32)

@@ -437,7 +437,21 @@ class _PendingStat(Deferred):
 
 
 def _field(reading: TactileReading | np.ndarray) -> np.ndarray:
-    return reading.field_ut if isinstance(reading, TactileReading) else reading
+    """The field of a reading: a :class:`TactileReading`'s, or the array itself once it is known to hold real
+    numbers (ValueError naming the dtype otherwise: a complex value would lose its imaginary part and True would
+    read as 1 uT)."""
+    if isinstance(reading, TactileReading):
+        return reading.field_ut
+    return real_field(reading)
+
+
+def real_field(value: object) -> np.ndarray:
+    """``value`` as an array of real numbers, unconverted (a float array is returned as it is: one attribute
+    read); ValueError naming the dtype for complex, boolean, text or object values."""
+    arr = value if isinstance(value, np.ndarray) else np.asarray(value)
+    if arr.dtype.kind not in "fiu":
+        raise ValueError(f"a reading holds real numbers (uT), got an array of dtype {arr.dtype}")
+    return arr
 
 
 def _saturated(reading: TactileReading | np.ndarray) -> np.ndarray | None:
