@@ -1,18 +1,20 @@
 """The SuperMag board's bank of press directions (tactile_manip/data/press_directions_supermag-4x4.npy), which
 :mod:`tactile_manip.perception.press_check` compares a reading with to tell a press from noise or a uniform field.
 
-    python -m benchmarks.press_bank                      # 2 x 2500 presses, about 7 CPU-minutes; writes the bank
+    python -m benchmarks.press_bank                      # 3 x 2500 presses, about 10 CPU-minutes; writes the bank
     python -m benchmarks.press_bank --presses 300 --out /tmp/bank.npy
 
-Presses of the training families only (the Allen key, the letter R, 90 procedural shapes of seeds 30000-30059
+Presses of training families only, never the six test rods that ``benchmarks/no_contact.py`` measures on: two
+batches of the contact model's families (the Allen key, the letter R, 90 procedural shapes of seeds 30000-30059
 and 31000-31029 (wide), 30 sharp ones of seeds 40000-40029, knife-edge ridges of 60/90/120 deg and a 12 x 3 mm
-flat bar), never the six test rods that ``benchmarks/no_contact.py`` measures on. Each press on its own drawn
-sensor (the simulator's full randomisation ranges), up to 6 mm off centre, any yaw, tilted up to 5 deg, at a
-force log-uniform from 0.5 to 15 N; the noise-free field change (``field_clean_ut``) of each press that touches
-the pad and stays within the layer is kept, scaled to unit length (float16: the comparison is a cosine). The
-check expands the bank by the board's 8 symmetries when it loads it. Also prints, for the last 10 % of the
-presses held out of the bank, the likeness quantiles that :data:`~tactile_manip.perception.press_check.MIN_LIKENESS`
-was chosen on, beside those of white-noise directions.
+flat bar) and one of the angle head's (150 procedural bars of seeds 20000-20149, 50 procedural prisms of seeds
+24000-24049). Each press on its own drawn sensor (the simulator's full randomisation ranges), up to 6 mm off
+centre, any yaw, tilted up to 5 deg, at a force log-uniform from 0.5 to 15 N; the noise-free field change
+(``field_clean_ut``) of each press that touches the pad and stays within the layer is kept, scaled to unit
+length (float16: the comparison is a cosine). The check compares each of a reading's 8 symmetric images with
+the bank. Also prints, for the last tenth of each batch, held out of the bank, the likeness quantiles that
+:data:`~tactile_manip.perception.press_check.MIN_LIKENESS` was chosen on, beside those of white-noise
+directions.
 """
 
 from __future__ import annotations
@@ -27,19 +29,23 @@ from tactile_manip.sim.pair import SensorPair
 from tactile_manip.sim.params import SimParams, randomise
 from tactile_manip.sim.shapes import make_indenter
 
-SEEDS = (11, 12)
 SHAPES = ([("allen_key", {}), ("letter_r", {})]
           + [("procedural", {"seed": 30000 + i}) for i in range(60)]
           + [("procedural", {"seed": 31000 + i, "size_mm": 26.0}) for i in range(30)]
           + [("procedural_sharp", {"seed": 40000 + i}) for i in range(30)]
           + [("ridge", {"angle_deg": a}) for a in (60, 90, 120)]
           + [("flat_bar", {"width_mm": 12.0, "thickness_mm": 3.0})])
+#: the angle head's training families: procedural bars and prisms (configs/dataset/bars*.toml, prisms.toml)
+BARS = ([("procedural_bar", {"seed": 20000 + i}) for i in range(150)]
+        + [("procedural_prism", {"seed": 24000 + i}) for i in range(50)])
+SEEDS = {11: SHAPES, 12: SHAPES, 13: BARS}  # the seed of each batch of presses, and its shapes
 
 
-def press_fields(seed: int, presses: int) -> np.ndarray:
-    """(n, 48) float32 noise-free field changes (uT) of up to ``presses`` presses drawn from ``seed``."""
+def press_fields(seed: int, presses: int, shapes: list) -> np.ndarray:
+    """(n, 48) float32 noise-free field changes (uT) of up to ``presses`` presses of ``shapes`` drawn from
+    ``seed``."""
     rng = np.random.default_rng(seed)
-    indenters = [make_indenter(name, **kwargs) for name, kwargs in SHAPES]
+    indenters = [make_indenter(name, **kwargs) for name, kwargs in shapes]
     fields = []
     for i in range(presses):
         pair = SensorPair(randomise(SimParams(), rng), seed=seed * 100000 + i)
@@ -59,10 +65,11 @@ def main() -> None:
     parser.add_argument("--presses", type=int, default=2500, help="presses drawn per seed")
     parser.add_argument("--out", default="tactile_manip/data/press_directions_supermag-4x4.npy")
     args = parser.parse_args()
-    fields = np.concatenate([press_fields(seed, args.presses) for seed in SEEDS])
-    units = fields / np.linalg.norm(fields, axis=1, keepdims=True)
-    held = len(units) // 10
-    bank, test = units[:-held], units[-held:]
+    batches = [press_fields(seed, args.presses, shapes) for seed, shapes in SEEDS.items()]
+    units = [f / np.linalg.norm(f, axis=1, keepdims=True) for f in batches]
+    held = [len(u) // 10 for u in units]   # the last tenth of each batch is held out of the bank
+    bank = np.concatenate([u[:-h] for u, h in zip(units, held)])
+    test = np.concatenate([u[-h:] for u, h in zip(units, held)])
     np.save(args.out, bank.reshape(-1, 4, 4, 3).astype(np.float16))
     print(f"wrote {args.out}: {len(bank)} press directions ({len(test)} held out)")
 

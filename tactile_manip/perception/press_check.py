@@ -17,7 +17,7 @@ the reading (about 0.1-0.3 ms on one thread):
    unit length) is compared with the directions of simulated presses of the board (:func:`press_bank`: the
    shipped bank of training-family shapes on drawn sensors, ``benchmarks/press_bank.py``). Its likeness is
    the length of its projection on the span of its :data:`NEIGHBOURS` nearest press directions, taken in the
-   reading's symmetric image nearest to a press: near 1 for a press (0.77 and more for 99.9 % of held-out
+   reading's symmetric image nearest to a press: near 1 for a press (0.84 and more for 99 % of held-out
    simulated presses without noise), at most 0.75 for white noise. A reading below :data:`MIN_LIKENESS` is no
    press: the estimators give no answer for it (``plausible`` False).
 
@@ -44,8 +44,8 @@ DRIFT_ALLOWANCE_UT = 5.0
 #: press directions whose span a reading is projected on
 NEIGHBOURS = 3
 #: a reading above the floor whose likeness to simulated presses is below this is no press. Chosen between the
-#: bank's 458 held-out presses (noise-free fields of training-family shapes on other drawn sensors: 0.1 % below
-#: 0.77, 1 % below 0.85) and 2000 white-noise directions (99.9 % below 0.73, the largest 0.75);
+#: bank's 704 held-out presses (noise-free fields of training-family shapes on other drawn sensors: 1 % below
+#: 0.84, the lowest 0.74) and 2000 white-noise directions (99.9 % below 0.74, the largest 0.75);
 #: ``benchmarks/press_bank.py`` prints both
 MIN_LIKENESS = 0.76
 #: the bank of press directions of each board layout that ships one (tactile_manip/data/)
