@@ -29,8 +29,15 @@ Bad input raises ValueError naming the problem (wrong shape, NaN or infinite val
 the history is unchanged); a missing or foreign model file raises
 :class:`~tactile_manip.perception.reconstruct.ModelFileError` naming the path.
 
+No contact is no contact: on a board whose chip noise is known, a reading within the board's noise floor
+(:class:`~tactile_manip.perception.press_check.PressCheck`: rated chip noise and a drift allowance, a stated
+0.1 % false-alarm rate) gives ``in_contact`` False and no quantity; the model does not run on it.
+
 No answer is silently wrong: a state is flagged (``plausible`` False, ``implausible_reason`` saying why) and holds
 no quantity (every value and sigma None, ``values`` and ``sigmas`` empty) when
+
+- the reading is above the noise floor with a pattern no simulated press of the board makes (the press check's
+  likeness; the reason starts with "no press"): ``in_contact`` is True and the model does not run;
 
 - the reading holds a |value| at or beyond :attr:`ContactEstimator.plausible_limits_ut` (more than an MLX90393
   can report as a change, or far beyond the field of a press: the model's ``input.plausible_field_ut``, else its

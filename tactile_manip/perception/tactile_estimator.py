@@ -23,7 +23,10 @@ Each keeps its own contract: the angle may be undefined (``angle.defined``), the
 sigmas, and either may be no answer (``plausible`` False, with its ``implausible_reason``): for a reading beyond
 what the chip can report or far beyond the field of a press both are (the same bound: 2000 uT on the SuperMag
 board), and a contact state whose output is off the pad or outside the trained force range is.
-:attr:`TactileEstimate.plausible` says whether both are answers.
+:attr:`TactileEstimate.plausible` says whether both are answers. Before either part answers, the board's press
+check (:mod:`~tactile_manip.perception.press_check`, one for both parts) judges the reading once: within the
+board's noise floor it is no contact (:attr:`TactileEstimate.in_contact` False, no position, no force, no
+angle), and above it with a pattern no simulated press makes (noise, a uniform field) it is no answer.
 
 Where the contact is, two estimates exist: the centroid of the reconstructed contact (``angle.centroid_mm``)
 and the contact model's centre of pressure (``contact.position_mm``). They err differently: on objects neither
