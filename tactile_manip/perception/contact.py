@@ -336,6 +336,9 @@ class ContactEstimator:
                              "pads' readings need one ContactEstimator each")
         t0 = time.perf_counter()
         checked = [self._check(r.field_ut if isinstance(r, TactileReading) else r) for r in readings]
+        sound = [f for f, _, why in checked if not why]
+        if self.press_check is not None and sound:  # every reading judged in one batched product
+            self.press_check.judge_many(np.stack(sound))
         unmeasured = [None if why else self._unmeasured(f, t0) for f, _, why in checked]
         run = [i for i, (_, _, why) in enumerate(checked) if not why and unmeasured[i] is None]
         mean = sigma = np.empty((0, len(self.target_names)), np.float32)

@@ -331,8 +331,9 @@ class TactilePoseEstimator:
         contact = peaks >= self.min_field_ut
         no_press = [""] * len(stack)
         if self.press_check is not None:  # a reading beyond the plausible bound is no answer already
-            for i in np.flatnonzero(contact & (peaks < self._plausible_ut)):
-                contact[i], no_press[i] = self.press_check.judge(stack[i])
+            judged = np.flatnonzero(contact & (peaks < self._plausible_ut))
+            for i, (touch, why) in zip(judged, self.press_check.judge_many(stack[judged])):
+                contact[i], no_press[i] = touch, why
         return contact, no_press
 
     def set_noise_floor(self, noise_ut: np.ndarray) -> None:
