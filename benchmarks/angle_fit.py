@@ -57,12 +57,14 @@ MAX_EVALS = 40                # residual evaluations per least-squares run
 def fit_box(config: dict[str, Any]) -> tuple[np.ndarray, np.ndarray, float]:
     """Lower and upper bounds of FITTED from the dataset's pose ranges and the simulator's sensor ranges, and
     the nominal skin modulus (kPa) at which the force is fitted."""
-    from tactile_manip.sim.params import SimParams, describe
+    from tactile_manip.boards import load_board
+    from tactile_manip.sim.params import describe, for_board
 
     poses = config.get("poses", {})
     offset, tilt = float(poses.get("offset_mm", 5.0)), float(poses.get("tilt_deg", 2.0))
     f_lo, f_hi = map(float, poses.get("force_n", (10.0, 11.0)))
-    ranges = {row["name"]: (row["value"], row["rand"]) for row in describe(SimParams())}
+    nominal = for_board(load_board("supermag-4x4"))
+    ranges = {row["name"]: (row["value"], row["rand"]) for row in describe(nominal)}
     spread = float(config.get("randomise_spread", 0.0))
 
     def span(name: str) -> tuple[float, float, float]:
@@ -85,10 +87,13 @@ class _Press:
     """One recorded press and the simulator that reads a parameter vector (FITTED) into its expected reading."""
 
     def __init__(self, job: dict[str, Any], reading: np.ndarray, lo: np.ndarray, hi: np.ndarray, e_nom: float):
-        from tactile_manip.sim.params import SimParams, with_values
+        from tactile_manip.boards import load_board
+        from tactile_manip.sim.params import for_board, with_values
         from tactile_manip.sim.shapes import make_indenter
 
-        self.params = SimParams() if job["params"] is None else with_values(SimParams(), job["params"])
+        self.params = for_board(load_board("supermag-4x4"))
+        if job["params"] is not None:
+            self.params = with_values(self.params, job["params"])
         self.params = with_values(self.params, {"layer.skin_modulus_kpa": e_nom})
         c = self.params.chip
         var = white_var(c) + c.drift_ut ** 2

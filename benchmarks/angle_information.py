@@ -91,12 +91,15 @@ def _jobs(data, idx: np.ndarray, specs: dict) -> list[dict[str, Any]]:
 def _information(job: dict[str, Any]) -> dict[str, Any]:
     """The derivatives of one press's noise-free reading (48,) with respect to the angle and each nuisance
     (central differences, in the order of ``PARAMETERS``), and its noise: what the Fisher matrix needs."""
+    from tactile_manip.boards import load_board
     from tactile_manip.sim.objects import IndenterPose
     from tactile_manip.sim.pair import SensorPair
-    from tactile_manip.sim.params import SimParams, randomised_values, with_values
+    from tactile_manip.sim.params import for_board, randomised_values, with_values
     from tactile_manip.sim.shapes import make_indenter
 
-    params = SimParams() if job["params"] is None else with_values(SimParams(), job["params"])
+    params = for_board(load_board("supermag-4x4"))
+    if job["params"] is not None:
+        params = with_values(params, job["params"])
     nominal = SensorPair(params, seed=job["sensor_seed"])
     rod = make_indenter(job["kind"], **job["kwargs"])
     sizes = shape_sizes(job["kind"], job["kwargs"])

@@ -28,7 +28,7 @@ from tactile_manip.sensors import SerialSensor, SerialSensorConfig
 from tactile_manip.wire.protocol import FrameDecoder, encode_frame
 from tactile_manip.wire import WIRE_FORMATS, make_decoder
 from tactile_manip.wire.anyskin import pack_frame
-from tactile_manip.sim.params import ChipParams
+from tactile_manip.chips import MLX90393
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_OUT = ROOT / "docs" / "results" / "benchmarks" / "driver.json"
@@ -88,7 +88,7 @@ def bench_wire_formats(n: int) -> dict[str, dict[str, float]]:
         n_chips = 16 if name == "supermag" else 5
 
         def decode(fs: list[bytes], name: str = name, n_chips: int = n_chips) -> None:
-            d = make_decoder(name, n_chips=n_chips, chip=ChipParams())
+            d = make_decoder(name, n_chips=n_chips, chip=MLX90393)
             if name == "anyskin":
                 d.feed(b"\r\n")  # mid-stream start: the line ending before the first frame
             for f in fs:

@@ -41,7 +41,7 @@ def make_recording(path: Path, seconds: float, seed: int = 0) -> Path:
     rng = np.random.default_rng(seed)
     sensor = SimulatedSensor()
     scale = CountScale.from_chip(sensor.chip)
-    idle = sensor.pair.baseline_field_ut
+    idle = sensor.pair.to_reading(sensor.pair.baseline_field_ut)  # (4, 4, 3) uT
     n = int(round(seconds * RATE_HZ))
     with RecordingWriter(path, recording_header(sensor)) as out:
         for k in range(n):

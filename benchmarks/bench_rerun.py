@@ -70,7 +70,7 @@ def bench_logging(seconds: float, frames: int) -> dict[str, Any]:
     import rerun as rr
 
     from tactile_manip.interop.rerun_log import RerunLogger
-    from tactile_manip.boards.layout import SUPERMAG_4X4
+    from tactile_manip.boards import load_board
 
     fields, depth = _fields(max(frames, int(seconds * RATE_HZ))), _depth()
     idle = _paced(seconds, lambda i: fields[i].sum())  # the loop itself, without logging
@@ -80,7 +80,7 @@ def bench_logging(seconds: float, frames: int) -> dict[str, Any]:
             for mode in modes:
                 rec = rr.RecordingStream("bench_rerun")
                 rr.save(str(Path(tmp) / f"{len(rows)}.rrd"), recording=rec)
-                logger = RerunLogger(rec, layout=SUPERMAG_4X4, batch_frames=batch, heatmap_every=heat)
+                logger = RerunLogger(rec, layout=load_board("supermag-4x4"), batch_frames=batch, heatmap_every=heat)
 
                 def log(i: int, logger=logger, estimates=estimates) -> None:
                     logger.log_frame(fields[i], sensor_time_s=i / RATE_HZ, host_time_s=1000.0 + i / RATE_HZ, frame=i)

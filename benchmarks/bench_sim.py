@@ -52,11 +52,11 @@ def _stage_ms(pair: SensorPair, indenter: Indenter, pose: IndenterPose, rng: np.
     p = pair.params
     # The gaps on the contact and image grids, exactly as press() computes them (no public accessor).
     gap_c, gap_i = pair._gaps(indenter, pose)
-    pixel_mm = p.layer.size_mm / gap_c.shape[0]
+    pixel_mm = pair.board.layer.size_mm[0] / gap_c.shape[0]
 
     def solve(modulus_kpa: float):
         return solve_contact(gap_c, force_n=FORCE_N, modulus_mpa=modulus_kpa * 1e-3,
-                             thickness_mm=p.layer.thickness_mm, pixel_mm=pixel_mm,
+                             thickness_mm=pair.thickness_mm, pixel_mm=pixel_mm,
                              tolerance=p.contact.tolerance, max_iterations=p.contact.max_iterations)
 
     t_skin, skin = _ms(lambda: solve(p.layer.skin_modulus_kpa))

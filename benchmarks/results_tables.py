@@ -79,7 +79,9 @@ BENCH_MODELS = {
     "paper": (None, "paper preset, untrained (latency only)"),
 }
 MODEL_ROLES = {"supermag": "default", "supermag_fast": "reference: previous default",
-               "supermag_robust": "reference: the default's image graphs", "supermag_compact": "reference"}
+               "supermag_robust": "reference: the default's image graphs", "supermag_compact": "reference",
+               "contact_eflesh": "the eFlesh board's contact model",
+               "contact_anyskin5": "the AnySkin board's contact model"}
 METHODS = {  # trial method names -> what they do
     "supermag": "one pass per reading",
     "supermag_sym": "symmetry-averaged (8 passes)",
@@ -88,6 +90,7 @@ METHODS = {  # trial method names -> what they do
     "supermag_rods": "one pass per reading; force and position from a contact model of the six rods",
     "bilinear": "bilinear 4x4 -> 16x16 (the paper's baseline)",
     "blind": "no tactile input: the rod taken along the pad's x axis",
+    "contact": "force and position from the board's contact model; no pose model (no angle)",
     "fast": "one pass per reading",
     "compact": "one pass per reading",
     "robust": "one pass per reading",
@@ -117,6 +120,10 @@ GRIP_SCENE = TrialRun("gripping: `configs/scenes/grip_sim.toml` (`task = \"grip\
                       "within 5 deg",
                       "docs/results/supermag/grip_sim/summary.json",
                       {"supermag": "supermag", "supermag_rods": "supermag", "blind": None})
+GRIP_BOARDS = [TrialRun(f"gripping on the {label} board: `configs/scenes/grip_{name}.toml`, 60 presentations, the "
+                        "force felt within 1.5 N of 8 N, the axis within 0.5 mm of the pad centre (no angle scored)",
+                        f"docs/results/{board}/grip_{name}/summary.json", {"contact": f"contact_{name}", "blind": None})
+               for name, board, label in (("eflesh", "eflesh", "eFlesh"), ("anyskin5", "anyskin-5", "AnySkin"))]
 ROBUST_SCENE = TrialRun("robust scene: `configs/scenes/reorient_robust.toml`, 300 presentations, 2-15 N, a drawn "
                         "sensor per trial, calibrated re-grasp below 0.8",
                         "docs/results/supermag/reorient_robust/summary.json",
@@ -129,6 +136,7 @@ TRIAL_RUNS = (
     MAIN_JOB,
     PLACE_SCENE,
     GRIP_SCENE,
+    *GRIP_BOARDS,
     MAIN_JOB_FAST,
     TrialRun("study: `tasks/reorient_study.toml`, 300 presentations of the same rods, another seed",
              "experiments/trials_fast/reorient_study/summary.json",

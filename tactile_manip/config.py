@@ -32,11 +32,20 @@ def load_config(path: str | Path, cls: type[T]) -> T:
         ConfigError: the file is missing, a directory, unreadable, not UTF-8, not valid TOML, or does not fit
             ``cls`` (a UTF-8 byte-order mark at its start is read past).
     """
+    return from_dict(cls, read_toml(path), where=str(path))
+
+
+def read_toml(path: str | Path) -> dict[str, Any]:
+    """The TOML file at ``path`` as a dict.
+
+    Raises:
+        ConfigError: the file is missing, a directory, unreadable, not UTF-8 or not valid TOML.
+    """
     path = Path(path)
     try:
         data = path.read_bytes()
         # a byte-order mark (some editors write one) is no part of the text
-        raw = tomllib.loads(data.removeprefix(UTF8_BOM).decode("utf-8"))
+        return tomllib.loads(data.removeprefix(UTF8_BOM).decode("utf-8"))
     except FileNotFoundError as e:
         raise ConfigError(f"config file not found: {path}") from e
     except IsADirectoryError as e:
@@ -47,7 +56,6 @@ def load_config(path: str | Path, cls: type[T]) -> T:
         raise ConfigError(f"{path}: not a text (UTF-8) TOML file: byte {e.start} is not UTF-8") from e
     except tomllib.TOMLDecodeError as e:
         raise ConfigError(f"{path}: not valid TOML: {e}") from e
-    return from_dict(cls, raw, where=str(path))
 
 
 def from_dict(cls: type[T], data: dict[str, Any], *, where: str = "config", prefix: str = "") -> T:

@@ -12,10 +12,11 @@ another command marked. ``--force`` then replaces only the command's own files i
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import tempfile
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from pathlib import Path
 
 from tactile_manip.errors import TactileManipError
@@ -25,18 +26,26 @@ class OutputPathError(TactileManipError, OSError):
     """An output path cannot be written, or holds something that must not be replaced without ``--force``."""
 
 
-def check_output_file(path: str | Path, *, force: bool = False) -> Path:
+def check_output_file(path: str | Path, *, force: bool = False, ours: Callable[[Path], bool] | None = None,
+                      what: str = "file of this command") -> Path:
     """Return ``path`` after checking that a file can be written there.
 
+    ``ours`` (given: ``--force`` replaces only what the same command wrote) says whether an existing file at
+    ``path`` is one the command wrote (``what`` names it in the refusal).
+
     Raises:
-        OutputPathError: ``path`` is a directory; it exists and ``force`` is False; its nearest existing parent
-            is not a directory; or that parent cannot be written into (permissions, a read-only file system).
+        OutputPathError: ``path`` is a directory; it exists and ``force`` is False, or ``force`` is True and
+            ``ours`` says it is not the command's; its nearest existing parent is not a directory; or that parent
+            cannot be written into (permissions, a read-only file system).
     """
     path = Path(path)
     if path.is_dir():
         raise OutputPathError(f"{path} is a directory; give a file name")
     if (path.exists() or path.is_symlink()) and not force:
         raise OutputPathError(f"{path} exists; pass --force to overwrite it")
+    if force and ours is not None and (path.exists() or path.is_symlink()) and not ours(path):
+        raise OutputPathError(f"{path} is not a {what}; refusing to replace it, with or without --force: choose "
+                              "another output or remove it yourself")
     check_writable_parent(path)
     return path
 
@@ -174,6 +183,18 @@ def _probe(folder: Path, target: Path) -> None:
             pass
     except OSError as e:
         raise OutputPathError(f"cannot write {target}: cannot create files in {folder} ({e.strerror})") from e
+
+
+@contextlib.contextmanager
+def unfinished(path: str | Path) -> Iterator[Path]:
+    """The block writes ``path`` (a temporary name, renamed into place at its end); should the block fail, or be
+    interrupted, ``path`` is removed, so no half-written file is left for a loader to find."""
+    path = Path(path)
+    try:
+        yield path
+    except BaseException:
+        path.unlink(missing_ok=True)
+        raise
 
 
 def unique_folder(path: str | Path) -> Path:

@@ -28,6 +28,8 @@ from pathlib import Path
 SHIPPED_MODELS: dict[str, str] = {
     "supermag": "supermag.onnx",  # the default: every scene, task, example and doc
     "contact": "contact_supermag.onnx",  # the contact model of the SuperMag board (ContactEstimator)
+    "contact_eflesh": "contact_eflesh.onnx",  # the eFlesh board's, for its grip scene (the six rods)
+    "contact_anyskin5": "contact_anyskin5.onnx",  # the AnySkin board's, for its grip scene (the six rods)
 }
 DEFAULT_MODEL = "supermag"
 CONTACT_MODEL = "contact"

@@ -173,11 +173,11 @@ def contact_model_of_layout(tmp_path: Path) -> Callable[[str], Path]:
     import json
 
     from tactile_manip.perception.reconstruct import METADATA_KEY
-    from tactile_manip.boards.layout import get_layout
+    from tactile_manip.boards import load_board
 
     def make(layout: str, **metadata) -> Path:
         proto = onnx.load(str(SHIPPED_CONTACT_MODEL))
-        grid = get_layout(layout).grid
+        grid = load_board(layout).grid
         if grid != (4, 4):
             proto = _contact_graph_of_grid(proto, grid)
         for prop in proto.metadata_props:

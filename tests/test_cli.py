@@ -13,7 +13,8 @@ from checks import assert_one_line_error
 from tactile_manip.cli import COMMANDS, main
 from tactile_manip.commands.demo import DEMO_OBJECTS
 from tactile_manip.data import load_dataset
-from tactile_manip.sim.params import SimParams, describe
+from tactile_manip.boards import load_board
+from tactile_manip.sim.params import describe, for_board
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIG = "configs/dataset/supermag.toml"  # relative: the commands are run from the repository root
@@ -49,7 +50,7 @@ def _assert_png(path: Path) -> None:
 def test_params_prints_every_parameter(capsys):
     assert main(["params"]) == 0
     lines = capsys.readouterr().out.splitlines()
-    rows = describe(SimParams())
+    rows = describe(for_board(load_board("supermag-4x4")))
     assert len(lines) == len(rows)
     for line, row in zip(lines, rows):
         assert line.split()[0] == row["name"]
@@ -59,7 +60,7 @@ def test_params_prints_every_parameter(capsys):
 def test_params_markdown_is_a_table_of_every_parameter(capsys):
     assert main(["params", "--markdown"]) == 0
     lines = capsys.readouterr().out.splitlines()
-    rows = describe(SimParams())
+    rows = describe(for_board(load_board("supermag-4x4")))
     assert lines[0].startswith("| parameter | default | unit |") and lines[1].startswith("|---")
     assert len(lines) == 2 + len(rows)
     for line, row in zip(lines[2:], rows):
@@ -92,11 +93,11 @@ def test_simulate_refuses_to_overwrite_without_force(at_root, dataset, capsys):
     assert dataset.read_bytes() == before
 
 
-def test_simulate_force_overwrites(at_root, tmp_path, capsys):
+def test_simulate_force_overwrites_its_own_dataset(at_root, tmp_path, capsys):
     out = tmp_path / "y.npz"
-    out.write_bytes(b"old")
-    rc = main(["simulate", "--config", CONFIG, "--scale", "0.0001", "--workers", "1", "--out", str(out),
-               "--seed", "5", "--force"])
+    args = ["simulate", "--config", CONFIG, "--scale", "0.0001", "--workers", "1", "--out", str(out)]
+    assert main([*args, "--seed", "4"]) == 0
+    rc = main([*args, "--seed", "5", "--force"])
     assert rc == 0
     data = load_dataset(out)
     assert len(data) == 11 and data.provenance["config"]["seed"] == 5

@@ -158,3 +158,21 @@ def test_a_command_folder_is_claimed_once_and_refused_to_others(tmp_path):
         check_command_folder(mine, "bench", ["report.md"], force=True)
     (mine / OWNER_FILE).write_text("not json")  # an unreadable mark is no mark
     assert folder_owner(mine) is None
+
+
+def test_force_replaces_only_a_dataset_the_same_command_wrote(tmp_path, capsys):
+    """simulate --force over a user's file of the same name, or over import's dataset, is refused and the file
+    is left as it was; over simulate's own dataset it goes ahead."""
+    from checks import assert_one_line_error
+
+    from tactile_manip.cli import main
+
+    mine = tmp_path / "notes.npz"
+    mine.write_bytes(b"my notes")
+    args = ["simulate", "--board", "anyskin-5", "--presses", "3", "--force", "--out"]
+    assert main([*args, str(mine)]) == 2
+    assert_one_line_error(capsys.readouterr().err, "simulate", str(mine), "not a dataset written by tactile-manip simulate")
+    assert mine.read_bytes() == b"my notes"
+    ours = tmp_path / "sim.npz"
+    assert main([*args, str(ours)]) == 0 and main([*args, str(ours)]) == 0
+    capsys.readouterr()

@@ -17,7 +17,9 @@ from hypothesis import strategies as st
 from tactile_manip.config import from_dict, load_config, to_dict
 from tactile_manip.errors import ConfigError
 from tactile_manip.sim.dataset import DatasetConfig, ObjectSpec, PoseRanges, _splits, load_dataset_config
+from tactile_manip.boards import load_board
 from tactile_manip.sim.params import (
+    for_board,
     ChipParams,
     ContactParams,
     LayerParams,
@@ -30,6 +32,7 @@ from tactile_manip.sim.params import (
 
 ROOT = Path(__file__).resolve().parents[1]
 SUPERMAG = ROOT / "configs" / "dataset" / "supermag.toml"
+NOMINAL = for_board(load_board("supermag-4x4"))  # the simulator's parameters with the SuperMag board's figures
 GROUPS = (LayerParams, ContactParams, VbtsParams, MagnetParams, ChipParams)
 
 
@@ -82,7 +85,7 @@ def test_nested_sim_table_overrides_defaults(tmp_path):
     cfg = load_dataset_config(path)
     assert cfg.sim.layer.skin_modulus_kpa == 150.0 and isinstance(cfg.sim.layer.skin_modulus_kpa, float)
     assert cfg.sim.vbts.lookup_table == "sensor_2"
-    assert cfg.sim.layer.thickness_mm == LayerParams().thickness_mm
+    assert cfg.sim.chip.noise_xy_ut is None  # the board's figure, filled in when the dataset is simulated
 
 
 # ---------------------------------------------------------------- bad files
@@ -108,8 +111,8 @@ def _error(path: Path) -> str:
 
 BAD_FILES = {
     "unknown top-level key": (lambda t: "colour = \"red\"\n" + t, ["colour", "allowed", "validation_fraction"]),
-    "unknown nested key": (lambda t: t + "\n[sim.layer]\nthicknes_mm = 2.0\n",
-                           ["sim.layer.thicknes_mm", "thickness_mm"]),
+    "unknown nested key": (lambda t: t + "\n[sim.layer]\nskin_moduls_kpa = 150.0\n",
+                           ["sim.layer.skin_moduls_kpa", "skin_modulus_kpa"]),
     "string for a float": (lambda t: t.replace("validation_fraction = 0.1", "validation_fraction = \"0.1\""),
                            ["validation_fraction", "number", "'0.1'"]),
     "float for an int": (lambda t: t.replace("\nseed = 0\n", "\nseed = 0.5\n"), ["seed", "integer", "0.5"]),
@@ -122,9 +125,9 @@ BAD_FILES = {
     "wrong Literal (array of tables)": (lambda t: t.replace("count = 2025", "count = 2025\nsplit = \"bogus\"", 1),
                                        ["objects[0].split", "bogus", "trainval"]),
     "negative count": (lambda t: t.replace("count = 2025", "count = -5", 1), ["objects[0]", "count", "-5"]),
-    "negative thickness": (lambda t: t + "\n[sim.layer]\nthickness_mm = -1\n",
-                           ["sim.layer", "thickness_mm", "-1"]),
-    "nan": (lambda t: t + "\n[sim.layer]\nthickness_mm = nan\n", ["sim.layer", "thickness_mm", "nan"]),
+    "negative modulus": (lambda t: t + "\n[sim.layer]\nvbts_modulus_kpa = -1\n",
+                         ["sim.layer", "vbts_modulus_kpa", "-1"]),
+    "nan": (lambda t: t + "\n[sim.layer]\nvbts_modulus_kpa = nan\n", ["sim.layer", "vbts_modulus_kpa", "nan"]),
     "inf": (lambda t: t + "\n[sim.magnet]\nchip_gap_mm = inf\n", ["sim.magnet", "chip_gap_mm", "inf"]),
     "nan in a pose range": (lambda t: t.replace("tilt_deg = 2.0", "tilt_deg = nan"), ["poses", "tilt_deg", "nan"]),
     "fraction out of range": (lambda t: t.replace("validation_fraction = 0.1", "validation_fraction = 1.0"),
@@ -153,7 +156,7 @@ def test_bad_file_is_one_config_error_naming_file_and_key(tmp_path, case):
 
 def test_post_init_error_keeps_its_cause(tmp_path):
     with pytest.raises(ConfigError) as info:
-        load_dataset_config(_write(tmp_path, SUPERMAG.read_text() + "\n[sim.layer]\nthickness_mm = -1\n"))
+        load_dataset_config(_write(tmp_path, SUPERMAG.read_text() + "\n[sim.layer]\nvbts_modulus_kpa = -1\n"))
     assert isinstance(info.value.__cause__, ValueError)
     assert isinstance(info.value, ValueError)  # the CLI turns ValueErrors into one line
 
@@ -207,7 +210,7 @@ def _shrunk(default: float, rand: tuple[float, float], log: bool, spread: float)
 
 
 def test_defaults_validate_and_lie_inside_their_randomisation_ranges():
-    params = SimParams()
+    params = NOMINAL
     assert [type(getattr(params, f.name)) for f in dataclasses.fields(params)] == list(GROUPS)
     for group in GROUPS:
         group()  # each group validates its defaults on its own
@@ -219,7 +222,7 @@ def test_defaults_validate_and_lie_inside_their_randomisation_ranges():
 
 
 @pytest.mark.parametrize("group, kwargs, match", [
-    (LayerParams, {"thickness_mm": -1.0}, "LayerParams.thickness_mm = -1.0"),
+    (LayerParams, {"vbts_modulus_kpa": -1.0}, "LayerParams.vbts_modulus_kpa = -1.0"),
     (LayerParams, {"skin_modulus_kpa": math.nan}, "LayerParams.skin_modulus_kpa must be a finite"),
     (ChipParams, {"noise_xy_ut": math.inf}, "ChipParams.noise_xy_ut must be a finite"),
     (MagnetParams, {"chip_gap_mm": 200.0}, r"MagnetParams.chip_gap_mm = 200.0 .*\(0.001, 100.0\)"),
@@ -231,14 +234,14 @@ def test_refused_values_name_the_field(group, kwargs, match):
 
 
 def test_randomise_with_zero_spread_returns_the_defaults():
-    params = SimParams()
+    params = NOMINAL
     assert randomise(params, np.random.default_rng(0), spread=0.0) == params
 
 
 @settings(max_examples=40, deadline=None)
 @given(seed=st.integers(0, 2**32 - 1), spread=st.sampled_from([0.25, 0.5, 1.0]))
 def test_randomise_stays_inside_the_shrunk_ranges(seed, spread):
-    base = SimParams()
+    base = NOMINAL
     drawn = dict((n, v) for n, v, _ in _rand_fields(randomise(base, np.random.default_rng(seed), spread=spread)))
     for name, default, f in _rand_fields(base):
         lo, hi = _shrunk(default, f.metadata["rand"], f.metadata["log"], spread)
@@ -247,20 +250,20 @@ def test_randomise_stays_inside_the_shrunk_ranges(seed, spread):
 
 
 def test_randomise_is_deterministic_per_seed_and_changes_every_randomisable_field():
-    base = SimParams()
+    base = NOMINAL
     a = randomise(base, np.random.default_rng(3), spread=1.0)
     assert a == randomise(base, np.random.default_rng(3), spread=1.0)
     assert a != randomise(base, np.random.default_rng(4), spread=1.0)
     for (name, new, _), (_, old, _) in zip(_rand_fields(a), _rand_fields(base)):
         assert new != old, f"{name} was not drawn"
     # fields without a range keep their defaults
-    assert a.layer.thickness_mm == base.layer.thickness_mm and a.vbts.lookup_table == base.vbts.lookup_table
+    assert a.chip.lsb_xy_ut == base.chip.lsb_xy_ut and a.vbts.lookup_table == base.vbts.lookup_table
 
 
 @pytest.mark.parametrize("spread", [-0.1, 1.5, math.nan])
 def test_randomise_refuses_bad_spread(spread):
     with pytest.raises(ValueError, match="spread"):
-        randomise(SimParams(), np.random.default_rng(0), spread=spread)
+        randomise(NOMINAL, np.random.default_rng(0), spread=spread)
 
 
 def test_describe_lists_every_field_with_a_source():
@@ -270,7 +273,7 @@ def test_describe_lists_every_field_with_a_source():
     assert len(rows) == leaves
     names = [r["name"] for r in rows]
     assert len(set(names)) == len(names)
-    assert {"layer.thickness_mm", "vbts.lookup_table", "magnet.transport", "chip.noise_z_ut"} <= set(names)
+    assert {"layer.skin_modulus_kpa", "vbts.lookup_table", "magnet.transport", "chip.noise_z_ut"} <= set(names)
     for r in rows:
         assert isinstance(r["source"], str) and r["source"].strip(), f"{r['name']} has no source"
         assert r["unit"], f"{r['name']} has no unit"

@@ -85,9 +85,10 @@ def test_probe_sees_a_heavy_import():
     assert _heavy_modules_after("import tactile_manip.plots; tactile_manip.plots._pyplot()") == ["matplotlib"]
 
 
-def _imported_modules(path: Path) -> set[str]:
-    """Every module ``path`` imports, anywhere in the file (also inside functions), as dotted absolute names."""
-    package = ".".join(("tactile_manip", *path.relative_to(PACKAGE).parent.parts))
+def _imported_modules(path: Path, root: Path = PACKAGE) -> set[str]:
+    """Every module ``path`` imports, anywhere in the file (also inside functions), as dotted absolute names
+    (``root``: the package's folder, which relative imports are resolved against)."""
+    package = ".".join(("tactile_manip", *path.relative_to(root).parent.parts))
     names = set()
     for node in ast.walk(ast.parse(path.read_text(), filename=str(path))):
         if isinstance(node, ast.Import):
@@ -231,3 +232,46 @@ def test_the_alias_scan_sees_an_alias(tmp_path):
                                        '__all__ = ["make_decoder"]\n')
     (tmp_path / "real.py").write_text("from tactile_manip.wire import make_decoder\n\ndef f():\n    return 1\n")
     assert [_is_alias(tmp_path / n) for n in ("moved.py", "names.py", "real.py")] == [True, True, False]
+
+
+# Every module of the package by layer, lowest first; a module imports only its own layer's and lower ones'
+# (docs/design.md, Layers). The modules at the package's top (types, errors, checks, ...) are the core.
+LAYERS: tuple[tuple[str, ...], ...] = (
+    ("types", "errors", "checks", "config", "version", "extras", "outputs", "progress", "lifeline", "chips",
+     "shipped", "plots", "__init__"),
+    ("wire",), ("boards",), ("logs",), ("data",), ("sim",), ("sensors",), ("perception", "robot"),
+    ("evaluation", "collection"), ("learning", "behaviours"), ("trials",), ("cluster", "interop", "bench"),
+    ("commands",), ("cli",), ("__main__",))
+RANK = {name: rank for rank, names in enumerate(LAYERS) for name in names}
+
+
+def _against_the_layers(package: Path) -> list[str]:
+    """``module -> imported module`` for every import (at any depth of a file) of a higher layer."""
+    found = []
+    for path in sorted(package.rglob("*.py")):
+        here = path.relative_to(package).with_suffix("").parts[0]
+        for name in sorted(_imported_modules(path, package)):
+            parts = name.split(".")
+            if parts[0] == "tactile_manip" and len(parts) > 1 and parts[1] != here \
+                    and RANK.get(parts[1], -1) > RANK[here]:
+                found.append(f"{path.relative_to(package).as_posix()} -> {name}")
+    return found
+
+
+def test_every_top_level_module_has_a_layer():
+    names = {p.stem if p.is_file() else p.name for p in PACKAGE.iterdir()
+             if (p.suffix == ".py" or (p / "__init__.py").is_file())}
+    assert names - set(RANK) == set()
+
+
+def test_no_import_runs_against_the_layers():
+    assert _against_the_layers(PACKAGE) == []
+
+
+def test_the_layer_scan_sees_an_import_of_a_higher_layer(tmp_path):
+    (tmp_path / "sensors").mkdir()
+    (tmp_path / "sensors" / "x.py").write_text("def f():\n    from tactile_manip.cli import main\n")
+    (tmp_path / "commands").mkdir()
+    (tmp_path / "commands" / "y.py").write_text("from tactile_manip.sensors import x\n")
+    assert _against_the_layers(tmp_path) == ["sensors/x.py -> tactile_manip.cli",
+                                             "sensors/x.py -> tactile_manip.cli.main"]

@@ -16,7 +16,7 @@ def test_shipped_model_resolves_from_any_folder(name, tmp_path, monkeypatch):
 
 def test_default_is_the_supermag_model_beside_its_contact_model():
     assert shipped_model().name == "supermag.onnx" == SHIPPED_MODELS[DEFAULT_MODEL]
-    assert set(SHIPPED_MODELS) == {DEFAULT_MODEL, "contact"}
+    assert set(SHIPPED_MODELS) == {DEFAULT_MODEL, "contact", "contact_eflesh", "contact_anyskin5"}
     assert shipped_model("contact") == models_dir() / "contact_supermag.onnx"
 
 

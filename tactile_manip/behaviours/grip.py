@@ -29,21 +29,21 @@ centre to the rod's axis, and the estimated in-hand angle against the true one.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
-from tactile_manip.behaviours.reorient import ReorientConfig, _Abort, _close_on, _grasp, _move_hand
+from tactile_manip.behaviours.skills import Abort, BehaviourConfig, close_on, grasp, move_hand, read_pad, release
+from tactile_manip.behaviours.task import ReportSection, Task, Trial, fmt2, lateral_section, percentile, rounded
 from tactile_manip.checks import check_finite_scalar
-from tactile_manip.errors import ArmFault, GripperError, SensorError
+from tactile_manip.errors import ArmFault
 from tactile_manip.perception.pose import wrap_axial
 from tactile_manip.robot.base import Arm, Gripper
 from tactile_manip.robot.frames import hand_T_finger_pad
-from tactile_manip.robot.twin_hand import GRIPPER_MAX_FORCE_N
 from tactile_manip.sensors.base import TactileSensor
 from tactile_manip.types import AngleEstimate
 
@@ -125,7 +125,7 @@ class GripResult:
 
 
 def grip_to_force(arm: Arm, gripper: Gripper, sensor: TactileSensor, estimator: TactileEstimator, *,
-                  object_width_m: float, config: ReorientConfig | None = None, grip: GripConfig | None = None,
+                  object_width_m: float, config: BehaviourConfig | None = None, grip: GripConfig | None = None,
                   truth: GripTruth | None = None) -> GripResult:
     """Grasp the object, centre it and servo the grip force to ``config.force_n`` (module docstring).
 
@@ -133,36 +133,27 @@ def grip_to_force(arm: Arm, gripper: Gripper, sensor: TactileSensor, estimator: 
     they carry no contact state (no contact model) the loop stays open (the grasp stays as commanded). Every
     fault ends in an outcome of the result, never an escape.
     """
-    cfg = config or ReorientConfig()
+    cfg = config or BehaviourConfig()
     spec = grip or GripConfig()
     result = GripResult(outcome="error", commanded_force_n=cfg.force_n)
     t0 = time.perf_counter()
     try:
-        _, width_m = _grasp(arm, gripper, object_width_m, cfg)
-        est = _read_all(sensor, estimator, cfg)
+        _, width_m = grasp(arm, gripper, object_width_m, cfg)
+        est = read_pad(sensor, estimator, cfg)
         closed_loop = est.contact is not None
         if closed_loop:
             est = _centre(arm, gripper, sensor, estimator, width_m, cfg, spec, result, est)
             est = _servo_force(gripper, sensor, estimator, width_m, cfg, spec, result, est)
         _keep(result, est, closed_loop)
         if not result.estimate.defined:
-            raise _Abort("abstained", f"no in-hand angle: {result.estimate.reason}")
+            raise Abort("abstained", f"no in-hand angle: {result.estimate.reason}")
         result.outcome = "done"
-    except _Abort as stop:
+    except Abort as stop:
         result.outcome, result.detail = stop.outcome, stop.detail
     result.timings_s["total"] = time.perf_counter() - t0
     if truth is not None and result.outcome == "done":
         _score(result, arm, truth, cfg.force_n, width_m)
     return result
-
-
-def _read_all(sensor: TactileSensor, estimator: TactileEstimator, cfg: ReorientConfig) -> TactileEstimate:
-    if cfg.settle_s > 0:
-        time.sleep(cfg.settle_s)
-    try:
-        return estimator.read(sensor, frames=cfg.frames, timeout_s=cfg.sensor_timeout_s)
-    except SensorError as exc:
-        raise _Abort("sensor_stale", f"tactile sensor: {exc}") from None
 
 
 def _keep(result: GripResult, est: TactileEstimate, closed_loop: bool) -> None:
@@ -173,7 +164,7 @@ def _keep(result: GripResult, est: TactileEstimate, closed_loop: bool) -> None:
 
 
 def _centre(arm: Arm, gripper: Gripper, sensor: TactileSensor, estimator: TactileEstimator, width_m: float,
-            cfg: ReorientConfig, spec: GripConfig, result: GripResult, est: TactileEstimate) -> TactileEstimate:
+            cfg: BehaviourConfig, spec: GripConfig, result: GripResult, est: TactileEstimate) -> TactileEstimate:
     """Move the pad centre onto the object's axis while the measured offset exceeds the tolerance."""
     while result.recentres < spec.max_recentres:
         shift_mm = _axis_offset_mm(est)
@@ -182,34 +173,33 @@ def _centre(arm: Arm, gripper: Gripper, sensor: TactileSensor, estimator: Tactil
         result.recentres += 1
         try:
             base_T_hand = arm.state().base_T_hand
-            gripper.open(width_m + 0.01)
         except ArmFault as exc:
-            raise _Abort("arm_fault", f"arm state unavailable before centring: {exc}") from None
-        except GripperError as exc:
-            raise _Abort("grasp_failed", f"gripper error while opening to centre: {exc}") from None
+            raise Abort("arm_fault", f"arm state unavailable before centring: {exc}") from None
+        release(gripper, width_m, "opening to centre")
         base_T_pad = base_T_hand @ hand_T_finger_pad(width_m)
         target = base_T_hand.copy()
         target[:3, 3] += base_T_pad[:3, :2] @ (np.asarray(shift_mm) * 1e-3)
-        _move_hand(arm, target, cfg, "centring move")
-        _close_at(gripper, width_m, result.commanded_force_n, cfg, "centred grasp")
-        est = _read_all(sensor, estimator, cfg)
+        move_hand(arm, target, cfg, "centring move")
+        close_on(gripper, width_m, cfg, "centred grasp", force_n=result.commanded_force_n)
+        est = read_pad(sensor, estimator, cfg)
     return est
 
 
 def _axis_offset_mm(est: TactileEstimate) -> tuple[float, float] | None:
     """The shortest move (pad frame, mm) that puts the pad centre on the object's axis: across the axis where
-    the angle is defined (the position is a point on it), else to the contact's position; None without one."""
+    the angle is measured (the position is a point on it), else (no angle, or the blind prior's, which no reading
+    made) to the contact's position; None without one."""
     if est.position_mm is None:
         return None
     p = np.asarray(est.position_mm, np.float64)
-    if est.angle.defined:
+    if est.angle.defined and est.angle.source != "prior":
         axis = np.array([math.cos(est.angle.angle_rad), math.sin(est.angle.angle_rad)])
         p = p - float(p @ axis) * axis
     return float(p[0]), float(p[1])
 
 
 def _servo_force(gripper: Gripper, sensor: TactileSensor, estimator: TactileEstimator, width_m: float,
-                 cfg: ReorientConfig, spec: GripConfig, result: GripResult, est: TactileEstimate) -> TactileEstimate:
+                 cfg: BehaviourConfig, spec: GripConfig, result: GripResult, est: TactileEstimate) -> TactileEstimate:
     """Command target / gain, the gain (felt / commanded force) estimated from every reading so far weighted by
     its sigma and the gripper's prior, until the force it implies is within the deadband of the target."""
     target = cfg.force_n
@@ -230,14 +220,9 @@ def _servo_force(gripper: Gripper, sensor: TactileSensor, estimator: TactileEsti
             return est
         ratio = min(max(target / (gain * command), 1.0 / MAX_FORCE_STEP_RATIO), MAX_FORCE_STEP_RATIO)
         result.force_steps += 1
-        result.commanded_force_n = min(max(command * ratio, 0.5), GRIPPER_MAX_FORCE_N)
-        _close_at(gripper, width_m, result.commanded_force_n, cfg, "force correction")
-        est = _read_all(sensor, estimator, cfg)
-
-
-def _close_at(gripper: Gripper, width_m: float, force_n: float, cfg: ReorientConfig, what: str) -> None:
-    """Grasp at ``force_n`` (a held object keeps its place; the fingers' force changes)."""
-    _close_on(gripper, width_m, dataclasses.replace(cfg, force_n=force_n), what)
+        result.commanded_force_n = min(max(command * ratio, 0.5), gripper.max_force_n)
+        close_on(gripper, width_m, cfg, "force correction", force_n=result.commanded_force_n)
+        est = read_pad(sensor, estimator, cfg)
 
 
 def _score(result: GripResult, arm: Arm, truth: GripTruth, target_n: float, width_m: float) -> None:
@@ -257,3 +242,92 @@ def _score(result: GripResult, arm: Arm, truth: GripTruth, target_n: float, widt
     if result.estimate is not None and result.estimate.defined:
         true_angle = math.atan2(axis[1], axis[0])
         result.angle_error_rad = float(wrap_axial(result.estimate.angle_rad - true_angle))
+
+
+class Grip(Task):
+    """Grip the rod at the behaviour's ``force_n``, centred on the pad (:func:`grip_to_force`); ``error_rad`` is
+    the estimated in-hand angle minus the true one, ``lateral_error_mm`` the distance from the pad centre to the
+    rod's axis, ``force_error_n`` the force the rod felt minus the target."""
+
+    name = "grip"
+    title = "Grip-to-force trials"
+    Config = GripConfig
+    simulated_only = "it is scored on the force the object feels, which only the twin knows"
+
+    @classmethod
+    def check_scene(cls, scene: Any) -> None:
+        super().check_scene(scene)
+        if not scene.contact_model and not any(m.contact_model for m in scene.methods):
+            raise ValueError(f"task = {scene.task!r} needs a contact_model (the force and position it servoes on), "
+                             "e.g. contact_model = \"models/contact_supermag.onnx\"")
+
+    def run(self, trial: Trial) -> GripResult:
+        return grip_to_force(trial.arm, trial.gripper, trial.sensor, trial.estimator,
+                             object_width_m=trial.object_width_m, config=self.behaviour, grip=self.config,
+                             truth=trial.truth)
+
+    def failed(self, outcome: str, detail: str) -> GripResult:
+        return GripResult(outcome=outcome, detail=detail)
+
+    def record(self, result: GripResult) -> dict[str, Any]:
+        outcome, detail = result.outcome, result.detail
+        measured = None not in (result.angle_error_rad, result.centre_error_m, result.force_error_n)
+        if outcome == "done" and not measured:
+            outcome, detail = "unmeasured", "the final force or pose was not measured"
+        state = result.contact if result.contact is not None and result.contact.plausible else None
+        return {"outcome": outcome, "detail": detail, "target_angle_rad": 0.0,
+                "action": "regrasp" if result.recentres or result.force_steps else "act",
+                "regrasps": result.recentres + result.force_steps,
+                "error_rad": result.angle_error_rad if outcome == "done" else None,
+                "lateral_error_mm": rounded(None if result.centre_error_m is None else result.centre_error_m * 1e3),
+                "clearance_mm": float(self.config.centre_tolerance_mm), "force_error_n": rounded(result.force_error_n),
+                "force_tolerance_n": float(self.config.force_tolerance_n),
+                "estimated_grip_force_n": rounded(None if state is None else state.force_n),
+                "estimated_grip_force_sigma_n": rounded(None if state is None else state.force_sigma_n),
+                "extra": {"commanded_force_n": float(self.behaviour.force_n),
+                          "final_command_n": rounded(result.commanded_force_n),
+                          "applied_force_n": rounded(result.true_force_n), "force_steps": result.force_steps,
+                          "recentres": result.recentres,
+                          "position_mm": None if result.position_mm is None else [round(v, 4) for v in
+                                                                                  result.position_mm]}}
+
+    @classmethod
+    def report(cls, records: Sequence[Any]) -> list[ReportSection]:
+        return [lateral_section(records, "Centring: the rod's axis from the pad centre", "gripped"),
+                force_section(records)]
+
+    @classmethod
+    def success_rule(cls, records: Sequence[Any]) -> str:
+        clearance = next((r.clearance_mm for r in records if r.clearance_mm is not None), None)
+        force = next((r.force_tolerance_n for r in records if r.force_tolerance_n is not None), None)
+        return (f"Success: outcome `done`, the force the rod feels within {force:g} N of the target, the rod's axis "
+                f"within {clearance:g} mm of the pad centre, and |estimated - true in-hand angle| <=")
+
+
+def force_errors(records: Sequence[Any]) -> dict[str, dict[str, Any]]:
+    """Per method, the force the rod felt against the target in a run's records (N): how many grips measured it,
+    RMSE, median and p95 of |error|, mean error, how many are within the tolerance, and the mean number of force
+    corrections (None where a method measured none)."""
+    out = {}
+    for method in dict.fromkeys(r.method for r in records):
+        mine = [r for r in records if r.method == method and r.force_error_n is not None]
+        err = np.array([r.force_error_n for r in mine], np.float64)
+        out[method] = {"n": len(mine), "rmse_n": float(np.sqrt(np.mean(err ** 2))) if mine else None,
+                       "median_abs_n": percentile(np.abs(err), 50), "p95_abs_n": percentile(np.abs(err), 95),
+                       "mean_n": float(err.mean()) if mine else None,
+                       "within_tolerance": sum(r.within_force for r in mine),
+                       "mean_force_steps": (float(np.mean([r.extra.get("force_steps", 0) for r in mine])) if mine
+                                            else None)}
+    return out
+
+
+def force_section(records: Sequence[Any]) -> ReportSection:
+    """The report's section of the force the rod felt against the target, per method."""
+    errors = force_errors(records)
+    rows = [[m, str(e["n"]), fmt2(e["rmse_n"]), fmt2(e["median_abs_n"]), fmt2(e["p95_abs_n"]), fmt2(e["mean_n"]),
+             f"{e['within_tolerance']}/{e['n']}",
+             "-" if e["mean_force_steps"] is None else f"{e['mean_force_steps']:.1f}"]
+            for m, e in errors.items()]
+    return ReportSection("force_error", errors, "Grip force: what the rod felt against the target",
+                         ["method", "gripped", "RMSE (N)", "median abs (N)", "p95 abs (N)", "mean (N)",
+                          "within tolerance", "mean force steps"], rows)

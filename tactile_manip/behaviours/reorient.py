@@ -20,12 +20,14 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Literal, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
-from tactile_manip.checks import check_choice, check_finite_scalar
-from tactile_manip.errors import ArmFault, GripperError, IKError, SafetyLimitError, SensorError
+from tactile_manip.behaviours.skills import Abort, BehaviourConfig, close_on, grasp, read_pad, release
+from tactile_manip.behaviours.task import Task, Trial, rounded
+from tactile_manip.checks import check_finite_scalar
+from tactile_manip.errors import ArmFault, IKError, SafetyLimitError, SensorError
 from tactile_manip.perception.pose import wrap_axial
 from tactile_manip.robot.base import Arm, Gripper
 from tactile_manip.robot.frames import angle_in_plane, hand_T_finger_pad, rotate_pose_about
@@ -36,48 +38,7 @@ if TYPE_CHECKING:
     from tactile_manip.perception.contact import ContactEstimator, ContactState
     from tactile_manip.perception.tactile_estimator import TactileEstimator
 
-POLICIES = ("act", "regrasp", "abstain")
 NO_TURN_RAD = 1e-6  # a correction smaller than this is not made (0.00006 deg)
-
-
-@dataclass(frozen=True)
-class ReorientConfig:
-    """Parameters of the behaviour.
-
-    Attributes:
-        force_n: grasp force threshold, N (the paper's gripper threshold: 10 N).
-        width_tolerance_m: accepted deviation of the grasp width from the object's nominal width, m.
-        settle_s: wait after the grasp before the frames are read (the skin and the filter settle), s.
-        frames: consecutive frames averaged for one estimate (8 ms each at 125 Hz).
-        sensor_timeout_s: a frame later than this aborts the trial as a stale sensor, s.
-        min_confidence: estimates below this confidence (or undefined ones) trigger the policy.
-        low_confidence: "act" (turn anyway; an undefined angle then counts as 0), "regrasp" (open, close
-            again and re-read, up to ``max_regrasps`` times, then act on the best estimate) or "abstain".
-        max_regrasps: re-grasps allowed by the "regrasp" policy.
-        speed_factor: arm speed factor for the correction (None: the backend's default).
-    """
-
-    force_n: float = 10.0
-    width_tolerance_m: float = 0.004
-    settle_s: float = 0.04
-    frames: int = 4
-    sensor_timeout_s: float = 0.1
-    min_confidence: float = 0.3
-    low_confidence: Literal["act", "regrasp", "abstain"] = "regrasp"
-    max_regrasps: int = 1
-    speed_factor: float | None = None
-
-    def __post_init__(self) -> None:
-        check_finite_scalar("force_n", self.force_n, low=0.0, low_open=True, high=140.0)
-        check_finite_scalar("width_tolerance_m", self.width_tolerance_m, low=0.0, high=0.08)
-        check_finite_scalar("settle_s", self.settle_s, low=0.0, high=10.0)
-        check_finite_scalar("sensor_timeout_s", self.sensor_timeout_s, low=0.0, low_open=True)
-        check_finite_scalar("min_confidence", self.min_confidence, low=0.0, high=1.0)
-        check_choice("low_confidence", self.low_confidence, POLICIES)
-        if isinstance(self.frames, bool) or not isinstance(self.frames, int) or self.frames < 1:
-            raise ValueError(f"frames must be a positive integer, got {self.frames!r}")
-        if isinstance(self.max_regrasps, bool) or not isinstance(self.max_regrasps, int) or self.max_regrasps < 0:
-            raise ValueError(f"max_regrasps must be a non-negative integer, got {self.max_regrasps!r}")
 
 
 class PhaseObserver(Protocol):
@@ -129,17 +90,9 @@ class ReorientResult:
     timings_s: dict[str, float] = field(default_factory=dict)
 
 
-class _Abort(Exception):
-    """A trial-ending outcome inside the behaviour (never escapes it)."""
-
-    def __init__(self, outcome: str, detail: str) -> None:
-        super().__init__(detail)
-        self.outcome, self.detail = outcome, detail
-
-
 def grasp_estimate_reorient(arm: Arm, gripper: Gripper, sensor: TactileSensor,
                             estimator: TactileEstimator, *, object_width_m: float,
-                            target_angle_rad: float, config: ReorientConfig | None = None,
+                            target_angle_rad: float, config: BehaviourConfig | None = None,
                             truth: GroundTruth | None = None, pad_T: np.ndarray | None = None,
                             observer: PhaseObserver | None = None) -> ReorientResult:
     """Run the behaviour once on the object between the fingers (see the module docstring).
@@ -159,17 +112,17 @@ def grasp_estimate_reorient(arm: Arm, gripper: Gripper, sensor: TactileSensor,
     The gripper is left closed on the object (the caller releases it); the arm stays where the correction
     left it, or where a fault stopped it.
     """
-    cfg = config or ReorientConfig()
+    cfg = config or BehaviourConfig()
     observer = observer or _Silent()
     contact = estimator.contact
-    estimator.check_layout(sensor.layout.name)
+    estimator.check_layout(sensor.layout)
     target = float(wrap_axial(check_finite_scalar("target_angle_rad", target_angle_rad)))
     result = ReorientResult(outcome="error")
     timings = result.timings_s
     t_start = time.perf_counter()
     try:
         observer.phase("grasp")
-        base_T_hand, result.grasp_width_m = _grasp(arm, gripper, object_width_m, cfg)
+        base_T_hand, result.grasp_width_m = grasp(arm, gripper, object_width_m, cfg)
         base_T_pad = base_T_hand @ (hand_T_finger_pad(result.grasp_width_m) if pad_T is None else pad_T)
         timings["grasp"] = time.perf_counter() - t_start
         t0 = time.perf_counter()
@@ -182,7 +135,7 @@ def grasp_estimate_reorient(arm: Arm, gripper: Gripper, sensor: TactileSensor,
             result.contact = _grip_contact(sensor, contact, cfg, observer)
             timings["grip_force"] = time.perf_counter() - t0
         if result.action == "abstain":
-            raise _Abort("abstained", f"estimate below confidence {cfg.min_confidence:.2f}: "
+            raise Abort("abstained", f"estimate below confidence {cfg.min_confidence:.2f}: "
                                       f"{est.reason or f'confidence {est.confidence:.2f}'}")
         result.correction_rad = float(wrap_axial(target - (est.angle_rad if est.defined else 0.0)))
         t0 = time.perf_counter()
@@ -190,7 +143,7 @@ def grasp_estimate_reorient(arm: Arm, gripper: Gripper, sensor: TactileSensor,
         result.correction_rad = _turn_about_pad_normal(arm, base_T_pad, est, result.correction_rad, cfg)
         timings["reorient"] = time.perf_counter() - t0
         result.outcome = "done"
-    except _Abort as stop:
+    except Abort as stop:
         result.outcome, result.detail = stop.outcome, stop.detail
     finally:
         timings["total"] = time.perf_counter() - t_start
@@ -202,55 +155,7 @@ def grasp_estimate_reorient(arm: Arm, gripper: Gripper, sensor: TactileSensor,
     return result
 
 
-def _move_hand(arm: Arm, target: np.ndarray, cfg: ReorientConfig, what: str) -> None:
-    """A Cartesian move of the hand to ``target`` (4, 4); a refusal or a fault ends the behaviour as its outcome."""
-    try:
-        arm.move_cartesian(target, speed_factor=cfg.speed_factor)
-    except IKError as exc:
-        raise _Abort("ik_failed", f"{what}: {exc}") from None
-    except SafetyLimitError as exc:
-        raise _Abort("safety_refused", f"{what}: {exc}") from None
-    except ArmFault as exc:
-        raise _Abort("arm_fault", f"{what}: {exc}") from None
-
-
-def _close_on(gripper: Gripper, width_m: float, cfg: ReorientConfig, what: str) -> float:
-    """Close to the force threshold on the object; returns the grasp width (m) or ends the trial."""
-    try:
-        grasp = gripper.grasp(width_m, cfg.force_n, epsilon_inner_m=cfg.width_tolerance_m,
-                              epsilon_outer_m=cfg.width_tolerance_m)
-    except GripperError as exc:
-        raise _Abort("grasp_failed", f"gripper error during the {what}: {exc}") from None
-    if not grasp.success:
-        raise _Abort("grasp_failed", f"{what}: the gripper stopped at {grasp.width_m * 1e3:.1f} mm, object "
-                                     f"{width_m * 1e3:.1f} +- {cfg.width_tolerance_m * 1e3:.1f} mm")
-    return grasp.width_m
-
-
-def _grasp(arm: Arm, gripper: Gripper, width_m: float, cfg: ReorientConfig) -> tuple[np.ndarray, float]:
-    """Close on the object; returns base_T_hand at the grasp and the grasp width (m)."""
-    width = _close_on(gripper, width_m, cfg, "grasp")
-    try:
-        return arm.state().base_T_hand, width
-    except ArmFault as exc:
-        raise _Abort("arm_fault", f"arm state unavailable after the grasp: {exc}") from None
-
-
-def _read(sensor: TactileSensor, estimator: TactileEstimator, cfg: ReorientConfig,
-          observer: PhaseObserver | None = None) -> AngleEstimate:
-    """The angle of the next ``cfg.frames`` frames, after the settling wait."""
-    if cfg.settle_s > 0:
-        time.sleep(cfg.settle_s)
-    try:
-        est = estimator.read(sensor, frames=cfg.frames, timeout_s=cfg.sensor_timeout_s).angle
-    except SensorError as exc:
-        raise _Abort("sensor_stale", f"tactile sensor: {exc}") from None
-    if observer is not None:
-        observer.estimate(est)
-    return est
-
-
-def _grip_contact(sensor: TactileSensor, contact: ContactEstimator, cfg: ReorientConfig,
+def _grip_contact(sensor: TactileSensor, contact: ContactEstimator, cfg: BehaviourConfig,
                   observer: PhaseObserver) -> ContactState | None:
     """The contact model's state of the newest frame (the last one the angle estimate read: the object is
     held at the final grasp), or None when the sensor has no frame within ``sensor_timeout_s`` or the model
@@ -268,13 +173,13 @@ def _grip_contact(sensor: TactileSensor, contact: ContactEstimator, cfg: Reorien
     return state
 
 
-def _confident(est: AngleEstimate, cfg: ReorientConfig) -> bool:
+def _confident(est: AngleEstimate, cfg: BehaviourConfig) -> bool:
     return est.defined and est.confidence >= cfg.min_confidence
 
 
 def _estimate_with_policy(gripper: Gripper, sensor: TactileSensor, estimator: TactileEstimator, width_m: float,
-                          cfg: ReorientConfig, result: ReorientResult, observer: PhaseObserver) -> AngleEstimate:
-    est = _read(sensor, estimator, cfg, observer)
+                          cfg: BehaviourConfig, result: ReorientResult, observer: PhaseObserver) -> AngleEstimate:
+    est = read_pad(sensor, estimator, cfg, observer).angle
     if _confident(est, cfg) or cfg.low_confidence == "act":
         return est
     if cfg.low_confidence == "abstain":
@@ -285,20 +190,17 @@ def _estimate_with_policy(gripper: Gripper, sensor: TactileSensor, estimator: Ta
         result.regrasps += 1
         result.action = "regrasp"
         observer.phase("grasp")
-        try:
-            gripper.open(width_m + 0.01)
-        except GripperError as exc:
-            raise _Abort("grasp_failed", f"gripper error while re-grasping: {exc}") from None
-        _close_on(gripper, width_m, cfg, "re-grasp")
+        release(gripper, width_m, "re-grasp")
+        close_on(gripper, width_m, cfg, "re-grasp")
         observer.phase("estimate")
-        est = _read(sensor, estimator, cfg, observer)
+        est = read_pad(sensor, estimator, cfg, observer).angle
         if est.defined and (not best.defined or est.confidence > best.confidence):
             best = est
     return best
 
 
 def _turn_about_pad_normal(arm: Arm, base_T_pad: np.ndarray, est: AngleEstimate, angle_rad: float,
-                           cfg: ReorientConfig) -> float:
+                           cfg: BehaviourConfig) -> float:
     """Rotate the hand by ``angle_rad`` about the pad normal through the contact centroid; returns the turn made.
 
     A rod is axial: turning by ``angle_rad - sign(angle_rad) * pi`` aligns it just as well, so when the turn
@@ -319,6 +221,42 @@ def _turn_about_pad_normal(arm: Arm, base_T_pad: np.ndarray, est: AngleEstimate,
             failures.append(f"turn of {math.degrees(turn):+.1f} deg: {exc}")
             last = exc
         except ArmFault as exc:
-            raise _Abort("arm_fault", f"turn of {math.degrees(turn):+.1f} deg: {exc}") from None
+            raise Abort("arm_fault", f"turn of {math.degrees(turn):+.1f} deg: {exc}") from None
     outcome = "safety_refused" if isinstance(last, SafetyLimitError) else "ik_failed"
-    raise _Abort(outcome, "; ".join(failures))
+    raise Abort(outcome, "; ".join(failures))
+
+
+class Reorient(Task):
+    """The paper's experiment as a trial: grasp, estimate the in-hand angle, turn the object to the scene's
+    ``target_deg``; scored on the object's true final angle (``error_rad``: final - target)."""
+
+    name = "reorient"
+    title = "Reorientation trials"
+    streams_frames = True
+
+    def run(self, trial: Trial) -> ReorientResult:
+        result = grasp_estimate_reorient(trial.arm, trial.gripper, trial.sensor, trial.estimator,
+                                         object_width_m=trial.object_width_m,
+                                         target_angle_rad=math.radians(self.scene.target_deg), config=self.behaviour,
+                                         truth=trial.truth, observer=trial.observer)
+        if trial.observer is not None:
+            trial.observer.phase("release")  # the cell opens the gripper when the trial ends
+        return result
+
+    def failed(self, outcome: str, detail: str) -> ReorientResult:
+        return ReorientResult(outcome=outcome, detail=detail)
+
+    def record(self, result: ReorientResult) -> dict[str, Any]:
+        est, grip = result.estimate, result.contact
+        outcome, detail = result.outcome, result.detail
+        if outcome == "done" and result.error_rad is None:
+            outcome, detail = "unmeasured", "the final angle was not measured"
+        return {"outcome": outcome, "detail": detail,
+                "target_angle_rad": float(wrap_axial(math.radians(self.scene.target_deg))),
+                "action": result.action, "regrasps": result.regrasps, "final_angle_rad": result.final_angle_rad,
+                "error_rad": result.error_rad,
+                "estimated_grip_force_n": rounded(None if grip is None else grip.force_n),
+                "estimated_grip_force_sigma_n": rounded(None if grip is None else grip.force_sigma_n),
+                "extra": {"grasp_width_m": result.grasp_width_m, "correction_rad": result.correction_rad,
+                          "estimate_timings_s": dict(est.timings_s) if est is not None else {},
+                          "commanded_force_n": float(self.behaviour.force_n)}}

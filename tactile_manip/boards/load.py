@@ -17,93 +17,20 @@ from __future__ import annotations
 import functools
 import math
 import re
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from tactile_manip.boards.spec import (
-    BodySpec,
-    BoardFile,
-    BoardHeader,
-    ChipModelSpec,
-    ChipSpec,
-    LayerSpec,
-    WireSpec,
-)
+from tactile_manip.boards.board import GENERIC_PREFIX, Board
+from tactile_manip.boards.spec import BodySpec, BoardFile, BoardHeader, ChipModelSpec, ChipSpec, LayerSpec, WireSpec
 from tactile_manip.config import load_config
 from tactile_manip.errors import ConfigError
 
 BOARD_DIR = Path(__file__).resolve().parent
-GENERIC_PREFIX = "generic:"
+DEFAULT_BOARD = "supermag-4x4"  # the board firmware/ speaks and every shipped model reads
 MAX_GENERIC_CHIPS = 64
 # Chip centres closer than this overlap: the MLX90393's package is 3 x 3 mm.
 MIN_CHIP_SPACING_MM = 3.0
-
-
-@dataclass(frozen=True, eq=False)
-class Board:
-    """A checked board: its chips (firmware order), reading grid, chip model and wire format, and, where the
-    file describes them, the magnetic body and compliant layer that simulation needs.
-
-    Attributes:
-        name: the board's name, stored in recordings, datasets and model metadata.
-        grid: (rows, cols) of the reading.
-        pitch_mm: distance between neighbouring reading cells, mm.
-        chips: one per chip, in the order the firmware sends them.
-        chip: the magnetometer's LSB sizes, rail, rate and noise.
-        wire: the serial backend's wire format and baud rate.
-        body: the magnetic body (None: not simulatable).
-        layer: the compliant layer (None: not simulatable).
-        path: the file it came from (None for ``generic:N``).
-    """
-
-    name: str
-    grid: tuple[int, int]
-    pitch_mm: float
-    chips: tuple[ChipSpec, ...]
-    chip: ChipModelSpec
-    wire: WireSpec
-    body: BodySpec | None = None
-    layer: LayerSpec | None = None
-    description: str = ""
-    source: str = ""
-    path: Path | None = None
-
-    @property
-    def n_chips(self) -> int:
-        return len(self.chips)
-
-    @property
-    def shape(self) -> tuple[int, int, int]:
-        """The reading's shape, (rows, cols, 3)."""
-        return (*self.grid, 3)
-
-    @property
-    def simulatable(self) -> bool:
-        """Whether the file describes a magnetic body, a compliant layer and every chip's position."""
-        return self.body is not None and self.layer is not None and not self.generic
-
-    @property
-    def generic(self) -> bool:
-        return self.name.startswith(GENERIC_PREFIX)
-
-    def require_simulation(self) -> None:
-        """Raise ConfigError (one line) unless the board can be simulated."""
-        if self.generic:
-            raise ConfigError(f"board {self.name} has no geometry and cannot be simulated: describe the board in a "
-                              "board file (docs/your_board.md) with its chips' positions, [body] and [layer]")
-        if not self.simulatable:
-            missing = " and ".join(t for t, v in (("[body]", self.body), ("[layer]", self.layer)) if v is None)
-            raise ConfigError(f"board {self.name} ({self.path}) has no {missing}: simulation needs the magnetic "
-                              "body and the compliant layer (docs/your_board.md)")
-
-    def chip_positions_mm(self) -> np.ndarray:
-        """(n_chips, 3) chip sensing points (x, y, z) in the pad frame, mm, firmware order; z below the layer
-        (NaN without a layer or for a board without geometry)."""
-        xy = np.array([c.position_mm for c in self.chips], dtype=np.float64)
-        z = -(self.layer.thickness_mm + self.layer.gap_mm) if self.layer is not None else math.nan
-        return np.column_stack([xy, np.full(len(self.chips), z)])
 
 
 def board_names() -> list[str]:
@@ -164,9 +91,24 @@ def board_from_file(path: str | Path) -> Board:
     if spec.body is not None and spec.layer is not None:
         _check_magnets(where, spec.body, spec.layer)
     head = spec.board
-    return Board(name=head.name, grid=head.grid, pitch_mm=head.pitch_mm, chips=chips, chip=spec.chip,
-                 wire=spec.wire, body=spec.body, layer=spec.layer, description=head.description,
-                 source=head.source, path=path)
+    board = Board(name=head.name, grid=head.grid, pitch_mm=head.pitch_mm, chips=chips, chip=spec.chip,
+                  wire=spec.wire, body=spec.body, layer=spec.layer, description=head.description,
+                  source=head.source, path=path)
+    _check_name(where, board, path)
+    return board
+
+
+def _check_name(where: str, board: Board, path: Path) -> None:
+    """A file may take a shipped board's name only with that board's contents (its own copy, say): a name is how
+    people and files refer to a board, and a second board under it would pass for the first."""
+    if board.name not in board_names() or path.resolve() == (BOARD_DIR / f"{board.name}.toml").resolve():
+        return
+    shipped = _shipped(board.name)
+    fields = ("grid", "pitch_mm", "chips", "chip", "wire", "body", "layer")
+    differ = [f for f in fields if getattr(board, f) != getattr(shipped, f)]
+    if differ:
+        raise ConfigError(f"{where}: board.name {board.name!r} is a shipped board's, but this file's "
+                          f"{', '.join(differ)} differ from it; give your board a name of its own")
 
 
 def _check_chips(where: str, head: BoardHeader, chips: tuple[ChipSpec, ...]) -> None:

@@ -23,12 +23,14 @@ numpy only, like every core module.
 from __future__ import annotations
 
 import math
+import unicodedata
 from dataclasses import dataclass, field
 from typing import Literal
 
 import numpy as np
 
 from tactile_manip.chips import ChipModelSpec
+from tactile_manip.wire import WIRE_FORMATS
 
 # the pad axis each signed name stands for (a chip's axis map is three of these)
 AXIS_VECTORS: dict[str, tuple[float, float, float]] = {
@@ -36,7 +38,6 @@ AXIS_VECTORS: dict[str, tuple[float, float, float]] = {
     "+z": (0.0, 0.0, 1.0), "-z": (0.0, 0.0, -1.0),
 }
 MAX_CHIPS = 1024  # more chips than any magnetic-skin board carries: a bigger count is a typing error
-WIRE_FORMAT_NAMES = ("supermag", "anyskin")  # wire.WIRE_FORMATS holds their decoders
 
 
 def _finite(where: str, value: float, *, low: float | None = None, high: float | None = None,
@@ -124,12 +125,12 @@ class ChipGridSpec:
 class WireSpec:
     """How the board's frames travel: the serial backend's wire format and the baud rate."""
 
-    format: str = "supermag"  # one of WIRE_FORMAT_NAMES
+    format: str = "supermag"  # a name of tactile_manip.wire.WIRE_FORMATS
     baudrate: int = 921600
 
     def __post_init__(self) -> None:
-        if self.format not in WIRE_FORMAT_NAMES:
-            raise ValueError(f"wire.format must be one of {', '.join(WIRE_FORMAT_NAMES)}, got {self.format!r}")
+        if self.format not in WIRE_FORMATS:
+            raise ValueError(f"wire.format must be one of {', '.join(WIRE_FORMATS)}, got {self.format!r}")
         if not isinstance(self.baudrate, int) or not 300 <= self.baudrate <= 20_000_000:
             raise ValueError(f"wire.baudrate must be an integer from 300 to 20000000, got {self.baudrate!r}")
 
@@ -213,6 +214,9 @@ class BoardHeader:
     def __post_init__(self) -> None:
         if not self.name or self.name != self.name.strip() or any(c in self.name for c in "/\\\n"):
             raise ValueError(f"board.name must be a plain name, got {self.name!r}")
+        if not self.name.isprintable() or any(unicodedata.category(c) in ("Cf", "Cc", "Zl", "Zp") for c in self.name):
+            raise ValueError(f"board.name must be printable, without control or formatting characters, got "
+                             f"{self.name.encode('unicode_escape').decode()!r}")
         if not all(isinstance(v, int) and not isinstance(v, bool) and 1 <= v <= 64 for v in self.grid):
             raise ValueError(f"board.grid must be two integers from 1 to 64, got {list(self.grid)}")
         _finite("board.pitch_mm", self.pitch_mm, low=0.0, high=1000.0)

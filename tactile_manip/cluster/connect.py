@@ -23,7 +23,7 @@ import sys
 import tempfile
 import threading
 import warnings
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -74,12 +74,15 @@ def _url_host(url: str) -> str:
 
 
 @contextlib.contextmanager
-def ray_session(address: str | None, *, num_cpus: int | None = None) -> Iterator[Any]:
+def ray_session(address: str | None, *, num_cpus: int | None = None,
+                python_path: Sequence[str] = ()) -> Iterator[Any]:
     """The ``ray`` module, initialised for one run and shut down after it.
 
     Args:
         address: see the module docstring.
         num_cpus: CPUs of a private local instance (None: all of this machine's); ignored for a cluster.
+        python_path: folders put first on the workers' ``PYTHONPATH`` (where a module the work needs was
+            imported from; on a cluster they must exist on every node).
 
     Raises:
         MissingExtraError: ray is not installed here.
@@ -90,8 +93,10 @@ def ray_session(address: str | None, *, num_cpus: int | None = None) -> Iterator
     ray = require("ray", "running on a Ray cluster")
     if ray.is_initialized():
         raise ClusterError("Ray is already initialised in this process; call this outside another Ray session")
-    kwargs: dict[str, Any] = {"log_to_driver": False, "configure_logging": False,
-                              "runtime_env": {"env_vars": dict(WORKER_ENV)}}
+    env = dict(WORKER_ENV)
+    if python_path:
+        env["PYTHONPATH"] = os.pathsep.join([*python_path, *filter(None, [os.environ.get("PYTHONPATH")])])
+    kwargs: dict[str, Any] = {"log_to_driver": False, "configure_logging": False, "runtime_env": {"env_vars": env}}
     if address is None:
         kwargs.update(num_cpus=num_cpus, include_dashboard=False, _node_ip_address=LOOPBACK)
     preflight(address)

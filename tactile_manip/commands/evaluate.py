@@ -82,6 +82,7 @@ def run(args: argparse.Namespace) -> int:
             if not sep or not label or not path:
                 raise ValueError(f"{option} must be LABEL=PATH, got {spec!r}")
             model = OnnxReconstructor(path, threads=args.threads, image_symmetry="stored")  # the file's images
+            _check_board(f"model {label} ({path})", model.metadata, data, args.data)
             methods[label] = SymmetrizedReconstructor(model) if option == "--symmetrized" else model
     results, _ = evaluate_methods(data, methods, split=args.split, inception_onnx=args.inception_onnx)
     rows = _gallery_rows(data, args.split, "val")
@@ -174,6 +175,7 @@ def _run_contact(args: argparse.Namespace, data) -> int:
         if not sep or not label or not path:
             raise ValueError(f"--model must be LABEL=PATH, got {spec!r}")
         models[label] = ContactEstimator(path, threads=args.threads)
+        _check_board(f"model {label} ({path})", models[label].metadata, data, args.data)
     report = evaluate_contact(data, models, split=args.split, baselines=not args.no_baselines)
     write_contact_report(claim_folder(args.out, "evaluate"), report,
                          {"data": str(args.data), "data_fingerprint": data.fingerprint(),
@@ -181,3 +183,11 @@ def _run_contact(args: argparse.Namespace, data) -> int:
     print(markdown_table(report), end="")
     print(f"wrote {args.out}/table.md, results.json, contact.png")
     return 0
+
+
+def _check_board(what: str, metadata: dict, data, data_path: str) -> None:
+    """Refuse a model of another board than the dataset's (one line naming both and what differs)."""
+    from tactile_manip.boards.identity import check_same_board, record_of_metadata, record_of_provenance
+
+    check_same_board(what, record_of_metadata(metadata), f"the dataset {data_path}",
+                     record_of_provenance(data.provenance))

@@ -94,9 +94,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from tactile_manip.data import dataset_path, from_arrays, save_dataset
+    from tactile_manip.data.io import written_by
     from tactile_manip.outputs import check_output_file
 
-    out = check_output_file(dataset_path(args.out), force=args.force)  # the file written, before reading anything
+    out = check_output_file(dataset_path(args.out), force=args.force, ours=written_by("tactile-manip import"),
+                            what="dataset written by tactile-manip import")  # before reading anything
     if args.readings_csv or args.labels_csv:
         return _run_probe_logs(args, out)
     probe_only = [f"--{k.replace('_', '-')}" for k in ("label_columns", "targets", "contact", "held_out_run", "labelled")

@@ -10,9 +10,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from tactile_manip.sim.params import SimParams, describe
+    from tactile_manip.boards import DEFAULT_BOARD, load_board
+    from tactile_manip.sim.params import describe, for_board
 
-    rows = describe(SimParams())
+    rows = describe(for_board(load_board(DEFAULT_BOARD)))  # the board's figures filled in: the SuperMag pad's
     if args.markdown:
         print("| parameter | default | unit | randomisation | source |\n|---|---|---|---|---|")
         for r in rows:

@@ -19,7 +19,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="success tolerance on |final - target|, deg (default 5)")
     p.add_argument("--out", default=None, metavar="DIR", help="folder for the report files (default: RUN_DIR)")
     p.add_argument("--title", default=None,
-                   help="heading of the summary and figures (default: by the run's task, e.g. 'Reorientation trials')")
+                   help="heading of the summary and figures (default: the title of the run's task)")
     p.add_argument("--force", action="store_true", help="replace the report of an earlier scoring at this tolerance")
 
 
@@ -30,7 +30,6 @@ def run(args: argparse.Namespace) -> int:
     from tactile_manip.errors import ConfigError
     from tactile_manip.trials.log import TrialLogError, read_run_info, read_trials, trials_path
     from tactile_manip.trials.report import tolerance_tag, write_report
-    from tactile_manip.trials.scene import TASK_TITLES
 
     tol_deg = args.tolerance_deg
     if not (math.isfinite(tol_deg) and 0.0 < tol_deg <= MAX_TOLERANCE_DEG):
@@ -51,11 +50,9 @@ def run(args: argparse.Namespace) -> int:
     if not records:
         raise TrialLogError(f"{file} holds no trial records yet: nothing to score")
     try:
-        task = next((r.task for r in records if r.task), "reorient")
-        title = args.title or TASK_TITLES.get(task, "Trials")
         if not in_run:
             claim_folder(out, "score")
-        write_report(out, records, tolerance_rad, title=title, tag=tag, run_info=read_run_info(run_dir), task=task)
+        write_report(out, records, tolerance_rad, title=args.title, tag=tag, run_info=read_run_info(run_dir))
     except ValueError as e:  # duplicated trials or unpaired seeds: the log is not a consistent run
         raise TrialLogError(f"{file}: {e}") from e
     print((out / f"summary{tag}.md").read_text(encoding="utf-8"), end="")

@@ -70,6 +70,6 @@ def _from_simulation(args: argparse.Namespace):
     title = (f"{args.object} at ({args.x_mm:.1f}, {args.y_mm:.1f}) mm, yaw {args.yaw_deg:.0f} deg, "
              f"{args.force_n:.1f} N: approach {s.approach_mm:.2f} mm (gel), {s.skin_approach_mm:.2f} mm (skin)")
     note = "" if s.contact else (
-        f"{args.object} at ({args.x_mm:g}, {args.y_mm:g}) mm does not touch the {pair.params.layer.size_mm:g} mm "
+        f"{args.object} at ({args.x_mm:g}, {args.y_mm:g}) mm does not touch the {pair.board.layer.size_mm[0]:g} mm "
         "pad (pad centre at (0, 0)): an empty press, noise and drift only")
     return s.field_ut, s.depth_mm, title, note

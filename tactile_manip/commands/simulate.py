@@ -14,6 +14,13 @@ import os
 from tactile_manip.progress import progress_bar
 
 MIN_PROBE_PRESSES = 3  # --board: one press each for the train, val and test splits
+SIMULATED_WHAT = "dataset written by tactile-manip simulate"  # the only file --force replaces
+
+
+def _simulated(path) -> bool:
+    from tactile_manip.data.io import dataset_source
+
+    return (dataset_source(path) or "").startswith(("tactile-manip simulate", "tactile_manip.sim."))
 
 DEFAULT_CONFIG = "configs/dataset/supermag.toml"
 
@@ -62,7 +69,7 @@ def run(args: argparse.Namespace) -> int:
     if args.shard_size is not None and args.shard_size < 1:
         raise ValueError(f"--shard-size must be >= 1, got {args.shard_size}")
     out = (_check_shard_folder(args.out, force=args.force) if args.shard_size else  # checked before the work
-           check_output_file(dataset_path(args.out), force=args.force))
+           check_output_file(dataset_path(args.out), force=args.force, ours=_simulated, what=SIMULATED_WHAT))
     if args.workers < 0:
         raise ValueError(f"--workers must be >= 0, got {args.workers}")
     if not 0 < args.scale <= 100:
@@ -96,7 +103,7 @@ def run(args: argparse.Namespace) -> int:
     what = "pairs" if data.has_images else "presses (no images)"
     print(f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB): {len(data)} {what} ({counts}) in {seconds:.1f} s, "
           f"{len(data) / seconds:.1f} presses/s; targets {', '.join(data.target_names)}")
-    for note in _physics_notes(data, thickness_mm=cfg.sim.layer.thickness_mm):
+    for note in _physics_notes(data, thickness_mm=cfg.sensor_board().layer.thickness_mm):
         print(f"note: {note}")
     return 0
 
@@ -154,7 +161,7 @@ def _simulate_board(args: argparse.Namespace) -> int:
     if not MIN_PROBE_PRESSES <= args.presses <= 1_000_000:  # checked before any press
         raise ValueError(f"--presses must be from {MIN_PROBE_PRESSES} to 1000000 (a press each for validation and "
                          f"test, and one to train on), got {args.presses}")
-    out = check_output_file(dataset_path(args.out), force=args.force)
+    out = check_output_file(dataset_path(args.out), force=args.force, ours=_simulated, what=SIMULATED_WHAT)
     board = load_board(args.board)
     board.require_simulation()
     plan = ProbePlan(tip=args.tip, tip_diameter_mm=args.tip_diameter_mm, max_force_n=args.max_force_n)
@@ -211,6 +218,6 @@ def _report_shards(data, path, cfg) -> int:
     size_mb = sum(f.stat().st_size for f in path.iterdir()) / 1e6
     print(f"wrote {path}/ ({data.shard_count} shards, {size_mb:.1f} MB): {len(data)} presses ({counts}) in "
           f"{seconds:.1f} s, {len(data) / seconds:.1f} presses/s; fingerprint {data.fingerprint()}")
-    for note in _physics_notes(data, thickness_mm=cfg.sim.layer.thickness_mm):
+    for note in _physics_notes(data, thickness_mm=cfg.sensor_board().layer.thickness_mm):
         print(f"note: {note}")
     return 0

@@ -1,4 +1,4 @@
-"""``tactile-manip trials``: run a reorientation trial scene (every presentation once per method) and report.
+"""``tactile-manip trials``: run a trial scene (every presentation once per method, its task each time) and report.
 
 Writes ``OUT/trials.jsonl`` (one fsynced line per trial, so a killed run loses no completed trial; continue it
 with ``--resume``) and each trial's per-frame streams to ``OUT/frames/`` (``tactile-manip export OUT`` turns
@@ -60,12 +60,11 @@ def run(args: argparse.Namespace) -> int:
     check_rerun_options(args)
     _check_ray_options(args)
     out = check_output_dir(run_folder(scene.name, args.out, resume=args.resume))
-    if args.ray is not None:
-        return _report(out, _run_on_ray(args, scene, out))
+    executor = _ray_executor(args) if args.ray is not None else None
     observer = _rerun_observer(args, scene.name) if args.rerun else None
     try:
         summary = run_trials(scene, out, scene_path=args.config, resume=args.resume, progress=not args.quiet,
-                             trial_observer=observer, frames=args.frames)
+                             trial_observer=observer, frames=args.frames, executor=executor)
     except BaseException:  # an error, Ctrl-C or SIGTERM: the viewer's server stops too
         if observer is not None:
             observer.close()
@@ -105,13 +104,12 @@ def _check_ray_options(args: argparse.Namespace) -> None:
     preflight(address)  # an unreachable cluster fails here, before the run folder
 
 
-def _run_on_ray(args: argparse.Namespace, scene, out):
+def _ray_executor(args: argparse.Namespace):
     from tactile_manip.cluster.connect import check_address
-    from tactile_manip.cluster.trials import DEFAULT_BLOCK_TRIALS, run_trials_on_ray
+    from tactile_manip.cluster.trials import DEFAULT_BLOCK_TRIALS, RayExecutor
 
-    return run_trials_on_ray(scene, out, scene_path=args.config, resume=args.resume, progress=not args.quiet,
-                             frames=args.frames, address=check_address(args.ray), num_cpus=args.workers or None,
-                             block_trials=args.block_trials or DEFAULT_BLOCK_TRIALS)
+    return RayExecutor(check_address(args.ray), num_cpus=args.workers or None,
+                       block_trials=args.block_trials or DEFAULT_BLOCK_TRIALS)
 
 
 def _rerun_observer(args: argparse.Namespace, name: str):

@@ -29,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from tactile_manip.boards.identity import check_same_board, record_of_provenance
 from tactile_manip.data.spec import ChannelSpec, ImageSpec
 from tactile_manip.data.targets import check_target_names, check_targets, target_unit
 from tactile_manip.errors import DatasetError
@@ -272,6 +273,9 @@ def concatenate(datasets: list[PairedDataset] | tuple[PairedDataset, ...]) -> Pa
             raise DatasetError(f"dataset {i} has images {d.image.to_dict()}, dataset 0 has {first.image.to_dict()}")
         if first.has_images and d.image_shape != first.image_shape:
             raise DatasetError(f"dataset {i} has {d.image_shape} images, dataset 0 {first.image_shape} images")
+    boards = [record_of_provenance(d.provenance) for d in parts]
+    for i, board in enumerate(boards[1:], start=1):
+        check_same_board(f"dataset {i}", board, "dataset 0", boards[0])
     object_index, names = None, None
     if any(d.object_names is not None for d in parts):  # a dataset that names none is the object "all"
         names = list(dict.fromkeys(name for d in parts
@@ -292,7 +296,7 @@ def concatenate(datasets: list[PairedDataset] | tuple[PairedDataset, ...]) -> Pa
                                             for d in parts)]
     dropped = sorted({k for d in parts for k in d.extras} - set(common))
     extras = {k: np.concatenate([d.extras[k] for d in parts]) for k in common}
-    provenance = {"source": "concatenate", "parts": [dict(d.provenance, fingerprint=d.fingerprint(), samples=len(d))
+    provenance = {"source": "concatenate", **({"board": boards[0]} if boards[0] is not None else {}), "parts": [dict(d.provenance, fingerprint=d.fingerprint(), samples=len(d))
                                                      for d in parts], "dropped_extras": dropped}
     def joined(name: str) -> np.ndarray | None:
         return None if getattr(first, name) is None else np.concatenate([getattr(d, name) for d in parts])

@@ -21,6 +21,7 @@ from __future__ import annotations
 import json
 import zipfile
 from dataclasses import replace
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -31,6 +32,7 @@ from tactile_manip.data.dataset import PairedDataset, concatenate
 from tactile_manip.data.shards import MANIFEST, ShardedDataset, is_shard_folder
 from tactile_manip.data.spec import ChannelSpec, ImageSpec
 from tactile_manip.errors import DatasetError
+from tactile_manip.outputs import unfinished
 
 FORMAT_VERSION = 3
 READABLE_VERSIONS = (1, 2, 3)
@@ -58,6 +60,25 @@ def dataset_path(path: str | Path) -> Path:
     return path if path.suffix == ".npz" else path.with_name(path.name + ".npz")
 
 
+def dataset_source(path: str | Path) -> str | None:
+    """What wrote the dataset file at ``path`` (its provenance's ``source``, e.g. "tactile-manip simulate"), or
+    None when ``path`` is not a readable dataset file of this package."""
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            meta = json.loads(str(z["metadata"])) if "metadata" in z.files else None
+    except Exception:  # noqa: BLE001 - any file that does not read as our dataset is simply not one
+        return None
+    provenance = meta.get("provenance") if isinstance(meta, dict) else None
+    source = provenance.get("source") if isinstance(provenance, dict) else None
+    return source if isinstance(source, str) else None
+
+
+def written_by(*sources: str) -> Callable[[Path], bool]:
+    """A check for :func:`~tactile_manip.outputs.check_output_file`'s ``ours``: the file is a dataset whose
+    provenance names one of ``sources`` (a prefix of it)."""
+    return lambda path: any((dataset_source(path) or "\0").startswith(s) for s in sources)
+
+
 def save_dataset(path: str | Path, data: PairedDataset) -> Path:
     """Write ``data`` to ``path`` (``.npz`` appended if missing) atomically: a temp file, then rename."""
     path = dataset_path(path)
@@ -72,7 +93,7 @@ def save_dataset(path: str | Path, data: PairedDataset) -> Path:
             "provenance": data.provenance}
     arrays["metadata"] = np.array(json.dumps(meta))
     tmp = path.with_name(path.name + ".partial")
-    with tmp.open("wb") as f:
+    with unfinished(tmp), tmp.open("wb") as f:
         np.savez_compressed(f, **arrays)
     tmp.replace(path)
     return path

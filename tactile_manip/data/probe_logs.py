@@ -59,7 +59,7 @@ def from_probe_logs(readings: Sequence[ReadingStream], labels: Sequence[LabelStr
         targets: label columns that become targets, by their name or their name in target units
             (``force_gf`` -> ``force_n``, in newtons); ``in_contact`` for the ``contact`` flag.
         label_columns: names of the label columns (required for arrays and CSVs without a header).
-        layout: board layout name (``anyskin-5``, ``supermag-4x4``) or a ``BoardLayout``: the chips' order and
+        layout: board layout name (``anyskin-5``, ``supermag-4x4``) or a ``Board``: the chips' order and
             the (R, C) cells their readings are stored on.
         contact: one comparison on a label column (``"z_mm < 145.1"``), in that column's units.
         missing: the value meaning "no reading" in every used column, or {column: value}.
@@ -104,7 +104,7 @@ def from_probe_logs(readings: Sequence[ReadingStream], labels: Sequence[LabelStr
     split_arr = _split(runs, split, test_fraction, val_fraction, held_out_run)
     prov = {"source": "tactile_manip.data.from_probe_logs", "code_version": code_version(),
             "created_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()), "layout": board.name,
-            "targets": plan.describe(), "contact": None if cond is None else str(cond),
+            "board": board.record, "targets": plan.describe(), "contact": None if cond is None else str(cond),
             "contact_use": None if cond is None else ("target" if plan.flag else "filter"),
             "missing": missing if not isinstance(missing, Mapping) else dict(missing),
             "split": split, "test_fraction": test_fraction, "val_fraction": val_fraction,

@@ -120,13 +120,13 @@ def read_reading_stream(path: str | Path) -> tuple[np.ndarray, np.ndarray, dict]
 
 
 def board_layout(layout: Any):
-    """A ``BoardLayout`` from its name (or itself); DatasetError naming the known layouts."""
-    from tactile_manip.boards.layout import BoardLayout, get_layout
+    """A ``Board`` from its name (or itself); DatasetError naming the known layouts."""
+    from tactile_manip.boards import Board, load_board
 
-    if isinstance(layout, BoardLayout):
+    if isinstance(layout, Board):
         return layout
     try:
-        return get_layout(str(layout))
+        return load_board(str(layout))
     except ValueError as e:
         raise DatasetError(str(e)) from None
 
@@ -168,7 +168,8 @@ def reading_stream(item: ReadingStream, board: Any, offset_s: float, baseline_s:
         span_s = float(np.nanmax(t) - np.nanmin(t))
         if baseline_s > BASELINE_SHARE * span_s:
             raise DatasetError(f"{where}: a baseline of the first {baseline_s:g} s would take in "
-                               f"{min(baseline_s / span_s, 1.0):.0%} of the run's {span_s:.3g} s, presses and all; "
+                               f"{min(baseline_s / span_s, 1.0) if span_s > 0 else 1.0:.0%} of the run's {span_s:.3g} s, "
+                               "presses and all; "
                                f"the baseline is the free pad at the start: give at most "
                                f"{BASELINE_SHARE * span_s:.3g} s (a few seconds before the first press)")
         first = np.isfinite(t) & (t <= np.nanmin(t) + baseline_s) & np.isfinite(readings).all(axis=(1, 2, 3))

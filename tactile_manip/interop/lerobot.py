@@ -391,9 +391,9 @@ def _tactile_meta(episodes: list[Episode], grid: tuple[int, int], s: _Streams,
               "axes": "x, y, z of the pad frame; row 0 at +y, column 0 at -x", "unit": "uT"}
     if layout_name:
         try:
-            from tactile_manip.boards.layout import get_layout
+            from tactile_manip.boards import load_board
 
-            layout["pitch_mm"] = get_layout(layout_name).pitch_mm
+            layout["pitch_mm"] = load_board(layout_name).pitch_mm
         except ValueError:
             pass
     meta = {"format": "tactile_manip.lerobot", "format_version": 1, "code_version": code_version(),

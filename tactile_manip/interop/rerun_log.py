@@ -97,7 +97,7 @@ def require_rerun(purpose: str):
 def taxel_origins_mm(grid: tuple[int, int], layout: Any = None) -> tuple[np.ndarray, np.ndarray]:
     """(R*C, 3) float32 taxel positions (x, y, 0) in mm and the (R*C,) bool mask of cells a chip feeds.
 
-    ``layout``: a :class:`~tactile_manip.boards.layout.BoardLayout` of this grid, or None for the default
+    ``layout``: a :class:`~tactile_manip.boards.Board` of this grid, or None for the default
     5 mm grid centred on the pad (row 0 at +y, column 0 at -x).
     """
     rows, cols = grid

@@ -23,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
+from tactile_manip.behaviours.registry import DEFAULT_TASK
 from tactile_manip.errors import RecordingError
 from tactile_manip.interop.frames import Episode, Frame
 
@@ -172,7 +173,7 @@ def _trial_episode(index: int, r, frames, tolerance_rad: float, phases: tuple[st
     if r.estimated_grip_force_n is not None:  # the scene had a contact model
         meta.update(estimated_grip_force_n=r.estimated_grip_force_n,
                     estimated_grip_force_sigma_n=r.estimated_grip_force_sigma_n)
-    return Episode(index=index, task=f"reorient {r.object} to {target_deg:g} deg", fps=fps, frames=out,
+    return Episode(index=index, task=f"{r.task or DEFAULT_TASK} {r.object} to {target_deg:g} deg", fps=fps, frames=out,
                    success=r.succeeded(tolerance_rad), meta=meta)
 
 

@@ -22,9 +22,10 @@ def sensor_name(episode: Episode) -> str:
 
 def layout_of(episode: Episode):
     """The board layout named in ``meta["layout"]`` when it matches the frames' grid, else None."""
-    from tactile_manip.boards.layout import LAYOUTS
+    from tactile_manip.boards import board_names, load_board
 
-    layout = LAYOUTS.get(str(episode.meta.get("layout", "")))
+    name = str(episode.meta.get("layout", ""))
+    layout = load_board(name) if name in board_names() else None
     return layout if layout is not None and tuple(layout.grid) == episode.grid else None
 
 

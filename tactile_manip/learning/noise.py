@@ -19,7 +19,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tactile_manip.config import from_dict
 from tactile_manip.data import PairedDataset
 from tactile_manip.errors import DatasetError
 
@@ -46,7 +45,7 @@ class ChipNoise:
         Raises:
             DatasetError: the dataset has no clean readings (made before they were stored, or not simulated).
         """
-        from tactile_manip.sim.dataset import DatasetConfig
+        from tactile_manip.sim.dataset import recorded_sim_params
 
         idx = np.asarray(idx, dtype=np.int64)
         if not data.has("field_clean_ut"):
@@ -58,7 +57,7 @@ class ChipNoise:
             ends = np.cumsum([part["samples"] for part in provenance["parts"]])
             return cls.concatenate([cls.of(data, idx[(idx >= end - part["samples"]) & (idx < end)], part)
                                     for part, end in zip(provenance["parts"], ends)])
-        chip = from_dict(DatasetConfig, provenance["config"], where="the dataset's provenance").sim.chip
+        chip = recorded_sim_params(provenance["config"]).chip
         levels = np.tile(np.array([[chip.noise_xy_ut, chip.noise_z_ut, chip.drift_ut]], np.float32), (len(idx), 1))
         names = list(provenance.get("sensor_param_names", []))
         if data.has("sensor_params"):

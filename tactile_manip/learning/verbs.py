@@ -8,9 +8,23 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from tactile_manip.learning.kinds import TrainRequest
+    from tactile_manip.learning.kinds import ExportRequest, TrainRequest
 
 RUN_FILES = ("checkpoint.pt", "best.pt")  # what a run folder holds that a new run would replace
+
+
+def check_data_of_checkpoint(request: ExportRequest, cells: list[int], board: dict | None, data) -> None:
+    """Refuse, before the export's work, ``--data`` of another reading grid or board than the checkpoint's
+    (``cells``: its (rows, cols, channels); ``board``: its board record, None where unknown)."""
+    from tactile_manip.boards.identity import check_same_board, record_of_provenance
+    from tactile_manip.errors import DatasetError
+
+    if list(data.readings.shape[1:]) != [int(c) for c in cells]:
+        raise DatasetError(f"--data {' '.join(request.data)} holds ({', '.join(map(str, data.readings.shape[1:]))}) "
+                           f"readings, but the checkpoint {request.checkpoint} reads ({', '.join(map(str, cells))}): "
+                           "give the data it was trained on")
+    check_same_board(f"the checkpoint {request.checkpoint}", board, f"--data {' '.join(request.data)}",
+                     record_of_provenance(data.provenance))
 
 
 def start_run(request: TrainRequest, *, total: int, desc: str, initial: int = 0):

@@ -32,7 +32,7 @@ from typing import Any
 
 import numpy as np
 
-from tactile_manip.boards.layout import DEFAULT_LAYOUT, get_layout
+from tactile_manip.boards import DEFAULT_BOARD, load_board
 from tactile_manip.chips import ChipModelSpec
 from tactile_manip.errors import ProtocolError, RecordingError
 from tactile_manip.logs.framed_file import (CRC32, TAG_EVENT, FramedWriter, Scan, json_default, read_header,
@@ -129,7 +129,7 @@ class Recording:
     @property
     def layout_name(self) -> str:
         """The board layout the frames were recorded with (recordings before layouts existed: supermag-4x4)."""
-        return self.header.get("layout", DEFAULT_LAYOUT)
+        return self.header.get("layout", DEFAULT_BOARD)
 
     def field_raw_ut(self) -> np.ndarray:
         """(N, R, C, 3) float32 raw fields in uT (counts times the recorded LSBs, or as the wire sent them)."""
@@ -181,7 +181,7 @@ def _record_decoder(header: dict[str, Any], path: Path) -> Callable[[bytes], Any
     if fmt == "supermag":
         return decode_frame
     try:
-        layout = get_layout(header.get("layout", ""))
+        layout = load_board(header.get("layout", ""))
         chip = header.get("chip", {})
         params = ChipModelSpec(**{k: chip[k] for k in ("lsb_xy_ut", "lsb_z_ut", "saturation_counts") if k in chip})
         return make_decoder(fmt, n_chips=layout.n_chips, chip=params).decode_record
@@ -212,7 +212,7 @@ def _assemble(path: Path, header: dict[str, Any], frames: list, health: list, ev
 def _assemble_fields(path: Path, header: dict[str, Any], frames: list, health: list, events: list,
                      scan: Scan) -> Recording:
     """A recording of a format that sends microtesla and no counter: sequence = record order, no device time."""
-    layout = get_layout(header["layout"])
+    layout = load_board(header["layout"])
     n = len(frames)
     raw = np.zeros((n, *layout.shape), np.float32)
     sat = np.zeros((n, *layout.shape), bool)

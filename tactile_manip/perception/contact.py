@@ -62,6 +62,8 @@ allocated but the returned state. An estimator keeps its history and these array
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import math
 import time
 from collections.abc import Mapping, Sequence
@@ -71,6 +73,7 @@ from typing import Any
 
 import numpy as np
 
+from tactile_manip.boards.identity import check_board_of
 from tactile_manip.extras import require
 from tactile_manip.perception.confidence import SigmaCalibration
 from tactile_manip.perception.contact_context import ContextBuffer
@@ -81,6 +84,9 @@ from tactile_manip.perception.press_check import PressCheck, press_check_for
 from tactile_manip.perception.reconstruct import ModelFileError, read_metadata
 from tactile_manip.shipped import resolve_model_path
 from tactile_manip.types import TactileReading
+
+if TYPE_CHECKING:
+    from tactile_manip.boards.board import Board
 
 # ContactState field of each standard target, and of its sigma
 STATE_FIELDS = {"x_mm": "x_sigma_mm", "y_mm": "y_sigma_mm", "depth_mm": "depth_sigma_mm",
@@ -288,8 +294,11 @@ class ContactEstimator:
         """Forget the readings kept for context (the next estimate reads its reading alone)."""
         self._history.clear()
 
-    def check_layout(self, layout: str) -> None:
-        """Refuse a sensor of another board layout than the model's."""
+    def check_layout(self, layout: str | Board) -> None:
+        """Refuse a sensor of another board layout (a name, or a sensor's Board) than the model's."""
+        if check_board_of(self.path.name, self.metadata, layout):
+            return
+        layout = getattr(layout, "name", layout)
         if self.board_layout and layout != self.board_layout:
             raise ValueError(f"{self.path.name} takes readings of the {self.board_layout!r} board layout, but the "
                              f"sensor has the {layout!r} layout: train a contact model for that board")
@@ -466,10 +475,10 @@ def _pad_half_size_mm(layout: str) -> tuple[float, float] | None:
     that is not known here."""
     if not layout:
         return None
-    from tactile_manip.boards.layout import get_layout
+    from tactile_manip.boards import load_board
 
     try:
-        board = get_layout(layout)
+        board = load_board(layout)
     except (ValueError, OSError):  # a board of its own (a dataset's layout name): no geometry
         return None
     rows, cols = board.grid

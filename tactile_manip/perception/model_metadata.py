@@ -6,7 +6,7 @@ another board layout, another context length) would otherwise load and give numb
 :func:`check_metadata` refuses it with a :class:`ModelFileError` naming the file and the field:
 
 - every field has its type (``context.frames`` an integer, ``targets.names`` a list of strings, ...);
-- shapes are positive integers; the board layout's reading grid (``boards/layout.py``; ``grid-RxC`` for
+- shapes are positive integers; the board layout's reading grid (``tactile_manip.boards``; ``grid-RxC`` for
   other grids) is the input's rows and columns;
 - a contact model's targets and units pair up by their suffixes (``x_mm`` in mm, ``force_n`` in N), its
   ``context.frames`` is the input's frame axis, within 1..:data:`MAX_CONTEXT_FRAMES`;
@@ -38,7 +38,7 @@ TOP_LEVEL = {"format_version": int, "kind": str, "package_version": str, "board_
              "data_fingerprint": str, "parameters": int, "input": dict, "output": dict, "noise": dict,
              "context": dict, "targets": dict, "normalisation": dict, "sigma_calibration": dict,
              "model_config": dict, "train_config": dict, "training": dict, "training_data": dict, "metrics": dict,
-             "one_reading": dict, "image_position_weight": _NUMBER, "image_symmetry": str}
+             "one_reading": dict, "image_position_weight": _NUMBER, "image_symmetry": str, "board": dict}
 _GRID_NAME = re.compile(r"grid-(\d+)x(\d+)")
 
 
@@ -116,7 +116,7 @@ class _Checker:
 
 def _check_layout(check: _Checker, layout: Any, grid: tuple[int, int]) -> None:
     """The board layout's reading grid (a known board's, or ``grid-RxC``) must be the input's rows x cols."""
-    from tactile_manip.boards.layout import get_layout
+    from tactile_manip.boards import load_board
 
     if layout is None:  # files from before board layouts: the loaders take them as SuperMag models
         return
@@ -124,7 +124,7 @@ def _check_layout(check: _Checker, layout: Any, grid: tuple[int, int]) -> None:
         want = (int(m.group(1)), int(m.group(2)))
     else:
         try:
-            want = tuple(get_layout(layout).grid)
+            want = tuple(load_board(layout).grid)
         except (ValueError, OSError):  # a board this machine does not know (a dataset's own name): nothing to compare
             return
     if want != grid:

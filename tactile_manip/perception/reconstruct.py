@@ -14,6 +14,8 @@ the confidence.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import abc
 import json
 import math
@@ -26,6 +28,7 @@ from typing import Any
 import numpy as np
 from scipy import ndimage
 
+from tactile_manip.boards.identity import check_board_of
 from tactile_manip.chips import MLX90393, full_scale_ut
 from tactile_manip.perception.angle_head import AngleHead, open_angle_head
 from tactile_manip.perception.board_symmetry import average_images, image_subgroup
@@ -34,6 +37,9 @@ from tactile_manip.perception.one_reading import open_one_reading
 from tactile_manip.perception.onnx_session import session_options
 from tactile_manip.extras import require
 from tactile_manip.shipped import SHIPPED_MODELS, missing_model_message, resolve_model_path
+
+if TYPE_CHECKING:
+    from tactile_manip.boards.board import Board
 
 METADATA_KEY = "tactile_manip"
 SYMMETRY_CHUNK = 64  # readings per batch of symmetric copies (4 or 8 images each)
@@ -57,7 +63,7 @@ def out_of_range(field_ut: np.ndarray) -> np.ndarray:
 def _limit_for(shape: tuple[int, ...]) -> np.ndarray | float:
     """The per-axis limit for readings of ``shape`` (the largest one when the last axis is not x, y, z)."""
     return READING_LIMIT_UT if shape and shape[-1] == 3 else float(READING_LIMIT_UT.max())
-DEFAULT_BOARD_LAYOUT = "supermag-4x4"  # the board every shipped model was trained on (boards/layout.py)
+DEFAULT_BOARD_LAYOUT = "supermag-4x4"  # the board every shipped model was trained on (tactile_manip/boards)
 
 
 @dataclass(frozen=True, eq=False)
@@ -72,7 +78,7 @@ class Reconstruction:
 class Reconstructor(abc.ABC):
     """Reading (R, C, 3) microtesla, baseline-subtracted -> depth image (H, W) in mm.
 
-    ``board_layout`` names the sensor board (``tactile_manip.boards.layout``) whose readings it was made for;
+    ``board_layout`` names the sensor board (``tactile_manip.boards``) whose readings it was made for;
     :meth:`check_layout` refuses readings of another board. ``angle_head`` is the model file's angle head
     (:class:`~tactile_manip.perception.angle_head.AngleHead`: the contact's axis straight from the reading,
     from which the pose estimator takes the angle by default), or None.
@@ -102,9 +108,12 @@ class Reconstructor(abc.ABC):
         """Readings (N, R, C, 3) as the model reads them (see :meth:`checked`)."""
         return self._check(fields_ut, batch=True)
 
-    def check_layout(self, layout: str) -> None:
-        """Refuse readings of board layout ``layout`` unless it is the one this reconstructor was made for."""
-        if layout != self.board_layout:
+    def check_layout(self, layout: str | Board) -> None:
+        """Refuse readings of board layout ``layout`` (a name, or a sensor's :class:`~tactile_manip.boards.Board`,
+        told apart by what its readings depend on) unless it is the one this reconstructor was made for."""
+        if check_board_of(self.name, getattr(self, "metadata", {"board_layout": self.board_layout}), layout):
+            return
+        if getattr(layout, "name", layout) != self.board_layout:
             raise ValueError(f"{self.name} takes readings of the {self.board_layout!r} board layout, but the sensor "
                              f"has the {layout!r} layout: train or export a model for that board")
 
@@ -316,11 +325,17 @@ def _describe(tensors: dict) -> str:
                            for n, (d, t) in tensors.items()) + ")"
 
 
+PARTIAL_SUFFIX = ".partial"  # what an export's file is called until its parity check passed
+
+
 def read_metadata(path: str | Path) -> dict[str, Any]:
     """The ``tactile_manip`` metadata of an exported model, validated in itself
     (:func:`~tactile_manip.perception.model_metadata.check_metadata`; the loaders compare it with the graph).
     Raises :class:`ModelFileError`."""
     path = Path(path)
+    if path.name.endswith(PARTIAL_SUFFIX):
+        raise ModelFileError(f"{path}: an unfinished export (export writes {PARTIAL_SUFFIX} while it checks the "
+                             "model, and renames it only once the check passed): export the model again")
     if not path.is_file():
         raise ModelFileError(missing_model_message(path))
     try:

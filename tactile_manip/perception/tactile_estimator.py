@@ -234,6 +234,12 @@ class TactileEstimator:
                 raise ValueError(f"the pose model takes {tuple(shape)} readings of the {layout!r} board, the "
                                  f"contact model {contact.input_shape} of {contact.board_layout!r}: use models of "
                                  "one board")
+            pose_metadata = getattr(getattr(pose, "reconstructor", None), "metadata", None)
+            if isinstance(pose_metadata, dict):  # the same name may still be two boards: their identities tell
+                from tactile_manip.boards.identity import check_same_board, record_of_metadata
+
+                check_same_board("the pose model", record_of_metadata(pose_metadata), "the contact model",
+                                 record_of_metadata(contact.metadata))
         self.pose = pose
         self.contact = contact
         default = 1.0 if contact is None else contact.image_position_weight
@@ -334,7 +340,7 @@ class TactileEstimator:
         """
         if isinstance(frames, bool) or not isinstance(frames, int) or frames < 1:
             raise ValueError(f"frames must be a positive integer, got {frames!r}")
-        self.check_layout(sensor.layout.name)
+        self.check_layout(sensor.layout)
         return self.estimate_frames(_fresh_frames(sensor, frames, timeout_s))
 
     def stream(self, sensor: TactileSensor, *, timeout_s: float = 0.1, max_estimates: int | None = None,
@@ -350,7 +356,7 @@ class TactileEstimator:
             SensorTimeoutError: the sensor stalls.
             ValueError: the sensor's board layout is not the parts' (before the first frame is read).
         """
-        self.check_layout(sensor.layout.name)
+        self.check_layout(sensor.layout)
         return _stream(sensor, self.estimate, timeout_s, max_estimates,
                        StreamStats() if stats is None else stats)
 

@@ -144,6 +144,11 @@ class Gripper(_Connectable):
     def max_width_m(self) -> float:
         """Widest opening, m."""
 
+    @property
+    @abc.abstractmethod
+    def max_force_n(self) -> float:
+        """The largest grasp force :meth:`grasp` accepts, N (a force servo clips its command to it)."""
+
     @abc.abstractmethod
     def state(self) -> GripperState:
         """Current opening and grasp flag."""

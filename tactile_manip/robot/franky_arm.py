@@ -360,6 +360,10 @@ class FrankyGripper(Gripper):
         width = float(self._call(lambda g: g.max_width, "reading the maximum width"))
         return width if width > 0.0 else FRANKA_HAND_MAX_WIDTH_M
 
+    @property
+    def max_force_n(self) -> float:
+        return FRANKA_HAND_MAX_FORCE_N
+
     def state(self) -> GripperState:
         s = self._call(lambda g: g.state, "reading the state")
         return GripperState(width_m=float(s.width), is_grasped=bool(s.is_grasped))

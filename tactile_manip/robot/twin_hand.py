@@ -171,6 +171,10 @@ class TwinGripper(Gripper):
     def max_width_m(self) -> float:
         return GRIPPER_MAX_WIDTH_M
 
+    @property
+    def max_force_n(self) -> float:
+        return GRIPPER_MAX_FORCE_N
+
     def state(self) -> GripperState:
         self._require_connected()
         return GripperState(width_m=self._width_m, is_grasped=self.world.held is not None)

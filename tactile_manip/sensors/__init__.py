@@ -3,7 +3,7 @@
 - :class:`TactileSensor`: the contract (connect, ``read_latest``, ``wait_new``, ``window``, baseline, health);
 - backends :class:`SerialSensor` (pyserial, imported on connect), :class:`SimulatedSensor`,
   :class:`ReplaySensor`, each built from its config dataclass or by :func:`make_sensor`;
-- :mod:`~tactile_manip.boards.layout`: board layouts; :mod:`~tactile_manip.sensors.drift`: baseline tracking,
+- :class:`~tactile_manip.boards.Board`: where a board's chips feed the reading; :mod:`~tactile_manip.sensors.drift`: baseline tracking,
   temperature, stray fields; :mod:`~tactile_manip.sensors.simulated.emulator`: the firmware emulator on a pty;
   :mod:`~tactile_manip.sensors.recording`: recording a live sensor to a crash-safe file.
 

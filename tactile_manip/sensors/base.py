@@ -25,7 +25,7 @@ from tactile_manip.errors import SensorDisconnectedError, SensorError, SensorTim
 from tactile_manip.sensors.baseline import Baseline, baseline_from_frames, noise_thresholds_ut
 from tactile_manip.sensors.config import BaselineConfig, DriftConfig
 from tactile_manip.sensors.drift import BaselineState
-from tactile_manip.boards.layout import SUPERMAG_4X4, BoardLayout
+from tactile_manip.boards import DEFAULT_BOARD, Board, load_board
 from tactile_manip.types import TactileReading
 
 RATE_WINDOW_S = 1.0  # the measured rate is taken over the last second of frames
@@ -138,10 +138,10 @@ class TactileSensor(abc.ABC):
     """
 
     def __init__(self, *, source: str, chip: ChipSettings, buffer_frames: int, baseline: BaselineConfig,
-                 layout: BoardLayout = SUPERMAG_4X4, drift: DriftConfig | None = None) -> None:
+                 layout: Board | None = None, drift: DriftConfig | None = None) -> None:
         self._source = source
         self._chip = chip
-        self._layout = layout
+        self._layout = layout = layout or load_board(DEFAULT_BOARD)
         self._state = BaselineState(drift or DriftConfig(), layout)
         self._baseline_config = baseline
         self._cond = threading.Condition()
@@ -190,7 +190,7 @@ class TactileSensor(abc.ABC):
         return self._chip
 
     @property
-    def layout(self) -> BoardLayout:
+    def layout(self) -> Board:
         """Where the board's chips sit and which reading cells they feed (readings are ``layout.shape``)."""
         return self._layout
 

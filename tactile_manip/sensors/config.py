@@ -111,7 +111,7 @@ class SerialSensorConfig:
     drift: DriftConfig = field(default_factory=DriftConfig)
 
     def __post_init__(self) -> None:
-        from tactile_manip.boards.layout import get_layout
+        from tactile_manip.boards import load_board
         from tactile_manip.wire import DEFAULT_LAYOUTS, WIRE_FORMATS
 
         for name in ("port", "serial_number"):
@@ -129,7 +129,7 @@ class SerialSensorConfig:
         # a chip given as the simulator's ChipParams keeps only its hardware part, what the driver reads
         object.__setattr__(self, "chip", as_chip_spec(self.chip))
         try:
-            n_chips = get_layout(self.layout).n_chips
+            n_chips = load_board(self.layout).n_chips
         except ValueError as e:
             raise ValueError(f"SerialSensorConfig.layout: {e}") from None
         n_coeff = len(self.drift.temperature_coeff_ut_per_c)
@@ -157,13 +157,20 @@ class SimulatedSensorConfig:
     """The simulator in process: readings at the chip rate from a :class:`~tactile_manip.sim.pair.SensorPair`."""
 
     backend: ClassVar[str] = "simulated"
+    board: str = "supermag-4x4"        # the simulated board: a shipped name or a board file with [body] and [layer]
     seed: int = 0                      # noise seed (the frame noise sequence is fixed by it)
     rate_hz: float = 125.0             # frame clock, Hz
     buffer_frames: int = 512           # ring buffer length, frames
     baseline: BaselineConfig = field(default_factory=BaselineConfig)
 
     def __post_init__(self) -> None:
+        from tactile_manip.boards import load_board
+
         _positive(self, "rate_hz", "buffer_frames")
+        try:
+            load_board(self.board).require_simulation()
+        except ValueError as e:
+            raise ValueError(f"SimulatedSensorConfig.board: {e}") from None
 
 
 @dataclass(frozen=True)

@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from tactile_manip.sensors.config import DriftConfig
-from tactile_manip.boards.layout import BoardLayout
+from tactile_manip.boards import Board
 
 
 class BaselineState:
@@ -35,7 +35,7 @@ class BaselineState:
         layout: the board (for the reading shape, the used cells and the chip order of the coefficients).
     """
 
-    def __init__(self, config: DriftConfig, layout: BoardLayout) -> None:
+    def __init__(self, config: DriftConfig, layout: Board) -> None:
         self.config = config
         self.layout = layout
         self._mask = layout.mask

@@ -20,7 +20,7 @@ from tactile_manip.chips import MLX90393, ChipModelSpec
 from tactile_manip.errors import RecordingError, SensorTimeoutError
 from tactile_manip.sensors.base import TactileSensor
 from tactile_manip.sensors.config import ReplaySensorConfig
-from tactile_manip.boards.layout import get_layout
+from tactile_manip.boards import load_board
 from tactile_manip.logs.recording import Recording, read_recording
 from tactile_manip.types import TactileReading
 
@@ -58,7 +58,7 @@ class ReplaySensor(TactileSensor):
         known = {f.name for f in dataclasses.fields(ChipModelSpec)}
         self._chip = dataclasses.replace(MLX90393, **{k: v for k, v in chip.items() if k in known})
         try:
-            self._layout = get_layout(rec.layout_name)
+            self._layout = load_board(rec.layout_name)
         except ValueError as e:
             raise RecordingError(f"{self.config.path}: {e}") from None
         self.recording, self._next = rec, 0

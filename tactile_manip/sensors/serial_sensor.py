@@ -2,7 +2,7 @@
 
 A reader thread blocks in ``Serial.read`` with a timeout (no busy loop), feeds the bytes to the protocol
 decoder of the configured wire format (:mod:`tactile_manip.wire`) and publishes each valid frame
-through the board layout (:mod:`tactile_manip.boards.layout`). The port is opened exclusively with DTR and
+through the board layout (:class:`~tactile_manip.boards.Board`). The port is opened exclusively with DTR and
 RTS at the configured levels (low by default: ESP32 boards behind a USB bridge reset, or enter their
 bootloader, when the host raises them; native-USB boards such as the SAMD21 only write once DTR is high),
 found by its device path or by its USB serial number on every (re)open; the first frames after every
@@ -24,7 +24,7 @@ from tactile_manip.errors import SensorDisconnectedError, SensorTimeoutError
 from tactile_manip.extras import require
 from tactile_manip.sensors.base import TactileSensor
 from tactile_manip.sensors.config import SerialSensorConfig
-from tactile_manip.boards.layout import get_layout
+from tactile_manip.boards import load_board
 from tactile_manip.wire.protocol import Unwrapper
 from tactile_manip.wire import ChipFrame, make_decoder
 
@@ -46,7 +46,7 @@ class SerialSensor(TactileSensor):
 
     def __init__(self, config: SerialSensorConfig) -> None:
         super().__init__(source=config.source, chip=config.chip, buffer_frames=config.buffer_frames,
-                         baseline=config.baseline, layout=get_layout(config.layout), drift=config.drift)
+                         baseline=config.baseline, layout=load_board(config.layout), drift=config.drift)
         self.config = config
         self._stop = threading.Event()
         self._port_lock = threading.Lock()

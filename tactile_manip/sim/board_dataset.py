@@ -96,7 +96,7 @@ def probe_press_dataset(board: Board, presses: int, *, plan: ProbePlan = ProbePl
             progress(1)
     seconds = time.perf_counter() - t0
     prov = {"source": "tactile_manip.sim.board_dataset", "code_version": code_version(), "layout": board.name,
-            "board_file": None if board.path is None else str(board.path), "seed": seed,
+            "board": board.record, "board_file": None if board.path is None else str(board.path), "seed": seed,
             "probe": {"tip": plan.tip, "tip_diameter_mm": plan.tip_diameter_mm, "min_force_n": plan.min_force_n,
                       "max_force_n": plan.max_force_n, "margin_mm": plan.margin_mm},
             "redrawn_bottomed_out": redrawn, "saturated_presses": int(saturated.sum()),

@@ -48,6 +48,7 @@ class BoardSkin:
         pixel_mm: pad grid spacing, mm (default: the longer pad side / 100, at least 0.25 mm).
         cell_mm: in-plane dipole cell of a magnetised layer, mm.
         thickness_nodes: Gauss-Legendre nodes through a magnetised layer's thickness.
+        gap_mm: the chips' gap below the layer's base, mm (default: the board file's).
 
     Attributes:
         n, pixel_mm: the pad grid's size (n x n pixels) and spacing, mm; it covers the longer pad side.
@@ -61,7 +62,8 @@ class BoardSkin:
     """
 
     def __init__(self, board: Board, *, modulus_kpa: float | None = None, remanence_scale: float = 1.0,
-                 pixel_mm: float | None = None, cell_mm: float = 0.5, thickness_nodes: int = 6) -> None:
+                 pixel_mm: float | None = None, cell_mm: float = 0.5, thickness_nodes: int = 6,
+                 gap_mm: float | None = None) -> None:
         board.require_simulation()
         self.board, self.layer, self.body = board, board.layer, board.body
         assert self.layer is not None and self.body is not None  # require_simulation() saw to it
@@ -78,6 +80,8 @@ class BoardSkin:
         sx, sy = self.layer.size_mm
         self.pad_mask = (np.abs(self.x_mm) < sx / 2) & (np.abs(self.y_mm) < sy / 2)  # (n, n) inside the layer
         self.chips_mm = board.chip_positions_mm()
+        if gap_mm is not None:
+            self.chips_mm[:, 2] = -(self.layer.thickness_mm + check_finite_scalar("gap_mm", gap_mm, low=0.0))
         self._to_pad = np.stack([c.matrix() for c in board.chips])  # (n_chips, 3, 3) chip axes -> pad axes
         if self.body.kind == "layer":
             self._init_layer(float(cell_mm), int(thickness_nodes))
@@ -95,6 +99,17 @@ class BoardSkin:
                                    polarisation_t=self._polarisation_t)
             return field * _TESLA_TO_UT
         return self._magnets_field_ut(self._rest_centres, np.zeros((len(self._rest_centres), 3)))
+
+    def rest_field_ut(self) -> np.ndarray:
+        """(n_chips, 3) no-contact field at the chips, pad axes, uT (:meth:`baseline_pad_ut`)."""
+        return self.baseline_pad_ut()
+
+    def contact_change_ut(self, pressure_mpa: np.ndarray, pixel_mm: float) -> np.ndarray:
+        """(n_chips, 3) field change at the chips (pad axes, uT) under a pressure on the pad grid, whose spacing
+        ``pixel_mm`` must be this skin's."""
+        if not np.isclose(pixel_mm, self.pixel_mm, rtol=1e-9, atol=0.0):
+            raise ValueError(f"pressure on a {pixel_mm:g} mm grid; this skin's pad grid is {self.pixel_mm:g} mm")
+        return self.field_change_pad_ut(pressure_mpa)
 
     def baseline_ut(self) -> np.ndarray:
         """(n_chips, 3) no-contact field in each chip's axes, uT (firmware order)."""

@@ -1,9 +1,13 @@
-"""MLX90393 magnetometer array under the skin: positions, Earth field, misalignment, noise and quantisation.
+"""A board's magnetometers under the skin: Earth field, misalignment, noise and quantisation.
 
-Fields here are microtesla (``_ut``) and readings are (4, 4, 3) arrays ``[row, col, axis]`` (docs/design.md):
-row 0 is +y, col 0 is -x. The chain from the magnet's field at the chips (pad axes) to a register value is
+Fields here are microtesla (``_ut``), one row per chip in the board's firmware order: ``(n_chips, 3)`` arrays
+in the pad's axes (the board maps them onto its reading grid, :meth:`~tactile_manip.boards.Board.cells_from_pad`).
+The chain from the magnet's field at the chips (pad axes) to a register value is
 
-    field + Earth  ->  rotate into chip axes  ->  + drift + noise  ->  round(/ LSB)  ->  clip to the rail.
+    field + Earth  ->  rotate by the chip's misalignment  ->  + drift + noise  ->  round(/ LSB)  ->  clip.
+
+The chips measure along the pad's axes (their mounting turn on the board is the driver's business): the
+quantisation is the same for turns by right angles, which every shipped board has.
 """
 
 from __future__ import annotations
@@ -12,27 +16,24 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from tactile_manip.boards import Board
 from tactile_manip.checks import check_array, check_finite_scalar
 from tactile_manip.sim.params import ChipParams
 
-GRID = 4  # chips per row and per column
 _INT16_MAX = 32767
-_READING_SHAPE = (GRID, GRID, 3)
 
 
-def chip_positions_mm(*, pitch_mm: float, thickness_mm: float, gap_mm: float) -> np.ndarray:
-    """Centres of the 4x4 chips in the pad frame, mm: (4, 4, 3) ``[row, col, xyz]``.
+def chip_positions_mm(board: Board, *, thickness_mm: float, gap_mm: float) -> np.ndarray:
+    """The board's chip sensing points in the pad frame, mm: (n_chips, 3) ``x, y, z``, firmware order.
 
-    Chip (r, c) sits at ``x = (c - 1.5) pitch``, ``y = (1.5 - r) pitch``, ``z = -(thickness + gap)``.
+    ``x, y`` are the board file's; ``z = -(thickness + gap)``, below a layer of ``thickness_mm`` with the chips
+    ``gap_mm`` under its base (the simulator's gap may differ from the file's: it is randomised).
     """
-    pitch = check_finite_scalar("pitch_mm", pitch_mm, low=0.0, low_open=True)
     thick = check_finite_scalar("thickness_mm", thickness_mm, low=0.0, low_open=True)
     gap = check_finite_scalar("gap_mm", gap_mm, low=0.0, low_open=True)
-    offsets = (np.arange(GRID) - (GRID - 1) / 2.0) * pitch  # -1.5, -0.5, 0.5, 1.5 pitches
-    pos = np.empty(_READING_SHAPE)
-    pos[..., 0] = offsets[None, :]
-    pos[..., 1] = -offsets[:, None]
-    pos[..., 2] = -(thick + gap)
+    pos = np.empty((board.n_chips, 3))
+    pos[:, :2] = [c.position_mm for c in board.chips]
+    pos[:, 2] = -(thick + gap)
     return pos
 
 
@@ -56,9 +57,9 @@ class Measurement:
     """One frame of the array as the chips report it.
 
     Attributes:
-        counts: (4, 4, 3) int16 register values, LSB.
-        raw_ut: (4, 4, 3) float32 ``counts * LSB``, uT (not baseline-subtracted).
-        saturated: (4, 4, 3) bool, True where the count hit the rail ``+-saturation_counts``.
+        counts: (n_chips, 3) int16 register values, LSB.
+        raw_ut: (n_chips, 3) float32 ``counts * LSB``, uT (not baseline-subtracted).
+        saturated: (n_chips, 3) bool, True where the count hit the rail ``+-saturation_counts``.
     """
 
     counts: np.ndarray
@@ -73,7 +74,7 @@ class ChipArray:
     Attributes:
         params: the chip parameters (LSB, noise, saturation, ...).
         earth_ut: (3,) Earth field in pad axes, uT; random direction, magnitude ``params.earth_field_ut``.
-        rotations: (4, 4, 3, 3) rotation of each chip: its columns are the chip's axes in pad axes, so a
+        rotations: (n_chips, 3, 3) rotation of each chip: its columns are the chip's axes in pad axes, so a
             pad-frame field ``b`` reads ``R.T @ b``. Random axis, angle ~ N(0, ``params.rotation_deg``)
             (that is the RMS angle); exactly the identity when ``rotation_deg`` is 0.
     """
@@ -84,57 +85,64 @@ class ChipArray:
 
     def __post_init__(self) -> None:
         self.earth_ut = check_array("earth_ut", self.earth_ut, shape=(3,))
-        self.rotations = check_array("rotations", self.rotations, shape=_READING_SHAPE + (3,))
+        self.rotations = check_array("rotations", self.rotations, shape=None)
+        if self.rotations.ndim != 3 or self.rotations.shape[1:] != (3, 3):
+            raise ValueError(f"rotations: expected shape (n_chips, 3, 3), got {self.rotations.shape}")
+        self._shape = (self.rotations.shape[0], 3)
         if self.params.saturation_counts > _INT16_MAX:
             raise ValueError(f"params.saturation_counts must be <= {_INT16_MAX} (int16 register), got "
                              f"{self.params.saturation_counts}")
         self._lsb_ut = np.array([self.params.lsb_xy_ut, self.params.lsb_xy_ut, self.params.lsb_z_ut])
         self._noise_ut = np.array([self.params.noise_xy_ut, self.params.noise_xy_ut, self.params.noise_z_ut])
 
+    @property
+    def n_chips(self) -> int:
+        return self._shape[0]
+
     @classmethod
-    def create(cls, params: ChipParams, rng: np.random.Generator) -> ChipArray:
-        """Draw the Earth field direction and the chip rotations from ``rng``."""
+    def create(cls, params: ChipParams, rng: np.random.Generator, *, n_chips: int) -> ChipArray:
+        """Draw the Earth field direction and the rotations of ``n_chips`` chips from ``rng``."""
         earth = _unit_vectors(rng, ()) * params.earth_field_ut
-        axes = _unit_vectors(rng, (GRID, GRID))
-        angles = rng.standard_normal((GRID, GRID)) * np.deg2rad(params.rotation_deg)
+        axes = _unit_vectors(rng, (n_chips,))
+        angles = rng.standard_normal((n_chips,)) * np.deg2rad(params.rotation_deg)
         return cls(params=params, earth_ut=earth, rotations=_rotations(axes, angles))
 
     def expected_ut(self, field_ut: object) -> np.ndarray:
-        """Noise-free, drift-free reading (4, 4, 3) in uT, not quantised: the idle-frame average (baseline).
+        """Noise-free, drift-free reading (n_chips, 3) in uT, not quantised: the idle-frame average (baseline).
 
         Args:
-            field_ut: (4, 4, 3) magnet field at the chips in pad axes, uT (float32 or float64).
+            field_ut: (n_chips, 3) magnet field at the chips in pad axes, uT (float32 or float64).
 
         Returns:
-            (4, 4, 3) float64 ``R.T @ (field + earth)`` per chip, uT in chip axes.
+            (n_chips, 3) float64 ``R.T @ (field + earth)`` per chip, uT in chip axes.
         """
-        b = check_array("field_ut", field_ut, shape=_READING_SHAPE) + self.earth_ut
-        return np.einsum("rcji,rcj->rci", self.rotations, b)
+        b = check_array("field_ut", field_ut, shape=self._shape) + self.earth_ut
+        return np.einsum("nji,nj->ni", self.rotations, b)
 
     def measure(self, field_ut: object, rng: np.random.Generator, *, drift_ut: object | None = None
                 ) -> Measurement:
         """One frame: expected reading + drift + Gaussian noise, rounded to counts and clipped to the rail.
 
         Args:
-            field_ut: (4, 4, 3) magnet field at the chips in pad axes, uT; NaN or inf raises ValueError.
-            rng: source of the noise (always draws one (4, 4, 3) standard normal array).
-            drift_ut: optional (4, 4, 3) offset in chip axes, uT, from :meth:`draw_drift` (once per press).
+            field_ut: (n_chips, 3) magnet field at the chips in pad axes, uT; NaN or inf raises ValueError.
+            rng: source of the noise (always draws one (n_chips, 3) standard normal array).
+            drift_ut: optional (n_chips, 3) offset in chip axes, uT, from :meth:`draw_drift` (once per press).
 
         Returns:
             The :class:`Measurement`; ``saturated`` marks counts at ``+-params.saturation_counts``.
         """
         value = self.expected_ut(field_ut)
         if drift_ut is not None:
-            value = value + check_array("drift_ut", drift_ut, shape=_READING_SHAPE)
-        value = value + rng.standard_normal(_READING_SHAPE) * self._noise_ut
+            value = value + check_array("drift_ut", drift_ut, shape=self._shape)
+        value = value + rng.standard_normal(self._shape) * self._noise_ut
         rail = self.params.saturation_counts
         counts = np.clip(np.rint(value / self._lsb_ut), -rail, rail).astype(np.int16)
         saturated = np.abs(counts.astype(np.int32)) >= rail
         return Measurement(counts=counts, raw_ut=self.counts_to_ut(counts), saturated=saturated)
 
     def draw_drift(self, rng: np.random.Generator) -> np.ndarray:
-        """A per-press offset (4, 4, 3) in uT, each entry ~ N(0, ``params.drift_ut``)."""
-        return rng.standard_normal(_READING_SHAPE) * self.params.drift_ut
+        """A per-press offset (n_chips, 3) in uT, each entry ~ N(0, ``params.drift_ut``)."""
+        return rng.standard_normal(self._shape) * self.params.drift_ut
 
     def counts_to_ut(self, counts: object) -> np.ndarray:
         """Register values (..., 3) in LSB to float32 uT (x, y at ``lsb_xy_ut``, z at ``lsb_z_ut``)."""

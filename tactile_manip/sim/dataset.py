@@ -6,8 +6,11 @@ pad frame; where the pressure acts, not the object's origin), the skin's indenta
 the rigid approach into it), the normal force (``force_n``) and ``in_contact``; a press that misses the pad
 has 0 for all of them. Extras beside them include the contact area (``contact_area_mm2``) and the centroid of
 the contact patch, unweighted by pressure (``contact_centroid_mm``, (N, 2) mm, pad frame), and the reading
-without drift, noise and quantisation (``field_clean_ut``, (N, 4, 4, 3) uT), from which training can draw the
-chips' noise afresh (``redraw_noise`` of the angle head).
+without drift, noise and quantisation (``field_clean_ut``, (N, rows, cols, 3) uT), from which training can draw
+the chips' noise afresh (``redraw_noise`` of the angle head).
+
+The magnetic sensor is the config's ``board`` (default ``supermag-4x4``, whose readings are (4, 4, 3)); the
+dataset's readings have that board's grid and its provenance names it (``layout``).
 
 Every sample ``i`` draws everything (pose, force, optional parameter randomisation, sensor noise) from
 ``np.random.default_rng([seed, i])``, and results are assembled in index order, so the output does not
@@ -30,12 +33,13 @@ from typing import Any, Literal
 
 import numpy as np
 
-from tactile_manip.config import load_config, to_dict
+from tactile_manip.boards import DEFAULT_BOARD, Board, load_board
+from tactile_manip.config import from_dict, load_config, to_dict
 from tactile_manip.data import PairedDataset, ShardWriter, depth_image_spec, quantise_depth
 from tactile_manip.sim.objects import Indenter, IndenterPose
 from tactile_manip.sim.shapes import SHAPES, check_shape_arguments, make_indenter
 from tactile_manip.sim.pair import PairedSample, SensorPair
-from tactile_manip.sim.params import SimParams, randomise, randomised_values
+from tactile_manip.sim.params import SimParams, for_board, randomise, randomised_values
 from tactile_manip.version import code_version
 
 
@@ -91,6 +95,7 @@ class DatasetConfig:
     """A whole dataset: mirrors ``configs/dataset/*.toml``."""
 
     seed: int = 0                     # base of the per-sample seeds
+    board: str = DEFAULT_BOARD        # the magnetic sensor's board: a shipped name or a board file (simulatable)
     sensor_seed: int = 0              # per-sensor constants (Earth field, chip misalignment)
     validation_fraction: float = 0.1  # of each trainval object, the last fraction goes to 'val'
     randomise_spread: float = 0.0     # 0: one fixed sensor pair; 1: full domain randomisation per sample
@@ -110,10 +115,16 @@ class DatasetConfig:
             raise ValueError("objects: a dataset needs at least one [[objects]] entry")
         if self.bottomed_out not in ("keep", "redraw"):
             raise ValueError(f"bottomed_out must be 'keep' or 'redraw', got {self.bottomed_out!r}")
-        half_pad_mm = self.sim.layer.size_mm / 2.0
+        board = self.sensor_board()
+        board.require_simulation()
+        half_pad_mm = min(board.layer.size_mm) / 2.0
         if self.poses.offset_mm > half_pad_mm:
             raise ValueError(f"poses.offset_mm = {self.poses.offset_mm:g} puts object centres off the "
-                             f"{self.sim.layer.size_mm:g} mm pad (empty presses); it must be <= {half_pad_mm:g}")
+                             f"{min(board.layer.size_mm):g} mm pad (empty presses); it must be <= {half_pad_mm:g}")
+
+    def sensor_board(self) -> Board:
+        """The board named by ``board`` (ConfigError naming it when unknown or a bad file)."""
+        return load_board(self.board)
 
     def scaled(self, factor: float) -> DatasetConfig:
         """The same dataset with every object count multiplied by ``factor``: at least 1 for an object that had
@@ -126,6 +137,28 @@ class DatasetConfig:
 def load_dataset_config(path: str | Path) -> DatasetConfig:
     """Parse a dataset TOML file (raises :class:`~tactile_manip.errors.ConfigError`)."""
     return load_config(path, DatasetConfig)
+
+
+# the SuperMag pad's geometry, which [sim] held before the board file stated it (datasets made then record it)
+_BOARD_KEYS = {"layer": ("size_mm", "thickness_mm"), "chip": ("pitch_mm",)}
+
+
+def recorded_sim_params(config: dict[str, Any], *, where: str = "the dataset's provenance") -> SimParams:
+    """The simulator's parameters a dataset's provenance ``config`` recorded, the board's figures filled in.
+
+    A dataset made before the board file stated the pad's geometry records it under ``[sim]``
+    (``layer.size_mm``, ``layer.thickness_mm``, ``chip.pitch_mm``: the SuperMag pad's); those keys are left out.
+
+    Raises:
+        ConfigError: a config that is not a dataset config (the message names ``where``).
+    """
+    config = dict(config)
+    sim = {group: dict(values) for group, values in config.get("sim", {}).items()}
+    for group, keys in _BOARD_KEYS.items():
+        for key in keys:
+            sim.get(group, {}).pop(key, None)
+    cfg = from_dict(DatasetConfig, {**config, "sim": sim}, where=where)
+    return for_board(cfg.sensor_board(), cfg.sim)
 
 
 @dataclass(frozen=True)
@@ -162,7 +195,9 @@ MAX_REDRAWS = 20   # bottomed_out = "redraw": draws per sample before a press th
 def _init_worker(cfg: DatasetConfig) -> None:
     _WORKER.clear()
     _WORKER["cfg"] = cfg
-    _WORKER["pair"] = SensorPair(cfg.sim, seed=cfg.sensor_seed)
+    _WORKER["board"] = board = cfg.sensor_board()
+    _WORKER["sim"] = for_board(board, cfg.sim)
+    _WORKER["pair"] = SensorPair(cfg.sim, board=board, seed=cfg.sensor_seed)
     _WORKER["objects"] = {}
 
 
@@ -190,8 +225,9 @@ def _simulate(task: _Task) -> dict[str, Any]:
         force = rng.uniform(*pr.force_n)
         pair, drawn = _WORKER["pair"], {}
         if cfg.randomise_spread > 0:
-            params = randomise(cfg.sim, rng, spread=cfg.randomise_spread)
-            pair, drawn = SensorPair(params, seed=cfg.sensor_seed), {"sensor_params": randomised_values(params)}
+            params = randomise(_WORKER["sim"], rng, spread=cfg.randomise_spread)
+            pair = SensorPair(params, board=_WORKER["board"], seed=cfg.sensor_seed)
+            drawn = {"sensor_params": randomised_values(params)}
         s = pair.press(_indenter(cfg.objects[task.spec], task.variant), pose, force, rng, render_depth=cfg.images)
         if not (s.bottomed_out and cfg.bottomed_out == "redraw"):
             break
@@ -215,7 +251,7 @@ def sample_targets(s: PairedSample) -> list[float]:
     if not (s.contact and s.pressure.area_mm2 > 0):
         return [0.0, 0.0, 0.0, 0.0, 0.0]
     x, y = s.pressure.centroid_mm
-    return [x, y, min(s.skin_approach_mm, s.params.layer.thickness_mm), s.force_n, 1.0]
+    return [x, y, min(s.skin_approach_mm, s.board.layer.thickness_mm), s.force_n, 1.0]
 
 
 def generate(cfg: DatasetConfig, *, workers: int = 0,
@@ -296,7 +332,8 @@ def _assemble(cfg: DatasetConfig, tasks: list[_Task], results: list[dict[str, An
 
     names = [o.display_name for o in cfg.objects]
     unique = list(dict.fromkeys(names))
-    provenance = {"source": "tactile-manip simulate", "config": to_dict(cfg), "code_version": code_version(),
+    provenance = {"source": "tactile-manip simulate", "config": to_dict(cfg), "layout": cfg.sensor_board().name,
+                  "board": cfg.sensor_board().record, "code_version": code_version(),
                   "created_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
                   "generation_seconds": round(seconds, 2), "workers": workers}
     extras = {"field_raw_ut": stack("field_raw_ut", np.float32),

@@ -1,13 +1,19 @@
 """The co-located sensor pair: one press of a rigid object gives a magnetic reading and a depth image.
 
 As in SuperMag's symmetric calibration rig, the same object is squeezed between the magnetic sensor
-(MBTS) and the vision-based sensor (VBTS), which share a 20x20x2.5 mm contact module but not its
-modulus. A press is quasi-static and force controlled:
+(MBTS) and the vision-based sensor (VBTS), which share a contact module (the board's layer; 20x20x2.5 mm on
+the SuperMag board) but not its modulus. The magnetic sensor is any simulatable board
+(:class:`~tactile_manip.boards.Board`, default ``supermag-4x4``): its chips, layer and magnetic body come from
+its board file, its readings have its grid's shape (``board.shape``, pad axes, 0 at cells no chip feeds). A
+press is quasi-static and force controlled:
 
 1. the object's gap to each pad from its protrusion heightmap and pose;
 2. a Polonsky-Keer contact solve per sensor (gel modulus for the VBTS, skin modulus for the MBTS);
 3. VBTS: the DTact pipeline on the rigid imprint ``clip(delta - s, 0)`` (200x200, 0.1 mm/px);
 4. MBTS: the deformed-dipole field change, plus baseline, Earth field, drift, noise, quantisation.
+
+A square magnetised layer (the SuperMag pad) takes the dipole-cell skin of :mod:`tactile_manip.sim.mbts`; any
+other body (a rectangular layer, discrete magnets) the board skin of :mod:`tactile_manip.sim.board_skin`.
 """
 
 from __future__ import annotations
@@ -16,13 +22,15 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from tactile_manip.boards import DEFAULT_BOARD, Board, load_board
 from tactile_manip.checks import check_finite_scalar
 from tactile_manip.errors import SimulationError
+from tactile_manip.sim.board_skin import BoardSkin
 from tactile_manip.sim.chip import ChipArray
 from tactile_manip.sim.contact import ContactSolution, solve_contact
-from tactile_manip.sim.mbts import MagneticSkin
+from tactile_manip.sim.mbts import MagneticSkin, is_square_layer
 from tactile_manip.sim.objects import Indenter, IndenterPose
-from tactile_manip.sim.params import SimParams
+from tactile_manip.sim.params import SimParams, for_board, nominal_remanence_t
 from tactile_manip.sim.vbts import dtact_depth
 
 
@@ -40,14 +48,15 @@ class PressureSummary:
 
 @dataclass(frozen=True)
 class PairedSample:
-    """One co-located reading pair. Arrays follow docs/design.md, Conventions.
+    """One co-located reading pair. Arrays follow docs/design.md, Conventions; readings have the board's
+    reading shape ``(rows, cols, 3)`` (``(4, 4, 3)`` on the SuperMag board), 0 at cells no chip feeds.
 
     Attributes:
-        field_ut: (4, 4, 3) float32, MBTS reading, baseline-subtracted, microtesla.
-        field_raw_ut: (4, 4, 3) float32, raw reading (counts x LSB), microtesla.
-        saturated: (4, 4, 3) bool, channels at the int16 rail.
-        field_change_ut: (4, 4, 3) float32, noise-free field change caused by the contact, microtesla.
-        field_clean_ut: (4, 4, 3) float32, what ``field_ut`` would read without drift, noise and quantisation
+        field_ut: (rows, cols, 3) float32, MBTS reading, baseline-subtracted, microtesla.
+        field_raw_ut: (rows, cols, 3) float32, raw reading (counts x LSB), microtesla.
+        saturated: (rows, cols, 3) bool, channels at the int16 rail.
+        field_change_ut: (rows, cols, 3) float32, noise-free field change caused by the contact, microtesla.
+        field_clean_ut: (rows, cols, 3) float32, what ``field_ut`` would read without drift, noise and quantisation
             (the contact's field change in chip axes), microtesla.
         depth_mm: (200, 200) float32 VBTS depth image (DTact pipeline), or None when not rendered.
         imprint_mm: (200, 200) float32 ideal rigid imprint on the VBTS gel, mm.
@@ -56,7 +65,7 @@ class PairedSample:
         approach_mm: rigid approach into the VBTS gel; skin_approach_mm: into the magnetic skin.
         force_n: press force on each sensor, N.
         pressure: pressure summary on the magnetic skin.
-        object_name, pose, params: everything used to make the sample.
+        object_name, pose, params, board: everything used to make the sample.
         t_s: time within a sequence (0 for a single press).
         bottomed_out: the approach into either layer reached its thickness: the object would press on the
             rigid base, where the elastic layer model (and so the whole sample) no longer holds.
@@ -79,6 +88,7 @@ class PairedSample:
     object_name: str
     pose: IndenterPose
     params: SimParams = field(repr=False)
+    board: Board = field(repr=False)
     t_s: float = 0.0
     bottomed_out: bool = False
 
@@ -88,7 +98,7 @@ class PairedSample:
             deepest = max(self.approach_mm, self.skin_approach_mm)
             raise SimulationError(
                 f"{self.force_n:g} N drives {self.object_name} {deepest:.4g} mm into the "
-                f"{self.params.layer.thickness_mm:g} mm layer: past its thickness the object bottoms out on the "
+                f"{self.board.layer.thickness_mm:g} mm layer: past its thickness the object bottoms out on the "
                 "rigid base, outside the elastic layer model; use a smaller force (10-11 N is the gripper's)")
         return self
 
@@ -97,20 +107,50 @@ class SensorPair:
     """Simulated MBTS + VBTS pair with one fixed set of parameters and per-sensor chip constants.
 
     Args:
-        params: all physical parameters (defaults: :class:`~tactile_manip.sim.params.SimParams`).
+        params: the simulator's parameters; fields left None take the board's values
+            (:func:`~tactile_manip.sim.params.for_board`; default :class:`~tactile_manip.sim.params.SimParams`).
+        board: the magnetic sensor's board (default ``supermag-4x4``); it must describe its body and layer.
         seed: draws the per-sensor constants (Earth field direction, chip misalignment).
+
+    Attributes:
+        board: the board; params: the parameters, the board's values filled in.
+        baseline_field_ut: (n_chips, 3) the magnet's field at the chips, pad axes, uT (firmware order).
+        baseline_ut: (n_chips, 3) the chips' noise-free idle reading, uT.
+
+    Raises:
+        ConfigError: a board that cannot be simulated (``generic:N``, no ``[body]`` / ``[layer]``).
     """
 
-    def __init__(self, params: SimParams | None = None, *, seed: int = 0) -> None:
-        self.params = params or SimParams()
-        p = self.params
-        self.chips = ChipArray.create(p.chip, np.random.default_rng(seed))
-        self.skin = MagneticSkin(p.layer, p.magnet, p.chip)
-        self.baseline_field_ut = self.skin.baseline_t() * 1e6
+    def __init__(self, params: SimParams | None = None, *, board: Board | None = None, seed: int = 0) -> None:
+        self.board = board if board is not None else load_board(DEFAULT_BOARD)
+        self.params = for_board(self.board, params)
+        p, layer = self.params, self.board.layer
+        self.chips = ChipArray.create(p.chip, np.random.default_rng(seed), n_chips=self.board.n_chips)
+        side = max(layer.size_mm)
+        n = max(2, int(round(side / p.contact.pixel_mm)))
+        self._contact_xy = _grid(n, side / n)
+        self.skin = _skin(self.board, p)
+        self.baseline_field_ut = self.skin.rest_field_ut()
         self.baseline_ut = self.chips.expected_ut(self.baseline_field_ut)
-        n = max(2, int(round(p.layer.size_mm / p.contact.pixel_mm)))
-        self._contact_xy = _grid(n, p.layer.size_mm / n)
+        x, y, _ = self._contact_xy  # a rectangular layer: no contact on the square grid beyond it
+        self._on_pad = None if layer.size_mm[0] == layer.size_mm[1] else (
+            (np.abs(x) < layer.size_mm[0] / 2) & (np.abs(y) < layer.size_mm[1] / 2))
         self._image_xy = _grid(p.vbts.image_px, p.vbts.pixel_mm)
+
+    @property
+    def thickness_mm(self) -> float:
+        """The board's layer thickness, mm."""
+        return self.board.layer.thickness_mm
+
+    def to_reading(self, chips: np.ndarray) -> np.ndarray:
+        """(n_chips, ...) values in firmware order -> the board's reading grid (rows, cols, ...), 0 at unused cells
+        (a reshape on the SuperMag board)."""
+        return self.board.cells_from_pad(chips)
+
+    @property
+    def baseline_reading_ut(self) -> np.ndarray:
+        """(rows, cols, 3) float64 noise-free idle reading, uT: :attr:`baseline_ut` on the reading grid."""
+        return self.to_reading(self.baseline_ut)
 
     def press(self, indenter: Indenter, pose: IndenterPose, force_n: float, rng: np.random.Generator, *,
               render_depth: bool = True) -> PairedSample:
@@ -132,7 +172,7 @@ class SensorPair:
         """The magnetic reading of a press as a dataset records it, without drift, noise or quantisation.
 
         Returns:
-            (4, 4, 3) float64 uT: the chips' expected values less this sensor's own unloaded reading, what
+            (rows, cols, 3) float64 uT: the chips' expected values less this sensor's own unloaded reading, what
             :meth:`press` returns as ``field_clean_ut``. Only the skin's contact is solved (no gel, no image), so
             it costs about a third of a press: for derivatives and fits of the physics. An object off the pad
             gives 0.
@@ -143,12 +183,12 @@ class SensorPair:
         """
         force = check_finite_scalar("force_n", force_n, low=0.0, low_open=True)
         x, y, _ = self._contact_xy
-        protrusion = indenter.protrusion_mm(x, y, pose)
-        change_ut = np.zeros((4, 4, 3))
+        protrusion = self._on_layer(indenter.protrusion_mm(x, y, pose))
+        change_ut = np.zeros((self.board.n_chips, 3))
         if np.isfinite(protrusion).any():  # a force-controlled solve: the gaps' datum does not matter
             skin = self._solve(np.nanmax(protrusion) - protrusion, force, self.params.layer.skin_modulus_kpa)
-            change_ut = self.skin.field_change_t(skin.pressure_mpa, skin.pixel_mm) * 1e6
-        return self.chips.expected_ut(self.baseline_field_ut + change_ut) - self.baseline_ut
+            change_ut = self.skin.contact_change_ut(skin.pressure_mpa, skin.pixel_mm)
+        return self.to_reading(self.chips.expected_ut(self.baseline_field_ut + change_ut) - self.baseline_ut)
 
     def ramp(self, indenter: Indenter, pose: IndenterPose, forces_n: np.ndarray, rng: np.random.Generator, *,
              render_depth: bool = False) -> list[PairedSample]:
@@ -178,7 +218,7 @@ class SensorPair:
         p = self.params
         gap_c, gap_i = self._gaps(indenter, pose)
         touching = force > 0 and np.isfinite(gap_c).any() and np.isfinite(gap_i).any()
-        change_ut = np.zeros((4, 4, 3))
+        change_ut = np.zeros((self.board.n_chips, 3))
         imprint = np.zeros(gap_i.shape)
         delta_v = delta_m = 0.0
         summary = PressureSummary()
@@ -186,7 +226,7 @@ class SensorPair:
             skin = self._solve(gap_c, force, p.layer.skin_modulus_kpa)
             gel = self._solve(gap_c, force, p.layer.vbts_modulus_kpa, warm=skin.pressure_mpa)
             delta_m, delta_v = skin.approach_mm, gel.approach_mm
-            change_ut = self.skin.field_change_t(skin.pressure_mpa, skin.pixel_mm) * 1e6
+            change_ut = self.skin.contact_change_ut(skin.pressure_mpa, skin.pixel_mm)
             imprint = np.clip(delta_v - np.nan_to_num(gap_i, nan=np.inf), 0.0, None)
             summary = self._summary(skin)
         m = self.chips.measure(self.baseline_field_ut + change_ut, rng, drift_ut=drift_ut)
@@ -194,29 +234,34 @@ class SensorPair:
         depth = None
         if render_depth:
             depth = dtact_depth(imprint, p.vbts, rng) if imprint.any() else np.zeros(imprint.shape, np.float32)
+        grid = self.to_reading
         return PairedSample(
-            field_ut=(m.raw_ut - self.baseline_ut).astype(np.float32), field_raw_ut=m.raw_ut,
-            saturated=m.saturated, field_change_ut=change_ut.astype(np.float32),
-            field_clean_ut=clean.astype(np.float32), depth_mm=depth,
+            field_ut=grid((m.raw_ut - self.baseline_ut).astype(np.float32)), field_raw_ut=grid(m.raw_ut),
+            saturated=grid(m.saturated), field_change_ut=grid(change_ut.astype(np.float32)),
+            field_clean_ut=grid(clean.astype(np.float32)), depth_mm=depth,
             imprint_mm=imprint.astype(np.float32), contact_mask=imprint > 0, contact=bool(imprint.any()),
             approach_mm=delta_v, skin_approach_mm=delta_m, force_n=force if touching else 0.0,
-            pressure=summary, object_name=indenter.name, pose=pose, params=p, t_s=t_s,
-            bottomed_out=max(delta_v, delta_m) >= p.layer.thickness_mm)
+            pressure=summary, object_name=indenter.name, pose=pose, params=p, board=self.board, t_s=t_s,
+            bottomed_out=max(delta_v, delta_m) >= self.thickness_mm)
 
     def _gaps(self, indenter: Indenter, pose: IndenterPose) -> tuple[np.ndarray, np.ndarray]:
         """Initial gaps (mm, NaN off the object) on the contact grid and the image grid, same datum."""
-        prot_c = indenter.protrusion_mm(self._contact_xy[0], self._contact_xy[1], pose)
+        prot_c = self._on_layer(indenter.protrusion_mm(self._contact_xy[0], self._contact_xy[1], pose))
         prot_i = indenter.protrusion_mm(self._image_xy[0], self._image_xy[1], pose)
         if not (np.isfinite(prot_c).any() and np.isfinite(prot_i).any()):
             return np.full(prot_c.shape, np.nan), np.full(prot_i.shape, np.nan)
         top = max(np.nanmax(prot_c), np.nanmax(prot_i))
         return top - prot_c, top - prot_i
 
+    def _on_layer(self, protrusion_mm: np.ndarray) -> np.ndarray:
+        """The protrusion on the contact grid, NaN beyond a rectangular layer's edges."""
+        return protrusion_mm if self._on_pad is None else np.where(self._on_pad, protrusion_mm, np.nan)
+
     def _solve(self, gap_mm: np.ndarray, force_n: float, modulus_kpa: float,
                warm: np.ndarray | None = None) -> ContactSolution:
         c = self.params.contact
         return solve_contact(gap_mm, force_n=force_n, modulus_mpa=modulus_kpa * 1e-3,
-                             thickness_mm=self.params.layer.thickness_mm, pixel_mm=self._contact_xy[2],
+                             thickness_mm=self.thickness_mm, pixel_mm=self._contact_xy[2],
                              tolerance=c.tolerance, max_iterations=c.max_iterations, initial_pressure_mpa=warm)
 
     def _summary(self, sol: ContactSolution) -> PressureSummary:
@@ -228,6 +273,16 @@ class SensorPair:
                                centroid_mm=(float((p * x).sum() / total), float((p * y).sum() / total)),
                                area_centroid_mm=(float(x[patch].mean()), float(y[patch].mean())),
                                iterations=sol.iterations)
+
+
+def _skin(board: Board, p: SimParams) -> MagneticSkin | BoardSkin:
+    """The skin model of ``board`` at parameters ``p`` (the board's values filled in): the dipole-cell skin of a
+    square magnetised layer, else the board skin on the pair's contact grid."""
+    if is_square_layer(board):
+        return MagneticSkin(board, p.layer, p.magnet)
+    return BoardSkin(board, modulus_kpa=p.layer.skin_modulus_kpa, pixel_mm=p.contact.pixel_mm,
+                     remanence_scale=p.magnet.remanence_t / nominal_remanence_t(board), cell_mm=p.magnet.cell_mm,
+                     thickness_nodes=p.magnet.thickness_nodes, gap_mm=p.magnet.chip_gap_mm)
 
 
 def _grid(n: int, pixel_mm: float) -> tuple[np.ndarray, np.ndarray, float]:

@@ -1,6 +1,10 @@
 """Every physical parameter of the paired-sensor simulator: default, unit, source and randomisation range.
 
-This is the one place where the simulator's numbers live. Each field carries metadata:
+This is the one place where the simulator's own numbers live: its settings, and the ranges it randomises the
+physical quantities over. What the board is (its chips, their pitch and model, the layer's size, thickness and
+modulus, the magnet's remanence, the chips' gap below the layer) comes from the board file
+(:mod:`tactile_manip.boards`; the SuperMag pad is ``supermag-4x4.toml``): a field whose default is None takes
+the board's value, filled in by :func:`for_board`. Each field carries metadata:
 
 - ``unit``: the unit (also in the field name where it is not SI);
 - ``source``: where the default comes from;
@@ -23,7 +27,8 @@ from typing import Any, Literal
 
 import numpy as np
 
-from tactile_manip.chips import MLX90393, ChipModelSpec, as_chip_spec
+from tactile_manip.boards import Board
+from tactile_manip.chips import ChipModelSpec, as_chip_spec
 
 _INF = math.inf
 
@@ -36,7 +41,8 @@ def param(default: Any, *, unit: str, source: str, rand: tuple[float, float] | N
 
 
 class _Validated:
-    """Checks every numeric field against its ``limits`` and its ``rand`` range on construction."""
+    """Checks every numeric field against its ``limits`` and its ``rand`` range on construction (None: the
+    board's value, not filled in yet)."""
 
     def __post_init__(self) -> None:
         hints = typing.get_type_hints(type(self))
@@ -46,7 +52,7 @@ class _Validated:
             choices = typing.get_args(hints[f.name]) if typing.get_origin(hints[f.name]) is Literal else ()
             if choices and value not in choices:
                 raise ValueError(f"{type(self).__name__}.{f.name} must be one of {list(choices)}, got {value!r}")
-            if "limits" not in meta or isinstance(value, str) or isinstance(value, bool):
+            if "limits" not in meta or value is None or isinstance(value, str) or isinstance(value, bool):
                 continue
             lo, hi = meta["limits"]
             where = f"{type(self).__name__}.{f.name}"
@@ -62,20 +68,19 @@ class _Validated:
 
 @dataclass(frozen=True)
 class LayerParams(_Validated):
-    """The elastic contact module shared by both sensors (bonded to a rigid base, frictionless top)."""
+    """The moduli of the elastic contact module shared by both sensors (bonded to a rigid base, frictionless top);
+    its size and thickness are the board's ``[layer]``."""
 
-    size_mm: float = param(20.0, unit="mm", source="SuperMag Sec. III-B: 20x20x2.5 mm contact module")
-    thickness_mm: float = param(2.5, unit="mm", source="SuperMag Sec. III-B: 20x20x2.5 mm contact module")
     vbts_modulus_kpa: float = param(
         118.0, unit="kPa", rand=(85.0, 125.0),
         source="Ecoflex 00-30: datasheet 100 % secant modulus 69 kPa; a neo-Hookean solid has a secant "
                "modulus of 0.58 E at 100 % strain, so E ~ 118 kPa. The design range is 50-125 kPa "
                "(docs/design.md); below ~85 kPa the Allen key at 10-11 N is pushed through >85 % of the "
                "2.5 mm layer, outside the linear model, so the randomisation range starts there")
-    skin_modulus_kpa: float = param(
-        200.0, unit="kPa", rand=(120.0, 300.0),
-        source="Ecoflex 00-30 with MQP-15-7 powder (3:1:1 by weight, SuperMag Sec. III-B); particle "
-               "loading stiffens silicone about 2-4x (ReSkin-style skins)")
+    skin_modulus_kpa: float | None = param(
+        None, unit="kPa", rand=(120.0, 300.0),
+        source="the board's layer.modulus_kpa (SuperMag: Ecoflex 00-30 with MQP-15-7 powder, 3:1:1 by weight, "
+               "Sec. III-B, 200 kPa); particle loading stiffens silicone about 2-4x (ReSkin-style skins)")
 
 
 @dataclass(frozen=True)
@@ -113,16 +118,19 @@ class VbtsParams(_Validated):
 
 @dataclass(frozen=True)
 class MagnetParams(_Validated):
-    """Magnetised skin and its discretisation into dipole cells."""
+    """The magnetic body's strength, the chips' gap below it, and a magnetised layer's dipole cells."""
 
-    remanence_t: float = param(0.05, unit="T", rand=(0.03, 0.055),
-                               source="polarisation J_r of MQP-15-7 silicone composites (ReSkin-style "
-                                      "skins; design range 0.03-0.11 T, docs/design.md); capped at 0.055 T "
-                                      "because above it the corner chips' z channel saturates (tested)")
-    chip_gap_mm: float = param(1.0, unit="mm", rand=(0.8, 2.0), limits=(1e-3, 100.0),
-                               source="skin-to-die distance of MLX90393 under a ReSkin skin (design range "
-                                      "0.5-2.0 mm, docs/design.md); below 0.8 mm the corner chips saturate at "
-                                      "J_r 0.055 T")
+    remanence_t: float | None = param(None, unit="T", rand=(0.03, 0.055),
+                                      source="the board's body.remanence_t, or its magnets' mean polarisation "
+                                             "(every magnet scales with it); the range: J_r of MQP-15-7 "
+                                             "silicone composites (ReSkin-style skins; design range "
+                                             "0.03-0.11 T, docs/design.md), capped at 0.055 T because above it "
+                                             "the SuperMag corner chips' z channel saturates (tested)")
+    chip_gap_mm: float | None = param(None, unit="mm", rand=(0.8, 2.0), limits=(1e-3, 100.0),
+                                      source="the board's layer.gap_mm; the range: skin-to-die distance of "
+                                             "MLX90393 under a ReSkin skin (design range 0.5-2.0 mm, "
+                                             "docs/design.md); below 0.8 mm the SuperMag corner chips saturate "
+                                             "at J_r 0.055 T")
     cell_mm: float = param(0.5, unit="mm", limits=(1e-3, 5.0),
                            source="design choice: dipole cells 0.4-0.5 mm converge to <2 % (tested)")
     thickness_nodes: int = param(6, unit="1", limits=(0, 64),
@@ -136,41 +144,49 @@ class MagnetParams(_Validated):
 
 @dataclass(frozen=True)
 class ChipParams(_Validated):
-    """MLX90393 magnetometer array at ReSkin's settings, as the simulator draws it.
+    """The magnetometers as the simulator draws them.
 
-    The datasheet figures (LSB sizes, rail, rate, rated noise) default to :data:`tactile_manip.chips.MLX90393`;
-    pitch, Earth field, drift and misalignment are the simulation's own. :meth:`spec` is the hardware part.
+    The hardware figures (LSB sizes, rail, rate, rated noise) default to the board's ``[chip]`` (None until
+    :func:`for_board`); Earth field, drift and misalignment are the simulation's own. :meth:`spec` is the
+    hardware part.
     """
 
-    pitch_mm: float = param(5.0, unit="mm", source="SuperMag Sec. III-B: 4x4 array at 5 mm pitch")
-    lsb_xy_ut: float = param(MLX90393.lsb_xy_ut, unit="uT/LSB",
-                             source="MLX90393 datasheet sensitivity table at ReSkin's gain/resolution")
-    lsb_z_ut: float = param(MLX90393.lsb_z_ut, unit="uT/LSB",
-                            source="MLX90393 datasheet sensitivity table at ReSkin's gain/resolution")
-    noise_xy_ut: float = param(MLX90393.noise_xy_ut, unit="uT", rand=(1.5, 15.0), log=True, limits=(-1e-12, 1e4),
-                               source="MLX90393 datasheet RMS noise; up to 10-17 uT in idle eFlesh "
-                                      "recordings")
-    noise_z_ut: float = param(MLX90393.noise_z_ut, unit="uT", rand=(2.5, 15.0), log=True, limits=(-1e-12, 1e4),
-                              source="MLX90393 datasheet RMS noise; up to 10-17 uT in idle eFlesh "
-                                     "recordings")
+    lsb_xy_ut: float | None = param(None, unit="uT/LSB", source="the board's chip.lsb_xy_ut")
+    lsb_z_ut: float | None = param(None, unit="uT/LSB", source="the board's chip.lsb_z_ut")
+    noise_xy_ut: float | None = param(None, unit="uT", rand=(1.5, 15.0), log=True, limits=(-1e-12, 1e4),
+                                      source="the board's chip.noise_xy_ut (MLX90393 datasheet RMS noise); up to "
+                                             "10-17 uT in idle eFlesh recordings")
+    noise_z_ut: float | None = param(None, unit="uT", rand=(2.5, 15.0), log=True, limits=(-1e-12, 1e4),
+                                     source="the board's chip.noise_z_ut (MLX90393 datasheet RMS noise); up to "
+                                            "10-17 uT in idle eFlesh recordings")
     earth_field_ut: float = param(50.0, unit="uT", rand=(25.0, 65.0), limits=(-1e-12, 1e4),
                                   source="geomagnetic field magnitude, 25-65 uT worldwide")
     drift_ut: float = param(5.0, unit="uT", rand=(0.0, 10.0), limits=(-1e-12, 1e4),
                             source="per-press baseline drift (temperature, hysteresis; docs/design.md)")
     rotation_deg: float = param(0.0, unit="deg", rand=(0.0, 3.0), limits=(-1e-12, 45.0),
                                 source="RMS mounting misalignment of each chip; 0 = ideal board")
-    saturation_counts: int = param(MLX90393.saturation_counts, unit="LSB", limits=(0, 1 << 31),
-                                   source="signed 16-bit output register of the MLX90393")
-    rate_hz: float = param(MLX90393.rate_hz, unit="Hz", source="SuperMag Sec. III-B: 125 Hz")
+    saturation_counts: int | None = param(None, unit="LSB", limits=(0, 1 << 31),
+                                          source="the board's chip.saturation_counts")
+    rate_hz: float | None = param(None, unit="Hz", source="the board's chip.rate_hz")
 
     def spec(self) -> ChipModelSpec:
-        """The hardware part (LSB sizes, rail, rate, rated noise) as the core chip spec, for the drivers."""
+        """The hardware part (LSB sizes, rail, rate, rated noise) as the core chip spec, for the drivers.
+
+        Raises:
+            ValueError: a figure not filled in from a board yet (see :func:`for_board`).
+        """
+        missing = [name for name in _BOARD_CHIP if getattr(self, name) is None]
+        if missing:
+            raise ValueError(f"ChipParams.{missing[0]} is not set: fill the board's figures in with for_board()")
         return as_chip_spec(self)
+
+
+_BOARD_CHIP = ("lsb_xy_ut", "lsb_z_ut", "noise_xy_ut", "noise_z_ut", "saturation_counts", "rate_hz")
 
 
 @dataclass(frozen=True)
 class SimParams:
-    """All parameters of a :class:`~tactile_manip.sim.pair.SensorPair`."""
+    """All parameters of a :class:`~tactile_manip.sim.pair.SensorPair` (None fields: the board's values)."""
 
     layer: LayerParams = field(default_factory=LayerParams)
     contact: ContactParams = field(default_factory=ContactParams)
@@ -179,11 +195,45 @@ class SimParams:
     chip: ChipParams = field(default_factory=ChipParams)
 
 
+def for_board(board: Board, params: SimParams | None = None) -> SimParams:
+    """``params`` (default: :class:`SimParams`) with every field it leaves None set to ``board``'s value: the
+    layer's modulus, the body's remanence (a magnet body's: its magnets' mean polarisation), the chips' gap,
+    LSB sizes, rail, rate and rated noise.
+
+    Raises:
+        ConfigError: the board cannot be simulated (no ``[body]`` / ``[layer]``, or ``generic:N``).
+    """
+    board.require_simulation()
+    params = params or SimParams()
+    layer, body, chip = board.layer, board.body, board.chip
+    assert layer is not None and body is not None  # require_simulation() saw to it
+    nominal = {"layer": {"skin_modulus_kpa": layer.modulus_kpa},
+               "magnet": {"remanence_t": nominal_remanence_t(board), "chip_gap_mm": layer.gap_mm},
+               "chip": {name: getattr(chip, name) for name in _BOARD_CHIP}}
+    changes = {}
+    for group, values in nominal.items():
+        part = getattr(params, group)
+        fill = {name: value for name, value in values.items() if getattr(part, name) is None}
+        changes[group] = dataclasses.replace(part, **fill) if fill else part
+    return dataclasses.replace(params, **changes)
+
+
+def nominal_remanence_t(board: Board) -> float:
+    """The remanence that :attr:`MagnetParams.remanence_t` scales from: a magnetised layer's, or the mean
+    polarisation magnitude of a board's magnets, T."""
+    body = board.body
+    assert body is not None
+    if body.kind == "layer":
+        return body.remanence_t
+    return float(np.mean([np.linalg.norm(m.polarisation_t) for m in body.magnets]))
+
+
 def randomise(params: Any, rng: np.random.Generator, *, spread: float = 1.0) -> Any:
     """Return a copy of ``params`` (any parameter dataclass, nested) with every randomisable field drawn.
 
     Each field with a ``rand`` range is drawn uniformly (log-uniformly where ``log``) from the range
-    shrunk about the default by ``spread`` in [0, 1]; ``spread=0`` returns the defaults unchanged.
+    shrunk about the default by ``spread`` in [0, 1]; ``spread=0`` returns the defaults unchanged. Give it
+    parameters filled in from a board (:func:`for_board`).
     """
     if not 0.0 <= spread <= 1.0:
         raise ValueError(f"spread must be in [0, 1], got {spread}")
@@ -196,6 +246,9 @@ def randomise(params: Any, rng: np.random.Generator, *, spread: float = 1.0) -> 
         rand = f.metadata.get("rand")
         if rand is None:
             continue
+        if value is None:
+            raise ValueError(f"{type(params).__name__}.{f.name} is the board's: fill it in with for_board() "
+                             "before randomising")
         lo, hi = (math.log(rand[0]), math.log(rand[1])) if f.metadata["log"] else rand
         centre = math.log(value) if f.metadata["log"] and value > 0 else value
         lo, hi = centre + spread * (lo - centre), centre + spread * (hi - centre)

@@ -1,5 +1,6 @@
 """The trial cells: where a scene's trials run. Both take a presentation and a method's estimator and run the
-scene's task (:meth:`Cell.run_one`) between :meth:`Cell.connected`'s connect and disconnect.
+scene's task (:meth:`Cell.run_one`: the task's ``run`` on the cell's hardware, the object and its truth) between
+:meth:`Cell.connected`'s connect and disconnect.
 
 - :class:`SimulatedCell`: the kinematic FR3 twin holds the presented object; when the twin gripper closes on it,
   the simulated tactile sensor is told the contact (the object's shape, its in-hand angle and offset in the pad
@@ -19,9 +20,8 @@ from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
-from tactile_manip.behaviours.grip import GripResult
-from tactile_manip.behaviours.place import PlaceResult
-from tactile_manip.behaviours.reorient import ReorientResult, grasp_estimate_reorient
+from tactile_manip.behaviours.registry import task_class
+from tactile_manip.behaviours.task import Task, Trial
 from tactile_manip.errors import ConfigError
 from tactile_manip.extras import require
 from tactile_manip.robot.frames import hand_T_finger_pad
@@ -37,15 +37,15 @@ class Cell(Protocol):
     """Where a scene's trials run: what :func:`~tactile_manip.trials.runner.run_scene` needs of a cell."""
 
     scene: TrialScene
+    task: Task
 
     def connected(self) -> contextlib.AbstractContextManager:
         """Connect the cell's arm, gripper and sensor, take the sensor's baseline, disconnect at the end."""
 
     def run_one(self, p: Presentation, estimator, *, arm_fault: bool = False, sensor_stall: bool = False,
                 observer=None):
-        """Present ``p`` and run the scene's task with ``estimator`` (a
-        :class:`~tactile_manip.perception.tactile_estimator.TactileEstimator`, with the method's contact model
-        where it has one); the task's result (never raises for a fault of the trial: it is an outcome)."""
+        """Present ``p`` and run the scene's task with the method's ``estimator``; the task's result (never
+        raises for a fault of the trial: it is an outcome)."""
 
     # A cell may also offer ``holds(p) -> bool``: whether it can hold presentation ``p`` at all. The runner then
     # draws a trial again where it cannot (see :func:`~tactile_manip.trials.presentation.draw_presentation`).
@@ -73,6 +73,7 @@ class SimulatedCell:
             raise ConfigError("sensor: the simulated cell (robot.backend = 'twin') needs the simulated sensor; "
                               "remove the [sensor] port")
         self.scene = scene
+        self.task = make_task(scene)
         self.twin = KinematicArm(TwinArmConfig(home_q_rad=scene.robot.home_q_rad,
                                                speed_factor=scene.robot.speed_factor))
         self.arm = SafeArm(self.twin, scene.robot.safety)
@@ -162,59 +163,32 @@ class SimulatedCell:
         return not sample.bottomed_out
 
     def _pair_of(self, p: Presentation):
-        """The simulated sensor pair of ``p``'s sensor (drawn, or the nominal one); the last one is kept."""
+        """The simulated sensor pair of ``p``'s sensor (the scene's board, drawn or nominal); the last one is kept."""
         from tactile_manip.sim.pair import SensorPair
 
-        params = p.sensor_params()
+        params = p.sensor_params(self.scene.sensor.board)
         key = None if params is None else p.seed
         if key not in self._pairs:
-            self._pairs = {key: SensorPair(seed=self.scene.sensor.seed) if params is None
-                           else SensorPair(params, seed=self.scene.sensor.seed)}
+            self._pairs = {key: SensorPair(params, board=self.sensor.pair.board, seed=self.scene.sensor.seed)}
         return self._pairs[key]
 
     def _use_sensor_of(self, p: Presentation) -> None:
         """Swap in the trial's drawn sensor (or back to the nominal one) and take its baseline, pad unloaded."""
-        params = p.sensor_params()
-        key = None if params is None else p.seed
+        key = None if p.sensor_spread == 0 else p.seed
         if key == self._sensor_key:
             return
         self.sensor.replace_pair(self._pair_of(p))
         self.sensor.calibrate_baseline(frames=SENSOR_DRAW_BASELINE_FRAMES)
         self._sensor_key = key
 
-    def run_one(self, p: Presentation, estimator: TactileEstimator, *,
-                arm_fault: bool = False, sensor_stall: bool = False,
-                observer=None) -> ReorientResult | PlaceResult | GripResult:
+    def run_one(self, p: Presentation, estimator: TactileEstimator, *, arm_fault: bool = False,
+                sensor_stall: bool = False, observer=None):
         """Present ``p``, run the scene's task with ``estimator``, release, reset.
 
-        ``estimator``: its contact model (of the sensor's board), where it has one, estimates the grip force at
-        the estimate step and closes the "grip" task's loop. ``observer`` (a
-        :class:`~tactile_manip.behaviours.reorient.PhaseObserver`) is told each phase, the release included.
+        ``observer`` (a :class:`~tactile_manip.behaviours.reorient.PhaseObserver`) is handed to the task.
         """
         with self.presented(p, arm_fault=arm_fault, sensor_stall=sensor_stall) as (obj, truth):
-            if self.scene.task == "place":
-                return self._place(p, estimator, obj, truth)
-            if self.scene.task == "grip":
-                return self._grip(estimator, obj, truth)
-            return run_reorientation(self, estimator, obj.width_m, truth, observer)
-
-    def _place(self, p: Presentation, estimator: TactileEstimator, obj, truth: WorldTruth) -> PlaceResult:
-        """The "place" task: a slot drawn from the presentation's seed, the rod put into it."""
-        from tactile_manip.behaviours.place import draw_slot, place_in_slot
-        from tactile_manip.robot.frames import hand_T_pad
-
-        base_T_pad = self.arm.state().base_T_hand @ hand_T_pad()  # the fingers' mid-plane before the grasp
-        slot = draw_slot(base_T_pad, p.seed, self.scene.place.clearance_mm * 1e-3)
-        return place_in_slot(self.arm, self.gripper, self.sensor, estimator, slot, object_width_m=obj.width_m,
-                             config=self.scene.behaviour, truth=truth)
-
-    def _grip(self, estimator: TactileEstimator, obj, truth: WorldTruth) -> GripResult:
-        """The "grip" task: an estimator with a contact model closes the loop on its force and position; the
-        blind baseline, or a method without a contact model, grips open loop."""
-        from tactile_manip.behaviours.grip import grip_to_force
-
-        return grip_to_force(self.arm, self.gripper, self.sensor, estimator, object_width_m=obj.width_m,
-                             config=self.scene.behaviour, grip=self.scene.grip, truth=truth)
+            return self.task.run(trial_of(self, p, estimator, obj.width_m, truth, observer))
 
     def _ready_for_trial(self) -> None:
         """Trial boundary: clear any fault (and an armed but unused fault injection), open, go home."""
@@ -249,14 +223,21 @@ def make_cell(scene: TrialScene):
     return OperatorCell(scene)
 
 
-def run_reorientation(cell, estimator: TactileEstimator, object_width_m: float, truth,
-                      observer=None) -> ReorientResult:
-    """The scene's reorientation behaviour in ``cell`` (its arm, gripper, sensor and scene) on the held object;
-    ``observer`` is told each phase, the release included (the cell opens the gripper when the trial ends); a
-    contact model of the estimator, where it has one, estimates the grip force at the estimate step."""
-    result = grasp_estimate_reorient(cell.arm, cell.gripper, cell.sensor, estimator, object_width_m=object_width_m,
-                                     target_angle_rad=math.radians(cell.scene.target_deg),
-                                     config=cell.scene.behaviour, truth=truth, observer=observer)
-    if observer is not None:
-        observer.phase("release")
-    return result
+def make_task(scene: TrialScene) -> Task:
+    """The task ``scene`` runs, built on it (its settings, the behaviour's parameters).
+
+    Raises:
+        ConfigError: the task class cannot be built (a method it must define is missing).
+    """
+    cls = task_class(scene.task)
+    try:
+        return cls(scene)
+    except TypeError as e:
+        raise ConfigError(f"task {scene.task!r}: {e}") from None
+
+
+def trial_of(cell, p: Presentation, estimator: TactileEstimator, object_width_m: float, truth,
+             observer=None) -> Trial:
+    """What the task is handed for trial ``p`` in ``cell`` (its arm, gripper and sensor)."""
+    return Trial(arm=cell.arm, gripper=cell.gripper, sensor=cell.sensor, estimator=estimator,
+                 object_width_m=object_width_m, seed=p.seed, presentation=p, truth=truth, observer=observer)

@@ -106,8 +106,12 @@ def build_tactile_estimators(scene: TrialScene, scene_path: Path | None = None, 
     :class:`~tactile_manip.perception.tactile_estimator.TactileEstimator` of its pose part
     (:func:`build_pose_estimators`) and its contact model (:func:`build_contact_estimators`, checked against
     the board ``layout``); without one for a method that has no contact model and for the blind baseline (no
-    tactile input)."""
+    tactile input). A blind pose part with a contact model of the method's own (``contact_model`` in its
+    ``[[methods]]`` entry) is a contact-only method: force and position from the pad, no angle (a board without a
+    pose model)."""
     poses = build_pose_estimators(scene, scene_path)
     contacts = build_contact_estimators(scene, scene_path, layout=layout)
-    return {name: TactileEstimator(pose, None if isinstance(pose, BlindPoseEstimator) else contacts[name])
+    own = {spec.name: bool(spec.contact_model) for spec in scene.methods}
+    return {name: TactileEstimator(pose, None if isinstance(pose, BlindPoseEstimator) and not own[name]
+                                   else contacts[name])
             for name, pose in poses.items()}

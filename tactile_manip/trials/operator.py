@@ -23,14 +23,13 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from tactile_manip.behaviours.reorient import ReorientResult
 from tactile_manip.errors import ConfigError
 from tactile_manip.extras import require
 from tactile_manip.robot.base import Arm, Gripper
 from tactile_manip.robot.frames import hand_T_pad
 from tactile_manip.sensors.base import TactileSensor
 from tactile_manip.sensors.config import SerialSensorConfig
-from tactile_manip.trials.cells import run_reorientation
+from tactile_manip.trials.cells import make_task, trial_of
 from tactile_manip.trials.scene import TrialScene
 
 if TYPE_CHECKING:
@@ -85,6 +84,7 @@ class OperatorCell:
             raise ConfigError("sensor: a real robot needs the real board: give [sensor] a port "
                               "(e.g. port = \"/dev/ttyUSB0\")")
         self.scene, self._ask, self._say = scene, ask, say
+        self.task = make_task(scene)
         # what can be known to fail is checked here, before `tactile-manip trials` writes its run folder
         if sensor is None:
             from tactile_manip.sensors.serial_sensor import SerialSensor
@@ -131,11 +131,11 @@ class OperatorCell:
             self.gripper.open()
             self._ask("take the object out of the hand, then press Enter ")
 
-    def run_one(self, p, estimator: TactileEstimator, *, arm_fault: bool = False,
-                sensor_stall: bool = False, observer=None) -> ReorientResult:
-        """Present ``p``, run the reorientation behaviour, ask for the measured final angle (``estimator`` and
+    def run_one(self, p, estimator: TactileEstimator, *, arm_fault: bool = False, sensor_stall: bool = False,
+                observer=None):
+        """Present ``p``, run the scene's task, ask for the measured final angle (``estimator`` and
         ``observer``: see :meth:`~tactile_manip.trials.cells.SimulatedCell.run_one`)."""
         if arm_fault or sensor_stall:
             raise ConfigError("injected faults exist only in simulation")
         with self.presented(p) as (obj, truth):
-            return run_reorientation(self, estimator, obj.width_m, truth, observer)
+            return self.task.run(trial_of(self, p, estimator, obj.width_m, truth, observer))

@@ -30,13 +30,16 @@ class Presentation:
     force_n: float
     sensor_spread: float = 0.0      # > 0: this trial's sensor is drawn (see sensor_params)
 
-    def sensor_params(self):
-        """The simulator parameters of this trial's sensor (drawn from its seed), or None for the nominal one."""
+    def sensor_params(self, board: str = "supermag-4x4"):
+        """The simulator parameters of this trial's sensor on ``board`` (a board's name or file; drawn from the
+        trial's seed about the board's figures), or None for the nominal one."""
         if self.sensor_spread == 0:
             return None
-        from tactile_manip.sim.params import SimParams, randomise
+        from tactile_manip.boards import load_board
+        from tactile_manip.sim.params import for_board, randomise
 
-        return randomise(SimParams(), np.random.default_rng([self.seed, 1]), spread=self.sensor_spread)
+        return randomise(for_board(load_board(board)), np.random.default_rng([self.seed, 1]),
+                         spread=self.sensor_spread)
 
 
 MAX_REDRAWS = 20  # draws of one trial a cell may refuse before the last is kept (and its trial fails)

@@ -56,8 +56,8 @@ class TrialRecord:
             step, N (None without a contact model, or when the trial ended before it; the line then leaves it
             out). The behaviour's commanded force is ``extra["commanded_force_n"]``.
         estimated_grip_force_sigma_n: its sigma (one standard deviation of the model's estimate), N.
-        task: the behaviour the trial ran: "reorient", "place" or "grip" (None in lines written before trials
-            named it: reorient).
+        task: the name of the task the trial ran (``Task.name``; None in lines written before trials named it:
+            the default task of :mod:`tactile_manip.behaviours.registry`).
         lateral_error_mm: distance from the task's target point to the rod's true axis, mm: the slot's centre
             when placing, the pad centre when gripping (None for a task without one).
         clearance_mm: the lateral error a trial may have and still succeed: the slot's clearance when placing,

@@ -5,9 +5,8 @@ Files, written to the given folder (``TAG`` is empty for the run's own report an
 
     summary{TAG}.json                run info, tolerance, per-method results, paired comparisons, per object,
                                      with a contact model the estimated grip force per method ("grip_force",
-                                     :mod:`tactile_manip.trials.grip_force`), for "place" and "grip" runs the
-                                     lateral error ("lateral_error") and for "grip" runs the force the rod felt
-                                     against the target ("force_error")
+                                     :mod:`tactile_manip.trials.grip_force`), and the sections of the run's
+                                     task (``Task.report``: e.g. "lateral_error", "force_error")
     summary{TAG}.md                  the same as markdown tables
     errors{TAG}.png                  histogram of |error| (deg) per method over executed trials, tolerance line:
                                      a 0-10 deg zoom and the whole range on a log count axis
@@ -27,6 +26,8 @@ from typing import Any
 
 import numpy as np
 
+from tactile_manip.behaviours.registry import DEFAULT_TASK, task_class
+from tactile_manip.behaviours.task import ReportSection, Task
 from tactile_manip.trials.grip_force import GripForceSummary, grip_force_summary, markdown_lines
 from tactile_manip.trials.record import OUTCOMES, TrialRecord
 from tactile_manip.trials.stats import RunSummary, success_vs_tolerance, summarise, wilson_interval
@@ -36,6 +37,7 @@ SWEEP_STEP_DEG = 0.1
 ZOOM_DEG = 10.0  # the error histogram's left panel: where methods that mostly succeed differ
 LINE_STYLES = ("-", "--", ":", "-.")  # one per method, so overlapping outlines stay apart in grey print too
 RUN_KEYS = ("run_id", "config_hash", "code_version", "started_utc")  # copied from run.json into the summary
+DEFAULT_RULE = Task.success_rule(())  # the success sentence a task's own replaces
 
 
 def tolerance_tag(tolerance_rad: float) -> str:
@@ -44,20 +46,20 @@ def tolerance_tag(tolerance_rad: float) -> str:
 
 
 def write_report(run_dir: str | Path, records: Sequence[TrialRecord], tolerance_rad: float, *,
-                 title: str = "Reorientation trials", tag: str = "",
-                 run_info: Mapping[str, Any] | None = None, task: str | None = None) -> RunSummary:
+                 title: str | None = None, tag: str = "", run_info: Mapping[str, Any] | None = None,
+                 task: type[Task] | None = None) -> RunSummary:
     """Score ``records`` at ``tolerance_rad`` and write the report files (module docstring) to ``run_dir``.
 
     Args:
         run_dir: folder to write to (created if missing).
         records: the run's trial records.
         tolerance_rad: success tolerance on |final - target|, rad.
-        title: heading of the markdown summary and the figures.
+        title: heading of the markdown summary and the figures (default: the task's title).
         tag: appended to every file stem (see :func:`tolerance_tag`); empty for the run's own report.
         run_info: the run's ``run.json`` (id, config hash, code version), copied into the summary; its config
             also says whether the cell was simulated (then the grip force is scored against the applied force).
-        task: the behaviour the trials ran ("reorient", "place", "grip"), named in the summary (default: the records'
-            own, where they name one, else "reorient").
+        task: the task the trials ran (default: :func:`task_of_run`); its sections and success rule join the
+            report.
 
     Returns:
         The RunSummary the files show.
@@ -67,24 +69,44 @@ def write_report(run_dir: str | Path, records: Sequence[TrialRecord], tolerance_
     out.mkdir(parents=True, exist_ok=True)
     run = {k: run_info[k] for k in RUN_KEYS if k in run_info} if run_info else {}
     grip = grip_force_summary(records, applied=_simulated(run_info))
-    task = task or next((r.task for r in records if r.task), "reorient")
-    doc = {"title": title, "task": task, "run": run, "tolerance_rad": tolerance_rad, **summary.to_dict()}
+    task = task or task_of_run(records, run_info)
+    title = title or (task.title if task is not None else "Trials")
+    sections: list[ReportSection] = task.report(records) if task is not None else []
+    doc = {"title": title, "task": task.name if task is not None else _task_name(records), "run": run,
+           "tolerance_rad": tolerance_rad, **summary.to_dict()}
     if grip:
         doc["grip_force"] = {m: asdict(s) for m, s in grip.items()}
-    if task in ("place", "grip"):
-        doc["lateral_error"] = lateral_errors(records)
-    if task == "grip":
-        doc["force_error"] = force_errors(records)
+    doc.update({section.key: section.data for section in sections})
     (out / f"summary{tag}.json").write_text(json.dumps(doc, indent=2) + "\n", encoding="utf-8")
     text = markdown_summary(summary, title=title, run_info=run, grip_force=grip)
-    if task in ("place", "grip"):
-        text = _lateral_section(text, records, task)
-    if task == "grip":
-        text = _force_section(text, records)
+    if task is not None:
+        text = text.replace(DEFAULT_RULE, task.success_rule(records), 1)
+    for section in sections:
+        text = text.rstrip("\n") + f"\n\n## {section.heading}\n\n" + "\n".join(
+            _table(list(section.columns), [list(row) for row in section.rows])) + "\n"
     (out / f"summary{tag}.md").write_text(text, encoding="utf-8")
     plot_errors(out / f"errors{tag}.png", records, tolerance_rad, title=title)
     plot_success_vs_tolerance(out / f"success_vs_tolerance{tag}.png", records, tolerance_rad, title=title)
     return summary
+
+
+def task_of_run(records: Sequence[TrialRecord], run_info: Mapping[str, Any] | None = None) -> type[Task] | None:
+    """The task a run's trials ran: the one its ``run.json`` config names, else the one its records name (the
+    default task for records written before records named one); None when that task cannot be imported here
+    (the report then has no sections of the task's own)."""
+    config = (run_info or {}).get("config")
+    ref = config.get("task") if isinstance(config, Mapping) else None
+    for candidate in (ref, _task_name(records)):
+        if isinstance(candidate, str):
+            try:
+                return task_class(candidate)
+            except ValueError:
+                continue
+    return None
+
+
+def _task_name(records: Sequence[TrialRecord]) -> str:
+    return next((r.task for r in records if r.task), DEFAULT_TASK)
 
 
 def _simulated(run_info: Mapping[str, Any] | None) -> bool:
@@ -92,74 +114,6 @@ def _simulated(run_info: Mapping[str, Any] | None) -> bool:
     config = (run_info or {}).get("config")
     robot = config.get("robot") if isinstance(config, Mapping) else None
     return isinstance(robot, Mapping) and robot.get("backend") == "twin"
-
-
-def lateral_errors(records: Sequence[TrialRecord]) -> dict[str, dict[str, Any]]:
-    """Per method, the lateral errors of a "place" or "grip" run (mm): how many trials measured one, median,
-    p95, and how many are within the clearance (None where a method measured none)."""
-    out = {}
-    for method in dict.fromkeys(r.method for r in records):
-        mine = [r for r in records if r.method == method and r.lateral_error_mm is not None]
-        lateral = [r.lateral_error_mm for r in mine]
-        out[method] = {"n": len(mine), "median_mm": _percentile(lateral, 50), "p95_mm": _percentile(lateral, 95),
-                       "within_clearance": sum(r.within_clearance for r in mine)}
-    return out
-
-
-def force_errors(records: Sequence[TrialRecord]) -> dict[str, dict[str, Any]]:
-    """Per method, the force the rod felt against the target in a "grip" run (N): how many grips measured it,
-    RMSE, median and p95 of |error|, mean error, how many are within the tolerance, and the mean number of force
-    corrections (None where a method measured none)."""
-    out = {}
-    for method in dict.fromkeys(r.method for r in records):
-        mine = [r for r in records if r.method == method and r.force_error_n is not None]
-        err = np.array([r.force_error_n for r in mine], np.float64)
-        out[method] = {"n": len(mine), "rmse_n": float(np.sqrt(np.mean(err ** 2))) if mine else None,
-                       "median_abs_n": _percentile(np.abs(err), 50), "p95_abs_n": _percentile(np.abs(err), 95),
-                       "mean_n": float(err.mean()) if mine else None,
-                       "within_tolerance": sum(r.within_force for r in mine),
-                       "mean_force_steps": (float(np.mean([r.extra.get("force_steps", 0) for r in mine])) if mine
-                                            else None)}
-    return out
-
-
-def _percentile(values, q: float) -> float | None:
-    return float(np.percentile(values, q)) if len(values) else None
-
-
-def _lateral_section(text: str, records: Sequence[TrialRecord], task: str) -> str:
-    """The success rule of a "place" or "grip" run (the lateral error within the clearance as well), and the
-    lateral error per method."""
-    clearance = next((r.clearance_mm for r in records if r.clearance_mm is not None), None)
-    if task == "place":
-        rule = (f"Success: outcome `done`, the rod's axis within {clearance:g} mm (the slot's clearance) of the slot's "
-                "centre, and |rod - slot axis| <=")
-        heading, done = "Lateral error (placed rods)", "placed"
-    else:
-        force = next((r.force_tolerance_n for r in records if r.force_tolerance_n is not None), None)
-        rule = (f"Success: outcome `done`, the force the rod feels within {force:g} N of the target, the rod's axis "
-                f"within {clearance:g} mm of the pad centre, and |estimated - true in-hand angle| <=")
-        heading, done = "Centring: the rod's axis from the pad centre", "gripped"
-    text = text.replace("Success: outcome `done` and |final - target| <=", rule, 1)
-    rows = [[m, str(e["n"]), _n2(e["median_mm"]), _n2(e["p95_mm"]), f"{e['within_clearance']}/{e['n']}"]
-            for m, e in lateral_errors(records).items()]
-    return text.rstrip("\n") + f"\n\n## {heading}\n\n" + "\n".join(
-        _table(["method", done, "median (mm)", "p95 (mm)", "within the clearance"], rows)) + "\n"
-
-
-def _force_section(text: str, records: Sequence[TrialRecord]) -> str:
-    """A grip run's force the rod felt against the target, per method."""
-    rows = [[m, str(e["n"]), _n2(e["rmse_n"]), _n2(e["median_abs_n"]), _n2(e["p95_abs_n"]), _n2(e["mean_n"]),
-             f"{e['within_tolerance']}/{e['n']}",
-             "-" if e["mean_force_steps"] is None else f"{e['mean_force_steps']:.1f}"]
-            for m, e in force_errors(records).items()]
-    return text.rstrip("\n") + "\n\n## Grip force: what the rod felt against the target\n\n" + "\n".join(
-        _table(["method", "gripped", "RMSE (N)", "median abs (N)", "p95 abs (N)", "mean (N)", "within tolerance",
-                "mean force steps"], rows)) + "\n"
-
-
-def _n2(x: float | None) -> str:
-    return "-" if x is None else f"{x:.2f}"
 
 
 def markdown_summary(summary: RunSummary, *, title: str = "Reorientation trials",
@@ -171,7 +125,7 @@ def markdown_summary(summary: RunSummary, *, title: str = "Reorientation trials"
     lines = [f"# {title}", ""]
     if run_info:
         lines += [", ".join(f"{k} `{v}`" for k, v in run_info.items()), ""]
-    lines += [f"Success: outcome `done` and |final - target| <= {tol:.6g} deg ({math.radians(tol):.4g} rad); "
+    lines += [f"{DEFAULT_RULE} {tol:.6g} deg ({math.radians(tol):.4g} rad); "
               f"{summary.n_records} trial records.", ""]
     lines += _table(["method", "success", "rate", "Wilson 95 % CI", "median abs err (deg)", "p95 abs err (deg)",
                      "abstained", "faults"],

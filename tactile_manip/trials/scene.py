@@ -1,21 +1,23 @@
-"""A reorientation trial scene: the TOML file ``tactile-manip trials --config`` reads, as typed dataclasses.
+"""A trial scene: the TOML file ``tactile-manip trials --config`` reads, as typed dataclasses.
 
-A scene names only what the job needs (docs/design.md, Scenes): the methods compared, the objects and how they
-are presented, the robot backend with its safety limits, the tactile sensor, the behaviour's parameters and
-(for robustness runs) a fault plan. See ``configs/scenes/reorient_sim.toml`` for a commented example.
+A scene names only what the job needs (docs/design.md, Scenes): the task each trial runs and its settings, the
+methods compared, the objects and how they are presented, the robot backend with its safety limits, the tactile
+sensor, the behaviour's parameters and (for robustness runs) a fault plan. See
+``configs/scenes/reorient_sim.toml`` for a commented example, and docs/your_task.md for a task of your own.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any, Literal
 
-from tactile_manip.behaviours.grip import GripConfig
-from tactile_manip.behaviours.reorient import ReorientConfig
+from tactile_manip.behaviours.registry import DEFAULT_TASK, task_class
+from tactile_manip.behaviours.skills import BehaviourConfig
 from tactile_manip.checks import check_finite_scalar
-from tactile_manip.config import load_config
+from tactile_manip.config import from_dict, read_toml
+from tactile_manip.errors import ConfigError
 from tactile_manip.perception.estimator import ANGLE_SOURCES
 from tactile_manip.robot.safety import SafetyLimits
 from tactile_manip.sensors.config import SerialSensorConfig, SimulatedSensorConfig
@@ -202,23 +204,6 @@ class FaultPlan:
     sensor_stall_trials: list[int] = field(default_factory=list)
 
 
-TASKS = ("reorient", "place", "grip")
-TASK_TITLES = {"reorient": "Reorientation trials", "place": "Slot placement trials",
-               "grip": "Grip-to-force trials"}
-
-
-@dataclass(frozen=True)
-class PlaceConfig:
-    """The slot of the "place" task: drawn per presentation in the pad plane, 4-6 cm beyond the pad centre along
-    -pad y, at a random angle; a placement succeeds with the rod within ``tolerance_deg`` of the slot's axis and
-    its axis within ``clearance_mm`` of the slot's centre."""
-
-    clearance_mm: float = 1.0
-
-    def __post_init__(self) -> None:
-        check_finite_scalar("place.clearance_mm", self.clearance_mm, low=0.0, low_open=True, high=50.0)
-
-
 @dataclass(frozen=True)
 class TrialScene:
     """Everything ``tactile-manip trials`` needs (see ``configs/scenes/reorient_sim.toml``).
@@ -237,17 +222,18 @@ class TrialScene:
             models are, e.g. ``models/contact_supermag.onnx``): each trial then logs the grip force the model
             estimates at the estimate step (``estimated_grip_force_n``); "" for none. A model of another
             board layout than the sensor's is refused before the first trial.
-        task: the behaviour each trial runs: "reorient" (grasp, estimate the in-hand angle, turn the rod to
-            ``target_deg``), "place" (grasp, estimate angle and contact centroid, put the rod into a slot
-            drawn per presentation; :mod:`tactile_manip.behaviours.place`) or "grip" (grasp at the
-            behaviour's ``force_n``, centre the rod on the pad and servo the grip force from the contact model;
-            :mod:`tactile_manip.behaviours.grip`). The summary names it.
-        place: the slot of the "place" task.
-        grip: the tolerances and limits of the "grip" task (its target force is ``behaviour.force_n``; the
-            force the gripper really applies is the presentation's ``force_n`` scaled by command / target).
+        task: the task each trial runs: a name of the table in :mod:`tactile_manip.behaviours.registry`
+            (the shipped tasks: reorient, the default, turns the rod to ``target_deg``; place puts it into a slot
+            drawn per presentation; grip servoes the grip force, centred, from the contact model), or
+            ``"module:Class"`` for a task of your own (docs/your_task.md). The records and the summary name it.
+        task_config: the task's settings, an instance of the task's ``Config`` (a dict is read into one; None:
+            its defaults). In a scene file they are the table named after the task (e.g. ``[wipe]``).
+
+    ``settings`` (not a field) is the task's settings in use: ``task_config``, or the defaults of the task's
+    ``Config`` where it is None.
     """
 
-    name: str = "reorient"
+    name: str = "scene"
     trials: int = 100
     seed: int = 0
     tolerance_deg: float = 5.0
@@ -261,25 +247,20 @@ class TrialScene:
     presentation: PresentationConfig = field(default_factory=PresentationConfig)
     robot: RobotConfig = field(default_factory=RobotConfig)
     sensor: SimulatedSensorConfig | SerialSensorConfig = field(default_factory=SimulatedSensorConfig)
-    behaviour: ReorientConfig = field(default_factory=ReorientConfig)
+    behaviour: BehaviourConfig = field(default_factory=BehaviourConfig)
     faults: FaultPlan = field(default_factory=FaultPlan)
     contact_model: str = ""
-    task: Literal["reorient", "place", "grip"] = "reorient"
-    place: PlaceConfig = field(default_factory=PlaceConfig)
-    grip: GripConfig = field(default_factory=GripConfig)
+    task: str = DEFAULT_TASK
+    task_config: Any = None
 
     def __post_init__(self) -> None:
-        if self.task not in TASKS:
-            raise ValueError(f"task must be one of {', '.join(TASKS)}, got {self.task!r}")
-        if self.task == "place" and self.robot.backend != "twin":
-            raise ValueError("task = \"place\" runs in the simulated cell only (robot.backend = \"twin\"): the "
-                             "slot is a world feature the twin knows")
-        if self.task == "grip" and self.robot.backend != "twin":
-            raise ValueError("task = \"grip\" runs in the simulated cell only (robot.backend = \"twin\"): it is "
-                             "scored on the force the object feels, which only the twin knows")
-        if self.task == "grip" and not self.contact_model and not any(m.contact_model for m in self.methods):
-            raise ValueError("task = \"grip\" needs a contact_model (the force and position it servoes on), e.g. "
-                             "contact_model = \"models/contact_supermag.onnx\"")
+        cls = task_class(self.task)
+        if isinstance(self.task_config, dict):
+            object.__setattr__(self, "task_config", from_dict(cls.Config, self.task_config, where="task_config",
+                                                              prefix=cls.name))
+        elif self.task_config is not None and not isinstance(self.task_config, cls.Config):
+            raise ValueError(f"task_config of task {self.task!r} must be a {cls.Config.__name__}, got "
+                             f"{type(self.task_config).__name__}")
         if isinstance(self.trials, bool) or self.trials < 1:
             raise ValueError(f"trials must be a positive integer, got {self.trials!r}")
         check_finite_scalar("tolerance_deg", self.tolerance_deg, low=0.0, low_open=True, high=90.0)
@@ -294,8 +275,24 @@ class TrialScene:
         if self.contact_model and not self.contact_model.endswith(".onnx"):
             raise ValueError(f"contact_model must be an exported .onnx contact model or \"\" (none), got "
                              f"{self.contact_model!r}")
+        # the task's settings: task_config, or the defaults of the task's Config where it is None
+        object.__setattr__(self, "settings", self.task_config if self.task_config is not None else cls.Config())
+        cls.check_scene(self)
 
 
 def load_scene(path: str | Path) -> TrialScene:
-    """Read a scene TOML file (raises ConfigError naming the file and the key on any problem)."""
-    return load_config(path, TrialScene)
+    """Read a scene TOML file (raises ConfigError naming the file and the key on any problem).
+
+    The task's settings are the file's table named after the task (``Task.name``), e.g. ``[wipe]``."""
+    raw = read_toml(path)
+    ref = raw.get("task", DEFAULT_TASK)
+    if isinstance(ref, str) and "task_config" not in raw:
+        try:
+            cls = task_class(ref)
+        except ValueError as e:
+            raise ConfigError(f"{path}: {e}") from None
+        if cls.name in {f.name for f in fields(TrialScene)}:
+            raise ConfigError(f"{path}: task {ref!r} is called {cls.name!r}, the name of a scene key; rename the task")
+        if cls.name in raw:
+            raw["task_config"] = from_dict(cls.Config, raw.pop(cls.name), where=str(path), prefix=cls.name)
+    return from_dict(TrialScene, raw, where=str(path))

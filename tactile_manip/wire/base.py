@@ -1,7 +1,7 @@
 """What every wire-format decoder of the serial backend provides (the formats: :mod:`tactile_manip.wire`).
 
 A decoder turns the bytes a port delivers into :class:`ChipFrame` s: one field per chip, in firmware order
-and chip axes, in microtesla. The board layout (:mod:`tactile_manip.boards.layout`) later maps the chips
+and chip axes, in microtesla. The board layout (:class:`~tactile_manip.boards.Board`) later maps the chips
 onto reading cells. A decoder never raises on bad bytes: it skips them and counts them in its
 :class:`WireStats`, and its output does not depend on how the stream was chunked.
 """

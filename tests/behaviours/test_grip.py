@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from tactile_manip.behaviours.grip import GripConfig, GripResult, grip_to_force
-from tactile_manip.behaviours.reorient import ReorientConfig
+from tactile_manip.behaviours.skills import BehaviourConfig
 from tactile_manip.perception.contact import ContactState
 from tactile_manip.perception.tactile_estimator import TactileEstimate, TactileEstimator
 from tactile_manip.trials.cells import SimulatedCell
@@ -26,7 +26,7 @@ TARGET_N = 8.0
 @pytest.fixture(scope="module")
 def cell():
     scene = TrialScene(trials=4, seed=3, methods=[MethodSpec("supermag", str(MODELS / "supermag.onnx"))],
-                       behaviour=ReorientConfig(force_n=TARGET_N),
+                       behaviour=BehaviourConfig(force_n=TARGET_N),
                        presentation=PresentationConfig(offset_mm=2.0, force_n=(5.0, 11.0), objects=[
                            TrialObject("hex_bar", "h8", {"size_mm": 8.0})]))
     cell = SimulatedCell(scene)

@@ -59,14 +59,15 @@ def test_the_summary_counts_each_estimator_and_the_bound_covers_the_same_presses
 def test_the_fit_finds_a_noise_free_press_from_a_head_twenty_degrees_off() -> None:
     from tactile_manip.sim.objects import IndenterPose
     from tactile_manip.sim.pair import SensorPair
-    from tactile_manip.sim.params import SimParams, with_values
+    from tactile_manip.boards import load_board
+    from tactile_manip.sim.params import for_board, with_values
     from tactile_manip.sim.shapes import make_indenter
 
     config = {"poses": {"offset_mm": 4.0, "tilt_deg": 5.0, "force_n": [2.0, 15.0]}, "randomise_spread": 1.0}
     lo, hi, e_nom = fit_box(config)
     sensor = {"magnet.remanence_t": 0.045, "magnet.chip_gap_mm": 1.3, "layer.skin_modulus_kpa": e_nom}
     pose, force = IndenterPose(1.5, -1.0, math.radians(35.0), math.radians(2.0), 0.0), 6.0
-    reading = SensorPair(with_values(SimParams(), sensor), seed=0).expected_reading_ut(
+    reading = SensorPair(with_values(for_board(load_board("supermag-4x4")), sensor), seed=0).expected_reading_ut(
         make_indenter("hex_bar", size_mm=4.0), pose, force)
     job = {"index": 7, "label": "hex_bar_4mm", "kind": "hex_bar", "kwargs": {"size_mm": 4.0}, "sensor_seed": 0,
            "params": sensor, "force_n": force, "saturated": np.zeros((4, 4, 3), bool).tolist(),

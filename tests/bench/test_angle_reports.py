@@ -142,7 +142,8 @@ def test_the_bound_differentiates_the_reading_as_recorded_less_the_sensors_own_b
     from benchmarks.angle_information import _information, shape_sizes
     from tactile_manip.sim.objects import IndenterPose
     from tactile_manip.sim.pair import SensorPair
-    from tactile_manip.sim.params import SimParams, with_values
+    from tactile_manip.boards import load_board
+    from tactile_manip.sim.params import for_board, with_values
     from tactile_manip.sim.shapes import make_indenter
 
     params = {"magnet.remanence_t": 0.04, "magnet.chip_gap_mm": 1.2, "layer.skin_modulus_kpa": 180.0}
@@ -152,7 +153,7 @@ def test_the_bound_differentiates_the_reading_as_recorded_less_the_sensors_own_b
     assert jac.shape == (48, 1 + len(POSE_NUISANCES) + len(SENSOR_NUISANCES) + len(shape_sizes("hex_bar", {})))
     # the remanence's column against the recorded clean field of the press on two sensors either side
     rod, pose = make_indenter("hex_bar", size_mm=4.0), IndenterPose(1.0, -0.5, 0.4)
-    clean = [SensorPair(with_values(SimParams(), params | {"magnet.remanence_t": 0.04 * (1 + s)}), seed=0)
+    clean = [SensorPair(with_values(for_board(load_board("supermag-4x4")), params | {"magnet.remanence_t": 0.04 * (1 + s)}), seed=0)
              .press(rod, pose, 4.0, np.random.default_rng(0), render_depth=False).field_clean_ut.ravel()
              for s in (0.02, -0.02)]
     column = jac[:, 1 + len(POSE_NUISANCES) + SENSOR_NUISANCES.index("magnet.remanence_t")]

@@ -6,18 +6,10 @@ import numpy as np
 import pytest
 
 from checks import assert_one_line_error
-from tactile_manip.boards import board_names, load_board
-from tactile_manip.boards.spec import axis_matrix
+from tactile_manip.boards import Board, ChipSpec, board_names, load_board
+from tactile_manip.boards.spec import ChipGridSpec, axis_matrix
 from tactile_manip.cli import main
 from tactile_manip.errors import ConfigError
-from tactile_manip.boards.layout import (
-    ANYSKIN_5,
-    LAYOUTS,
-    SUPERMAG_4X4,
-    cross_layout,
-    get_layout,
-    grid_layout,
-)
 
 GRID_2X3 = """
 [board]
@@ -71,12 +63,23 @@ def _same_layout(a, b) -> bool:
             and np.array_equal(np.nan_to_num(a.positions_mm()), np.nan_to_num(b.positions_mm())))
 
 
+def _cross(pitch_mm: float) -> Board:
+    """The five-chip cross (centre, left, right, up, down) in a 3x3 reading, chip axes turned as the AnySkin
+    visualiser turns them."""
+    cells = ((1, 1), (1, 0), (1, 2), (0, 1), (2, 1))
+    chips = tuple(ChipSpec(cell=cell, position_mm=((cell[1] - 1) * pitch_mm, (1 - cell[0]) * pitch_mm),
+                           rotation_deg=rot) for cell, rot in zip(cells, (90.0, 90.0, 180.0, -90.0, 0.0)))
+    return Board(name="cross", grid=(3, 3), chips=chips, pitch_mm=pitch_mm)
+
+
 def test_the_shipped_files_give_the_layouts_the_boards_always_had():
-    assert {"supermag-4x4", "anyskin-5", "eflesh"} <= set(board_names()) == set(LAYOUTS)
-    assert _same_layout(SUPERMAG_4X4, grid_layout("supermag-4x4", rows=4, cols=4, pitch_mm=5.0))
-    assert SUPERMAG_4X4._identity                                  # the default board's frames stay a reshape
-    assert _same_layout(ANYSKIN_5, cross_layout("anyskin-5", pitch_mm=7.0))
-    assert _same_layout(get_layout("eflesh"), ANYSKIN_5)          # the eFlesh cube sits on the AnySkin board
+    supermag, anyskin = load_board("supermag-4x4"), load_board("anyskin-5")
+    assert {"supermag-4x4", "anyskin-5", "eflesh"} <= set(board_names())
+    grid = Board(name="grid", grid=(4, 4), pitch_mm=5.0, chips=ChipGridSpec(rows=4, cols=4, pitch_mm=5.0).chips())
+    assert _same_layout(supermag, grid)
+    assert supermag._identity                                      # the default board's frames stay a reshape
+    assert _same_layout(anyskin, _cross(7.0))
+    assert _same_layout(load_board("eflesh"), anyskin)             # the eFlesh cube sits on the AnySkin board
 
 
 def test_every_shipped_board_but_generic_can_be_simulated_and_says_its_chip_model():
@@ -95,7 +98,7 @@ def test_every_shipped_board_but_generic_can_be_simulated_and_says_its_chip_mode
 def test_generic_boards_have_no_geometry_and_refuse_simulation():
     board = load_board("generic:10")
     assert board.shape == (1, 10, 3) and board.n_chips == 10 and not board.simulatable
-    layout = get_layout("generic:10")
+    layout = load_board("generic:10")
     frame = np.arange(30, dtype=np.float32).reshape(10, 3)
     np.testing.assert_array_equal(layout.reading_from_chips(frame), frame.reshape(1, 10, 3))
     assert np.isnan(layout.positions_mm()).all()
@@ -107,12 +110,12 @@ def test_generic_boards_have_no_geometry_and_refuse_simulation():
 
 
 def test_a_users_file_describes_a_grid_and_turned_chips(tmp_path):
-    grid = get_layout(str(_write(tmp_path, GRID_2X3)))
+    grid = load_board(str(_write(tmp_path, GRID_2X3)))
     assert grid.name == "my-grid" and grid.shape == (2, 3, 3)
     assert grid.positions_mm()[1, 2].tolist() == [4.0, -2.0]
     two = load_board(_write(tmp_path, TWO_CHIPS + SIM_TABLES, "two.toml"))
     assert two.simulatable and two.layer.size_mm == (20.0, 10.0)
-    layout = get_layout(str(two.path))
+    layout = load_board(str(two.path))
     reading = layout.reading_from_chips(np.array([[1.0, 0, 5], [1.0, 0, 6]], np.float32))
     np.testing.assert_allclose(reading[0, 0], [0, -1, 5], atol=1e-6)   # chip x along pad -y
     np.testing.assert_allclose(reading[0, 1], [1, 0, 6])
@@ -218,13 +221,13 @@ def test_import_refuses_a_bad_board_file_in_one_line(tmp_path, capsys):
     assert not (tmp_path / "out.npz").exists()
 
 
-def test_the_wire_formats_a_board_may_name_are_the_serial_backends():
-    from tactile_manip.boards.spec import WIRE_FORMAT_NAMES
+def test_the_wire_formats_a_board_may_name_are_the_serial_backends(tmp_path):
     from tactile_manip.wire import WIRE_FORMATS
 
-    assert set(WIRE_FORMAT_NAMES) == set(WIRE_FORMATS)
     for name in board_names():
         assert load_board(name).wire.format in WIRE_FORMATS
+    with pytest.raises(ConfigError, match="wire.format must be one of supermag, anyskin, got 'morse'"):
+        load_board(_write(tmp_path, GRID_2X3 + '\n[wire]\nformat = "morse"\n'))
 
 
 def test_the_emulator_streams_a_boards_chips_and_refuses_what_it_cannot(tmp_path, capsys):
@@ -235,9 +238,12 @@ def test_the_emulator_streams_a_boards_chips_and_refuses_what_it_cannot(tmp_path
     decoder = make_decoder("anyskin", n_chips=5, chip=load_board("eflesh").chip)
     frames = decoder.feed(emulator.frame_bytes(0, 0.0, np.random.default_rng(0)) * 3)
     assert frames and frames[-1].field_ut.shape == (5, 3)
-    with pytest.raises(ValueError, match="has no chip positions"):
+    with pytest.raises(ValueError, match="generic:5 has no geometry and cannot be simulated"):
         EmulatorConfig(wire_format="anyskin", board="generic:5")
+    with pytest.raises(ValueError, match=r"has no \[body\] and \[layer\]"):
+        EmulatorConfig(wire_format="anyskin", board=str(_write(tmp_path, TWO_CHIPS.replace(
+            "[board]", "[wire]\nformat = \"anyskin\"\n\n[board]"), "two.toml")))
     with pytest.raises(ValueError, match="supermag wire format carries the 16 chips"):
         EmulatorConfig(wire_format="supermag", board="eflesh")
     assert main(["emulate", "--board", "generic:5", "--frames", "1"]) == 2
-    assert_one_line_error(capsys.readouterr().err, "emulate", "has no chip positions")
+    assert_one_line_error(capsys.readouterr().err, "emulate", "has no geometry and cannot be simulated")

@@ -9,7 +9,7 @@ import pytest
 from tactile_manip.data import from_probe_logs, load_dataset, save_dataset
 from tactile_manip.data.streams import Comparison, parse_comparison
 from tactile_manip.errors import DatasetError
-from tactile_manip.boards.layout import ANYSKIN_5
+from tactile_manip.boards import load_board
 
 LABELS = ["time_s", "x_mm", "y_mm", "z_mm", "force_gf"]
 
@@ -47,7 +47,7 @@ def test_each_sensor_row_takes_the_nearest_label_row_that_has_a_reading():
                                _nearest_usable(labels, sensor[:, 0], 4, force_used=True) * 9.80665e-3, rtol=1e-5)
     np.testing.assert_allclose(data.extra("time_s"), sensor[:, 0])
     # chip-major values land on the layout's cells, turned into pad axes
-    expected = ANYSKIN_5.readings_from_chips(sensor[:, 1:].reshape(-1, 5, 3))
+    expected = load_board("anyskin-5").readings_from_chips(sensor[:, 1:].reshape(-1, 5, 3))
     np.testing.assert_array_equal(data.readings, expected)
     assert data.readings.shape == (len(sensor), 3, 3, 3) and data.provenance["layout"] == "anyskin-5"
     assert not data.readings[:, 0, 0].any()  # a corner no chip feeds
@@ -205,7 +205,7 @@ def test_a_recording_works_in_place_of_the_sensor_csv(tmp_path):
     labels = {"time_s": t[::2] + 0.001, "x_mm": np.arange(20.0)}
     data = from_probe_logs([tmp_path / "r.tmrec"], [labels], targets=["x_mm"], baseline_s=0.1)
     assert len(data) == 40 and data.provenance["runs"][0]["readings"]["kind"] == "recording"
-    raw = ANYSKIN_5.readings_from_chips(fields)
+    raw = load_board("anyskin-5").readings_from_chips(fields)
     np.testing.assert_allclose(data.readings, raw - raw[t <= t[0] + 0.1].mean(axis=0), atol=1e-3)
     with pytest.raises(DatasetError, match="recorded with layout anyskin-5, not supermag-4x4"):
         from_probe_logs([tmp_path / "r.tmrec"], [labels], targets=["x_mm"], layout="supermag-4x4")

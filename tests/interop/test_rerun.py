@@ -15,7 +15,7 @@ from tactile_manip.interop.rerun_log import ARROW_MM_PER_UT, JOINTS, taxel_origi
 from tactile_manip.interop.rerun_read import read_entity  # noqa: E402
 from tactile_manip.interop.rerun_sink import grpc_url, viewer_command  # noqa: E402
 from tactile_manip.interop.timeline import episode_starts_s  # noqa: E402
-from tactile_manip.boards.layout import SUPERMAG_4X4  # noqa: E402
+from tactile_manip.boards import load_board  # noqa: E402
 
 
 def _frames(episodes):
@@ -32,7 +32,7 @@ def test_every_field_frame_reads_back_exactly(tmp_path, episodes):
     vectors = np.array(field.components["Arrows3D:vectors"], dtype=np.float32)      # (80, 16, 3) mm
     np.testing.assert_array_equal(vectors / np.float32(ARROW_MM_PER_UT),
                                   np.stack([f.field_ut.reshape(16, 3) for f in frames]))
-    origins, _ = taxel_origins_mm((4, 4), SUPERMAG_4X4)
+    origins, _ = taxel_origins_mm((4, 4), load_board("supermag-4x4"))
     np.testing.assert_array_equal(np.array(field.components["Arrows3D:origins"][7]), origins)
     bz = read_entity(out, "tactile/mbts/bz")
     np.testing.assert_array_equal(np.array([d[0]["buffer"] for d in bz.components["Tensor:data"]], np.float32),

@@ -206,9 +206,9 @@ class _Frames:
     """What ``stream`` uses of a sensor: ``layout`` and ``wait_new`` (each frame once, then a timeout)."""
 
     def __init__(self, fields: np.ndarray, layout: str = "anyskin-5") -> None:
-        from tactile_manip.boards.layout import get_layout
+        from tactile_manip.boards import load_board
 
-        self.layout, self.fields, self.next = get_layout(layout), fields, 0
+        self.layout, self.fields, self.next = load_board(layout), fields, 0
 
     def wait_new(self, timeout_s: float) -> TactileReading:
         if self.next >= len(self.fields):

@@ -273,9 +273,9 @@ class _FramesDuringEstimates:
     estimate runs: the reconstructor below publishes ``per_estimate`` frames each time it is called."""
 
     def __init__(self, fields: np.ndarray) -> None:
-        from tactile_manip.boards.layout import get_layout
+        from tactile_manip.boards import load_board
 
-        self.layout = get_layout("supermag-4x4")
+        self.layout = load_board("supermag-4x4")
         self.fields, self.published, self.seen = fields, 1, -1
 
     def publish(self, n: int) -> None:

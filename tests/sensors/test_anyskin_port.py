@@ -34,7 +34,7 @@ def chip_values(k: int) -> np.ndarray:
 
 
 def expected_reading(k: int) -> np.ndarray:
-    """(3, 3, 3) pad-frame reading of frame k, from the layout documented in boards/layout.py."""
+    """(3, 3, 3) pad-frame reading of frame k, from the layout of the anyskin-5 board file."""
     v = chip_values(k)
     out = np.zeros((3, 3, 3), np.float32)
     for i, ((r, col), deg) in enumerate(zip(CELLS, TURN_DEG)):

@@ -8,9 +8,9 @@ import pytest
 from tactile_manip.errors import CalibrationError
 from tactile_manip.sensors.baseline import baseline_from_frames, noise_thresholds_ut
 from tactile_manip.sensors.config import BaselineConfig
-from tactile_manip.sim.params import ChipParams
+from tactile_manip.chips import MLX90393
 
-THRESHOLDS = noise_thresholds_ut(BaselineConfig(), ChipParams())
+THRESHOLDS = noise_thresholds_ut(BaselineConfig(), MLX90393)
 
 
 def _idle(n=125, seed=0):
@@ -22,7 +22,7 @@ def _idle(n=125, seed=0):
 
 def test_thresholds_are_six_times_the_rated_noise_or_absolute():
     assert np.allclose(THRESHOLDS, [9.0, 9.0, 15.0])
-    assert np.allclose(noise_thresholds_ut(BaselineConfig(max_noise_ut=20.0), ChipParams()), 20.0)
+    assert np.allclose(noise_thresholds_ut(BaselineConfig(max_noise_ut=20.0), MLX90393), 20.0)
 
 
 def test_idle_frames_give_their_mean():

@@ -8,17 +8,17 @@ import pytest
 from tactile_manip.sensors import SerialSensorConfig, SimulatedSensor, SimulatedSensorConfig
 from tactile_manip.sensors.config import DriftConfig
 from tactile_manip.sensors.drift import BaselineState
-from tactile_manip.boards.layout import ANYSKIN_5, SUPERMAG_4X4
+from tactile_manip.boards import load_board
 
 
 def _state(**kw) -> BaselineState:
-    state = BaselineState(DriftConfig(**kw), SUPERMAG_4X4)
+    state = BaselineState(DriftConfig(**kw), load_board("supermag-4x4"))
     state.set(np.full((4, 4, 3), 100.0, np.float32), None)
     return state
 
 
 def test_no_baseline_means_raw_and_no_tracking():
-    state = BaselineState(DriftConfig(track=True), SUPERMAG_4X4)
+    state = BaselineState(DriftConfig(track=True), load_board("supermag-4x4"))
     raw = np.ones((4, 4, 3), np.float32)
     assert state.field(raw, None) is raw
     state.observe(raw, raw)
@@ -61,16 +61,16 @@ def test_tracking_is_off_by_default():
 def test_temperature_compensation_uses_per_chip_coefficients_in_firmware_order():
     coeff = np.zeros((5, 3))
     coeff[0] = [1.0, 0.0, 2.0]        # centre chip: +1 uT/degC on its x (the pad's y after its 90 degree turn)
-    state = BaselineState(DriftConfig(temperature_coeff_ut_per_c=tuple(coeff.ravel())), ANYSKIN_5)
-    t_ref = ANYSKIN_5.cells_from_chips(np.full(5, 25.0))
+    state = BaselineState(DriftConfig(temperature_coeff_ut_per_c=tuple(coeff.ravel())), load_board("anyskin-5"))
+    t_ref = load_board("anyskin-5").cells_from_chips(np.full(5, 25.0))
     state.set(np.zeros((3, 3, 3), np.float32), t_ref)
-    warm = ANYSKIN_5.cells_from_chips(np.full(5, 30.0))
+    warm = load_board("anyskin-5").cells_from_chips(np.full(5, 30.0))
     raw = np.zeros((3, 3, 3), np.float32)
     raw[1, 1] = [0.0, 5.0, 10.0]      # what 5 degC of drift looks like on the centre chip, pad axes
     np.testing.assert_allclose(state.field(raw, warm), 0.0, atol=1e-5)
     np.testing.assert_allclose(state.field(raw, None)[1, 1], [0.0, 5.0, 10.0])  # no temperature: no term
     with pytest.raises(ValueError, match="needs 3 per chip \\(15\\)"):
-        BaselineState(DriftConfig(temperature_coeff_ut_per_c=(1.0, 2.0, 3.0)), ANYSKIN_5)
+        BaselineState(DriftConfig(temperature_coeff_ut_per_c=(1.0, 2.0, 3.0)), load_board("anyskin-5"))
     with pytest.raises(ValueError, match="3 values"):
         DriftConfig(temperature_coeff_ut_per_c=(1.0, 2.0))
     with pytest.raises(ValueError, match="supermag-4x4 board needs 3 per chip \\(48\\)"):

@@ -1,19 +1,16 @@
-"""Board layouts: chip order, positions and rotations onto reading cells (docs/design.md, Conventions)."""
+"""Boards as reading layouts: chip order, positions and rotations onto reading cells (docs/design.md, Conventions)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from tactile_manip.boards.layout import (
-    ANYSKIN_5,
-    SUPERMAG_4X4,
-    BoardLayout,
-    ChipPlacement,
-    get_layout,
-    grid_layout,
-)
+from tactile_manip.boards import Board, ChipSpec, load_board
+from tactile_manip.boards.spec import ChipGridSpec
 from tactile_manip.sim.chip import chip_positions_mm
+
+SUPERMAG_4X4 = load_board("supermag-4x4")
+ANYSKIN_5 = load_board("anyskin-5")
 
 
 def test_supermag_4x4_is_the_identity_at_the_simulators_chip_positions():
@@ -22,7 +19,7 @@ def test_supermag_4x4_is_the_identity_at_the_simulators_chip_positions():
     reading = SUPERMAG_4X4.reading_from_chips(chips)
     np.testing.assert_array_equal(reading, chips.reshape(4, 4, 3))
     assert np.shares_memory(reading, chips)                      # a reshape: no work on the default board
-    sim = chip_positions_mm(pitch_mm=5.0, thickness_mm=2.5, gap_mm=0.5)[..., :2]
+    sim = chip_positions_mm(SUPERMAG_4X4, thickness_mm=2.5, gap_mm=0.5)[:, :2].reshape(4, 4, 2)
     np.testing.assert_allclose(SUPERMAG_4X4.positions_mm(), sim)  # row 0 at +y, col 0 at -x
     assert SUPERMAG_4X4.positions_mm()[0, 0].tolist() == [-7.5, 7.5] and SUPERMAG_4X4.mask.all()
 
@@ -61,9 +58,9 @@ def test_saturation_and_temperatures_follow_the_chips():
 
 def test_a_board_whose_firmware_order_is_not_grid_order():
     # a 2x2 board wired column-major, one chip mounted upside down in the plane
-    layout = BoardLayout(name="test-2x2", grid=(2, 2), pitch_mm=5.0, chips=(
-        ChipPlacement((0, 0), (-2.5, 2.5)), ChipPlacement((1, 0), (-2.5, -2.5)),
-        ChipPlacement((0, 1), (2.5, 2.5), rotation_deg=180.0), ChipPlacement((1, 1), (2.5, -2.5))))
+    layout = Board(name="test-2x2", grid=(2, 2), pitch_mm=5.0, chips=(
+        ChipSpec((0, 0), (-2.5, 2.5)), ChipSpec((1, 0), (-2.5, -2.5)),
+        ChipSpec((0, 1), (2.5, 2.5), rotation_deg=180.0), ChipSpec((1, 1), (2.5, -2.5))))
     chips = np.array([[1, 2, 3], [4, 5, 6], [7, 8, 9], [10, 11, 12]], np.float32)
     reading = layout.reading_from_chips(chips)
     np.testing.assert_allclose(reading[1, 0], [4, 5, 6])
@@ -72,10 +69,11 @@ def test_a_board_whose_firmware_order_is_not_grid_order():
 
 def test_bad_layouts_and_names_are_refused():
     with pytest.raises(ValueError, match="outside the 2x2 grid"):
-        BoardLayout(name="x", grid=(2, 2), pitch_mm=5.0, chips=(ChipPlacement((2, 0), (0, 0)),))
+        Board(name="x", grid=(2, 2), pitch_mm=5.0, chips=(ChipSpec((2, 0), (0, 0)),))
     with pytest.raises(ValueError, match="same cell"):
-        BoardLayout(name="x", grid=(2, 2), pitch_mm=5.0,
-                    chips=(ChipPlacement((0, 0), (0, 0)), ChipPlacement((0, 0), (1, 0))))
+        Board(name="x", grid=(2, 2), pitch_mm=5.0,
+                    chips=(ChipSpec((0, 0), (0, 0)), ChipSpec((0, 0), (1, 0))))
     with pytest.raises(ValueError, match="known boards: anyskin-5, .*supermag-4x4"):
-        get_layout("hexagon")
-    assert grid_layout("g", rows=2, cols=3, pitch_mm=4.0).positions_mm()[1, 2].tolist() == [4.0, -2.0]
+        load_board("hexagon")
+    grid = Board(name="g", grid=(2, 3), pitch_mm=4.0, chips=ChipGridSpec(rows=2, cols=3, pitch_mm=4.0).chips())
+    assert grid.positions_mm()[1, 2].tolist() == [4.0, -2.0]

@@ -10,10 +10,10 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from tactile_manip.errors import ProtocolError
-from tactile_manip.boards.layout import ANYSKIN_5, LAYOUTS
+from tactile_manip.boards import board_names, load_board
 from tactile_manip.wire import WIRE_FORMATS, make_decoder
 from tactile_manip.wire.anyskin import AnySkinDecoder, frame_length
-from tactile_manip.sim.params import ChipParams
+from tactile_manip.chips import MLX90393
 
 N_CHIPS = 5
 LEN = frame_length(N_CHIPS)
@@ -62,7 +62,7 @@ def test_decode_record_reads_a_stored_frame_and_refuses_others():
 
 
 def test_saturated_channels_are_flagged_at_the_counts_rail():
-    chip = ChipParams()
+    chip = MLX90393
     v = np.zeros((N_CHIPS, 4), np.float32)
     v[:, 0] = 25.0
     v[2, 3] = chip.saturation_counts * chip.lsb_z_ut  # z of chip 2 at the rail
@@ -73,10 +73,10 @@ def test_saturated_channels_are_flagged_at_the_counts_rail():
 def test_the_format_table_names_importable_decoders():
     for name in WIRE_FORMATS:
         n = 16 if name == "supermag" else N_CHIPS
-        assert make_decoder(name, n_chips=n, chip=ChipParams()).name == name
+        assert make_decoder(name, n_chips=n, chip=MLX90393).name == name
     with pytest.raises(ValueError, match="known formats: supermag, anyskin"):
-        make_decoder("reskin-ascii", n_chips=5, chip=ChipParams())
-    assert set(LAYOUTS) == {"supermag-4x4", "anyskin-5", "eflesh"} and ANYSKIN_5.n_chips == N_CHIPS
+        make_decoder("reskin-ascii", n_chips=5, chip=MLX90393)
+    assert set(board_names()) == {"supermag-4x4", "anyskin-5", "eflesh"} and load_board("anyskin-5").n_chips == N_CHIPS
 
 
 @settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])

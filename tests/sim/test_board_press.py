@@ -14,7 +14,7 @@ from tactile_manip.sim.board_press import press, readings_with_chip
 from tactile_manip.sim.board_skin import BoardSkin, rotation_matrix
 from tactile_manip.sim.magnets import magnet_field_t
 from tactile_manip.sim.mbts import MagneticSkin
-from tactile_manip.sim.params import SimParams
+from tactile_manip.sim.params import for_board
 
 # eFlesh firmware order: centre, left, right, up, down
 CENTRE, LEFT, RIGHT, UP, DOWN = range(5)
@@ -31,11 +31,12 @@ def supermag():
 
 
 def test_supermag_board_matches_the_magnetic_skin(supermag):
-    p = SimParams()
-    ref = MagneticSkin(p.layer, p.magnet, p.chip)
-    np.testing.assert_allclose(supermag.baseline_pad_ut(), ref.baseline_t().reshape(-1, 3) * 1e6, rtol=1e-12)
+    board = load_board("supermag-4x4")
+    p = for_board(board)
+    ref = MagneticSkin(board, p.layer, p.magnet)
+    np.testing.assert_allclose(supermag.baseline_pad_ut(), ref.baseline_t() * 1e6, rtol=1e-12)
     sample = press(supermag, tip="sphere", tip_diameter_mm=6.0, x_mm=1.3, y_mm=-0.7, force_n=5.0)
-    expected = ref.field_change_t(sample.pressure_mpa, supermag.pixel_mm).reshape(-1, 3) * 1e6
+    expected = ref.field_change_t(sample.pressure_mpa, supermag.pixel_mm) * 1e6
     peak = np.abs(expected).max()
     assert 50.0 < peak < 1000.0
     np.testing.assert_allclose(sample.field_change_pad_ut, expected, atol=1e-6 * peak)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from tactile_manip.boards import load_board
 from tactile_manip.sim.chip import chip_positions_mm
 from tactile_manip.sim.magnetics import (
     cuboid_field_t,
@@ -27,7 +28,7 @@ def _magpylib_t(points_mm: np.ndarray, j_t, size_mm=SIZE_MM, centre_mm=CENTRE_MM
 
 
 def _chips(gap_mm: float) -> np.ndarray:
-    return chip_positions_mm(pitch_mm=5.0, thickness_mm=2.5, gap_mm=gap_mm).reshape(-1, 3)
+    return chip_positions_mm(load_board("supermag-4x4"), thickness_mm=2.5, gap_mm=gap_mm)
 
 
 @pytest.mark.parametrize("gap_mm", [0.5, 1.0, 2.0])

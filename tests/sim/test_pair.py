@@ -116,7 +116,7 @@ def test_a_force_past_the_layer_is_flagged_and_refused_on_request(pair):
     normal = pair.press(make_indenter("letter_r"), CENTRE, 10.0, np.random.default_rng(0), render_depth=False)
     assert not normal.bottomed_out and normal.check_within_layer() is normal
     crushed = pair.press(make_indenter("letter_r"), CENTRE, 1e6, np.random.default_rng(0), render_depth=False)
-    assert crushed.bottomed_out and crushed.approach_mm > pair.params.layer.thickness_mm
+    assert crushed.bottomed_out and crushed.approach_mm > pair.board.layer.thickness_mm
     with pytest.raises(SimulationError, match=r"1e\+06 N drives letter_r \d+ mm into the 2.5 mm layer"):
         crushed.check_within_layer()
 
@@ -137,8 +137,8 @@ def test_bad_force_raises(pair, force):
 def test_bad_parameters_raise_before_any_work():
     with pytest.raises(ValueError, match="remanence_t"):
         MagnetParams(remanence_t=np.nan)
-    with pytest.raises(ValueError, match="thickness_mm"):
-        SimParams(layer=dataclasses.replace(SimParams().layer, thickness_mm=-2.5))
+    with pytest.raises(ValueError, match="skin_modulus_kpa"):
+        SimParams(layer=dataclasses.replace(SimParams().layer, skin_modulus_kpa=-200.0))
     with pytest.raises(ValueError, match="tilt"):
         IndenterPose(tilt_x_rad=1.0)
 

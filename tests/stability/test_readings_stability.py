@@ -131,9 +131,9 @@ def test_shipped_model_on_readings_at_the_int16_rail_gives_no_answer(estimators,
     """Readings the chip model produces when every channel is on the int16 rail (baseline-subtracted), thousands
     of uT: no answer from the image or the angle head."""
     for sign in (1.0, -1.0):
-        m = pair.chips.measure(np.full((4, 4, 3), sign * 1e6), np.random.default_rng(0))
+        m = pair.chips.measure(np.full((16, 3), sign * 1e6), np.random.default_rng(0))
         assert m.saturated.all()
-        reading = m.raw_ut - pair.baseline_ut
+        reading = pair.to_reading(m.raw_ut - pair.baseline_ut)
         assert np.abs(reading).min() > 2000.0  # beyond the SuperMag board's plausible field on every channel
         _no_answer(estimators("supermag-image").estimate(reading))
         _no_answer(estimators("supermag").estimate(reading))

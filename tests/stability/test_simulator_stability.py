@@ -125,7 +125,7 @@ def test_plate_larger_than_the_pad_through_the_sensor_pair(pair):
     (a uniform shallow imprint has no axis)."""
     plate = Indenter(np.zeros((61, 61)), 0.5, name="plate_30mm")
     s = pair.press(plate, IndenterPose(), 10.0, np.random.default_rng(0))
-    pad_mm2 = pair.params.layer.size_mm**2
+    pad_mm2 = pair.board.layer.size_mm[0] * pair.board.layer.size_mm[1]
     assert s.contact and s.contact_mask.all() and s.force_n == 10.0
     assert s.pressure.area_mm2 == pytest.approx(pad_mm2)
     assert s.pressure.mean_kpa * 1e-3 * s.pressure.area_mm2 == pytest.approx(10.0, rel=1e-9)

@@ -373,9 +373,9 @@ def test_a_method_names_where_its_angle_comes_from_and_the_main_job_runs_the_pap
 
 
 def test_the_place_task_runs_through_the_runner_and_its_success_needs_the_slot_clearance(tmp_path) -> None:
-    from tactile_manip.trials.scene import PlaceConfig
+    from tactile_manip.behaviours.place import PlaceConfig
 
-    scene = _scene(trials=3, task="place", place=PlaceConfig(clearance_mm=1.0),
+    scene = _scene(trials=3, task="place", task_config=PlaceConfig(clearance_mm=1.0),
                    methods=[MethodSpec("supermag", MODEL), MethodSpec("bilinear", "bilinear", output_px=16)])
     summary = run_trials(scene, tmp_path / "run", progress=False)
     records = read_trials(tmp_path / "run" / "trials.jsonl")
@@ -418,11 +418,11 @@ def test_the_blind_baseline_reads_the_sensor_and_answers_the_prior(tmp_path) -> 
 
 def test_the_grip_task_runs_through_the_runner_with_a_contact_model_per_method(tmp_path) -> None:
     from tactile_manip.behaviours.grip import GripConfig
-    from tactile_manip.behaviours.reorient import ReorientConfig
+    from tactile_manip.behaviours.skills import BehaviourConfig
 
     contact = str(REPO / "models" / "contact_supermag.onnx")
-    scene = _scene(trials=3, task="grip", grip=GripConfig(force_tolerance_n=1.5, centre_tolerance_mm=0.5),
-                   behaviour=ReorientConfig(force_n=8.0),
+    scene = _scene(trials=3, task="grip", task_config=GripConfig(force_tolerance_n=1.5, centre_tolerance_mm=0.5),
+                   behaviour=BehaviourConfig(force_n=8.0),
                    presentation=PresentationConfig(force_n=(5.0, 11.0), objects=THIN_RODS),
                    methods=[MethodSpec("supermag", MODEL, contact_model=contact), MethodSpec("blind", "blind")])
     summary = run_trials(scene, tmp_path / "run", progress=False)

@@ -22,6 +22,7 @@ import torch
 from tactile_manip.learning.angle_head.model import AngleHead, AngleModelConfig, SymmetrizedAngleHead, count_parameters
 from tactile_manip.learning.checkpoint import load_net_checkpoint
 from tactile_manip.learning.cvae.export import ExportError
+from tactile_manip.outputs import unfinished
 from tactile_manip.perception.angle_head import ANGLE_HEAD_KEY, ANGLE_HEAD_META_KEY
 from tactile_manip.perception.one_reading import encode
 from tactile_manip.perception.board_symmetry import IMAGE_SYMMETRIES
@@ -107,8 +108,9 @@ def attach_angle_head(checkpoint: str | Path, base: str | Path, out: str | Path,
     final = Path(out)
     final.parent.mkdir(parents=True, exist_ok=True)
     tmp = final.with_name(final.name + ".partial")
-    onnx.save(proto, str(tmp))
-    tmp.replace(final)
+    with unfinished(tmp):
+        onnx.save(proto, str(tmp))
+        tmp.replace(final)
     return record
 
 

@@ -24,11 +24,13 @@ from typing import Any
 import numpy as np
 import torch
 
+from tactile_manip.boards.identity import record_of_name
 from tactile_manip.config import to_dict
 from tactile_manip.data.targets import target_unit
 from tactile_manip.learning.checkpoint import load_net_checkpoint
 from tactile_manip.learning.contact.model import ContactModel, ContactModelConfig, FusedContactModel, count_parameters
 from tactile_manip.learning.cvae.export import ExportError
+from tactile_manip.outputs import unfinished
 from tactile_manip.perception.reconstruct import METADATA_KEY
 from tactile_manip.version import __version__
 
@@ -76,24 +78,25 @@ def export_contact_onnx(checkpoint: str | Path, out: str | Path, *, metrics: dic
     final = Path(out)
     tmp = final.with_name(final.name + ".partial")
     final.parent.mkdir(parents=True, exist_ok=True)
-    fused = FusedContactModel(model).eval()  # one batched product per layer: fewer nodes, same function
-    torch.onnx.export(fused, (example,), str(tmp), dynamo=False, opset_version=17, input_names=["field_ut"],
-                      output_names=["mean", "sigma"],
-                      dynamic_axes={"field_ut": {0: "batch"}, "mean": {0: "batch"}, "sigma": {0: "batch"}})
-    meta = contact_metadata(model, payload, metrics or {})
-    if image_position_weight is not None:
-        meta["image_position_weight"] = float(image_position_weight)
-    if plausible_field_ut is not None:
-        meta["input"]["plausible_field_ut"] = float(plausible_field_ut)
-    if ranges:
-        meta["targets"]["range"] = ranges
-    proto = onnx.load(str(tmp))
-    entry = proto.metadata_props.add()
-    entry.key, entry.value = METADATA_KEY, json.dumps(meta)
-    proto.producer_name = "tactile_manip"
-    onnx.save(proto, str(tmp))
-    meta["parity_max_abs"] = check_contact_parity(model, tmp, check_windows)
-    tmp.replace(final)
+    with unfinished(tmp):  # a failed export leaves no .partial behind
+        fused = FusedContactModel(model).eval()  # one batched product per layer: fewer nodes, same function
+        torch.onnx.export(fused, (example,), str(tmp), dynamo=False, opset_version=17, input_names=["field_ut"],
+                          output_names=["mean", "sigma"],
+                          dynamic_axes={"field_ut": {0: "batch"}, "mean": {0: "batch"}, "sigma": {0: "batch"}})
+        meta = contact_metadata(model, payload, metrics or {})
+        if image_position_weight is not None:
+            meta["image_position_weight"] = float(image_position_weight)
+        if plausible_field_ut is not None:
+            meta["input"]["plausible_field_ut"] = float(plausible_field_ut)
+        if ranges:
+            meta["targets"]["range"] = ranges
+        proto = onnx.load(str(tmp))
+        entry = proto.metadata_props.add()
+        entry.key, entry.value = METADATA_KEY, json.dumps(meta)
+        proto.producer_name = "tactile_manip"
+        onnx.save(proto, str(tmp))
+        meta["parity_max_abs"] = check_contact_parity(model, tmp, check_windows)
+        tmp.replace(final)
     return meta
 
 
@@ -109,6 +112,7 @@ def contact_metadata(model: ContactModel, payload: dict[str, Any], metrics: dict
                   "layout": "[frame, row, col, channel]; frame 0 the newest reading, frame k the reading k frames "
                             "before it", "channels": inp["channels"]},
         "board_layout": inp["layout"],
+        **({"board": board} if (board := inp.get("board") or record_of_name(inp["layout"])) is not None else {}),
         "context": inp["context"],
         "targets": {"names": names, "units": [target_unit(n) for n in names]},
         "output": {"names": ["mean", "sigma"], "shape": ["batch", len(names)],

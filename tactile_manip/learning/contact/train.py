@@ -37,6 +37,7 @@ from typing import Any, Literal
 import numpy as np
 import torch
 
+from tactile_manip.boards.identity import record_of_provenance
 from tactile_manip.config import check_ranges, to_dict
 from tactile_manip.data import PairedDataset, load_datasets
 from tactile_manip.data.dataset import UNLABELLED
@@ -271,9 +272,11 @@ def _input_record(data: PairedDataset, cfg: ContactTrainConfig) -> dict[str, Any
     if data.has("time_s") and len(data) > 1:
         steps = np.diff(np.sort(data.extra("time_s")))
         period = float(np.median(steps[steps > 0])) if (steps > 0).any() else None
+    board = record_of_provenance(data.provenance)
     return {"cells": list(data.readings.shape[1:]), "channels": to_dict(data.channels),
             "layout": data.provenance.get("layout", "supermag-4x4" if data.grid == (4, 4) else
                                           f"grid-{data.grid[0]}x{data.grid[1]}"),
+            **({"board": board} if board is not None else {}),
             "context": {"frames": cfg.context_frames, "max_gap_s": cfg.context_max_gap_s,
                         "frame_period_s": period}}
 

@@ -48,7 +48,9 @@ def run_export(request: ExportRequest) -> int:
     """Export a contact model (:mod:`.export`); ``data`` gives real windows to check it on."""
     from tactile_manip.data import load_datasets
     from tactile_manip.learning.contact.export import export_contact_onnx, load_contact_checkpoint
+    from tactile_manip.boards.identity import record_of_name
     from tactile_manip.learning.contact.train import dataset_windows
+    from tactile_manip.learning.verbs import check_data_of_checkpoint
 
     if request.card or request.pixel_mm is not None:
         raise ValueError("--card and --pixel-mm are for image models; a contact model keeps its validation "
@@ -57,6 +59,8 @@ def run_export(request: ExportRequest) -> int:
     if request.data:
         _, payload = load_contact_checkpoint(request.checkpoint)
         data = load_datasets(list(request.data), images=False)
+        check_data_of_checkpoint(request, payload["input"]["cells"],
+                                 payload["input"].get("board") or record_of_name(payload["input"]["layout"]), data)
         windows = dataset_windows(data, payload["input"]["context"])[data.indices("test")]
     metrics = json.loads(open(request.metrics).read()) if request.metrics else {}
     meta = export_contact_onnx(request.checkpoint, request.out, metrics=metrics, check_windows=windows,

@@ -36,6 +36,7 @@ from tactile_manip.learning.checkpoint import CheckpointError, read_checkpoint
 from tactile_manip.learning.cvae.data import InputSpec, OutputSpec
 from tactile_manip.learning.cvae.model import CVAEConfig, SuperMagCVAE, count_parameters
 from tactile_manip.perception.one_reading import ONE_READING_KEY, encode, open_one_reading
+from tactile_manip.outputs import unfinished
 from tactile_manip.perception.board_symmetry import IMAGE_SYMMETRIES
 from tactile_manip.perception.reconstruct import METADATA_KEY
 from tactile_manip.version import __version__
@@ -115,26 +116,27 @@ def export_onnx(checkpoint: str | Path, out: str | Path, *, pixel_mm: float, met
     out = Path(out)
     final, out = out, out.with_name(out.name + ".partial")  # an existing model is replaced only by a checked one
     out.parent.mkdir(parents=True, exist_ok=True)
-    torch.onnx.export(graph, (field, eps), str(out), dynamo=False, opset_version=17,
-                      input_names=["field_ut", "eps"], output_names=["depth_mm", "spread_mm"],
-                      dynamic_axes={"field_ut": {0: "batch"}, "eps": {0: "batch", 1: "samples"},
-                                    "depth_mm": {0: "batch"}, "spread_mm": {0: "batch"}})
-    one = OneReadingGraph(model, spec, graph.output).eval()
-    one_bytes = io.BytesIO()
-    torch.onnx.export(one, (field[:1],), one_bytes, dynamo=False, opset_version=17, input_names=["field_ut"],
-                      output_names=["depth_mm"])
-    meta = _metadata(model, spec, payload, pixel_mm, metrics or {}, extra or {})
-    if plausible_field_ut is not None:
-        meta["input"]["plausible_field_ut"] = float(plausible_field_ut)
-    meta["image_symmetry"] = image_symmetry
-    proto = onnx.load(str(out))
-    for key, value in ((METADATA_KEY, json.dumps(meta)), (ONE_READING_KEY, encode(one_bytes.getvalue()))):
-        entry = proto.metadata_props.add()
-        entry.key, entry.value = key, value
-    proto.producer_name = "tactile_manip"
-    onnx.save(proto, str(out))
-    meta["parity_max_abs_mm"] = check_parity(graph, out, check_readings)
-    out.replace(final)
+    with unfinished(out):  # a failed export leaves no .partial behind
+        torch.onnx.export(graph, (field, eps), str(out), dynamo=False, opset_version=17,
+                          input_names=["field_ut", "eps"], output_names=["depth_mm", "spread_mm"],
+                          dynamic_axes={"field_ut": {0: "batch"}, "eps": {0: "batch", 1: "samples"},
+                                        "depth_mm": {0: "batch"}, "spread_mm": {0: "batch"}})
+        one = OneReadingGraph(model, spec, graph.output).eval()
+        one_bytes = io.BytesIO()
+        torch.onnx.export(one, (field[:1],), one_bytes, dynamo=False, opset_version=17, input_names=["field_ut"],
+                          output_names=["depth_mm"])
+        meta = _metadata(model, spec, payload, pixel_mm, metrics or {}, extra or {})
+        if plausible_field_ut is not None:
+            meta["input"]["plausible_field_ut"] = float(plausible_field_ut)
+        meta["image_symmetry"] = image_symmetry
+        proto = onnx.load(str(out))
+        for key, value in ((METADATA_KEY, json.dumps(meta)), (ONE_READING_KEY, encode(one_bytes.getvalue()))):
+            entry = proto.metadata_props.add()
+            entry.key, entry.value = key, value
+        proto.producer_name = "tactile_manip"
+        onnx.save(proto, str(out))
+        meta["parity_max_abs_mm"] = check_parity(graph, out, check_readings)
+        out.replace(final)
     return meta
 
 
@@ -168,7 +170,7 @@ def _metadata(model: SuperMagCVAE, spec: InputSpec, payload: dict, pixel_mm: flo
                    "units": "mm of indentation, >= 0" if image["unit"] == "mm" else image["unit"],
                    "image": image, "pixel_mm": pixel_mm,
                    "layout": "pixel (0, 0) at the (-x, +y) corner of the pad"},
-        # the board whose readings the model takes (boards/layout.py); 4x4 data is the SuperMag board's
+        # the board whose readings the model takes (tactile_manip.boards); 4x4 data is the SuperMag board's
         "board_layout": ("supermag-4x4" if (cfg.taxel_rows, cfg.taxel_cols) == (4, 4)
                          else f"grid-{cfg.taxel_rows}x{cfg.taxel_cols}"),
         "preset": payload["train_config"]["preset"], "model_config": payload["model_config"],

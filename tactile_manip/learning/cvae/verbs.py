@@ -52,7 +52,9 @@ def run_export(request: ExportRequest) -> int:
     """Write the checkpoint as ONNX (:mod:`.export`); ``data`` gives real readings, pixel size and provenance,
     --card a model card."""
     from tactile_manip.data import load_datasets
-    from tactile_manip.learning.cvae.export import export_onnx
+    from tactile_manip.boards.identity import record_of_name
+    from tactile_manip.learning.cvae.export import export_onnx, load_checkpoint
+    from tactile_manip.learning.verbs import check_data_of_checkpoint
     from tactile_manip.outputs import check_output_file
 
     if request.card:
@@ -61,6 +63,10 @@ def run_export(request: ExportRequest) -> int:
     if request.data:
         data = load_datasets(list(request.data))
         data.require_images("export of an image model with --data")
+        model, _, _ = load_checkpoint(request.checkpoint)
+        grid = (model.cfg.taxel_rows, model.cfg.taxel_cols)
+        check_data_of_checkpoint(request, [*grid, data.readings.shape[-1]],
+                                 record_of_name("supermag-4x4" if grid == (4, 4) else ""), data)
         readings = data.readings[data.indices("val")]
         pixel_mm = request.pixel_mm or data.image.pixel_mm or 0.1
         trained_on = sorted(set(data.objects(data.indices("train")).tolist()))

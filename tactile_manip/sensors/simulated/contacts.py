@@ -2,7 +2,8 @@
 
 A press costs ~30-100 ms of physics, far more than the 8 ms between frames, so a script of presses is solved
 before streaming: each press's noise-free field change at a handful of force levels, linearly interpolated
-in force at frame time. Streaming then only looks up a (4, 4, 3) field and adds fresh chip noise.
+in force at frame time. Streaming then only looks up a (n_chips, 3) field (the pair's board's chips, firmware
+order, pad axes) and adds fresh chip noise.
 """
 
 from __future__ import annotations
@@ -69,14 +70,14 @@ class Press:
 
 def field_change_levels(pair: SensorPair, indenter: Indenter, pose: IndenterPose, forces_n: Sequence[float],
                         rng: np.random.Generator) -> np.ndarray:
-    """Noise-free field change (L, 4, 4, 3) in uT (pad axes) at each force; 0 N gives zeros.
+    """Noise-free field change (L, n_chips, 3) in uT (pad axes, firmware order) at each force; 0 N gives zeros.
 
     Raises SimulationError when a force pushes the object through the layer (it would bottom out)."""
-    out = np.zeros((len(forces_n), 4, 4, 3))
+    out = np.zeros((len(forces_n), pair.board.n_chips, 3))
     for i, f in enumerate(forces_n):
         if f > 0:
             sample = pair.press(indenter, pose, float(f), rng, render_depth=False).check_within_layer()
-            out[i] = sample.field_change_ut
+            out[i] = pair.board.chips_from_cells(sample.field_change_ut)
     return out
 
 
@@ -101,6 +102,7 @@ class ContactTimeline:
         if period_s is not None and (not math.isfinite(period_s) or period_s < max(end, 1e-3)):
             raise ValueError(f"period_s must be >= the end of the last press ({end:g} s), got {period_s}")
         self.presses = tuple(ordered)
+        self.board = pair.board
         self.period_s = period_s
         self.duration_s = end
         rng = np.random.default_rng(seed)
@@ -133,10 +135,16 @@ class ContactTimeline:
         return 0.0 if i is None else self.presses[i].force_at(self._local(t_s))
 
     def change_at(self, t_s: float) -> np.ndarray:
-        """Noise-free field change (4, 4, 3) in uT, pad axes, at script time ``t_s`` (zeros between presses)."""
+        """Noise-free field change (rows, cols, 3) in uT, pad axes, on the board's reading grid, at script time
+        ``t_s`` (zeros between presses)."""
+        return self.board.cells_from_pad(self.chip_change_at(t_s))
+
+    def chip_change_at(self, t_s: float) -> np.ndarray:
+        """Noise-free field change (n_chips, 3) in uT, pad axes, firmware order, at script time ``t_s`` (zeros
+        between presses): what the frame threads add to the chips' field."""
         i = self.active(t_s)
         if i is None:
-            return np.zeros((4, 4, 3))
+            return np.zeros((self.board.n_chips, 3))
         f = self.presses[i].force_at(self._local(t_s))
         forces, changes = self._levels[i]
         k = int(np.clip(np.searchsorted(forces, f) - 1, 0, len(forces) - 2))

@@ -18,12 +18,13 @@ and counted (as a USB bridge does), so a missing reader never stalls the schedul
 ``time.monotonic_ns() // 1000`` (system-wide on Linux) in ``t_mcu_us`` just before each write, which lets a
 reader on the same machine measure the write-to-read latency.
 
-``wire_format="anyskin"`` streams the ReSkin/AnySkin binary sketch's bytes instead (five chips, float32
-t, x, y, z each, then CRLF; :mod:`tactile_manip.wire.anyskin`): the simulator models the SuperMag pad,
-so each chip of the ``anyskin-5`` cross gets the simulated field interpolated (bilinearly, over the 4x4
-chips) at its position and turned into its own axes, and a temperature of 25 degC with 0.1 degC noise.
+The emulated board is any board whose file describes its magnetic body and layer (``board``; default the
+wire format's own board, ``supermag-4x4`` or ``anyskin-5``): the simulator models that board's skin and chips.
+``wire_format="anyskin"`` streams the ReSkin/AnySkin binary sketch's bytes (per chip float32 t, x, y, z in the
+chip's own axes, then CRLF; :mod:`tactile_manip.wire.anyskin`), with a temperature of 25 degC and 0.1 degC noise;
+``"supermag"`` our frames, which carry the 16 chips of ``supermag-4x4``.
 
-Run it with ``tactile-manip emulate`` (or ``python -m tactile_manip.sensors.simulated.emulator``).
+Run it with ``tactile-manip emulate``.
 """
 
 from __future__ import annotations
@@ -41,10 +42,11 @@ import numpy as np
 
 from tactile_manip.outputs import OutputPathError, check_writable_parent
 from tactile_manip.sensors.simulated.contacts import ContactTimeline, Press
-from tactile_manip.boards.layout import ANYSKIN_5, BoardLayout, get_layout
-from tactile_manip.wire.protocol import encode_frame
-from tactile_manip.wire.anyskin import pack_frame
+from tactile_manip.boards import Board, load_board
 from tactile_manip.sim.pair import SensorPair
+from tactile_manip.wire import DEFAULT_LAYOUTS
+from tactile_manip.wire.anyskin import pack_frame
+from tactile_manip.wire.protocol import encode_frame
 
 REBASE_LATE_S = 0.25  # a tick this late restarts the schedule instead of bursting to catch up
 
@@ -90,7 +92,7 @@ class EmulatorConfig:
     clock: Literal["device", "host"] = "device"  # t_mcu_us: time on the schedule, or host monotonic at write
     period_s: float | None = None          # repeat the press script with this period, s
     wire_format: Literal["supermag", "anyskin"] = "supermag"  # the bytes: our frames or the AnySkin sketch's
-    board: str = ""  # the board whose chips the AnySkin frames carry (a name or a board file; "": anyskin-5)
+    board: str = ""  # the emulated board (a name or a board file; "": the wire format's own board)
 
     def __post_init__(self) -> None:
         if self.wire_format not in ("supermag", "anyskin"):
@@ -98,10 +100,10 @@ class EmulatorConfig:
         if self.board and self.wire_format == "supermag" and self.board != "supermag-4x4":
             raise ValueError(f"EmulatorConfig.board {self.board!r}: the supermag wire format carries the 16 chips of "
                              "supermag-4x4; give --wire-format anyskin for another board")
-        layout = frame_layout(self) if self.wire_format == "anyskin" else None
-        if layout is not None and np.isnan(layout.positions_mm()[layout.mask]).any():
-            raise ValueError(f"EmulatorConfig.board {self.board!r} has no chip positions to read the simulated pad "
-                             "at; describe the board in a board file (docs/your_board.md)")
+        try:
+            emulated_board(self).require_simulation()
+        except ValueError as e:  # ConfigError: unknown, a bad file, or no magnets to simulate
+            raise ValueError(f"EmulatorConfig.board: {e}") from None
         if not self.rate_hz > 0:
             raise ValueError(f"EmulatorConfig.rate_hz must be > 0, got {self.rate_hz}")
         if self.clock not in ("device", "host"):
@@ -131,23 +133,17 @@ class EmulatorReport:
     last_seq: int = -1
 
 
-def frame_layout(config: EmulatorConfig) -> BoardLayout:
-    """The layout whose chips an AnySkin-format frame of ``config`` carries (its board, else anyskin-5)."""
-    return get_layout(config.board) if config.board else ANYSKIN_5
+def emulated_board(config: EmulatorConfig) -> Board:
+    """The board ``config`` emulates: its ``board``, else the wire format's own."""
+    return load_board(config.board or DEFAULT_LAYOUTS[config.wire_format])
 
 
-def anyskin_frame(field_4x4_ut: np.ndarray, layout: BoardLayout, rng: np.random.Generator) -> bytes:
-    """An AnySkin sketch frame of ``layout``'s chips from a (4, 4, 3) pad field at 5 mm pitch (interpolated)."""
-    pos = layout.positions_mm()                              # (rows, cols, 2), NaN where no chip
-    col = np.clip(np.nan_to_num(pos[..., 0]) / 5.0 + 1.5, 0.0, 3.0)  # fractional 4x4 grid coordinates
-    row = np.clip(1.5 - np.nan_to_num(pos[..., 1]) / 5.0, 0.0, 3.0)
-    c0, r0 = np.minimum(col.astype(int), 2), np.minimum(row.astype(int), 2)
-    fc, fr = (col - c0)[..., None], (row - r0)[..., None]
-    f = np.asarray(field_4x4_ut, np.float64)
-    reading = ((1 - fr) * ((1 - fc) * f[r0, c0] + fc * f[r0, c0 + 1])
-               + fr * ((1 - fc) * f[r0 + 1, c0] + fc * f[r0 + 1, c0 + 1]))
-    temps = 25.0 + 0.1 * rng.standard_normal(layout.n_chips)
-    return pack_frame(temps, layout.chips_from_reading(reading))
+def anyskin_frame(raw_pad_ut: np.ndarray, board: Board, rng: np.random.Generator) -> bytes:
+    """An AnySkin sketch frame of ``board``'s chips from their (n_chips, 3) raw field in pad axes, uT (firmware
+    order): each chip's vector turned into its own axes."""
+    temps = 25.0 + 0.1 * rng.standard_normal(board.n_chips)
+    chips_ut = np.einsum("nji,nj->ni", board.chip_matrices(), np.asarray(raw_pad_ut, np.float64))
+    return pack_frame(temps, chips_ut)
 
 
 class FirmwareEmulator:
@@ -157,19 +153,22 @@ class FirmwareEmulator:
         config: rate, seed, duration, link path, clock.
         presses: scripted contacts, solved in :meth:`open` before streaming starts.
         faults: injected faults.
-        pair: the simulated sensor pair (default ``SensorPair(seed=config.seed)``).
+        pair: the simulated sensor pair (default: the emulated board's, ``SensorPair(board=..., seed=config.seed)``).
     """
 
     def __init__(self, config: EmulatorConfig | None = None, *, presses: Sequence[Press] = (),
                  faults: FaultConfig | None = None, pair: SensorPair | None = None) -> None:
         self.config = config or EmulatorConfig()
-        self._layout = frame_layout(self.config)  # the chips an AnySkin frame carries
+
         self.faults = faults or FaultConfig()
         if self.faults.disconnects and not self.config.link:
             raise ValueError("disconnects need a link path (EmulatorConfig.link / --link PATH): a pty cannot "
                              "come back at the same /dev/pts path, the link can")
         self.presses = tuple(presses)
-        self.pair = pair if pair is not None else SensorPair(seed=self.config.seed)
+        self.board = emulated_board(self.config)
+        self.pair = pair if pair is not None else SensorPair(board=self.board, seed=self.config.seed)
+        if self.pair.board.n_chips != self.board.n_chips:
+            raise ValueError(f"the pair simulates board {self.pair.board.name}, the emulator streams {self.board.name}")
         self.report = EmulatorReport()
         self._timeline: ContactTimeline | None = None
         self._master = self._slave = -1
@@ -246,11 +245,11 @@ class FirmwareEmulator:
 
     def frame_bytes(self, seq: int, t_rel_s: float, noise_rng: np.random.Generator) -> bytes:
         """The undamaged frame ``seq`` at stream time ``t_rel_s`` (fresh noise from ``noise_rng``)."""
-        change = self._timeline.change_at(t_rel_s) if self._timeline is not None else 0.0
+        change = self._timeline.chip_change_at(t_rel_s) if self._timeline is not None else 0.0
         measured = self.pair.chips.measure(self.pair.baseline_field_ut + change, noise_rng)
         if self.config.wire_format == "anyskin":
-            return anyskin_frame(measured.raw_ut, self._layout, noise_rng)
-        counts = measured.counts
+            return anyskin_frame(measured.raw_ut, self.board, noise_rng)
+        counts = self.pair.to_reading(measured.counts)
         temps = None
         if self.config.temperature:
             temps = np.rint(2500 + 10 * noise_rng.standard_normal((4, 4))).astype(np.int16)  # 25 C, 0.1 C noise
@@ -341,9 +340,3 @@ class FirmwareEmulator:
 def _is_pty_path(path: str) -> bool:
     """Whether ``path`` names a pseudo-terminal device (Linux ``/dev/pts/N``, macOS ``/dev/ttysNNN``)."""
     return path.startswith("/dev/pts/") or (path.startswith("/dev/ttys") and path[9:].isdigit())
-
-
-if __name__ == "__main__":  # pragma: no cover - the CLI is tested through `tactile-manip emulate`
-    from tactile_manip.cli import main
-
-    sys.exit(main(["emulate", *sys.argv[1:]]))

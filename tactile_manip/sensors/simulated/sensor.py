@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from tactile_manip.boards import load_board
 from tactile_manip.checks import check_finite_scalar
 from tactile_manip.sensors.base import TactileSensor
 from tactile_manip.sensors.config import SimulatedSensorConfig
@@ -35,18 +36,21 @@ class SimulatedSensor(TactileSensor):
     Deterministic for a seed: frame ``k`` after ``connect()`` carries the ``k``-th noise draw (stalled ticks
     draw nothing); which frame a contact first appears in depends on when it was set.
 
+    Readings have the pair's board's shape (``layout`` is that board).
+
     Args:
-        config: seed, frame rate, buffer length, baseline settings.
+        config: board, seed, frame rate, buffer length, baseline settings.
         pair: the simulated sensor pair to read (shared with a behaviour so both see the same physics);
-            default ``SensorPair(seed=config.seed)``.
+            default ``SensorPair(board=load_board(config.board), seed=config.seed)``.
     """
 
     def __init__(self, config: SimulatedSensorConfig | None = None, *, pair: SensorPair | None = None) -> None:
         config = config or SimulatedSensorConfig()
         self.config = config
-        self.pair = pair if pair is not None else SensorPair(seed=config.seed)
+        self.pair = pair if pair is not None else SensorPair(board=load_board(config.board), seed=config.seed)
         chip = dataclasses.replace(self.pair.params.chip, rate_hz=config.rate_hz)
-        super().__init__(source="simulated", chip=chip, buffer_frames=config.buffer_frames, baseline=config.baseline)
+        super().__init__(source="simulated", chip=chip, buffer_frames=config.buffer_frames, baseline=config.baseline,
+                         layout=self.pair.board)
         self._cache: collections.OrderedDict[tuple, np.ndarray] = collections.OrderedDict()
         self._static: np.ndarray | None = None
         self._script: tuple[ContactTimeline, float] | None = None
@@ -68,7 +72,7 @@ class SimulatedSensor(TactileSensor):
         The first call for a contact solves it (~30-100 ms, in the caller's thread); repeats come from a cache.
 
         Returns:
-            (4, 4, 3) float64 noise-free field change in uT, pad axes (the ground truth of the reading).
+            (rows, cols, 3) float64 noise-free field change in uT, pad axes (the ground truth of the reading).
 
         Raises:
             ValueError: a negative or non-finite force.
@@ -76,14 +80,13 @@ class SimulatedSensor(TactileSensor):
         """
         force = check_finite_scalar("force_n", force_n, low=0.0)
         key = (indenter, pose, force)
-        change = self._cache.get(key)
+        change = self._cache.get(key)  # (n_chips, 3), firmware order
         if change is None:
-            change = np.zeros((4, 4, 3))
+            change = np.zeros((self.pair.board.n_chips, 3))
             if force > 0:
                 rng = np.random.default_rng(self.config.seed)  # the press's own noise is not used
                 sample = self.pair.press(indenter, pose, force, rng, render_depth=False).check_within_layer()
-                change = sample.field_change_ut
-                change = change.astype(np.float64)
+                change = self.pair.board.chips_from_cells(sample.field_change_ut).astype(np.float64)
             self._cache[key] = change
             if len(self._cache) > CACHE_SIZE:
                 self._cache.popitem(last=False)
@@ -92,7 +95,7 @@ class SimulatedSensor(TactileSensor):
         with self._contact_lock:
             self._script = None
             self._static = change
-        return change
+        return self.pair.to_reading(change)
 
     def replace_pair(self, pair: SensorPair) -> None:
         """Read another simulated sensor pair from the next frame on (say, a drawn skin per trial).
@@ -100,7 +103,13 @@ class SimulatedSensor(TactileSensor):
         Its no-contact field differs from the old one's: take a new baseline (pad unloaded) before reading
         contacts. Its chips are rated by their own noise (the baseline's refusal threshold follows them). The
         contact in place is cleared; cached contact solves belong to the old pair and are dropped.
+
+        Raises:
+            ValueError: a pair of another board (readings would change shape under the readers).
         """
+        if pair.board is not self.pair.board and pair.board.name != self.pair.board.name:
+            raise ValueError(f"replace_pair: the sensor reads board {self.pair.board.name}, the pair is "
+                             f"{pair.board.name}'s")
         self.clear_contact()
         self._cache.clear()
         self._chip = dataclasses.replace(pair.params.chip, rate_hz=self.config.rate_hz)
@@ -129,13 +138,14 @@ class SimulatedSensor(TactileSensor):
 
     @property
     def contact_field_ut(self) -> np.ndarray:
-        """The noise-free field change (4, 4, 3) in uT (pad axes) that the next frame will carry."""
-        return self._change_at(time.monotonic())
+        """The noise-free field change (rows, cols, 3) in uT (pad axes) that the next frame will carry."""
+        return self.pair.to_reading(self._change_at(time.monotonic()))
 
     @property
     def expected_baseline_ut(self) -> np.ndarray:
-        """(4, 4, 3) float32 idle reading without noise, uT: pass it to ``set_baseline`` to skip calibration."""
-        return self.pair.baseline_ut.astype(np.float32)
+        """(rows, cols, 3) float32 idle reading without noise, uT: pass it to ``set_baseline`` to skip
+        calibration."""
+        return self.pair.baseline_reading_ut.astype(np.float32)
 
     def stall(self) -> None:
         """Stop producing frames (like a hung board) until :meth:`resume`; readers go stale."""
@@ -180,8 +190,8 @@ class SimulatedSensor(TactileSensor):
             return static
         if script is not None:
             timeline, t0 = script
-            return timeline.change_at(t_host_s - t0)
-        return np.zeros((4, 4, 3))
+            return timeline.chip_change_at(t_host_s - t0)
+        return np.zeros((self.pair.board.n_chips, 3))
 
     def _run(self) -> None:
         cpu0 = time.thread_time()
@@ -201,8 +211,8 @@ class SimulatedSensor(TactileSensor):
                     generation, pair = self._pair_generation, self.pair
                     with self._contact_lock:
                         m = pair.chips.measure(pair.baseline_field_ut + self._change_at(deadline), rng)
-                        self._publish(m.raw_ut, m.saturated, seq=seq, t_host_s=time.monotonic(),
-                                      t_device_s=k * period)
+                        self._publish(pair.to_reading(m.raw_ut), pair.to_reading(m.saturated), seq=seq,
+                                      t_host_s=time.monotonic(), t_device_s=k * period)
                     with self._cond:
                         self._published_generation = generation
                         self._cond.notify_all()
