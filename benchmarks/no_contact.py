@@ -45,7 +45,8 @@ from tactile_manip.perception import TactileEstimator  # noqa: E402
 from tactile_manip.perception.press_check import DRIFT_ALLOWANCE_UT, FALSE_ALARM, MIN_LIKENESS  # noqa: E402
 from tactile_manip.sim.objects import IndenterPose  # noqa: E402
 from tactile_manip.sim.pair import SensorPair  # noqa: E402
-from tactile_manip.sim.params import SimParams, randomise  # noqa: E402
+from tactile_manip.boards import load_board  # noqa: E402
+from tactile_manip.sim.params import for_board, randomise  # noqa: E402
 from tactile_manip.sim.shapes import make_indenter  # noqa: E402
 
 FORCES_N = (0.1, 0.25, 0.5, 1.0, 2.0, 5.0, 10.0)
@@ -83,7 +84,7 @@ def judge_noise(estimator: TactileEstimator) -> list[dict[str, Any]]:
 def measured_noise_ut(pair: SensorPair, rng: np.random.Generator, frames: int = 125) -> np.ndarray:
     """(4, 4, 3) the per-channel std of ``frames`` idle frames, as a baseline measures it."""
     raw = np.stack([pair.chips.measure(pair.baseline_field_ut, rng).raw_ut for _ in range(frames)])
-    return raw.std(axis=0)
+    return pair.to_reading(raw.std(axis=0))
 
 
 def judge_board(estimator: TactileEstimator, poses: int, seed: int) -> dict[str, Any]:
@@ -95,13 +96,14 @@ def judge_board(estimator: TactileEstimator, poses: int, seed: int) -> dict[str,
         counts[sensor] = {k: np.zeros(len(FORCES_N) + 1, int) for k in ("frames", "detected", "measured")}
     for i in range(poses):
         drawn = i % 3 != 0  # two drawn sensors per nominal one
-        params = randomise(SimParams(), rng) if drawn else SimParams()
+        nominal = for_board(load_board("supermag-4x4"))
+        params = randomise(nominal, rng) if drawn else nominal
         pair = SensorPair(params, seed=PAIR_SEED + i)
         rod = rods[i % len(rods)]
         pose = IndenterPose(x_mm=rng.uniform(-5, 5), y_mm=rng.uniform(-5, 5), yaw_rad=rng.uniform(-math.pi, math.pi),
                             tilt_x_rad=math.radians(rng.uniform(-5, 5)), tilt_y_rad=math.radians(rng.uniform(-5, 5)))
         idle = pair.chips.measure(pair.baseline_field_ut, rng, drift_ut=pair.chips.draw_drift(rng))
-        frames = [(0, (idle.raw_ut - pair.baseline_ut).astype(np.float32))]
+        frames = [(0, pair.to_reading((idle.raw_ut - pair.baseline_ut).astype(np.float32)))]
         for k, force in enumerate(FORCES_N, start=1):
             sample = pair.press(rod, pose, force, rng, render_depth=False)
             if not sample.bottomed_out and sample.contact:

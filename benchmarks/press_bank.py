@@ -26,7 +26,8 @@ import numpy as np
 
 from tactile_manip.sim.objects import IndenterPose
 from tactile_manip.sim.pair import SensorPair
-from tactile_manip.sim.params import SimParams, randomise
+from tactile_manip.boards import load_board
+from tactile_manip.sim.params import for_board, randomise
 from tactile_manip.sim.shapes import make_indenter
 
 SHAPES = ([("allen_key", {}), ("letter_r", {})]
@@ -48,7 +49,7 @@ def press_fields(seed: int, presses: int, shapes: list) -> np.ndarray:
     indenters = [make_indenter(name, **kwargs) for name, kwargs in shapes]
     fields = []
     for i in range(presses):
-        pair = SensorPair(randomise(SimParams(), rng), seed=seed * 100000 + i)
+        pair = SensorPair(randomise(for_board(load_board("supermag-4x4")), rng), seed=seed * 100000 + i)
         pose = IndenterPose(x_mm=rng.uniform(-6, 6), y_mm=rng.uniform(-6, 6), yaw_rad=rng.uniform(-math.pi, math.pi),
                             tilt_x_rad=math.radians(rng.uniform(-5, 5)), tilt_y_rad=math.radians(rng.uniform(-5, 5)))
         indenter = indenters[rng.integers(len(indenters))]
