@@ -24,9 +24,9 @@ import math
 
 import numpy as np
 
+from tactile_manip.boards import load_board
 from tactile_manip.sim.objects import IndenterPose
 from tactile_manip.sim.pair import SensorPair
-from tactile_manip.boards import load_board
 from tactile_manip.sim.params import for_board, randomise
 from tactile_manip.sim.shapes import make_indenter
 

@@ -196,7 +196,7 @@ def rated_noise_ut(board_layout: str) -> np.ndarray | None:
     return np.array([chip.noise_xy_ut, chip.noise_xy_ut, chip.noise_z_ut], dtype=np.float64)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def press_bank(board_layout: str) -> tuple[np.ndarray, np.ndarray] | None:
     """The board's shipped bank: (M, R*C*3) float32 unit directions of simulated presses, and the board's
     symmetries as one (S*R*C*3, R*C*3) matrix (see :class:`PressCheck`); read-only; None where none ships."""
@@ -225,7 +225,7 @@ def bank_of(directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return flat, symmetries
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def press_check_for(board_layout: str, input_shape: tuple[int, ...]) -> PressCheck | None:
     """The board's :class:`PressCheck` (its rated noise with the drift allowance, its press bank where one
     ships), or None for a board whose chip noise is not known here (the estimators then keep their older
