@@ -29,8 +29,15 @@ Bad input raises ValueError naming the problem (wrong shape, NaN or infinite val
 the history is unchanged); a missing or foreign model file raises
 :class:`~tactile_manip.perception.reconstruct.ModelFileError` naming the path.
 
+No contact is no contact: on a board whose chip noise is known, a reading within the board's noise floor
+(:class:`~tactile_manip.perception.press_check.PressCheck`: rated chip noise and a drift allowance, a stated
+0.1 % false-alarm rate) gives ``in_contact`` False and no quantity; the model does not run on it.
+
 No answer is silently wrong: a state is flagged (``plausible`` False, ``implausible_reason`` saying why) and holds
 no quantity (every value and sigma None, ``values`` and ``sigmas`` empty) when
+
+- the reading is above the noise floor with a pattern no simulated press of the board makes (the press check's
+  likeness; the reason starts with "no press"): ``in_contact`` is True and the model does not run;
 
 - the reading holds a |value| at or beyond :attr:`ContactEstimator.plausible_limits_ut` (more than an MLX90393
   can report as a change, or far beyond the field of a press: the model's ``input.plausible_field_ut``, else its
@@ -60,7 +67,7 @@ from typing import TYPE_CHECKING
 import math
 import time
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -70,9 +77,10 @@ from tactile_manip.boards.identity import check_board_of
 from tactile_manip.extras import require
 from tactile_manip.perception.confidence import SigmaCalibration
 from tactile_manip.perception.contact_context import ContextBuffer
-from tactile_manip.perception.estimator import implausible_field, plausible_limits_ut
+from tactile_manip.perception.estimator import implausible_field, plausible_limits_ut, real_field
 from tactile_manip.perception.model_metadata import check_metadata
 from tactile_manip.perception.onnx_session import session_options
+from tactile_manip.perception.press_check import PressCheck, press_check_for
 from tactile_manip.perception.reconstruct import ModelFileError, read_metadata
 from tactile_manip.shipped import resolve_model_path
 from tactile_manip.types import TactileReading
@@ -148,9 +156,15 @@ class ContactEstimator:
         threads: onnxruntime intra-op threads (1: what a control loop wants).
         min_field_ut: for a model without an ``in_contact`` target, a reading whose largest |field| is below
             this is "not in contact" (the pose estimator's rule). A model with one uses its own output (> 0.5).
+            Both only where the board has no press check (or ``press_check`` is False).
+        press_check: judge each reading with the board's
+            :class:`~tactile_manip.perception.press_check.PressCheck` first (the default, where the board's chip
+            noise is known): within the noise floor "no contact", above it and unlike any press "no press" (no
+            answer), and the model runs only on the rest. False runs the model on every reading.
     """
 
-    def __init__(self, path: str | Path, *, threads: int = 1, min_field_ut: float = 20.0) -> None:
+    def __init__(self, path: str | Path, *, threads: int = 1, min_field_ut: float = 20.0,
+                 press_check: bool = True) -> None:
         if not (np.isfinite(min_field_ut) and min_field_ut >= 0):
             raise ValueError(f"min_field_ut must be a finite value >= 0, got {min_field_ut!r}")
         self.path = resolve_model_path(path)  # a shipped model's name, or a checkout's path from any folder
@@ -185,8 +199,14 @@ class ContactEstimator:
             raise ModelFileError(f"{self.path}: its image_position_weight {weight!r} is not a share in [0, 1]")
         self.image_position_weight = float(weight)
         self.min_field_ut = float(min_field_ut)
+        #: the no-contact and press-likeness tests of the board (None for a board whose chip noise is unknown here:
+        #: the field rule and the model's in_contact output then decide)
+        self.press_check: PressCheck | None = (press_check_for(self.board_layout, self.input_shape)
+                                               if press_check else None)
         channels = self.metadata["input"].get("channels", {"kind": "magnetic_vector", "unit": "uT"})
         self._magnetic_ut = channels.get("kind") == "magnetic_vector" and channels.get("unit") == "uT"
+        if not self._magnetic_ut:  # the board's chip noise is a floor of fields in uT only
+            self.press_check = None
         #: (channels,) uT: a reading with a |value| at or beyond its channel's limit is implausible (no answer)
         self.plausible_limits_ut = plausible_limits_ut(self.metadata, channels=self.input_shape[-1],
                                                        board_layout=self.board_layout, magnetic_ut=self._magnetic_ut)
@@ -305,6 +325,9 @@ class ContactEstimator:
         if why:  # no answer, and the reading stays out of the context
             return self._implausible_state(peak_ut >= self.min_field_ut, None, why, time.perf_counter() - t0)
         self._history.push(field_ut, time.monotonic() if t_s is None else float(t_s))  # the bound input
+        unmeasured = self._unmeasured(field_ut, t0)
+        if unmeasured is not None:  # no contact, or no press: the frame is context, the model does not run
+            return unmeasured
         self.session.run_with_iobinding(self._binding)                                # into _mean, _sigma
         return self._state(peak_ut, time.perf_counter() - t0)
 
@@ -322,7 +345,11 @@ class ContactEstimator:
                              "pads' readings need one ContactEstimator each")
         t0 = time.perf_counter()
         checked = [self._check(r.field_ut if isinstance(r, TactileReading) else r) for r in readings]
-        run = [i for i, (_, _, why) in enumerate(checked) if not why]
+        sound = [f for f, _, why in checked if not why]
+        if self.press_check is not None and sound:  # every reading judged in one batched product
+            self.press_check.judge_many(np.stack(sound))
+        unmeasured = [None if why else self._unmeasured(f, t0) for f, _, why in checked]
+        run = [i for i, (_, _, why) in enumerate(checked) if not why and unmeasured[i] is None]
         mean = sigma = np.empty((0, len(self.target_names)), np.float32)
         if run:
             batch = np.stack([checked[i][0] for i in run])[:, None].astype(np.float32, copy=False)
@@ -333,16 +360,40 @@ class ContactEstimator:
         for i, (_, peak_ut, why) in enumerate(checked):
             if why:
                 states.append(self._implausible_state(peak_ut >= self.min_field_ut, None, why, latency, frames=0))
+            elif unmeasured[i] is not None:
+                states.append(replace(unmeasured[i], latency_s=latency))
             else:
                 states.append(self._state_of(mean[rows[i]].tolist(), sigma[rows[i]].tolist(), peak_ut, latency, 1))
         return states
+
+    def set_noise_floor(self, noise_ut: np.ndarray) -> None:
+        """Judge "no contact" against a measured noise floor: ``noise_ut`` (3,) per axis or (R, C, 3) per channel
+        (a sensor's ``baseline.noise_ut``), uT, with the drift allowance, never below the board's rated floor
+        (:meth:`~tactile_manip.perception.press_check.PressCheck.with_noise`). No-op for a board without a
+        :class:`~tactile_manip.perception.press_check.PressCheck`."""
+        if self.press_check is not None:
+            self.press_check = self.press_check.with_noise(noise_ut)
+
+    def _unmeasured(self, field_ut: np.ndarray, t0: float) -> ContactState | None:
+        """The state of a reading the model is not run on: within the noise floor (no contact: ``in_contact``
+        False, plausible, no quantities), or above it with a pattern no press makes (``plausible`` False); None
+        for a press to measure, or where the board has no press check."""
+        if self.press_check is None:
+            return None
+        contact, no_press = self.press_check.judge(field_ut)
+        if contact and not no_press:
+            return None
+        if not contact:
+            return ContactState(in_contact=False, context_frames=0, latency_s=time.perf_counter() - t0)
+        return self._implausible_state(True, None, no_press, time.perf_counter() - t0, frames=0)
 
     def _check(self, field_ut: np.ndarray) -> tuple[np.ndarray, float, str]:
         """The reading as float32 (R, C, A), its largest |value| (uT) and why it is implausible ("" when it is
         not); ValueError for a wrong shape or a NaN or infinite value. One reduction decides for a plausible
         reading: NaN and inf carry through the maximum, and a peak below every limit is plausible."""
-        if getattr(field_ut, "dtype", None) == np.float32:
-            arr = np.asarray(field_ut)
+        field_ut = real_field(field_ut)  # ValueError for complex, boolean or text values
+        if field_ut.dtype == np.float32:
+            arr = field_ut
         else:
             with np.errstate(over="ignore"):  # a float64 beyond float32's range is judged below, not warned about
                 arr = np.asarray(field_ut, dtype=np.float32)
@@ -374,7 +425,8 @@ class ContactEstimator:
             if probability is None or not math.isfinite(probability):  # the field rule, as without that output
                 return self._implausible_state(peak_ut >= self.min_field_ut, None, why, latency_s)
             probability = min(max(probability, 0.0), 1.0)
-            return self._implausible_state(probability > 0.5, probability, why, latency_s, frames=frames_used)
+            contact = True if self.press_check is not None else probability > 0.5  # the check saw a press
+            return self._implausible_state(contact, probability, why, latency_s, frames=frames_used)
         for k, sigma_map in self.sigma_maps.items():
             sigma[k] = sigma_map.one(sigma[k])
         fields = self._blank.copy()
@@ -383,7 +435,9 @@ class ContactEstimator:
         if self._flag is not None:
             probability = min(max(mean[self._flag], 0.0), 1.0)
             fields["in_contact_probability"] = probability
-            fields["in_contact"] = probability > 0.5
+            fields["in_contact"] = True if self.press_check is not None else probability > 0.5
+        elif self.press_check is not None:
+            fields["in_contact"] = True  # the press check found a press above the noise floor
         else:
             fields["in_contact"] = peak_ut >= self.min_field_ut
         fields["values"] = dict(zip(self.target_names, mean))

@@ -69,6 +69,7 @@ import numpy as np
 from tactile_manip.perception.confidence import ConfidenceCalibration
 from tactile_manip.perception.angle_head import within_probability
 from tactile_manip.perception.pose import PoseParams, angle_from_image, wrap_axial
+from tactile_manip.perception.press_check import PressCheck, press_check_for
 from tactile_manip.perception.reconstruct import (READING_LIMIT_UT, ModelFileError, Reconstruction, Reconstructor,
                                                    out_of_range)
 from tactile_manip.types import IMPLAUSIBLE_READING, AngleEstimate, Deferred, TactileReading
@@ -161,6 +162,11 @@ class TactilePoseEstimator:
             _model_metadata(reconstructor), channels=int(reconstructor.input_shape[-1]),
             board_layout=reconstructor.board_layout, magnetic_ut=reconstructor.magnetic_ut)
         self._plausible_ut = float(self.plausible_limits_ut.min())  # below it, one comparison says "plausible"
+        #: the board's no-contact and press-likeness tests (None for a reconstructor of no known board, such as
+        #: the interpolation baselines: the field rule ``min_field_ut`` alone decides there)
+        self.press_check: PressCheck | None = (
+            press_check_for(reconstructor.board_layout, tuple(reconstructor.input_shape))
+            if reconstructor.magnetic_ut and _model_metadata(reconstructor) else None)
 
     @property
     def input_shape(self) -> tuple[int, ...]:
@@ -260,19 +266,21 @@ class TactilePoseEstimator:
         n = len(stack)
         peaks = np.abs(stack).reshape(n, -1).max(axis=1)
         flagged = flags.reshape(n, -1).any(axis=1)
+        contact, no_press = self._judge(stack, peaks)
         out: list[AngleEstimate | None] = [None] * n
         now, later = [], []  # readings whose image is needed now; those whose head answers
         for i in range(n):
             reason = why[i] if why is not None else (self.implausible(stack[i]) if peaks[i] >= self._plausible_ut
                                                      else "")
+            reason = reason or no_press[i]
             if reason:  # no answer: nothing to escalate (an image only where the caller asked for it)
                 out[i] = AngleEstimate(0.0, 0.0, False, reason=IMPLAUSIBLE_READING, plausible=False,
                                        implausible_reason=reason)
                 if images:
                     now.append(i)
-            elif peaks[i] < self.min_field_ut and not images:
+            elif not contact[i] and not images:
                 out[i] = AngleEstimate(0.0, 0.0, False, reason=NO_CONTACT_FIELD)
-            elif self.defers_images and not flagged[i] and not images and peaks[i] >= self.min_field_ut:
+            elif self.defers_images and not flagged[i] and not images and contact[i]:
                 later.append(i)
             else:
                 now.append(i)
@@ -298,7 +306,7 @@ class TactilePoseEstimator:
             for i, rec in zip(now, made):
                 recs[i] = rec
                 t3 = time.perf_counter()
-                out[i] = self._image_estimate(rec, flags[i], bool(peaks[i] >= self.min_field_ut), stack[i],
+                out[i] = self._image_estimate(rec, flags[i], bool(contact[i]), stack[i],
                                               out[i], timings[i])
                 timings[i].update(reconstruct=t2 - t1, pose=time.perf_counter() - t3)
         deferred = set(later)
@@ -315,6 +323,24 @@ class TactilePoseEstimator:
             else:
                 done.append(replace(est, saturated_chips=chips, timings_s=timing))
         return done, (recs if images else None)
+
+    def _judge(self, stack: np.ndarray, peaks: np.ndarray) -> tuple[np.ndarray, list[str]]:
+        """Per reading of ``stack`` (n, R, C, 3): whether it holds a contact field (its largest |value| at least
+        ``min_field_ut`` and, where the board has a press check, above its noise floor), and why it is no press
+        ("" where it is one, or holds no contact)."""
+        contact = peaks >= self.min_field_ut
+        no_press = [""] * len(stack)
+        if self.press_check is not None:  # a reading beyond the plausible bound is no answer already
+            judged = np.flatnonzero(contact & (peaks < self._plausible_ut))
+            for i, (touch, why) in zip(judged, self.press_check.judge_many(stack[judged])):
+                contact[i], no_press[i] = touch, why
+        return contact, no_press
+
+    def set_noise_floor(self, noise_ut: np.ndarray) -> None:
+        """Judge "no contact" against a measured noise floor (see
+        :meth:`~tactile_manip.perception.contact.ContactEstimator.set_noise_floor`); no-op without a press check."""
+        if self.press_check is not None:
+            self.press_check = self.press_check.with_noise(noise_ut)
 
     def _reconstruct(self, checked: np.ndarray) -> list[Reconstruction]:
         """Reconstructions of checked readings (M, R, C, 3): one reading through the file's one-reading graph,
@@ -437,7 +463,21 @@ class _PendingStat(Deferred):
 
 
 def _field(reading: TactileReading | np.ndarray) -> np.ndarray:
-    return reading.field_ut if isinstance(reading, TactileReading) else reading
+    """The field of a reading: a :class:`TactileReading`'s, or the array itself once it is known to hold real
+    numbers (ValueError naming the dtype otherwise: a complex value would lose its imaginary part and True would
+    read as 1 uT)."""
+    if isinstance(reading, TactileReading):
+        return reading.field_ut
+    return real_field(reading)
+
+
+def real_field(value: object) -> np.ndarray:
+    """``value`` as an array of real numbers, unconverted (a float array is returned as it is: one attribute
+    read); ValueError naming the dtype for complex, boolean, text or object values."""
+    arr = value if isinstance(value, np.ndarray) else np.asarray(value)
+    if arr.dtype.kind not in "fiu":
+        raise ValueError(f"a reading holds real numbers (uT), got an array of dtype {arr.dtype}")
+    return arr
 
 
 def _saturated(reading: TactileReading | np.ndarray) -> np.ndarray | None:

@@ -23,7 +23,10 @@ Each keeps its own contract: the angle may be undefined (``angle.defined``), the
 sigmas, and either may be no answer (``plausible`` False, with its ``implausible_reason``): for a reading beyond
 what the chip can report or far beyond the field of a press both are (the same bound: 2000 uT on the SuperMag
 board), and a contact state whose output is off the pad or outside the trained force range is.
-:attr:`TactileEstimate.plausible` says whether both are answers.
+:attr:`TactileEstimate.plausible` says whether both are answers. Before either part answers, the board's press
+check (:mod:`~tactile_manip.perception.press_check`, one for both parts) judges the reading once: within the
+board's noise floor it is no contact (:attr:`TactileEstimate.in_contact` False, no position, no force, no
+angle), and above it with a pattern no simulated press makes (noise, a uniform field) it is no answer.
 
 Where the contact is, two estimates exist: the centroid of the reconstructed contact (``angle.centroid_mm``)
 and the contact model's centre of pressure (``contact.position_mm``). They err differently: on objects neither
@@ -92,6 +95,15 @@ class TactileEstimate:
     def __getstate__(self) -> dict:
         """The fields with the position measured (a pickled or copied estimate holds values only)."""
         return {**self.__dict__, "_position_mm": self.position_mm}
+
+    @property
+    def in_contact(self) -> bool:
+        """Whether the reading holds a contact: the contact model's flag where there is one (above the board's
+        noise floor: :mod:`~tactile_manip.perception.press_check`), else whether the pose part saw a contact
+        field. Without a contact, ``position_mm`` and the contact's quantities are None."""
+        if self.contact is not None:
+            return self.contact.in_contact
+        return self.angle.reason != NO_CONTACT_FIELD
 
     @property
     def plausible(self) -> bool:
@@ -166,7 +178,7 @@ def fused_position_mm(angle: AngleEstimate, contact: ContactState | None, image_
     without a contact model). None where the reading's field is below the pose estimator's ``min_field_ut``: a
     contact model trained on presses only reports a contact on an empty pad. With no share for the image, the
     contact model's position needs no image (a deferred one stays undecoded)."""
-    if angle.reason == NO_CONTACT_FIELD:
+    if angle.reason == NO_CONTACT_FIELD or (contact is not None and not contact.in_contact):
         return None
     model = contact.position_mm if contact is not None and contact.in_contact else None
     if image_weight == 0.0 and model is not None:
@@ -257,6 +269,16 @@ class TactileEstimator:
 
     def _position(self, angle: AngleEstimate, contact: ContactState | None) -> tuple[float, float] | None:
         return fused_position_mm(angle, contact, self.image_position_weight, self._min_area_mm2)
+
+    def set_noise_floor(self, noise_ut: np.ndarray) -> None:
+        """Judge "no contact" against a measured noise floor in both parts: ``noise_ut`` (3,) per axis or (R, C, 3)
+        per channel, uT, such as a sensor's ``baseline.noise_ut`` (with the drift allowance, never below the
+        board's rated floor: :meth:`~tactile_manip.perception.press_check.PressCheck.with_noise`)."""
+        checks = [part for part in (self.pose, self.contact) if getattr(part, "press_check", None) is not None]
+        if checks:  # one check for both parts, as loaded: the reading is judged once
+            check = checks[0].press_check.with_noise(noise_ut)
+            for part in checks:
+                part.press_check = check
 
     def check_layout(self, layout: str) -> None:
         """Refuse a sensor of board layout ``layout`` that either part does not read (ValueError naming both)."""

@@ -42,7 +42,7 @@ def test_either_alone_where_the_other_sees_no_contact() -> None:
     assert fused_position_mm(empty, TOUCH, 0.7) == (1.0, 1.0)
     assert fused_position_mm(small, TOUCH, 0.7) == (1.0, 1.0)  # its centroid is no centroid
     lifted = ContactState(in_contact=False, x_mm=4.0, y_mm=4.0)
-    assert fused_position_mm(LINE, lifted, 0.7) == (2.0, -1.0)
+    assert fused_position_mm(LINE, lifted, 0.7) is None  # the contact model says no contact: no position
     force_only = ContactState(in_contact=True, force_n=3.0)
     assert fused_position_mm(LINE, force_only, 0.7) == (2.0, -1.0)
     assert fused_position_mm(empty, lifted, 0.7) is None

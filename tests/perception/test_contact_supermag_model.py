@@ -68,11 +68,10 @@ def test_with_the_pose_model_the_position_lies_between_the_image_and_the_model_a
     image, model = np.array(est.angle.centroid_mm), np.array(est.contact.position_mm)
     np.testing.assert_allclose(est.position_mm, (image + model) / 2, atol=1e-9)
     assert np.hypot(*(np.array(est.position_mm) - press.pressure.centroid_mm)) < 1.0  # the centre of pressure
-    # a tenth of that press is under the pose estimator's 20 uT field rule: the contact model still says "in
-    # contact" (it never saw an empty pad), and the position follows the field rule
+    # a tenth of that press is within the board's noise floor: no contact for both parts, and no position
     faint = both.estimate((press.field_ut * 0.1).astype(np.float32))
-    assert faint.contact.in_contact and faint.angle.reason == "no contact field"
-    assert faint.position_mm is None
+    assert not faint.contact.in_contact and faint.angle.reason == "no contact field"
+    assert faint.position_mm is None and faint.contact.force_n is None and not faint.in_contact
 
 
 def test_several_pads_through_one_tactile_estimator_equal_each_pad_alone() -> None:
