@@ -427,11 +427,15 @@ def depth_choices(root: Path, doc: str) -> list[str]:
     and the default estimator's acceptance rows, from ``benchmarks/bench_depth.py``."""
     d = _json(root, DEPTH)
     m = d["machine"]
+    load = m["load_average"][0]
+    wall = ("Wall p99 is mostly the time the thread waited for a core on that busy machine; " if load >= m["usable_cores"]
+            else "On that quiet machine wall and CPU time agree; on a busy one wall p99 is mostly the time the thread "
+                 "waits for a core, and ")
     lines = ["", f"The default model's depth image, one thread, by what each image averages (`python -m "
-             f"benchmarks.bench_depth`, {m['time_utc'][:10]}; {m['cpu_model']}, {m['usable_cores']} cores shared with "
-             f"other jobs, load average {m['load_average'][0]:.1f}; {d['readings']} unseen-rod readings x "
-             f"{d['repeats']}; {_link('depth.md', DEPTH.replace('.json', '.md'), doc)}). Wall p99 is mostly the time "
-             "the thread waited for a core on that busy machine; best p99 (each reading's fastest of the passes) "
+             f"benchmarks.bench_depth`, {m['time_utc'][:10]}; {m['cpu_model']}, {m['usable_cores']} cores, "
+             f"load average {load:.1f}; {d['readings']} unseen-rod readings x "
+             f"{d['repeats']}; {_link('depth.md', DEPTH.replace('.json', '.md'), doc)}). {wall}"
+             "best p99 (each reading's fastest of the passes) "
              "and CPU p99 (the thread's CPU time) are the cost itself. The default decodes once "
              "(`image_symmetry=\"none\"`); the file's four-pass average (`\"stored\"`) is what the trials, "
              "`evaluate` (Table I), `calibrate` and `export --depth` decode, where an image's quality pays and its "
