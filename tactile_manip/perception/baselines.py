@@ -27,23 +27,31 @@ from tactile_manip.types import AngleEstimate, TactileReading
 BLIND = "blind"  # the name a scene's method gives the blind baseline (``reconstructor = "blind"``)
 
 
-class BlindPoseEstimator:
-    """The pose part of the blind baseline: angle 0 (the pad's x axis) through the pad centre, confidence 1, for
-    any reading of any board. No reconstructor, no calibration, no angle head."""
+class _AnyBoardPose:
+    """What the pose parts without a model share: they read any board's readings, with no reconstructor,
+    calibration or angle head."""
 
-    name = BLIND
+    name = ""
     calibration = None
     angle_head = None
-    angle_source = "prior"
+    angle_source = ""
     input_shape = None  # any reading
     board_layout = ""  # any board
     min_contact_area_mm2 = 0.0
 
     def __repr__(self) -> str:
-        return "BlindPoseEstimator()"
+        return f"{type(self).__name__}()"
 
     def check_layout(self, layout: str) -> None:
-        """Any board's sensor is read (and ignored)."""
+        """Any board's sensor is read (a contact model beside it checks its own board)."""
+
+
+class BlindPoseEstimator(_AnyBoardPose):
+    """The pose part of the blind baseline: angle 0 (the pad's x axis) through the pad centre, confidence 1, for
+    any reading of any board. No reconstructor, no calibration, no angle head."""
+
+    name = BLIND
+    angle_source = "prior"
 
     def estimate(self, reading: TactileReading | np.ndarray) -> AngleEstimate:
         """The prior, whatever ``reading`` holds."""
@@ -64,24 +72,13 @@ class BlindPoseEstimator:
 NO_POSE_MODEL = "no pose model"  # the reason of every angle of an estimator without a pose model
 
 
-class NoPoseEstimator:
+class NoPoseEstimator(_AnyBoardPose):
     """The pose part of an estimator whose board has a contact model and no pose model (an AnySkin or eFlesh
     board, say): every angle is undefined (``reason`` :data:`NO_POSE_MODEL`, confidence 0), so nothing acts on
     one, and the estimates' ``position_mm`` is the contact model's. Reads any board's readings."""
 
     name = "none"
-    calibration = None
-    angle_head = None
     angle_source = "none"
-    input_shape = None  # any reading
-    board_layout = ""  # any board
-    min_contact_area_mm2 = 0.0
-
-    def __repr__(self) -> str:
-        return "NoPoseEstimator()"
-
-    def check_layout(self, layout: str) -> None:
-        """Any board's sensor is read (the contact model checks its own layout)."""
 
     def estimate(self, reading: TactileReading | np.ndarray) -> AngleEstimate:
         """No angle."""

@@ -58,20 +58,3 @@ def test_the_table_names_every_shipped_task_and_each_is_a_task() -> None:
     for name in TASKS:
         cls = task_class(name)
         assert issubclass(cls, Task) and cls.name == name and cls.title
-
-
-def test_the_tasks_import_nothing_of_the_layers_that_run_them() -> None:
-    """behaviours/ sits below trials/ (docs/design.md, Layers): a task gets its records and presentations as
-    objects, and imports none of the modules that run, log or report it."""
-    above = tuple(f"tactile_manip.{folder}" for folder in NAMELESS)
-    offenders = {}
-    for path in sorted((PACKAGE / "behaviours").rglob("*.py")):
-        names = set()
-        for node in ast.walk(ast.parse(path.read_text())):
-            if isinstance(node, ast.Import):
-                names.update(alias.name for alias in node.names)
-            elif isinstance(node, ast.ImportFrom) and node.module:
-                names.add(node.module)
-        if found := sorted(n for n in names if n.startswith(above)):
-            offenders[path.name] = found
-    assert offenders == {}
