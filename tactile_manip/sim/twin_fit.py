@@ -36,6 +36,7 @@ from tactile_manip.sim.twin import Magnets, board_magnets, discs_field_pad_ut, p
 STAGES = ("file", "magnets", "readout")
 MIN_FIT_EV = 0.3          # a fit that explains less of its own rows has not converged on this board
 READOUT_RIDGE = 0.05      # pull of a free readout towards its chip's turn at unit gain (share of the field's power)
+READOUT_PRIOR_ROWS = 12   # ... and at least as much as this many presses would weigh (a handful of labels)
 # share of the cost the untouched board's field carries per stage (the chips' offsets taken as nil); in "readout"
 # only where the presses do not pin the magnets (all at one point: less than PINNING_SPAN_MM apart), and then only
 # enough to keep them from wandering; elsewhere the offsets take up what the geometry leaves of the rest field
@@ -161,7 +162,8 @@ def solve_readout(stage: str, change: np.ndarray, readings: np.ndarray, axes: np
     """(C, 3, 3) readout per chip (pad field -> chip reading) that best maps ``change`` (N, C, 3) onto
     ``readings`` (N, C, 3): a gain on the file's axes (``file``), a gain on the best of :data:`TURNS`
     (``magnets``), or a 3x3 matrix drawn towards that turn at unit gain (``readout``: ridge regression, so a
-    field direction the presses hardly excite keeps the chip's turn). ``axes``: (C, 3, 3) the file's chip -> pad
+    field direction the presses hardly excite keeps the chip's turn, and a handful of presses cannot pull the
+    readout far). ``axes``: (C, 3, 3) the file's chip -> pad
     matrices."""
     out = np.empty((change.shape[1], 3, 3))
     for c in range(change.shape[1]):
@@ -178,7 +180,8 @@ def solve_readout(stage: str, change: np.ndarray, readings: np.ndarray, axes: np
             out[c] = best[1] * best[2]
             continue
         gram = b.T @ b
-        ridge = READOUT_RIDGE * max(float(np.trace(gram)) / 3.0, 1e-12)
+        share = max(READOUT_RIDGE, READOUT_PRIOR_ROWS / len(b))
+        ridge = share * max(float(np.trace(gram)) / 3.0, 1e-12)
         out[c] = np.linalg.solve(gram + ridge * np.eye(3), b.T @ y + ridge * best[2].T).T
     return out
 
