@@ -47,6 +47,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    import dataclasses
     import os
     import sys
     import tempfile
@@ -120,8 +121,6 @@ def run(args: argparse.Namespace) -> int:
                                      "ev_by_order": {"-".join(map(str, o["order"])): o["ev"] for o in fit.orders},
                                      "rest_rms_ut_by_order": {"-".join(map(str, o["order"])): o["rest_rms_ut"]
                                                               for o in fit.orders}}
-    import dataclasses
-
     name = args.name or f"{board.name}-fitted"
     source = (f"fitted by tactile-manip fit-board to {Path(args.raw).name} and {Path(args.labels).name} "
               f"(first {args.train_fraction:g} of the rows) from the board file {board.name}; [fit] says what on what")
