@@ -75,6 +75,14 @@ def test_a_probe_above_the_pad_changes_nothing_and_raw_adds_the_rest_field():
     assert np.abs(deep).max() > 50.0  # a 3 mm press moves the field by tens of uT at least
 
 
+def test_presses_at_pad_points_are_the_logged_poses_through_the_rig_frame():
+    twin = BoardTwin(known_board())
+    stage = grid_log(np.random.default_rng(1), 40)
+    xy, approach = twin.pad_poses(stage)
+    np.testing.assert_allclose(twin.readings_at_pad_ut(xy, approach), twin.readings_ut(stage), rtol=1e-12)
+    assert not twin.readings_at_pad_ut(np.zeros((1, 2)), np.array([-1.0])).any()  # above the pad: no press
+
+
 def test_a_board_without_twin_is_refused():
     with pytest.raises(ConfigError, match="fit-board"):
         BoardTwin(load_board("eflesh"))
