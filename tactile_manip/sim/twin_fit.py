@@ -153,10 +153,12 @@ def change_pad_ut(p: _Params, chips_mm: np.ndarray, size_mm: np.ndarray, log: Pr
 
 def _depth_per_z(log: PressLog) -> float:
     """-1 where the presses go in as the stage's z falls (the eFlesh rigs), +1 where it rises: the readings change
-    most at the far end of z's range from where they change least."""
+    most at the far end of z's range from where they change least (-1 where z or the readings do not vary)."""
     z = log.stage_xyz_mm[:, 2]
     size = np.linalg.norm(log.readings_ut.reshape(len(z), -1), axis=1)
-    return -1.0 if np.corrcoef(z, size)[0, 1] < 0 else 1.0
+    if np.ptp(z) == 0.0 or np.ptp(size) == 0.0:  # nothing to tell by: the rigs' usual way
+        return -1.0
+    return 1.0 if np.corrcoef(z, size)[0, 1] > 0 else -1.0
 
 
 def solve_readout(stage: str, change: np.ndarray, readings: np.ndarray, axes: np.ndarray) -> np.ndarray:
