@@ -1,6 +1,8 @@
 """The ROS 2 message types of the MCAP export: their fields, their ``ros2msg`` schema text and a JSON Schema.
 
-The fields are those of the ROS 2 interface packages (``builtin_interfaces``, ``std_msgs``, ``sensor_msgs``);
+The fields are those of the ROS 2 interface packages (``builtin_interfaces``, ``std_msgs``, ``sensor_msgs``,
+``geometry_msgs``, ``diagnostic_msgs``, ``std_srvs``), for the MCAP export and the live topics of
+``tactile-manip serve`` alike (one definition of each; :mod:`tactile_manip.interop.ros2.type_hash` hashes them);
 types are keyed ``pkg/Type`` as ``.msg`` files refer to each other, and MCAP schemas are named
 ``pkg/msg/Type`` as rosbag2 names them. The ``ros2msg`` text is the type's own fields followed by each type it
 uses, after a line of 80 ``=`` and ``MSG: pkg/Type``, which is how rosbag2 stores a definition in MCAP. The
