@@ -204,3 +204,35 @@ class MemoryTransport:
 
     def close(self) -> None:
         self.closed = True
+
+
+@dataclass
+class _TeePublisher:
+    publishers: list[Publisher]
+
+    @property
+    def drops(self) -> int:
+        return sum(p.drops for p in self.publishers)
+
+    def publish(self, cdr: bytes, stamp_ns: int, seq: int) -> None:
+        for p in self.publishers:
+            p.publish(cdr, stamp_ns, seq)
+
+
+@dataclass
+class Tee:
+    """Several transports as one (``serve --transport both``): each topic and service on every one."""
+
+    transports: list
+    name: str = "tee"
+
+    def advertise(self, topic: str, type_name: str, qos: Qos) -> _TeePublisher:
+        return _TeePublisher([t.advertise(topic, type_name, qos) for t in self.transports])
+
+    def add_service(self, name: str, srv_type: str, handler: Callable[[bytes], bytes]) -> None:
+        for t in self.transports:
+            t.add_service(name, srv_type, handler)
+
+    def close(self) -> None:
+        for t in self.transports:
+            t.close()

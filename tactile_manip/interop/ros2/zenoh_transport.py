@@ -40,6 +40,8 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 from tactile_manip.interop.ros2.names import check_namespace, check_node_name
+from tactile_manip.interop.ros2.type_hash import dds_type_name as dds_type
+from tactile_manip.interop.ros2.type_hash import type_hash
 from tactile_manip.interop.ros2.transport import BEST_EFFORT, TRANSIENT_LOCAL, Qos, SendQueue
 
 ADMIN_SPACE = "@ros2_lv"
@@ -48,12 +50,6 @@ LOOPBACK = "127.0.0.1"
 NO_TYPE_HASH = "TypeHashNotSupported"  # what rmw_zenoh writes for a type without a hash
 GID_BYTES = 16
 SERVICE_QOS = Qos(reliability="reliable", depth=10)  # rmw_qos_profile_services_default
-
-
-def dds_type(ros2_type: str) -> str:
-    """``"std_msgs/msg/String"`` -> ``"std_msgs::msg::dds_::String_"`` (the name rmw_zenoh uses on the wire)."""
-    pkg, kind, name = ros2_type.split("/")
-    return f"{pkg}::{kind}::dds_::{name}_"
 
 
 def mangle(name: str) -> str:
@@ -91,12 +87,8 @@ def rmw_zid(zid_hex: str) -> str:
 
 
 def type_hash_of(type_name: str) -> str:
-    """The RIHS01 hash of a ROS 2 type (``pkg/msg/T`` or ``pkg/srv/T``); :data:`NO_TYPE_HASH` where the hash
-    module cannot give one."""
-    try:
-        from tactile_manip.interop.ros2.type_hash import type_hash
-    except ImportError:  # pragma: no cover - the module ships with the package
-        return NO_TYPE_HASH
+    """The RIHS01 hash of a ROS 2 type (``pkg/msg/T`` or ``pkg/srv/T``); :data:`NO_TYPE_HASH` for a type
+    outside our table."""
     try:
         return type_hash(type_name)
     except (KeyError, ValueError):
