@@ -109,8 +109,11 @@ def main() -> int:
     calls = {}
     time.sleep(min(0.5, a.seconds / 4))
     for name in a.call:  # a ROS 2 client's call: a query on the service's key with rmw_zenoh's attachment
-        with lock:
-            srv = [t for t in tokens.values() if t["kind"] == "SS" and t.get("topic") == name]
+        srv = []
+        while not srv and time.monotonic() < deadline:  # its liveliness token may take a moment to arrive
+            with lock:
+                srv = [t for t in tokens.values() if t["kind"] == "SS" and t.get("topic") == name]
+            time.sleep(0.05)
         if not srv:
             calls[name] = {"error": "no such service in the graph"}
             continue
