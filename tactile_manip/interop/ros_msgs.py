@@ -54,6 +54,12 @@ MESSAGES: dict[str, list[tuple[str, str]]] = {
     # what ROS 2 (Iron on) adds to every service's event message; needed for a service's type hash
     "service_msgs/ServiceEventInfo": [("uint8", "event_type"), ("builtin_interfaces/Time", "stamp"),
                                       ("char[16]", "client_gid"), ("int64", "sequence_number")],
+    # our own, where no standard type fits (their .msg files: tactile_manip/interop/ros2/msg/)
+    "tactile_manip_msgs/Angle": [("std_msgs/Header", "header"), ("float32", "angle"), ("float32", "confidence"),
+                                 ("bool", "defined"), ("bool", "plausible")],
+    "tactile_manip_msgs/Contact": [("std_msgs/Header", "header"), ("bool", "in_contact"), ("bool", "plausible"),
+                                   ("geometry_msgs/Point", "position"), ("geometry_msgs/Vector3", "position_sigma"),
+                                   ("geometry_msgs/Vector3", "force"), ("geometry_msgs/Vector3", "force_sigma")],
 }
 # pkg/Service: its request and response are MESSAGES[f"{pkg/Service}_Request"] and [..._Response]. A request
 # with no fields (std_srvs/Trigger's) travels as one uint8 on the ROS 2 wire, the member rosidl adds to an empty
