@@ -118,7 +118,8 @@ def open_transport(args: argparse.Namespace):
         if args.transport in ("foxglove", "both"):
             from tactile_manip.interop.ros2.foxglove_transport import FoxgloveTransport
 
-            opened.append(FoxgloveTransport(host=args.bind, port=args.foxglove_port, allow_remote=args.allow_remote))
+            opened.append(FoxgloveTransport(host=args.bind, port=args.foxglove_port,
+                                            allow_remote=args.allow_remote).start())
     except BaseException:
         for t in opened:
             t.close()

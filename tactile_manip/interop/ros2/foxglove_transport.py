@@ -7,8 +7,8 @@ transport sends, so the app decodes them as it decodes a ROS 2 bag. Services (ta
 advertised with their request and response schemas and answered in CDR.
 
 Where it listens: 127.0.0.1 by default. Any other address is refused unless the caller allows it
-(``allow_remote=True``, the command's ``--allow-remote``), and :attr:`FoxgloveTransport.notice` then says that
-other machines can connect. A port in use is refused with :class:`PortInUseError` (one line at the CLI).
+(``allow_remote=True``, the command's ``--allow-remote``), and :meth:`FoxgloveTransport.description` then says
+that other machines can connect. A port in use is refused with :class:`PortInUseError` (one line at the CLI).
 
 What a slow client costs: ``publish`` hands the bytes to the SDK, which queues them per client (``backlog``
 messages) and never blocks the caller; when a client's queue is full the SDK drops that client's oldest message.
@@ -179,12 +179,11 @@ class FoxgloveTransport:
         host = LOOPBACK if self.host in ("0.0.0.0", "::", "[::]") else self.host
         return f"ws://{f'[{host}]' if ':' in host and not host.startswith('[') else host}:{self.port}"
 
-    @property
-    def notice(self) -> str:
-        """One line on where the server listens and who can connect."""
+    def description(self) -> str:
+        """Where the server listens and who can connect, for the command's status line."""
         reach = ("this machine only" if is_loopback(self.host)
-                 else "OTHER MACHINES CAN CONNECT (not loopback; --allow-remote)")
-        return f"foxglove: WebSocket server on {self.host}:{self.port} ({reach}); open {self.url} in Foxglove"
+                 else "OTHER MACHINES CAN CONNECT: not loopback, --allow-remote")
+        return f"foxglove WebSocket server on {self.host}:{self.port} ({reach}): open {self.url} in Foxglove"
 
     @property
     def slow_client_events(self) -> int:

@@ -1,4 +1,4 @@
-"""The Foxglove WebSocket transport: an independent client in another process (tests/interop/foxglove_ws_client.py:
+"""The Foxglove WebSocket transport: an independent client in another process (foxglove_ws_client.py beside this:
 the `websockets` package and mcap-ros2-support's decoder, nothing of ours) receives every message with its ROS 2
 schema, values equal to what was published and no gap; a service answers in CDR; slow and vanished clients
 never hold up publishing; where it listens is checked before anything starts."""
@@ -116,14 +116,14 @@ def _advertise_all(transport: FoxgloveTransport) -> list:
     return [transport.advertise(topic, type_name) for topic, type_name in TOPICS.items()]
 
 
-def test_only_loopback_unless_allowed_and_the_notice_says_so():
+def test_only_loopback_unless_allowed_and_the_description_says_so():
     assert is_loopback("127.0.0.1") and is_loopback("::1") and is_loopback("localhost")
     assert not is_loopback("0.0.0.0") and not is_loopback("192.168.1.5")
     with pytest.raises(ConfigError, match=r"0\.0\.0\.0 is not a loopback address.*--allow-remote"):
         FoxgloveTransport(host="0.0.0.0")
     remote = FoxgloveTransport(host="0.0.0.0", allow_remote=True)
-    assert "OTHER MACHINES CAN CONNECT" in remote.notice and remote.url == "ws://127.0.0.1:8765"
-    assert "this machine only" in FoxgloveTransport().notice
+    assert "OTHER MACHINES CAN CONNECT" in remote.description() and remote.url == "ws://127.0.0.1:8765"
+    assert "this machine only" in FoxgloveTransport().description()
     with pytest.raises(ConfigError, match="port"):
         FoxgloveTransport(port=70000)
     with pytest.raises(ConfigError, match="backlog"):
