@@ -137,8 +137,8 @@ def run(seconds: float, stall_s: float, cores: int) -> dict[str, Any]:
 
 
 def markdown(report: dict[str, Any]) -> str:
-    rows = ["| run | readings (source Hz) | per topic: received / published, gaps, received Hz | "
-            "reading -> published p50 / p99 | publish call p50 / p99 / max | drops (ours) | slow-client events |",
+    rows = [("| run | readings (source Hz) | per topic: received / published, gaps, received Hz | "
+             "reading -> published p50 / p99 | publish call p50 / p99 / max | drops (ours) | slow-client events |"),
             "|---|---|---|---|---|---|---|"]
     for name, r in report["runs"].items():
         per = "; ".join(f"{t.rsplit('/', 1)[-1]} {v['received']}/{v['published']}, {v['gaps']}, "

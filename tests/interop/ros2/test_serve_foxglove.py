@@ -158,6 +158,7 @@ def nothing_listens(port: int, timeout_s: float = 5.0) -> bool:
 
 
 def serve(*args: str) -> subprocess.Popen:
+    """``tactile-manip serve --transport foxglove ARGS`` (a later ``--transport`` in ARGS wins)."""
     return subprocess.Popen([sys.executable, "-m", "tactile_manip", "serve", "--transport", "foxglove", *args],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             env={**os.environ, "PYTHONUNBUFFERED": "1"})
@@ -221,7 +222,26 @@ def test_a_foxglove_port_in_use_is_one_line_and_exit_2():
     assert out == ""
 
 
-@pytest.mark.parametrize("sig, status", [(signal.SIGTERM, 143), (signal.SIGKILL, -9)])
+def test_serve_over_both_transports_listens_on_both_and_foxglove_streams(tmp_path):
+    pytest.importorskip("zenoh", reason="eclipse-zenoh is not installed (extra 'ros2')")
+    fox_port, zenoh_port = free_port(), free_port()
+    proc = serve("--sim", "--seconds", "6", "--foxglove-port", str(fox_port), "--zenoh-port", str(zenoh_port),
+                 "--transport", "both")
+    out = tmp_path / "got.json"
+    try:
+        wait_listening(proc, fox_port)
+        assert listening(zenoh_port)
+        client = _client(f"ws://127.0.0.1:{fox_port}", out, "--seconds", "2", "--wait-topics", "5")
+        got = _result(client, out)
+    finally:
+        _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 0, err
+    assert "zenoh (rmw_zenoh layout" in err and "foxglove WebSocket server" in err
+    assert len(got["messages"]["/tactile/angle"]) > 100  # about 2 s at 125 Hz
+    assert nothing_listens(fox_port) and nothing_listens(zenoh_port)
+
+
+@pytest.mark.parametrize("sig, status", [(signal.SIGINT, 130), (signal.SIGTERM, 143), (signal.SIGKILL, -9)])
 def test_no_foxglove_listener_outlives_serve(sig, status):
     port = free_port()
     proc = serve("--sim", "--foxglove-port", str(port))
