@@ -116,11 +116,11 @@ class FoxglovePublisher:
     drops: int = 0
     sent: int = 0
     unheard: int = 0
-    last_seq: int = 0
 
     def publish(self, cdr: bytes, stamp_ns: int, seq: int) -> None:
-        """Hand one CDR message (with its 4-byte encapsulation header) to the SDK, stamped ``stamp_ns``."""
-        self.last_seq = seq
+        """Hand one CDR message (with its 4-byte encapsulation header) to the SDK, stamped ``stamp_ns`` (the
+        frame's time a client sees). ``seq`` is not sent: the protocol has no field for it (clients see order
+        and gaps in the stamps)."""
         if self.transport.closed:
             self.drops += 1
             return

@@ -126,8 +126,8 @@ def test_a_foxglove_client_gets_every_topic_with_the_estimators_values(tmp_path)
 @pytest.mark.slow
 def test_a_foxglove_client_gets_every_topic_for_a_minute_at_125_hz(tmp_path):
     got, published, pub, elapsed = serve_to_client(tmp_path, 60.0)
-    assert len(published) > 0.95 * 125 * 60  # the source kept the board's rate
     check_stream(got, published, pub, elapsed)
+    assert len(published) > 0.95 * 125 * 60  # the source kept the board's rate (a loaded machine's may not)
 
 
 def free_port() -> int:
