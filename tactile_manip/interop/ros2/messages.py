@@ -28,7 +28,6 @@ in ``tactile_manip/interop/ros2/msg/`` and are the table's text (:func:`msg_text
 
 from __future__ import annotations
 
-
 from pathlib import Path
 from typing import Any
 

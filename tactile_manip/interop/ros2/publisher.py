@@ -32,7 +32,12 @@ import numpy as np
 from tactile_manip.interop import cdr
 from tactile_manip.interop.ros2 import messages as m
 from tactile_manip.interop.ros2.names import check_namespace, fully_qualified
-from tactile_manip.interop.ros2.transport import DEFAULT, SENSOR_DATA, Publisher, Transport
+from tactile_manip.interop.ros2.transport import (
+    DEFAULT,
+    SENSOR_DATA,
+    Publisher,
+    Transport,
+)
 from tactile_manip.interop.ros_msgs import MESSAGES
 
 
@@ -96,7 +101,7 @@ class TactilePublisher:
 
     def stamp_ns(self, t_host_s: float) -> int:
         """A reading's monotonic arrival time on the system clock, ns since the epoch."""
-        return int(round(t_host_s * 1e9)) + self._wall_minus_mono_ns
+        return round(t_host_s * 1e9) + self._wall_minus_mono_ns
 
     def estimate(self, reading):
         """``estimator.estimate(reading)``, with the reading and the estimate published; returns the estimate."""

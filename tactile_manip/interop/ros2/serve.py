@@ -24,7 +24,11 @@ from typing import Any
 
 from tactile_manip.interop.ros2 import messages as m
 from tactile_manip.interop.ros2.names import fully_qualified
-from tactile_manip.interop.ros2.publisher import Diagnostics, TactilePublisher, trigger_service
+from tactile_manip.interop.ros2.publisher import (
+    Diagnostics,
+    TactilePublisher,
+    trigger_service,
+)
 
 DIAGNOSTICS_PERIOD_S = 1.0
 STALE_S = 0.25  # about 30 frames at 125 Hz

@@ -42,7 +42,7 @@ def test_a_send_that_blocks_never_blocks_put_and_every_drop_is_counted():
 def _serve_with_client(tmp_path, defs, client_args, kill_after_s=None, seconds=3.0):
     pytest.importorskip("zenoh", reason="eclipse-zenoh is not installed (extra 'ros2')")
     pytest.importorskip("mcap_ros2._dynamic", reason="mcap-ros2-support is not installed")
-    from conftest import Client, free_port
+    from ros2_helpers import Client, free_port
 
     from tactile_manip.interop.ros2.zenoh_transport import ZenohTransport
 

@@ -13,14 +13,14 @@ import pytest
 pytest.importorskip("zenoh", reason="eclipse-zenoh is not installed (extra 'ros2')")
 pytest.importorskip("mcap_ros2._dynamic", reason="mcap-ros2-support is not installed")
 
-from conftest import Client, free_port  # noqa: E402
+from ros2_helpers import Client, free_port
 
-from tactile_manip.interop.ros2.publisher import TactilePublisher  # noqa: E402
-from tactile_manip.interop.ros2.type_hash import type_hash  # noqa: E402
-from tactile_manip.interop.ros2.zenoh_transport import ZenohTransport, qos_keyexpr  # noqa: E402
-from tactile_manip.interop.ros2.transport import SENSOR_DATA  # noqa: E402
-from tactile_manip.perception.tactile_estimator import TactileEstimator  # noqa: E402
-from tactile_manip.sensors import SimulatedSensor, parse_press  # noqa: E402
+from tactile_manip.interop.ros2.publisher import TactilePublisher
+from tactile_manip.interop.ros2.transport import SENSOR_DATA
+from tactile_manip.interop.ros2.type_hash import type_hash
+from tactile_manip.interop.ros2.zenoh_transport import ZenohTransport, qos_keyexpr
+from tactile_manip.perception.tactile_estimator import TactileEstimator
+from tactile_manip.sensors import SimulatedSensor, parse_press
 
 TOPICS = {"/tactile/field_raw": "std_msgs/msg/Float32MultiArray", "/tactile/field": "std_msgs/msg/Float32MultiArray",
           "/tactile/angle": "tactile_manip_msgs/msg/Angle", "/tactile/contact": "tactile_manip_msgs/msg/Contact"}
