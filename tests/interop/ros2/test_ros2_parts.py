@@ -163,3 +163,24 @@ def test_services_answer_trigger_responses():
                                                                                              "message": "done"}
     failed = cdr.decode(MESSAGES, "std_srvs/Trigger_Response", mt.call("/t/fails", request))
     assert failed["success"] is False and "ZeroDivisionError" in failed["message"]
+
+
+@pytest.mark.parametrize("frame_id", ["", "p", "pad", "left_pad", "a_longer_frame_name"])
+def test_the_one_step_encoders_write_what_the_cdr_codec_writes(frame_id):
+    from tactile_manip.perception.contact import ContactState
+
+    rng = np.random.default_rng(len(frame_id))
+    for state in (ContactState(in_contact=True, x_mm=1.5, y_mm=-0.5, depth_mm=0.3, force_n=4.0, x_sigma_mm=0.2,
+                               y_sigma_mm=0.25, force_sigma_n=0.4, shear_x_n=0.1), None):
+        e = _Estimate(state)
+        stamp_ns = int(rng.integers(0, 2_000_000_000 * 10**9))  # any time until 2033
+        assert m.StampedEncoder(frame_id, m.ANGLE_BODY).encode(stamp_ns, *m.angle_values(e)) == cdr.encode(
+            MESSAGES, "tactile_manip_msgs/Angle", m.angle_message(e, stamp_ns, frame_id))
+        fast = m.StampedEncoder(frame_id, m.CONTACT_BODY).encode(stamp_ns, *m.contact_values(e))
+        slow = cdr.encode(MESSAGES, "tactile_manip_msgs/Contact", m.contact_message(e, stamp_ns, frame_id))
+        assert fast.hex() == slow.hex()  # NaNs included: same bits
+    for shape in [(4, 4, 3), (5, 1, 3)]:
+        f = rng.normal(0, 80, shape).astype(np.float32)
+        assert m.FieldEncoder(shape).encode(f) == cdr.encode(MESSAGES, "std_msgs/Float32MultiArray", m.field_message(f))
+    with pytest.raises(ValueError, match="NaN"):
+        m.FieldEncoder((4, 4, 3)).encode(np.full((4, 4, 3), np.nan))
