@@ -112,6 +112,8 @@ CASES = {
     "bench": {"missing": lambda p: ["--out", f"{p['tmp']}/bench", "--scene", p["missing"]],
               "readonly": lambda p: ["--out", f"{p['ro']}/bench"],
               "dir": lambda p: ["--out", p["file"]]},  # a file where the report folder goes
+    "serve": {"missing": lambda p: ["--replay", p["missing"], "--seconds", "1"],
+              "dir": lambda p: ["--replay", p["dir"], "--seconds", "1"]},
     "demo": {"readonly": lambda p: ["--out", f"{p['ro']}/demo"],
              "dir": lambda p: ["--out", p["file"]]},  # a file where the PNG folder goes
 }
@@ -123,6 +125,7 @@ NO_PATH = {
     ("find-port", "dir"): "takes no path",
     ("emulate", "missing"): "reads no input file (presses are specs, not paths)",
     ("demo", "missing"): "reads no input file",
+    ("serve", "readonly"): "writes no file (it publishes)",
 }
 
 FAULTS = ("missing", "readonly", "dir")

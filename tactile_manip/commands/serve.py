@@ -17,7 +17,11 @@ import math
 import os
 import time
 
-from tactile_manip.commands.serial_options import add_serial_options, check_sim_board, serial_config
+from tactile_manip.commands.serial_options import (
+    add_serial_options,
+    check_sim_board,
+    serial_config,
+)
 
 DEFAULT_SIM_PRESS = "letter_r,t=0.3,force=10,yaw=20,rise=0.4,hold=0.6"
 TRANSPORTS = ("zenoh", "foxglove", "both")
@@ -91,7 +95,12 @@ def check_options(args: argparse.Namespace) -> None:
 
 def open_sensors(args: argparse.Namespace) -> list:
     from tactile_manip.checks import check_nonblank
-    from tactile_manip.sensors import ReplaySensor, ReplaySensorConfig, SerialSensor, SimulatedSensor
+    from tactile_manip.sensors import (
+        ReplaySensor,
+        ReplaySensorConfig,
+        SerialSensor,
+        SimulatedSensor,
+    )
     from tactile_manip.sensors.config import SimulatedSensorConfig
 
     if args.sim:
@@ -149,7 +158,13 @@ def describe_transport(transport) -> str:
 def run(args: argparse.Namespace) -> int:
     from tactile_manip.extras import require
     from tactile_manip.interop.ros2.publisher import TactilePublisher
-    from tactile_manip.interop.ros2.serve import Pad, Server, pad_namespaces, say, summary
+    from tactile_manip.interop.ros2.serve import (
+        Pad,
+        Server,
+        pad_namespaces,
+        say,
+        summary,
+    )
     from tactile_manip.perception.tactile_estimator import TactileEstimator
     from tactile_manip.sensors import parse_press
 
@@ -165,14 +180,10 @@ def run(args: argparse.Namespace) -> int:
     sensors = open_sensors(args)
     for s in sensors:
         estimator.check_layout(s.layout.name)
-    transport = open_transport(args)
     connected = []
+    transport = None
     try:
-        say(f"serve: {describe_transport(transport)}")
-        if args.allow_remote and args.bind not in ("127.0.0.1", "::1", "localhost"):
-            say(f"serve: listening on {args.bind}, beyond this machine: anyone who reaches it can read the topics "
-                "and call tare")
-        for s in sensors:
+        for s in sensors:  # a missing recording or port fails before anything listens
             s.connect()
             connected.append(s)
         if not args.no_baseline:
@@ -180,6 +191,11 @@ def run(args: argparse.Namespace) -> int:
         for s in sensors:
             if presses:
                 s.play(presses, period_s=max(p.end_s for p in presses) + 0.5)
+        transport = open_transport(args)
+        say(f"serve: {describe_transport(transport)}")
+        if args.allow_remote and args.bind not in ("127.0.0.1", "::1", "localhost"):
+            say(f"serve: listening on {args.bind}, beyond this machine: anyone who reaches it can read the topics "
+                "and call tare")
         pads = [Pad(s, TactilePublisher(estimator, transport, namespace=ns, depth_hz=args.depth_hz))
                 for s, ns in zip(sensors, namespaces)]
         server = Server(pads, estimator, transport)
@@ -191,7 +207,8 @@ def run(args: argparse.Namespace) -> int:
         finally:
             say(summary(server, describe_transport(transport), time.monotonic() - start))
     finally:
-        transport.close()
+        if transport is not None:
+            transport.close()
         for s in connected:
             s.disconnect()
     return 0

@@ -28,7 +28,7 @@ in ``tactile_manip/interop/ros2/msg/`` and are the table's text (:func:`msg_text
 
 from __future__ import annotations
 
-
+import struct
 from pathlib import Path
 from typing import Any
 
@@ -140,3 +140,70 @@ def trigger_response(success: bool, message: str) -> dict[str, Any]:
 
 
 
+
+
+class StampedEncoder:
+    """CDR of a message that is a ``std_msgs/Header`` (with a fixed ``frame_id``) then primitives only, in one
+    ``struct.pack``: what :func:`~tactile_manip.interop.cdr.encode` writes (a test holds them equal), at a
+    fraction of its cost, for the topics every reading publishes.
+
+    ``body`` lists the primitive types after the header in order (nested messages flattened); ``encode(stamp_ns,
+    *values)`` takes the values in that order.
+    """
+
+    def __init__(self, frame_id: str, body: tuple[str, ...]) -> None:
+        from tactile_manip.interop.cdr import HEADER, PRIMITIVES
+
+        name = frame_id.encode("utf-8")
+        self._head = HEADER
+        self._frame = struct.pack("<I", len(name) + 1) + name + b"\0"
+        offset, fmt = 8 + len(self._frame), "<"
+        for kind in body:
+            code, size, _ = PRIMITIVES[kind]
+            pad = -offset % size
+            fmt += "x" * pad + code
+            offset += pad + size
+        self._body = struct.Struct(fmt)
+
+    def encode(self, stamp_ns: int, *values: Any) -> bytes:
+        sec, nanosec = divmod(int(stamp_ns), 1_000_000_000)
+        return self._head + struct.pack("<iI", sec, nanosec) + self._frame + self._body.pack(*values)
+
+
+ANGLE_BODY = ("float32", "float32", "bool", "bool")
+CONTACT_BODY = ("bool", "bool") + ("float64",) * 12
+
+
+def angle_values(estimate) -> tuple:
+    """The values of :data:`ANGLE_BODY` for an estimate (as :func:`angle_message` sets them)."""
+    a = estimate.angle
+    return float(a.angle_rad), float(a.confidence), bool(a.defined), bool(a.plausible)
+
+
+def contact_values(estimate) -> tuple:
+    """The values of :data:`CONTACT_BODY` for an estimate (as :func:`contact_message` sets them)."""
+    msg = contact_message(estimate, 0, "")
+    return (msg["in_contact"], msg["plausible"],
+            *(msg[k][axis] for k in ("position", "position_sigma", "force", "force_sigma") for axis in "xyz"))
+
+
+class FieldEncoder:
+    """CDR of :func:`field_message` for fields of one shape: the layout written once, the data appended."""
+
+    def __init__(self, shape: tuple[int, ...]) -> None:
+        from tactile_manip.interop.cdr import encode
+        from tactile_manip.interop.ros_msgs import MESSAGES
+
+        template = encode(MESSAGES, "std_msgs/Float32MultiArray", field_message(np.zeros(shape, np.float32)))
+        self.values = int(np.prod(shape))
+        self._prefix = template[:len(template) - 4 * self.values]  # everything up to the data, its count included
+        self.shape = tuple(shape)
+
+    def encode(self, field_ut: np.ndarray) -> bytes:
+        f = np.asarray(field_ut, dtype="<f4")
+        if f.shape != self.shape or not np.isfinite(f).all():
+            from tactile_manip.interop.cdr import encode
+            from tactile_manip.interop.ros_msgs import MESSAGES
+
+            return encode(MESSAGES, "std_msgs/Float32MultiArray", field_message(f))  # refuses NaN, as it says
+        return self._prefix + f.tobytes()

@@ -61,7 +61,7 @@ def check_name(name: str, *, what: str = "topic name") -> str:
         raise ValueError(f"{what} {name!r}: substitutions ({{...}}) are not expanded here; write the name out")
     if "~" in name[1:] or (name.startswith("~") and name not in ("~",) and not name.startswith("~/")):
         raise ValueError(f"{what} {name!r}: '~' may only come first, alone or followed by '/'")
-    body = name.lstrip("~").lstrip("/") if name.startswith("~") else name[1:] if name.startswith("/") else name
+    body = name.lstrip("~").lstrip("/") if name.startswith("~") else name.removeprefix("/")
     if name.startswith("/") and name == "/":
         raise ValueError(f"{what} {name!r}: the root alone is not a name")
     if body or not name.startswith("~"):

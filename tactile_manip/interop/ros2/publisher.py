@@ -32,7 +32,12 @@ import numpy as np
 from tactile_manip.interop import cdr
 from tactile_manip.interop.ros2 import messages as m
 from tactile_manip.interop.ros2.names import check_namespace, fully_qualified
-from tactile_manip.interop.ros2.transport import DEFAULT, SENSOR_DATA, Publisher, Transport
+from tactile_manip.interop.ros2.transport import (
+    DEFAULT,
+    SENSOR_DATA,
+    Publisher,
+    Transport,
+)
 from tactile_manip.interop.ros_msgs import MESSAGES
 
 
@@ -44,8 +49,11 @@ class _Topic:
     seq: int = 0
 
     def send(self, msg: dict[str, Any], stamp_ns: int) -> None:
+        self.send_cdr(cdr.encode(MESSAGES, self.type_name, msg), stamp_ns)
+
+    def send_cdr(self, data: bytes, stamp_ns: int) -> None:
         self.seq += 1
-        self.publisher.publish(cdr.encode(MESSAGES, self.type_name, msg), stamp_ns, self.seq)
+        self.publisher.publish(data, stamp_ns, self.seq)
 
 
 class TactilePublisher:
@@ -84,6 +92,10 @@ class TactilePublisher:
             full = fully_qualified(self.namespace, name)
             type_name = m.TOPICS[name]
             self.topics[name] = _Topic(full, type_name, transport.advertise(full, m.ros2_type(type_name), SENSOR_DATA))
+        # the messages of every reading, each encoded in one step (the same bytes as cdr.encode: a test holds it)
+        self._angle = m.StampedEncoder(self.frame_id, m.ANGLE_BODY)
+        self._contact = m.StampedEncoder(self.frame_id, m.CONTACT_BODY)
+        self._field: m.FieldEncoder | None = None
         self._wall_minus_mono_ns = time.time_ns() - time.monotonic_ns()
         self.readings = 0
         self.last_publish_s = math.nan   # monotonic time the last reading's messages were handed over
@@ -96,7 +108,7 @@ class TactilePublisher:
 
     def stamp_ns(self, t_host_s: float) -> int:
         """A reading's monotonic arrival time on the system clock, ns since the epoch."""
-        return int(round(t_host_s * 1e9)) + self._wall_minus_mono_ns
+        return round(t_host_s * 1e9) + self._wall_minus_mono_ns
 
     def estimate(self, reading):
         """``estimator.estimate(reading)``, with the reading and the estimate published; returns the estimate."""
@@ -108,10 +120,13 @@ class TactilePublisher:
         """Publish one reading (a :class:`~tactile_manip.types.TactileReading`) and its estimate."""
         stamp_ns = self.stamp_ns(reading.t_host_s)
         t = self.topics
-        t["field_raw"].send(m.raw_field_message(reading.field_raw_ut), stamp_ns)
-        t["field"].send(m.field_message(reading.field_ut), stamp_ns)
-        t["angle"].send(m.angle_message(estimate, stamp_ns, self.frame_id), stamp_ns)
-        t["contact"].send(m.contact_message(estimate, stamp_ns, self.frame_id), stamp_ns)
+        shape = np.shape(reading.field_ut)
+        if self._field is None or self._field.shape != shape:
+            self._field = m.FieldEncoder(shape)
+        t["field_raw"].send_cdr(self._field.encode(reading.field_raw_ut), stamp_ns)
+        t["field"].send_cdr(self._field.encode(reading.field_ut), stamp_ns)
+        t["angle"].send_cdr(self._angle.encode(stamp_ns, *m.angle_values(estimate)), stamp_ns)
+        t["contact"].send_cdr(self._contact.encode(stamp_ns, *m.contact_values(estimate)), stamp_ns)
         if self.depth_period_s is not None and reading.t_host_s >= self._next_depth_s:
             self._next_depth_s = reading.t_host_s + self.depth_period_s
             depth = self._reconstructor.reconstruct(np.asarray(reading.field_ut, np.float32)).depth_mm

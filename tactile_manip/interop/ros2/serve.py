@@ -8,9 +8,9 @@ the last pass are estimated in one batch (``estimate_many``). Per pad:
 - services ``<ns>/tare`` (``std_srvs/srv/Trigger``: a new baseline from the free pad, ~1 s of frames; the noise
   floor of the estimates follows it) and ``<ns>/describe_board`` (``std_srvs/srv/Trigger``: the board, the
   models and the topics, as JSON in ``message``);
-- a status on ``/diagnostics`` once a second and at once when its level changes: OK; WARN while frames are lost
-  on the wire or messages are dropped; ERROR while the link is down; STALE when no frame came for
-  ``stale_s`` (a sensor that stops: nothing else is published for it meanwhile, so no estimate is stale).
+- a status on ``/diagnostics`` once a second, and at once when a pad goes stale or comes back: OK; WARN while
+  frames are lost on the wire or messages are dropped; ERROR while the link is down; STALE when no frame came
+  for ``stale_s`` (a sensor that stops: nothing else is published for it meanwhile, so no estimate is stale).
 """
 
 from __future__ import annotations
@@ -24,7 +24,11 @@ from typing import Any
 
 from tactile_manip.interop.ros2 import messages as m
 from tactile_manip.interop.ros2.names import fully_qualified
-from tactile_manip.interop.ros2.publisher import Diagnostics, TactilePublisher, trigger_service
+from tactile_manip.interop.ros2.publisher import (
+    Diagnostics,
+    TactilePublisher,
+    trigger_service,
+)
 
 DIAGNOSTICS_PERIOD_S = 1.0
 STALE_S = 0.25  # about 30 frames at 125 Hz
@@ -87,10 +91,12 @@ def status(pad: Pad, now_s: float, stale_s: float) -> dict[str, Any]:
     age = now_s - pad.last_frame_s
     drops, lost = pad.publisher.drops, h.frames_missed
     overflow = getattr(pad.subscription, "overflowed", 0)
-    if not h.link_up:
+    if age > stale_s:
+        link = "" if h.link_up else f"; link down: {h.last_error or 'reconnecting'}"
+        level, message = m.STALE, (f"no frame for {age:.2f} s{link}: no estimates are published until frames "
+                                   "resume")
+    elif not h.link_up:
         level, message = m.ERROR, f"link down: {h.last_error or 'reconnecting'}"
-    elif age > stale_s:
-        level, message = m.STALE, f"no frame for {age:.2f} s: no estimates are published until frames resume"
     elif drops > pad.reported_drops or lost > pad.reported_lost or overflow:
         level, message = m.WARN, (f"{drops - pad.reported_drops} messages dropped, {lost - pad.reported_lost} "
                                   f"frames lost on the wire since the last report")
@@ -164,7 +170,7 @@ class Server:
     def _diagnose(self) -> None:
         now = time.monotonic()
         changed = False
-        for pad in self.pads:  # a level that changes is reported at once, not at the next second
+        for pad in self.pads:  # a pad going stale, or coming back, is reported at once, not at the next second
             stale = now - pad.last_frame_s > self.stale_s
             changed |= stale != (pad.level == m.STALE)
         if now < self._next_diag_s and not changed:

@@ -131,7 +131,7 @@ class SendQueue:
             try:
                 self._send(item)
                 self.sent += 1
-            except Exception as e:  # a send that fails (a closing session) costs that message, not the thread
+            except Exception as e:  # noqa: BLE001 - a send that fails (a closing session) costs that message, not the thread
                 self.errors += 1
                 self.last_error = f"{type(e).__name__}: {e}"
                 if self._on_drop is not None:

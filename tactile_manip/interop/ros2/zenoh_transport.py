@@ -40,9 +40,14 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 from tactile_manip.interop.ros2.names import check_namespace, check_node_name
+from tactile_manip.interop.ros2.transport import (
+    BEST_EFFORT,
+    TRANSIENT_LOCAL,
+    Qos,
+    SendQueue,
+)
 from tactile_manip.interop.ros2.type_hash import dds_type_name as dds_type
 from tactile_manip.interop.ros2.type_hash import type_hash
-from tactile_manip.interop.ros2.transport import BEST_EFFORT, TRANSIENT_LOCAL, Qos, SendQueue
 
 ADMIN_SPACE = "@ros2_lv"
 DEFAULT_PORT = 7447
@@ -232,7 +237,7 @@ class ZenohTransport:
             payload = query.payload.to_bytes() if query.payload is not None else b""
             try:
                 response = handler(payload)
-            except Exception as e:  # a failing handler answers with an error, it does not end the server
+            except Exception as e:  # noqa: BLE001 - a failing handler answers with an error, it does not end the server
                 query.reply_err(f"{name}: {type(e).__name__}: {e}")
                 return
             query.reply(query.key_expr, response, attachment=attachment(seq, time.time_ns(), client_gid))
@@ -272,7 +277,7 @@ class ZenohTransport:
                        *(p._zpub for p in self._publishers)]:
             try:
                 entity.undeclare()
-            except Exception:  # noqa: BLE001 - closing the session below undeclares what is left
+            except Exception:  # noqa: BLE001, S110 - closing the session below undeclares what is left
                 pass
         try:
             self.session.close()

@@ -1,46 +1,14 @@
-"""Helpers of the live ROS 2 tests: a free port, the message definitions a client is given, and the
-independent client (``zenoh_client.py``) started in its own process."""
+"""The message definitions an independent client of the live ROS 2 tests is given (``defs``)."""
 
 from __future__ import annotations
 
 import json
-import socket
-import subprocess
-import sys
-import time
 from pathlib import Path
 
 import pytest
+from ros2_helpers import TYPES
 
 from tactile_manip.interop.ros_msgs import ros2msg_text
-
-CLIENT = Path(__file__).resolve().parent / "zenoh_client.py"
-TYPES = ("std_msgs/Float32MultiArray", "tactile_manip_msgs/Angle", "tactile_manip_msgs/Contact", "sensor_msgs/Image",
-         "diagnostic_msgs/DiagnosticArray", "std_srvs/Trigger_Response")
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-def port_is_free(port: int) -> bool:
-    with socket.socket() as s:
-        try:
-            s.bind(("127.0.0.1", port))
-        except OSError:
-            return False
-        return True
-
-
-def wait_port_free(port: int, timeout_s: float = 5.0) -> bool:
-    end = time.monotonic() + timeout_s
-    while time.monotonic() < end:
-        if port_is_free(port):
-            return True
-        time.sleep(0.05)
-    return port_is_free(port)
 
 
 @pytest.fixture
@@ -49,26 +17,3 @@ def defs(tmp_path) -> Path:
     path = tmp_path / "defs.json"
     path.write_text(json.dumps({t.replace("/", "/msg/"): ros2msg_text(t) for t in TYPES}))
     return path
-
-
-class Client:
-    """The independent subscriber, running in its own process until its seconds are up."""
-
-    def __init__(self, port: int, defs: Path, out: Path, *, seconds: float, extra: tuple[str, ...] = ()) -> None:
-        self.out = out
-        self.proc = subprocess.Popen([sys.executable, str(CLIENT), "--connect", f"tcp/127.0.0.1:{port}",
-                                      "--defs", str(defs), "--seconds", str(seconds), "--out", str(out), *extra],
-                                     stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-        line = self.proc.stdout.readline()
-        if line.strip() != "ready":
-            self.proc.kill()
-            raise AssertionError(f"client did not start: {line!r} {self.proc.stderr.read()[-2000:]}")
-
-    def result(self, timeout_s: float = 60.0) -> dict:
-        _, err = self.proc.communicate(timeout=timeout_s)
-        assert self.proc.returncode == 0, err[-3000:]
-        return json.loads(self.out.read_text())
-
-    def kill(self) -> None:
-        self.proc.kill()
-        self.proc.wait()

@@ -13,14 +13,14 @@ import pytest
 pytest.importorskip("zenoh", reason="eclipse-zenoh is not installed (extra 'ros2')")
 pytest.importorskip("mcap_ros2._dynamic", reason="mcap-ros2-support is not installed")
 
-from conftest import Client, free_port  # noqa: E402
+from ros2_helpers import Client, free_port
 
-from tactile_manip.interop.ros2.publisher import TactilePublisher  # noqa: E402
-from tactile_manip.interop.ros2.type_hash import type_hash  # noqa: E402
-from tactile_manip.interop.ros2.zenoh_transport import ZenohTransport, qos_keyexpr  # noqa: E402
-from tactile_manip.interop.ros2.transport import SENSOR_DATA  # noqa: E402
-from tactile_manip.perception.tactile_estimator import TactileEstimator  # noqa: E402
-from tactile_manip.sensors import SimulatedSensor, parse_press  # noqa: E402
+from tactile_manip.interop.ros2.publisher import TactilePublisher
+from tactile_manip.interop.ros2.transport import SENSOR_DATA
+from tactile_manip.interop.ros2.type_hash import type_hash
+from tactile_manip.interop.ros2.zenoh_transport import ZenohTransport, qos_keyexpr
+from tactile_manip.perception.tactile_estimator import TactileEstimator
+from tactile_manip.sensors import SimulatedSensor, parse_press
 
 TOPICS = {"/tactile/field_raw": "std_msgs/msg/Float32MultiArray", "/tactile/field": "std_msgs/msg/Float32MultiArray",
           "/tactile/angle": "tactile_manip_msgs/msg/Angle", "/tactile/contact": "tactile_manip_msgs/msg/Contact"}
@@ -62,10 +62,12 @@ def serve_to_client(tmp_path, defs, seconds: float, *, client_seconds: float | N
     return got, published, pub, elapsed
 
 
-def check_stream(got, published, pub, elapsed, *, values: bool) -> None:
+def check_stream(got, published, pub, elapsed, *, values: bool, rate_tolerance: float) -> None:
+    """What the client got against what was published; rates compared within ``rate_tolerance`` (a relative
+    error: a few seconds on a busy machine see bursts that a minute averages out)."""
     n = len(published)
     source_hz = n / elapsed
-    assert abs(source_hz - 125.0) / 125.0 < 0.05, source_hz
+    assert abs(source_hz - 125.0) / 125.0 < rate_tolerance, source_hz
     graph = {t["topic"]: t for t in got["tokens"] if t["kind"] == "MP"}
     nodes = [t for t in got["tokens"] if t["kind"] == "NN"]
     assert [(t["namespace"], t["node"]) for t in nodes] == [("/tactile", "tactile_manip")]
@@ -78,7 +80,7 @@ def check_stream(got, published, pub, elapsed, *, values: bool) -> None:
         assert t["seqs"] == list(range(1, n + 1)), topic      # every message, in order, no gap
         recv = np.array(t["recv_s"])
         rate = (n - 1) / (recv[-1] - recv[0])
-        assert abs(rate - source_hz) / source_hz < 0.05, (topic, rate, source_hz)
+        assert abs(rate - source_hz) / source_hz < rate_tolerance, (topic, rate, source_hz)
     assert pub.drops == 0
     if not values:
         return
@@ -106,11 +108,11 @@ def check_stream(got, published, pub, elapsed, *, values: bool) -> None:
 
 def test_an_independent_client_gets_every_topic_with_the_estimators_values(tmp_path, defs):
     got, published, pub, elapsed = serve_to_client(tmp_path, defs, 2.5)
-    check_stream(got, published, pub, elapsed, values=True)
+    check_stream(got, published, pub, elapsed, values=True, rate_tolerance=0.25)
 
 
 @pytest.mark.slow
 def test_an_independent_client_gets_every_topic_for_a_minute_at_125_hz(tmp_path, defs):
     got, published, pub, elapsed = serve_to_client(tmp_path, defs, 60.0)
     assert len(published) > 0.95 * 125 * 60
-    check_stream(got, published, pub, elapsed, values=True)
+    check_stream(got, published, pub, elapsed, values=True, rate_tolerance=0.05)
