@@ -112,7 +112,7 @@ def measure_latency(seconds: float, folder: Path) -> dict[str, Any]:
 
     arrivals, queued, estimate_s, publish_s = [], [], [], []
     with ZenohTransport(namespace="/tactile", port=port, on_sent=on_sent) as zt:
-        client = _client(port, seconds + 4, folder / "latency.json", _defs(folder), cores)
+        client = _client(port, seconds + 10, folder / "latency.json", _defs(folder), cores)  # past the warm-up
         time.sleep(1.0)
         pub = TactilePublisher(est, zt, namespace="/tactile")
         with SimulatedSensor() as sensor:
@@ -195,7 +195,9 @@ def measure_load(pads: int, seconds: float, folder: Path) -> dict[str, Any]:
 
 def markdown(report: dict[str, Any]) -> str:
     lat, load = report.get("latency"), report.get("load")
-    lines = [f"machine: {report['machine'].get('cpu', '')}; load average at start {report['load_average']}", ""]
+    m = report["machine"]
+    lines = [f"machine: {m.get('cpu_model', '')}, {m.get('usable_cores', '?')} usable cores; load average "
+             f"{report['load_average']} at start, {report.get('load_average_end', '?')} at the end", ""]
     if lat:
         lines += [f"reading -> published, one pad, default model, pinned to core(s) {lat['cores']}, "
                   f"{lat['readings']} readings:", "",
@@ -205,7 +207,7 @@ def markdown(report: dict[str, Any]) -> str:
                           ("to_zenoh_ms", "reading -> last message handed to zenoh")):
             s = lat[key]
             lines.append(f"| {name} | {s['p50']:.2f} | {s['p99']:.2f} | {s['max']:.2f} |")
-        lines += ["", f"subscriber: {lat['received']} contact messages received, {lat['gaps']} gaps; "
+        lines += ["", f"subscriber: {lat['received']} of {lat['readings']} contact messages received, {lat['gaps']} gaps; "
                   f"{lat['drops']} dropped unsent; {lat['overflowed']} frames not taken", ""]
     if load:
         lines += [f"{load['pads']} pads from one process, pinned to cores {load['cores']}, {load['seconds']:.1f} s:",
