@@ -31,6 +31,7 @@ EXTRAS: dict[str, tuple[str, str]] = {
     "pandas": ("pandas", "lerobot"),
     "sklearn": ("scikit-learn", "sklearn"),
     "zenoh": ("eclipse-zenoh", "ros2"),
+    "foxglove": ("foxglove-sdk", "foxglove"),
 }
 
 

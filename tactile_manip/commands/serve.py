@@ -127,7 +127,8 @@ def open_transport(args: argparse.Namespace):
         if args.transport in ("foxglove", "both"):
             from tactile_manip.interop.ros2.foxglove_transport import FoxgloveTransport
 
-            opened.append(FoxgloveTransport(host=args.bind, port=args.foxglove_port, allow_remote=args.allow_remote))
+            opened.append(FoxgloveTransport(host=args.bind, port=args.foxglove_port,
+                                            allow_remote=args.allow_remote).start())
     except BaseException:
         for t in opened:
             t.close()
@@ -171,6 +172,8 @@ def run(args: argparse.Namespace) -> int:
         require("serial", "serving a serial port")
     if args.transport in ("zenoh", "both"):
         require("zenoh", "serving ROS 2 topics over Zenoh")
+    if args.transport in ("foxglove", "both"):
+        require("foxglove", "serving ROS 2 topics over a Foxglove WebSocket server")
     check_options(args)
     check_sim_board(args)
     presses = [parse_press(s) for s in args.press or [DEFAULT_SIM_PRESS]] if args.sim else []
