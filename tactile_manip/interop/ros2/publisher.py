@@ -4,12 +4,13 @@
 ::
 
     from tactile_manip import TactileEstimator
-    from tactile_manip.interop.ros2 import TactilePublisher, ZenohTransport
+    from tactile_manip.interop.ros2.publisher import TactilePublisher
+    from tactile_manip.interop.ros2.zenoh_transport import ZenohTransport
 
     est = TactileEstimator.load()
     with ZenohTransport(namespace="/tactile") as zt:
         pub = TactilePublisher(est, zt, namespace="/tactile")
-        for frame in ...:                       # your loop
+        for reading in readings:                # your loop
             e = pub.estimate(reading)           # as est.estimate(reading), and every topic published
 
 Topics and types: :mod:`tactile_manip.interop.ros2.messages`. Each topic's messages carry a sequence number
