@@ -170,6 +170,10 @@ def run(args: argparse.Namespace) -> int:
 
     if args.port or args.serial_number:
         require("serial", "serving a serial port")
+    if args.transport in ("zenoh", "both"):
+        require("zenoh", "serving ROS 2 topics over Zenoh")
+    if args.transport in ("foxglove", "both"):
+        require("foxglove", "serving ROS 2 topics over a Foxglove WebSocket server")
     check_options(args)
     check_sim_board(args)
     presses = [parse_press(s) for s in args.press or [DEFAULT_SIM_PRESS]] if args.sim else []

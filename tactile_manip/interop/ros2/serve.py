@@ -27,11 +27,13 @@ from tactile_manip.interop.ros2.names import fully_qualified
 from tactile_manip.interop.ros2.publisher import (
     Diagnostics,
     TactilePublisher,
+    estimate_readings,
     trigger_service,
 )
 
 DIAGNOSTICS_PERIOD_S = 1.0
 STALE_S = 0.25  # about 30 frames at 125 Hz
+BATCH_PER_PAD = 2  # readings per pad estimated in one call at most
 
 
 @dataclass
@@ -124,10 +126,13 @@ class Server:
                                   "std_srvs/srv/Trigger",
                                   trigger_service(lambda pad=pad: (True, describe(pad, estimator))))
         self._next_diag_s = -math.inf
+        self.streaming_since_s = math.nan  # monotonic time the loop started taking frames
 
     def run(self, *, seconds: float | None = None) -> int:
         """Publish until ``seconds`` pass (None: until interrupted); returns readings published."""
-        end = math.inf if seconds is None else time.monotonic() + seconds
+        self._warm_up()
+        self.streaming_since_s = time.monotonic()
+        end = math.inf if seconds is None else self.streaming_since_s + seconds
         subs = [pad.sensor.subscribe() for pad in self.pads]
         for pad, sub in zip(self.pads, subs):
             pad.subscription, pad.last_frame_s = sub, time.monotonic()
@@ -139,6 +144,17 @@ class Server:
             for sub in subs:
                 sub.close()
         return sum(pad.publisher.readings for pad in self.pads)
+
+    def _warm_up(self) -> None:
+        """One estimate of each pad's newest reading, unpublished: a model's first run is slow, and frames that
+        queue meanwhile would make the first batches large."""
+        from tactile_manip.errors import SensorError
+
+        try:
+            readings = [pad.sensor.read_latest(max_age_s=1.0) for pad in self.pads]
+        except SensorError:
+            return
+        estimate_readings(self.estimator, readings)
 
     def _pass(self, timeout_s: float) -> None:
         """Wait for frames (at most ``timeout_s``), then estimate and publish every frame that came."""
@@ -158,14 +174,13 @@ class Server:
                 time.sleep(min(0.001, timeout_s))
                 return
         now = time.monotonic()
-        readings = [r for _, r in batch]
-        if len(readings) == 1:
-            estimates = [self.estimator.estimate(readings[0])]
-        else:
-            estimates = self.estimator.estimate_many(readings)
-        for (pad, reading), estimate in zip(batch, estimates):
-            pad.publisher.publish(reading, estimate)
-            pad.last_frame_s = now
+        chunk = BATCH_PER_PAD * len(self.pads)  # a backlog is worked off in batches of the usual size
+        for start in range(0, len(batch), chunk):
+            part = batch[start:start + chunk]
+            estimates = estimate_readings(self.estimator, [r for _, r in part])
+            for (pad, reading), estimate in zip(part, estimates):
+                pad.publisher.publish(reading, estimate)
+                pad.last_frame_s = now
 
     def _diagnose(self) -> None:
         now = time.monotonic()

@@ -143,6 +143,8 @@ class ZenohTransport:
         connect: Zenoh endpoints to connect to (``tcp/HOST:PORT``), e.g. a ROS machine's ``rmw_zenohd``.
         domain_id: the ROS domain (``ROS_DOMAIN_ID``), 0 by default.
         max_queued: messages waiting to be sent before the oldest is dropped.
+        on_sent: called on the send thread after each message went to zenoh, with its topic and the monotonic
+            time (for measurements: ``benchmarks/bench_serve.py``).
 
     Raises:
         ValueError: a non-loopback ``bind`` without ``allow_remote``, or a bad namespace or node name.
@@ -154,7 +156,8 @@ class ZenohTransport:
 
     def __init__(self, *, namespace: str = "/", node: str = "tactile_manip", bind: str | None = LOOPBACK,
                  port: int = DEFAULT_PORT, connect: Sequence[str] = (), allow_remote: bool = False,
-                 domain_id: int = 0, max_queued: int = 4096) -> None:
+                 domain_id: int = 0, max_queued: int = 4096,
+                 on_sent: Callable[[str, float], None] | None = None) -> None:
         from tactile_manip.extras import require
 
         zenoh = require("zenoh", "the Zenoh transport of `serve`")
@@ -166,6 +169,7 @@ class ZenohTransport:
         self.domain_id = int(domain_id)
         self.endpoint = None if bind is None else f"tcp/{'[' + bind + ']' if ':' in bind else bind}:{int(port)}"
         self.connect = list(connect)
+        self._on_sent = on_sent
         self._zenoh = zenoh
         config = zenoh.Config()
         config.insert_json5("mode", '"peer"')
@@ -257,6 +261,8 @@ class ZenohTransport:
     def _send(self, item: _Outgoing) -> None:
         item.publisher._zpub.put(item.cdr, attachment=item.attachment)
         item.publisher.sent += 1
+        if self._on_sent is not None:
+            self._on_sent(item.publisher.topic, time.monotonic())
 
     @staticmethod
     def _dropped(item: _Outgoing) -> None:

@@ -107,3 +107,27 @@ def test_no_listener_outlives_serve(sig, status):
     proc.communicate(timeout=30)
     assert proc.returncode == status
     assert wait_no_listener(port), f"port {port} still taken after {sig!r}"
+
+
+def test_serve_replays_a_recording_as_several_pads(tmp_path, defs):
+    pytest.importorskip("mcap_ros2._dynamic", reason="mcap-ros2-support is not installed")
+    rec = tmp_path / "press.tmrec"
+    done = subprocess.run([sys.executable, "-m", "tactile_manip", "record", "--sim", "--out", str(rec), "--seconds", "3"],
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    port = free_port()
+    proc = serve("--replay", str(rec), "--pads", "2", "--seconds", "7", "--zenoh-port", str(port), "--node", "hand")
+    try:
+        wait_listening(proc, port)
+        got = Client(port, defs, tmp_path / "got.json", seconds=3.0).result()
+    finally:
+        _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 0, err
+    nodes = [(t["namespace"], t["node"]) for t in got["tokens"] if t["kind"] == "NN"]
+    assert nodes == [("/tactile", "hand")]
+    for pad in ("pad0", "pad1"):
+        seqs = got["topics"][f"/tactile/{pad}/angle"]["seqs"]
+        assert len(seqs) > 100 and seqs == list(range(seqs[0], seqs[0] + len(seqs)))  # joined mid-stream: no gap
+    statuses = {s["name"] for d in got["topics"]["/diagnostics"]["values"] for s in d["status"]}
+    assert statuses == {"tactile_manip: /tactile/pad0", "tactile_manip: /tactile/pad1"}
+    assert "from 2 pad(s)" in err
