@@ -87,8 +87,15 @@ def tare(pad: Pad, estimator) -> tuple[bool, str]:
     return True, f"new baseline of {pad.sensor.source} ({pad.namespace})"
 
 
-def status(pad: Pad, now_s: float, stale_s: float) -> dict[str, Any]:
-    """The pad's diagnostic status now (and its level kept on ``pad``)."""
+def slow_client_events(transport) -> int:
+    """The slow-client events of ``transport`` (or of each transport of a Tee) so far: the Foxglove server's
+    "client outbox full" reports (its SDK drops that client's oldest messages without counting them)."""
+    return sum(getattr(t, "slow_client_events", 0) for t in getattr(transport, "transports", [transport]))
+
+
+def status(pad: Pad, now_s: float, stale_s: float, *, slow_clients: tuple[int, int] = (0, 0)) -> dict[str, Any]:
+    """The pad's diagnostic status now (and its level kept on ``pad``); ``slow_clients``: the transport's
+    slow-client events (new since the last report, in all)."""
     h = pad.sensor.health()
     age = now_s - pad.last_frame_s
     drops, lost = pad.publisher.drops, h.frames_missed
@@ -102,13 +109,17 @@ def status(pad: Pad, now_s: float, stale_s: float) -> dict[str, Any]:
     elif drops > pad.reported_drops or lost > pad.reported_lost or overflow:
         level, message = m.WARN, (f"{drops - pad.reported_drops} messages dropped, {lost - pad.reported_lost} "
                                   f"frames lost on the wire since the last report")
+    elif slow_clients[0]:
+        level, message = m.WARN, ("a Foxglove client fell behind and lost messages since the last report (its "
+                                  "server drops them uncounted)")
     else:
         level, message = m.OK, "streaming"
     pad.level, pad.message = level, message
     pad.reported_drops, pad.reported_lost = drops, lost
     values = {"rate_hz": h.rate_hz, "frames": h.frames, "last_frame_age_s": age, "published_readings":
               pad.publisher.readings, "dropped_messages": drops, "frames_missed": lost, "seq_gaps": h.seq_gaps,
-              "crc_errors": h.crc_errors, "reconnects": h.reconnects, "unread_frames_dropped": overflow}
+              "crc_errors": h.crc_errors, "reconnects": h.reconnects, "unread_frames_dropped": overflow,
+              "slow_client_events": slow_clients[1]}
     return m.diagnostic_status(level=level, name=f"tactile_manip: {pad.namespace}", message=message,
                                hardware_id=pad.sensor.source, values=values)
 
@@ -126,6 +137,7 @@ class Server:
                                   "std_srvs/srv/Trigger",
                                   trigger_service(lambda pad=pad: (True, describe(pad, estimator))))
         self._next_diag_s = -math.inf
+        self._reported_slow = 0
         self.streaming_since_s = math.nan  # monotonic time the loop started taking frames
 
     def run(self, *, seconds: float | None = None) -> int:
@@ -191,15 +203,19 @@ class Server:
         if now < self._next_diag_s and not changed:
             return
         self._next_diag_s = now + DIAGNOSTICS_PERIOD_S
-        self.diagnostics.publish([status(pad, now, self.stale_s) for pad in self.pads])
+        slow = slow_client_events(self.transport)
+        slow_clients, self._reported_slow = (slow - self._reported_slow, slow), slow
+        self.diagnostics.publish([status(pad, now, self.stale_s, slow_clients=slow_clients) for pad in self.pads])
 
 
 def summary(server: Server, transport_description: str, elapsed_s: float) -> str:
     readings = sum(p.publisher.readings for p in server.pads)
     drops = sum(p.publisher.drops for p in server.pads)
     rate = readings / len(server.pads) / elapsed_s if elapsed_s > 0 else 0.0
+    slow = slow_client_events(server.transport)
+    slow_text = f" ({slow} slow-client events: clients that fell behind lost messages)" if slow else ""
     return (f"serve: published {readings} readings from {len(server.pads)} pad(s) in {elapsed_s:.1f} s "
-            f"({rate:.1f} per pad per s), {drops} messages dropped; {transport_description}")
+            f"({rate:.1f} per pad per s), {drops} messages dropped{slow_text}; {transport_description}")
 
 
 def say(text: str) -> None:

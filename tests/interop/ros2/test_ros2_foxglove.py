@@ -247,3 +247,37 @@ def test_sixty_seconds_at_125_hz_arrive_whole_at_the_source_rate(tmp_path):
         # the rate the client saw them arrive at, against the rate they were published at
         received_hz = (len(received) - 1) / ((received[-1][2] - received[0][2]) * 1e-9)
         assert abs(received_hz - source_hz) / source_hz < 0.05, (topic, received_hz, source_hz)
+
+
+def test_a_slow_client_shows_on_diagnostics_and_in_the_summary():
+    import threading
+
+    from tactile_manip.interop.ros2 import messages as m
+    from tactile_manip.interop.ros2.publisher import TactilePublisher
+    from tactile_manip.interop.ros2.serve import Pad, Server, summary
+    from tactile_manip.interop.ros2.transport import MemoryTransport
+    from tactile_manip.perception.tactile_estimator import TactileEstimator
+    from tactile_manip.sensors import SimulatedSensor
+
+    class SlowClients(MemoryTransport):
+        slow_client_events = 0  # what FoxgloveTransport counts from its SDK's log
+
+    est = TactileEstimator.load()
+    mt = SlowClients()
+    with SimulatedSensor() as sensor:
+        pad = Pad(sensor, TactilePublisher(est, mt, namespace="/tactile"))
+        server = Server([pad], est, mt)
+        runner = threading.Thread(target=server.run, kwargs={"seconds": 3.5})
+        runner.start()
+        time.sleep(1.2)
+        mt.slow_client_events = 1  # a client's queue overflowed
+        runner.join()
+    statuses = [cdr.decode(MESSAGES, m.DIAGNOSTICS_TYPE, x.cdr)["status"][0] for x in mt.on("/diagnostics")]
+    levels = [s["level"] for s in statuses]
+    warned = [s for s in statuses if s["level"] == m.WARN]
+    assert len(warned) == 1 and "fell behind and lost messages" in warned[0]["message"], levels
+    assert {"key": "slow_client_events", "value": "1"} in warned[0]["values"]
+    after = statuses[statuses.index(warned[0]) + 1:]
+    assert after and all("fell behind" not in s["message"] for s in after)  # reported once, not again
+    assert all({"key": "slow_client_events", "value": "1"} in s["values"] for s in after)  # the count stays
+    assert "1 slow-client events" in summary(server, "memory", 3.5)
