@@ -23,6 +23,7 @@ from typing import Any
 ROOT = Path(__file__).resolve().parent.parent
 FEWLABEL = "docs/results/contact/fewlabel_k.json"  # python -m benchmarks.fewlabel_k
 DEPTH = "docs/results/benchmarks/depth.json"  # python -m benchmarks.bench_depth
+SERVE = "docs/results/benchmarks/serve.json"  # python -m benchmarks.bench_serve --seconds 60
 SPATIAL, NORMAL = "runs/spatial_20250316_155729", "runs/normal_20250401_014340"
 
 
@@ -63,6 +64,18 @@ def _few(run: str, k: str, method: str, seed: str | None = None, fmt: str = ".2f
 
 
 QUOTES: tuple[Quote, ...] = (
+    Quote("docs/ros2.md", "(estimate, four messages encoded and queued) p50 {} ms, p99 {} ms; to the last of its "
+                          "messages handed to Zenoh p50 {} ms, p99 {} ms. Of that, the estimate alone is p50 {} ms "
+                          "and publishing alone p50 {} ms (p99 {} ms).",
+          (Value(SERVE, "latency/to_published_ms/p50"), Value(SERVE, "latency/to_published_ms/p99"),
+           Value(SERVE, "latency/to_zenoh_ms/p50"), Value(SERVE, "latency/to_zenoh_ms/p99"),
+           Value(SERVE, "latency/estimate_ms/p50"), Value(SERVE, "latency/publish_ms/p50"),
+           Value(SERVE, "latency/publish_ms/p99"))),
+    Quote("docs/ros2.md", "the slowest pad published {} readings per second (the simulated sensors ran at 125 Hz), "
+                          "with {} gaps in the subscriber's sequence numbers over the 64 topics, {} messages dropped "
+                          "and {} frames left untaken.",
+          (Value(SERVE, "load/min_rate_hz", ".1f"), Value(SERVE, "load/total_gaps", "d"),
+           Value(SERVE, "load/total_drops", "d"), Value(SERVE, "load/total_overflowed", "d"))),
     Quote("README.md", "eFlesh spatial run give {} mm (kNN on the same 25: {} mm; {} mm over two draws, 100 give {} mm), "
                        "against {} mm with all 3844",
           (_few(SPATIAL, "25", "ours", "0"), _few(SPATIAL, "25", "kNN", "0"), _few(SPATIAL, "25", "ours"),

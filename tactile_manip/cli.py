@@ -57,6 +57,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "find-port": ("tactile_manip.commands.find_port", "list serial ports that may be the sensor board"),
     "view": ("tactile_manip.commands.view",
              "watch a sensor's field live (board or simulation) or replay a recording; or stream it to Rerun"),
+    "serve": ("tactile_manip.commands.serve",
+              "publish a sensor's readings and estimates live as ROS 2 topics (Zenoh as rmw_zenoh, or Foxglove)"),
     "trials": ("tactile_manip.commands.trials",
                "run a scene's task (reorient the rod, place it in a slot, or grip it at a target force) per "
                "method on the same presentations, simulated or on an FR3, and report"),

@@ -30,6 +30,8 @@ EXTRAS: dict[str, tuple[str, str]] = {
     "pyarrow": ("pyarrow", "lerobot"),
     "pandas": ("pandas", "lerobot"),
     "sklearn": ("scikit-learn", "sklearn"),
+    "zenoh": ("eclipse-zenoh", "ros2"),
+    "foxglove": ("foxglove-sdk", "foxglove"),
 }
 
 

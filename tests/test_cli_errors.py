@@ -122,6 +122,8 @@ CASES = {
                                            "--out", f"{p['tmp']}/s.csv"],
                      "readonly": lambda p: ["--board", p["file"], "--labels", p["file"], "--out", f"{p['ro']}/s.csv"],
                      "dir": lambda p: ["--board", p["dir"], "--labels", p["dir"], "--out", f"{p['tmp']}/s.csv"]},
+    "serve": {"missing": lambda p: ["--replay", p["missing"], "--seconds", "1"],
+              "dir": lambda p: ["--replay", p["dir"], "--seconds", "1"]},
     "demo": {"readonly": lambda p: ["--out", f"{p['ro']}/demo"],
              "dir": lambda p: ["--out", p["file"]]},  # a file where the PNG folder goes
 }
@@ -133,6 +135,7 @@ NO_PATH = {
     ("find-port", "dir"): "takes no path",
     ("emulate", "missing"): "reads no input file (presses are specs, not paths)",
     ("demo", "missing"): "reads no input file",
+    ("serve", "readonly"): "writes no file (it publishes)",
 }
 
 FAULTS = ("missing", "readonly", "dir")

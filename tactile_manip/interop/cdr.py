@@ -4,7 +4,8 @@ A message is its 4-byte encapsulation header (``00 01 00 00``: CDR, little endia
 fields in order. Each primitive sits at an offset, counted from the end of the header, that is a multiple of
 its size (8 at most); padding bytes are zero. A string is a uint32 byte count that includes the terminating
 NUL, the UTF-8 bytes and the NUL. A sequence (``T[]``) is a uint32 element count and the elements; an empty
-sequence adds no padding (elements are aligned one by one, so only a first element would be). Nested
+sequence adds no padding (elements are aligned one by one, so only a first element would be). A fixed-size
+array (``T[N]``, e.g. a covariance's ``float64[9]``) is its N elements with no count. Nested
 messages are their fields inline, without a header or padding of their own.
 
 Messages are plain dicts (``{"header": {"stamp": {"sec": 1, "nanosec": 2}, "frame_id": "pad"}, ...}``),
@@ -31,12 +32,23 @@ PRIMITIVES: dict[str, tuple[str, int, str]] = {
 
 
 def split_type(field_type: str) -> tuple[str, bool]:
-    """``"float32[]"`` -> ("float32", True); fixed-size arrays (``T[N]``) and bounded types are refused."""
+    """``"float32[]"`` -> ("float32", True), ``"float64[9]"`` -> ("float64", True) (an array either way: see
+    :func:`array_size`); bounded types (``T[<=N]``, ``string<=N``) are refused."""
     if field_type.endswith("[]"):
         return field_type[:-2], True
+    if array_size(field_type) is not None:
+        return field_type[:field_type.index("[")], True
     if "[" in field_type or "<" in field_type:
-        raise ValueError(f"CDR: unsupported field type {field_type!r} (only T and T[] here)")
+        raise ValueError(f"CDR: unsupported field type {field_type!r} (only T, T[] and T[N] here)")
     return field_type, False
+
+
+def array_size(field_type: str) -> int | None:
+    """N of a fixed-size array type ``T[N]``; None for any other type."""
+    if not field_type.endswith("]") or "[" not in field_type:
+        return None
+    size = field_type[field_type.index("[") + 1:-1]
+    return int(size) if size.isdigit() else None
 
 
 class CdrWriter:
@@ -134,7 +146,10 @@ def _write(w: CdrWriter, messages, type_name: str, msg: Mapping[str, Any]) -> No
     for field_type, name in messages[type_name]:
         base, is_seq = split_type(field_type)
         value = msg[name]
-        if base in PRIMITIVES and is_seq:
+        size = array_size(field_type)
+        if size is not None:
+            _write_array(w, messages, base, size, value, name)
+        elif base in PRIMITIVES and is_seq:
             w.sequence(base, value)
         elif base in PRIMITIVES:
             w.primitive(base, value)
@@ -153,11 +168,44 @@ def _write(w: CdrWriter, messages, type_name: str, msg: Mapping[str, Any]) -> No
             _write(w, messages, base, value)
 
 
+def _write_array(w: CdrWriter, messages, base: str, size: int, value: Any, name: str) -> None:
+    """A ``T[N]`` field: its N elements and no count (a primitive array aligned once, as its elements are)."""
+    if base in PRIMITIVES:
+        raw = isinstance(value, (bytes, bytearray, memoryview))
+        arr = np.frombuffer(bytes(value), "u1") if raw else np.asarray(value, dtype=PRIMITIVES[base][2]).reshape(-1)
+        items: Any = arr
+    else:
+        items = list(value)
+    if len(items) != size:
+        raise ValueError(f"CDR: field {name!r} is a {base}[{size}], got {len(items)} values")
+    if base in PRIMITIVES:
+        w.align(PRIMITIVES[base][1])
+        w.buf += np.ascontiguousarray(items, dtype=PRIMITIVES[base][2]).tobytes()
+        return
+    for item in items:
+        w.string(item) if base == "string" else _write(w, messages, base, item)
+
+
+def _read_array(r: CdrReader, messages, base: str, size: int) -> Any:
+    if base in PRIMITIVES:
+        _, width, dtype = PRIMITIVES[base]
+        if base in ("uint8", "byte", "char"):
+            return bytes(r._take(size))
+        r.align(width)
+        return np.frombuffer(r._take(size * width), dtype=dtype).copy()
+    if base == "string":
+        return [r.string() for _ in range(size)]
+    return [_read(r, messages, base) for _ in range(size)]
+
+
 def _read(r: CdrReader, messages, type_name: str) -> dict[str, Any]:
     out: dict[str, Any] = {}
     for field_type, name in messages[type_name]:
         base, is_seq = split_type(field_type)
-        if base in PRIMITIVES:
+        size = array_size(field_type)
+        if size is not None:
+            out[name] = _read_array(r, messages, base, size)
+        elif base in PRIMITIVES:
             out[name] = r.sequence(base) if is_seq else r.primitive(base)
         elif base == "string":
             out[name] = [r.string() for _ in range(r.primitive("uint32"))] if is_seq else r.string()

@@ -1,6 +1,8 @@
 """The ROS 2 message types of the MCAP export: their fields, their ``ros2msg`` schema text and a JSON Schema.
 
-The fields are those of the ROS 2 interface packages (``builtin_interfaces``, ``std_msgs``, ``sensor_msgs``);
+The fields are those of the ROS 2 interface packages (``builtin_interfaces``, ``std_msgs``, ``sensor_msgs``,
+``geometry_msgs``, ``diagnostic_msgs``, ``std_srvs``), for the MCAP export and the live topics of
+``tactile-manip serve`` alike (one definition of each; :mod:`tactile_manip.interop.ros2.type_hash` hashes them);
 types are keyed ``pkg/Type`` as ``.msg`` files refer to each other, and MCAP schemas are named
 ``pkg/msg/Type`` as rosbag2 names them. The ``ros2msg`` text is the type's own fields followed by each type it
 uses, after a line of 80 ``=`` and ``MSG: pkg/Type``, which is how rosbag2 stores a definition in MCAP. The
@@ -32,7 +34,37 @@ MESSAGES: dict[str, list[tuple[str, str]]] = {
                           ("uint8[]", "data")],
     "sensor_msgs/JointState": [("std_msgs/Header", "header"), ("string[]", "name"), ("float64[]", "position"),
                                ("float64[]", "velocity"), ("float64[]", "effort")],
+    # live topics (tactile-manip serve)
+    "geometry_msgs/Vector3": [("float64", "x"), ("float64", "y"), ("float64", "z")],
+    "geometry_msgs/Point": [("float64", "x"), ("float64", "y"), ("float64", "z")],
+    "geometry_msgs/PointStamped": [("std_msgs/Header", "header"), ("geometry_msgs/Point", "point")],
+    "geometry_msgs/Wrench": [("geometry_msgs/Vector3", "force"), ("geometry_msgs/Vector3", "torque")],
+    "geometry_msgs/WrenchStamped": [("std_msgs/Header", "header"), ("geometry_msgs/Wrench", "wrench")],
+    "sensor_msgs/MagneticField": [("std_msgs/Header", "header"), ("geometry_msgs/Vector3", "magnetic_field"),
+                                  ("float64[9]", "magnetic_field_covariance")],
+    "diagnostic_msgs/KeyValue": [("string", "key"), ("string", "value")],
+    # level: OK = 0, WARN = 1, ERROR = 2, STALE = 3
+    "diagnostic_msgs/DiagnosticStatus": [("byte", "level"), ("string", "name"), ("string", "message"),
+                                         ("string", "hardware_id"), ("diagnostic_msgs/KeyValue[]", "values")],
+    "diagnostic_msgs/DiagnosticArray": [("std_msgs/Header", "header"),
+                                        ("diagnostic_msgs/DiagnosticStatus[]", "status")],
+    # services: a .srv's request and response are the messages <Service>_Request and <Service>_Response
+    "std_srvs/Trigger_Request": [],
+    "std_srvs/Trigger_Response": [("bool", "success"), ("string", "message")],
+    # what ROS 2 (Iron on) adds to every service's event message; needed for a service's type hash
+    "service_msgs/ServiceEventInfo": [("uint8", "event_type"), ("builtin_interfaces/Time", "stamp"),
+                                      ("char[16]", "client_gid"), ("int64", "sequence_number")],
+    # our own, where no standard type fits (their .msg files: tactile_manip/interop/ros2/msg/)
+    "tactile_manip_msgs/Angle": [("std_msgs/Header", "header"), ("float32", "angle"), ("float32", "confidence"),
+                                 ("bool", "defined"), ("bool", "plausible")],
+    "tactile_manip_msgs/Contact": [("std_msgs/Header", "header"), ("bool", "in_contact"), ("bool", "plausible"),
+                                   ("geometry_msgs/Point", "position"), ("geometry_msgs/Vector3", "position_sigma"),
+                                   ("geometry_msgs/Vector3", "force"), ("geometry_msgs/Vector3", "force_sigma")],
 }
+# pkg/Service: its request and response are MESSAGES[f"{pkg/Service}_Request"] and [..._Response]. A request
+# with no fields (std_srvs/Trigger's) travels as one uint8 on the ROS 2 wire, the member rosidl adds to an empty
+# structure (``structure_needs_at_least_one_member``).
+SERVICES: tuple[str, ...] = ("std_srvs/Trigger",)
 SEPARATOR = "=" * 80
 _INTEGER = {k for k in PRIMITIVES if k not in ("float32", "float64", "bool")}
 
