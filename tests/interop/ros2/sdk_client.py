@@ -42,7 +42,10 @@ def plain(msg):
 def main() -> int:
     from zenoh_ros2_sdk import ROS2ServiceClient, ROS2Subscriber
     from zenoh_ros2_sdk.session import ZenohSession
-    from zenoh_ros2_sdk.utils import compute_service_type_hash, compute_type_hash_from_msg
+    from zenoh_ros2_sdk.utils import (
+        compute_service_type_hash,
+        compute_type_hash_from_msg,
+    )
 
     ap = argparse.ArgumentParser()
     ap.add_argument("--port", type=int, required=True)
