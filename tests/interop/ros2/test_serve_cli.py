@@ -77,6 +77,7 @@ def test_serve_sim_shows_topics_services_and_diagnostics_to_a_client(tmp_path, d
     (("--namespace", "/tactile/"), "no trailing '/'"),
     (("--bind", "0.0.0.0"), "add --allow-remote"),
     (("--node", "my-node"), "character '-'"),
+    (("--depth-hz", "5", "--model", "none"), "decodes no depth image"),
 ])
 def test_bad_input_is_one_line_and_exit_2(args, says):
     proc = serve("--sim", "--seconds", "1", "--zenoh-port", str(free_port()), *args)
