@@ -72,6 +72,7 @@ def main() -> int:
     cfg.insert_json5("mode", '"peer"')
     cfg.insert_json5("scouting/multicast/enabled", "false")
     cfg.insert_json5("connect/endpoints", json.dumps([a.connect]))
+    cfg.insert_json5("listen/endpoints", "[]")  # a peer listens on every interface unless told not to
     session = zenoh.open(cfg)
     lock = threading.Lock()
     tokens: dict[str, dict] = {}
