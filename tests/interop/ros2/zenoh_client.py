@@ -69,10 +69,9 @@ def main() -> int:
         defs = json.load(f)
     decoders = {t: generate_dynamic(t, text)[t] for t, text in defs.items()}
     cfg = zenoh.Config()
-    cfg.insert_json5("mode", '"peer"')
+    cfg.insert_json5("mode", '"client"')  # as a ROS 2 tool joins a router: it listens nowhere
     cfg.insert_json5("scouting/multicast/enabled", "false")
     cfg.insert_json5("connect/endpoints", json.dumps([a.connect]))
-    cfg.insert_json5("listen/endpoints", "[]")  # a peer listens on every interface unless told not to
     session = zenoh.open(cfg)
     lock = threading.Lock()
     tokens: dict[str, dict] = {}
