@@ -181,6 +181,9 @@ def run(args: argparse.Namespace) -> int:
     pose = None if args.model.lower() == "none" else args.model
     contact = None if args.contact_model.lower() == "none" else args.contact_model
     estimator = TactileEstimator.load(pose, contact)  # a bad model fails before anything listens
+    if args.depth_hz is not None and getattr(getattr(estimator, "pose", None), "reconstructor", None) is None:
+        raise ValueError(f"--depth-hz: --model {args.model} decodes no depth image; name a pose model "
+                         "(supermag, bilinear, an .onnx file) or leave --depth-hz out")
     sensors = open_sensors(args)
     for s in sensors:
         estimator.check_layout(s.layout.name)

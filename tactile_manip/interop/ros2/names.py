@@ -33,7 +33,7 @@ def _check_tokens(what: str, name: str, tokens: list[str]) -> None:
 def check_namespace(namespace: str) -> str:
     """The absolute namespace of ``namespace`` (``"tactile"`` -> ``"/tactile"``, ``""`` -> ``"/"``)."""
     if not isinstance(namespace, str):
-        raise ValueError(f"namespace: expected a string, got {type(namespace).__name__}")
+        raise TypeError(f"namespace: expected a string, got {type(namespace).__name__}")
     ns = namespace if namespace.startswith("/") else "/" + namespace
     if ns == "/":
         return ns

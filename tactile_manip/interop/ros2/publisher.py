@@ -111,6 +111,12 @@ class TactilePublisher:
         """A reading's monotonic arrival time on the system clock, ns since the epoch."""
         return round(t_host_s * 1e9) + self._wall_minus_mono_ns
 
+    def warm_up(self, reading) -> None:
+        """Run what publishing ``reading`` would run the first time (the depth image's decoder), publishing
+        nothing: a model's first run is slow."""
+        if self._reconstructor is not None:
+            self._reconstructor.reconstruct(np.asarray(reading.field_ut, np.float32))
+
     def estimate(self, reading):
         """The estimator's estimate of ``reading`` (:func:`estimate_readings`), with the reading and the
         estimate published; returns the estimate."""

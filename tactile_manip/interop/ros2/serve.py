@@ -167,6 +167,8 @@ class Server:
         except SensorError:
             return
         estimate_readings(self.estimator, readings)
+        for pad, reading in zip(self.pads, readings):
+            pad.publisher.warm_up(reading)
 
     def _pass(self, timeout_s: float) -> None:
         """Wait for frames (at most ``timeout_s``), then estimate and publish every frame that came."""
@@ -185,14 +187,14 @@ class Server:
             if not batch:
                 time.sleep(min(0.001, timeout_s))
                 return
-        now = time.monotonic()
         chunk = BATCH_PER_PAD * len(self.pads)  # a backlog is worked off in batches of the usual size
         for start in range(0, len(batch), chunk):
             part = batch[start:start + chunk]
             estimates = estimate_readings(self.estimator, [r for _, r in part])
             for (pad, reading), estimate in zip(part, estimates):
                 pad.publisher.publish(reading, estimate)
-                pad.last_frame_s = now
+                # when the frame came, not when the loop took it: a busy loop is not a sensor that stopped
+                pad.last_frame_s = max(pad.last_frame_s, reading.t_host_s)
 
     def _diagnose(self) -> None:
         now = time.monotonic()

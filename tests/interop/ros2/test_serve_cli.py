@@ -77,6 +77,7 @@ def test_serve_sim_shows_topics_services_and_diagnostics_to_a_client(tmp_path, d
     (("--namespace", "/tactile/"), "no trailing '/'"),
     (("--bind", "0.0.0.0"), "add --allow-remote"),
     (("--node", "my-node"), "character '-'"),
+    (("--depth-hz", "5", "--model", "none"), "decodes no depth image"),
 ])
 def test_bad_input_is_one_line_and_exit_2(args, says):
     proc = serve("--sim", "--seconds", "1", "--zenoh-port", str(free_port()), *args)
@@ -131,3 +132,33 @@ def test_serve_replays_a_recording_as_several_pads(tmp_path, defs):
     statuses = {s["name"] for d in got["topics"]["/diagnostics"]["values"] for s in d["status"]}
     assert statuses == {"tactile_manip: /tactile/pad0", "tactile_manip: /tactile/pad1"}
     assert "from 2 pad(s)" in err
+
+
+def test_serve_joins_a_zenoh_router_instead_of_listening(tmp_path, defs):
+    """Where a router holds the port (rmw_zenohd on a ROS 2 machine), serve connects to it and listens nowhere;
+    a client of the router sees the graph and the topics."""
+    pytest.importorskip("mcap_ros2._dynamic", reason="mcap-ros2-support is not installed")
+    import zenoh
+
+    port = free_port()
+    config = zenoh.Config()
+    config.insert_json5("mode", '"router"')
+    config.insert_json5("listen/endpoints", f'["tcp/127.0.0.1:{port}"]')
+    config.insert_json5("scouting/multicast/enabled", "false")
+    router = zenoh.open(config)
+    try:
+        proc = serve("--sim", "--seconds", "8", "--no-listen", "--connect", f"tcp/127.0.0.1:{port}")
+        try:
+            said = [proc.stderr.readline() for _ in range(2)]  # where it connected; then that it streams
+            client = Client(port, defs, tmp_path / "got.json", seconds=3.0)
+            got = client.result()
+        finally:
+            _, err = proc.communicate(timeout=60)
+            err = "".join(said) + err
+    finally:
+        router.close()
+    assert proc.returncode == 0, err
+    assert f"connected to tcp/127.0.0.1:{port}" in err and "listening" not in err
+    assert ("MP", "/tactile/angle") in {(t["kind"], t.get("topic")) for t in got["tokens"]}
+    seqs = got["topics"]["/tactile/angle"]["seqs"]
+    assert len(seqs) > 100 and seqs == list(range(seqs[0], seqs[0] + len(seqs)))

@@ -69,7 +69,7 @@ def main() -> int:
         defs = json.load(f)
     decoders = {t: generate_dynamic(t, text)[t] for t, text in defs.items()}
     cfg = zenoh.Config()
-    cfg.insert_json5("mode", '"peer"')
+    cfg.insert_json5("mode", '"client"')  # as a ROS 2 tool joins a router: it listens nowhere
     cfg.insert_json5("scouting/multicast/enabled", "false")
     cfg.insert_json5("connect/endpoints", json.dumps([a.connect]))
     session = zenoh.open(cfg)
