@@ -191,8 +191,8 @@ def fused_position_mm(angle: AngleEstimate, contact: ContactState | None, image_
 
 
 class _LazyPosition(Deferred):
-    """The fused position of one pad of :meth:`TactileEstimator.estimate_many`, measured when first read (it
-    needs the pad's image, which is decoded only then)."""
+    """The fused position of one pad's estimate, measured when first read (it needs the pad's image, which is
+    decoded only then)."""
 
     __slots__ = ("estimator", "angle", "contact")
 
@@ -288,10 +288,12 @@ class TactileEstimator:
 
     def estimate(self, reading: Reading) -> TactileEstimate:
         """Angle, contact and position of ``reading`` (R, C, 3) uT, baseline-subtracted (ValueError for NaN or
-        a wrong shape, from either part; the contact model checks first, so its history stays unchanged)."""
+        a wrong shape, from either part; the contact model checks first, so its history stays unchanged). As in
+        :meth:`estimate_many`, the position is measured when first read: where the angle comes from the head, the
+        image it needs is decoded only then."""
         contact = self.contact.estimate(reading) if self.contact is not None else None
         angle = self.pose.estimate(reading)
-        return TactileEstimate(angle=angle, contact=contact, position_mm=self._position(angle, contact))
+        return TactileEstimate(angle=angle, contact=contact, position_mm=_LazyPosition(self, angle, contact))
 
     def estimate_many(self, readings: Sequence[Reading]) -> list[TactileEstimate]:
         """Angle, contact and position of several pads' readings (each (R, C, 3) uT): the angles in one batched

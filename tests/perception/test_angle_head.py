@@ -176,6 +176,18 @@ def test_the_images_of_a_call_are_decoded_once_together_and_only_when_read() -> 
     assert pickle.loads(pickle.dumps(many[0])) == many[0]  # a copy holds the measured values
 
 
+def test_a_tactile_estimate_decodes_its_image_only_when_its_position_is_read() -> None:
+    from tactile_manip.perception.tactile_estimator import TactileEstimator
+
+    rec = Counting(0.0, head=FakeHead(0.4, 50.0))
+    est = TactileEstimator(TactilePoseEstimator(rec)).estimate(_reading(70.0))
+    assert est.angle.source == "head" and est.angle.angle_rad == pytest.approx(0.4)
+    assert rec.runs == []                                  # the angle alone decodes nothing
+    position = est.position_mm                             # the image's centroid: decoded now, once
+    assert rec.runs == [1] and position == est.angle.centroid_mm and est.position_mm == position
+    assert rec.runs == [1]
+
+
 def test_the_head_can_be_left_out_and_bad_readings_are_still_refused() -> None:
     rec = Stripe(round_=True, head=FakeHead(0.5, 1e4))
     assert not TactilePoseEstimator(rec, angle_source="image").estimate(_reading()).defined
