@@ -9,7 +9,9 @@ recipe of docs/your_board.md: ``import ... --board eflesh --labelled K``, ``trai
 configs/train/contact_fewlabel.toml`` (which labels the unlabelled presses, then trains the network), ``export``
 and ``evaluate``. Each command's wall time is taken from outside; train's is split into labelling and network at
 the labeller's last stage line (the time that line arrived). Beside the times: the error of the calibrated model
-on the run's test part (evaluate's RMSE, with its kNN on the same K labelled presses), the longest stretch in
+on the run's test part (evaluate's RMSE, with its kNN on the same K labelled presses), the CPU time of all the
+commands together (what the calibration costs whatever else runs; on two cores their wall time cannot be much
+below it, as the labeller and the network each run on one thread), the longest stretch in
 which a command printed nothing, what the train command itself said it took (its "train in all"), and the cores
 other processes kept busy meanwhile (a shared machine slows every stage). Another route (a twin's fit-board ->
 simulate -> train) is one more function in ``ROUTES``, returning its commands and the results file its last
@@ -20,9 +22,11 @@ It measures; it asserts nothing.
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import os
 import re
+import resource
 import subprocess
 import sys
 import tempfile
@@ -85,8 +89,9 @@ ROUTES: dict[str, Callable[[Case], tuple[list[Step], Path]]] = {"manifold": mani
 
 
 def run_step(step: Step) -> dict[str, Any]:
-    """Run one command; its wall time split by stage, its longest silence, its last lines."""
+    """Run one command; its wall time split by stage, its CPU time, its longest silence, its output lines."""
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    used = resource.getrusage(resource.RUSAGE_CHILDREN)
     start = time.monotonic()
     stamped: list[tuple[float, str]] = []
     with subprocess.Popen([sys.executable, "-m", "tactile_manip", *step.argv], stdout=subprocess.PIPE,
@@ -94,6 +99,8 @@ def run_step(step: Step) -> dict[str, Any]:
         for line in child.stdout:
             stamped.append((time.monotonic() - start, line.rstrip("\n")))
     wall = time.monotonic() - start
+    done = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (done.ru_utime - used.ru_utime) + (done.ru_stime - used.ru_stime)
     if child.returncode:
         tail = "\n".join(text for _, text in stamped[-20:])
         raise SystemExit(f"tactile-manip {' '.join(step.argv)} failed ({child.returncode}):\n{tail}")
@@ -103,7 +110,8 @@ def run_step(step: Step) -> dict[str, Any]:
         marks = [t for t, text in stamped if re.match(step.split[1], text)]
         if marks:
             stages = {step.split[0]: marks[-1], step.stage: wall - marks[-1]}
-    return {"stages": stages, "wall_s": wall, "longest_silence_s": max(b - a for a, b in zip(moments, moments[1:])),
+    return {"stages": stages, "wall_s": wall, "cpu_s": cpu,
+            "longest_silence_s": max(b - a for a, b in itertools.pairwise(moments)),
             "lines": [text for _, text in stamped]}
 
 
@@ -121,27 +129,29 @@ def time_case(route: str, case: Case) -> dict[str, Any]:
     steps, results = ROUTES[route](case)
     before = cpu_counters()
     stages: dict[str, float] = {}
-    silences, claimed = [], None
+    silences, claimed, cpu = [], None, 0.0
     for step in steps:
         done = run_step(step)
+        cpu += done["cpu_s"]
         for stage, seconds in done["stages"].items():
             stages[stage] = stages.get(stage, 0.0) + seconds
         silences.append(done["longest_silence_s"])
         claimed = claimed_total_s(done["lines"]) if step.argv[0] == "train" else claimed
-        print(f"  {step.argv[0]}: {done['wall_s']:.1f} s", flush=True)
+        print(f"  {step.argv[0]}: {done['wall_s']:.1f} s wall, {done['cpu_s']:.1f} s CPU", flush=True)
     figure = RUNS[case.run][1]
     methods = json.loads(results.read_text())["methods"]
     error = {m: float(methods[m][figure] if figure in methods[m] else methods[m]["rmse"][figure])
              for m in ("ours", "kNN")}
     total = sum(stages.values())
     return {"stages_s": {k: round(v, 1) for k, v in stages.items()}, "total_s": round(total, 1),
+            "cpu_s": round(cpu, 1),
             "within_goal": total <= GOAL_S, "longest_silence_s": round(max(silences), 1),
             "train_says_s": claimed, "error": error, "figure": figure,
             "other_load": other_load(before, cpu_counters())}
 
 
 def markdown(report: dict[str, Any]) -> str:
-    head = ["run", "route", "K", "seed", *(f"{s} s" for s in STAGES), "total", f"<= {GOAL_S / 60:.0f} min",
+    head = ["run", "route", "K", "seed", *(f"{s} s" for s in STAGES), "total", "CPU", f"<= {GOAL_S / 60:.0f} min",
             "longest silence s", "error (ours)", "kNN", "other cores busy"]
     lines = [f"\nWall time of the calibration, per stage (machine load at start "
              f"{report['machine']['load_average']})\n", "| " + " | ".join(head) + " |", "|---" * len(head) + "|"]
@@ -150,6 +160,7 @@ def markdown(report: dict[str, Any]) -> str:
         lines.append("| " + " | ".join([
             row["run"].split("_")[0], row["route"], str(row["k"]), str(row["seed"]),
             *(f"{row['stages_s'].get(s, 0.0):.0f}" for s in STAGES), f"{row['total_s'] / 60:.1f} min",
+            f"{row['cpu_s'] / 60:.1f} min",
             "yes" if row["within_goal"] else "no", f"{row['longest_silence_s']:.0f}",
             f"{row['error']['ours']:.3f} {UNITS[row['figure']].split()[0]}", f"{row['error']['kNN']:.3f}",
             "-" if other is None else f"{other:.2f}"]) + " |")
