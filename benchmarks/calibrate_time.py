@@ -41,7 +41,7 @@ from benchmarks.fewlabel_k import RUNS, UNITS
 from tactile_manip.bench.machine import cpu_counters, other_load
 
 GOAL_S = 600.0  # the whole calibration, import to evaluate, on two cores
-STAGES = ("import", "label", "train", "export", "evaluate")
+STAGES = ("import", "label", "train", "export", "evaluate")  # the manifold route's; a route may add its own
 
 
 @dataclass(frozen=True)
@@ -88,13 +88,14 @@ def manifold_route(case: Case) -> tuple[list[Step], Path]:
 ROUTES: dict[str, Callable[[Case], tuple[list[Step], Path]]] = {"manifold": manifold_route}
 
 
-def run_step(step: Step) -> dict[str, Any]:
-    """Run one command; its wall time split by stage, its CPU time, its longest silence, its output lines."""
+def run_step(step: Step, program: tuple[str, ...] = (sys.executable, "-m", "tactile_manip")) -> dict[str, Any]:
+    """Run one command (``program`` with ``step.argv``); its wall time split by stage, its CPU time, its longest
+    silence, its output lines."""
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
     used = resource.getrusage(resource.RUSAGE_CHILDREN)
     start = time.monotonic()
     stamped: list[tuple[float, str]] = []
-    with subprocess.Popen([sys.executable, "-m", "tactile_manip", *step.argv], stdout=subprocess.PIPE,
+    with subprocess.Popen([*program, *step.argv], stdout=subprocess.PIPE,
                           stderr=subprocess.STDOUT, text=True, env=env) as child:
         for line in child.stdout:
             stamped.append((time.monotonic() - start, line.rstrip("\n")))
@@ -151,15 +152,17 @@ def time_case(route: str, case: Case) -> dict[str, Any]:
 
 
 def markdown(report: dict[str, Any]) -> str:
-    head = ["run", "route", "K", "seed", *(f"{s} s" for s in STAGES), "total", "CPU", f"<= {GOAL_S / 60:.0f} min",
+    stages = [*STAGES, *dict.fromkeys(s for row in report["cases"] for s in row["stages_s"] if s not in STAGES)]
+    head = ["run", "route", "K", "seed", *(f"{s} s" for s in stages), "total", "CPU", f"<= {GOAL_S / 60:.0f} min",
             "longest silence s", "error (ours)", "kNN", "other cores busy"]
-    lines = [f"\nWall time of the calibration, per stage (machine load at start "
-             f"{report['machine']['load_average']})\n", "| " + " | ".join(head) + " |", "|---" * len(head) + "|"]
+    title = f"\nWall time of the calibration, per stage (machine load at start {report['machine']['load_average']})\n"
+    lines = [title, "| " + " | ".join(head) + " |", "|---" * len(head) + "|"]
     for row in report["cases"]:
         other = (row["other_load"] or {}).get("other_processes_cores")
         lines.append("| " + " | ".join([
             row["run"].split("_")[0], row["route"], str(row["k"]), str(row["seed"]),
-            *(f"{row['stages_s'].get(s, 0.0):.0f}" for s in STAGES), f"{row['total_s'] / 60:.1f} min",
+            *(f"{row['stages_s'][s]:.0f}" if s in row["stages_s"] else "-" for s in stages),
+            f"{row['total_s'] / 60:.1f} min",
             f"{row['cpu_s'] / 60:.1f} min",
             "yes" if row["within_goal"] else "no", f"{row['longest_silence_s']:.0f}",
             f"{row['error']['ours']:.3f} {UNITS[row['figure']].split()[0]}", f"{row['error']['kNN']:.3f}",

@@ -28,7 +28,6 @@ def test_the_blas_runs_on_the_given_threads_within_and_as_before_after() -> None
 def test_without_threadpoolctl_it_says_what_to_install_and_still_runs(monkeypatch) -> None:
     monkeypatch.setitem(sys.modules, "threadpoolctl", None)   # import threadpoolctl now raises ImportError
     ran = False
-    with pytest.warns(RuntimeWarning, match="pip install threadpoolctl"):
-        with limited_threads(1):
-            ran = True
+    with pytest.warns(RuntimeWarning, match="pip install threadpoolctl"), limited_threads(1):
+        ran = True
     assert ran
