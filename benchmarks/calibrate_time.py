@@ -189,6 +189,8 @@ def main(argv: list[str] | None = None) -> int:
                     work.mkdir()
                     row = time_case(route, Case(args.runs, run, args.k, seed, work))
                     report["cases"].append({"run": run, "route": route, "k": args.k, "seed": seed, **row})
+                    args.out.parent.mkdir(parents=True, exist_ok=True)  # each case kept as it ends: a long
+                    args.out.write_text(json.dumps(report, indent=2) + "\n")  # run cut short keeps its cases
     publish(report, args.out, markdown)
     args.out.with_suffix(".md").write_text(markdown(report).strip() + "\n")
     return 0
