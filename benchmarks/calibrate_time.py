@@ -121,7 +121,7 @@ def claimed_total_s(lines: list[str]) -> float | None:
     for text in lines:
         found = re.search(r"train in all ([0-9.]+) (s|min)", text)
         if found:
-            return float(found.group(1)) * (60.0 if found.group(2) == "min" else 1.0)
+            return round(float(found.group(1)) * (60.0 if found.group(2) == "min" else 1.0), 1)
     return None
 
 

@@ -86,7 +86,7 @@ class ContactTrainConfig:
     label_recency: float = 0.0    # the fit of the field norm weighs a labelled press by e ** (this x the share of
                                   # its run elapsed before it): later presses count more where the skin drifts
     seed: int = 0
-    threads: int = 0              # torch CPU threads (0: torch's default)
+    threads: int = 0              # CPU threads of torch and of numpy's BLAS each (0: each library's default)
 
     def __post_init__(self) -> None:
         check_schedule(self)
