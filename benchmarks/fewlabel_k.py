@@ -10,8 +10,10 @@ configs/train/contact_fewlabel.toml``, ``export`` and ``evaluate``. Evaluate's o
 fitted on the same K labelled presses, stand beside it. K = all is the whole training part labelled (the recipe
 is then configs/train/contact.toml). Writes a JSON, a markdown table and a plot of error against K
 (default ``docs/results/contact/fewlabel_k.*``; ``--update`` keeps the cases of that report this call does not
-measure). It measures; it asserts nothing. About 2 minutes a case on 2 CPU cores, 4 for the spatial run's few
-labels (the labeller's leave-one-out refits).
+measure). It measures; it asserts nothing. Each command runs on one thread: a case takes about 1 CPU-minute
+(the network), 4 for the spatial run's few labels (the labeller's leave-one-out refits), and about that in wall
+time on an idle machine; on two cores other work kept 1.5 cores busy, 1.7 and 9 minutes
+(``benchmarks.calibrate_time`` times each stage).
 """
 
 from __future__ import annotations

@@ -20,7 +20,7 @@ import sys
 import time
 from typing import IO, Any
 
-HEARTBEAT_S = 60.0  # at most one line per minute while a stage runs, off a terminal
+HEARTBEAT_S = 20.0  # at most one line every 20 s while a stage runs, off a terminal: no log silent for long
 
 
 def progress_bar(*, total: int | None, desc: str, unit: str = "it", quiet: bool = False, initial: int = 0,

@@ -399,3 +399,37 @@ def test_the_manifold_run_has_enough_validation_samples_to_calibrate_sigma(few_l
 
     _, manifold, ignore = few_label_runs
     assert ignore["val_samples"] < MIN_SIGMA_SAMPLES <= manifold["val_samples"]
+
+
+def test_the_train_command_shows_each_labelling_stage_and_the_true_time_of_each_part(labelled_presses, tmp_path,
+                                                                                     capsys, monkeypatch) -> None:
+    pytest.importorskip("torch", reason="training needs torch")
+    import re
+
+    from tactile_manip.cli import main
+    from tactile_manip.data import save_dataset
+    from tactile_manip.learning.contact import fewlabel
+
+    save_dataset(tmp_path / "few.npz", _hide_labels(labelled_presses(300), 20))
+    cfg = tmp_path / "few.toml"
+    cfg.write_text('kind = "contact"\ntargets = ["x_mm", "y_mm"]\nhidden = 8\nmembers = 1\nepochs = 2\n'
+                   'unlabelled = "manifold"\nthreads = 1\n')
+    blas = []
+    real = fewlabel.pseudo_labels
+
+    def spy(*args, **kwargs):   # how many threads numpy's BLAS may use while the labeller runs
+        threadpoolctl = pytest.importorskip("threadpoolctl")
+        blas.extend(p["num_threads"] for p in threadpoolctl.threadpool_info() if p["user_api"] == "blas")
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(fewlabel, "pseudo_labels", spy)
+    assert main(["train", "--config", str(cfg), "--data", str(tmp_path / "few.npz"), "--out", str(tmp_path / "m")]) == 0
+    out, err = capsys.readouterr()
+    for stage in ("mapping the readings: 3/3 map", "each target's fit by leave-one-out: 2/2 target",
+                  "leave-one-out of the field model's refit: ", "placing the unlabelled presses: "):
+        assert re.search(f"^labelling: {re.escape(stage)}.* in [0-9.]+ s$", err, re.M), (stage, err)
+    # the labelling, the network and the whole command, each its own time: the network's alone is not the command's
+    assert re.search(r"labelled from 20 in \d+ s;", out), out
+    times = re.search(r"labelling (\d+) s, network (\d+) s, train in all (\d+) s;", out)
+    assert times and int(times.group(3)) >= int(times.group(1)) + int(times.group(2)) - 1, out
+    assert blas and set(blas) == {1}, blas

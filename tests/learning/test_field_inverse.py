@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import functools
+import io
 import re
 
 import numpy as np
@@ -10,6 +12,7 @@ import pytest
 from tactile_manip.learning.contact import fewlabel, field_inverse
 from tactile_manip.learning.contact.field_inverse import refine_places, settle
 from tactile_manip.learning.contact.fewlabel import pseudo_labels, reading_maps
+from tactile_manip.progress import progress_bar
 
 CHIPS_MM = np.array([[0.0, 0.0], [-7.0, 0.0], [7.0, 0.0], [0.0, -7.0], [0.0, 7.0]])
 
@@ -296,7 +299,7 @@ def test_the_labeller_settles_the_places_where_a_pass_that_settling_repeats_hold
     first_repeated = passes - len(field_inverse.SETTLE_PASSES) + 1   # the first pass that settling repeats
     for best in range(1, passes + 1):
         loo = np.tile(np.abs(np.arange(1.0, passes + 1) - best)[:, None] + 1.0, (1, 2))  # least after `best`
-        monkeypatch.setattr(fewlabel, "_refined_loo", lambda *args, loo=loo: loo)
+        monkeypatch.setattr(fewlabel, "_refined_loo", lambda *args, loo=loo, **kwargs: loo)
         found = pseudo_labels(readings, truth, labelled, names=names, maps=maps)
         np.testing.assert_array_equal(found.loo_rmse, loo[best - 1])  # the passes' own leave-one-out
         if best >= first_repeated:
@@ -309,6 +312,29 @@ def test_the_labeller_settles_the_places_where_a_pass_that_settling_repeats_hold
             assert not any("settled" in m for m in found.methods)
             if best == 1:
                 np.testing.assert_array_equal(found.values, fewlabel._refit(readings, truth, labelled, starts)[0])
+
+
+
+def test_the_labeller_reports_each_stage_as_it_goes_and_labels_as_it_does_unseen(presses) -> None:
+    readings, truth, labelled = (part[:600] for part in presses)
+    names = ["x_mm", "y_mm"]
+    log = io.StringIO()
+    shown = pseudo_labels(readings, truth, labelled, names=names,
+                          stages=functools.partial(progress_bar, stream=log, heartbeat_s=0.0))
+    lines = log.getvalue().splitlines()
+    ends = [line for line in lines if re.search(r" in [0-9.]+ s$", line)]
+    assert [line.split(": ")[1] for line in ends] == [
+        "mapping the readings", "each target's fit by leave-one-out", "leave-one-out of the field model's refit",
+        "placing the unlabelled presses"], lines
+    starts = int(re.search(r"mean of (\d+) starts", shown.methods[0]).group(1))
+    refits = labelled.sum() * starts   # every labelled press held out, from every start
+    assert ends[2].startswith(f"labelling: leave-one-out of the field model's refit: {refits}/{refits} refit in ")
+    # the longest stage says where it is after every refit (here the heartbeat is 0 s)
+    assert sum(line.endswith(" s so far") and "refit" in line for line in lines) == refits
+    assert ends[3].startswith(f"labelling: placing the unlabelled presses: {starts}/{starts} start in ")
+    unseen = pseudo_labels(readings, truth, labelled, names=names)
+    np.testing.assert_array_equal(shown.values, unseen.values)
+    np.testing.assert_array_equal(shown.loo_rmse, unseen.loo_rmse)
 
 
 @pytest.mark.slow

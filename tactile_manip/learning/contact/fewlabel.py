@@ -48,10 +48,12 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from tactile_manip.errors import DatasetError
+from tactile_manip.progress import progress_bar
 from tactile_manip.learning.contact.field_inverse import SETTLE_PASSES, places_by_pass, settle
 
 MIN_LABELLED = 5          # below this, no fit is chosen by leave-one-out
@@ -81,7 +83,7 @@ class PseudoLabels:
 def pseudo_labels(readings: np.ndarray, targets: np.ndarray, labelled: np.ndarray, *, neighbours: int = 20,
                   earlier: np.ndarray | None = None, names: Sequence[str] | None = None,
                   maps: dict[str, np.ndarray] | None = None, refine: bool = True,
-                  weights: np.ndarray | None = None) -> PseudoLabels:
+                  weights: np.ndarray | None = None, stages: Callable[..., Any] | None = None) -> PseudoLabels:
     """Label every row of ``readings`` (N, ...) from the rows where ``labelled`` (N,) holds.
 
     ``targets`` (N, K) is read only on the labelled rows. ``earlier`` (N, ...): the reading a few frames before
@@ -95,7 +97,10 @@ def pseudo_labels(readings: np.ndarray, targets: np.ndarray, labelled: np.ndarra
     passes as give the least leave-one-out RMSE, and their leave-one-out RMSE is that of the refitted places.
     ``weights`` (N,): how much each labelled row counts in the fit of the field norm (:func:`recency_weights`: the
     later presses of a run more, where the skin drifts); read on the labelled rows only, which must hold finite
-    positive weights. Raises ``DatasetError`` with fewer than ``MIN_LABELLED`` labelled rows, a non-finite label or
+    positive weights. ``stages``: makes the progress display of each stage, given the keywords ``total``,
+    ``desc`` and ``unit`` (:func:`~tactile_manip.progress.progress_bar`; default: nothing shown): the maps, the
+    fits' leave-one-out, the refit's leave-one-out (one step per held-out press and start: most of the time) and
+    the placing. Raises ``DatasetError`` with fewer than ``MIN_LABELLED`` labelled rows, a non-finite label or
     reading, fewer rows than ``neighbours`` + 1, names that do not match the targets, maps with other rows than the
     readings, or weights of another length or not finite and positive on the labelled rows.
     """
@@ -134,8 +139,12 @@ def pseudo_labels(readings: np.ndarray, targets: np.ndarray, labelled: np.ndarra
         "place" if n in PLACE_TARGETS else "load" if n in LOAD_TARGETS else None for n in names]
     fits = {}
     by_map: dict[str, list[tuple[str, Fit]]] = {}
+    stages = stages or (lambda **kw: progress_bar(**kw, quiet=True))
     if any(kind != "load" for kind in kinds):
-        by_map = _fits_by_map(reading_maps(x, neighbours) if maps is None else maps)
+        if maps is None:
+            with stages(total=len(MAPS), desc="labelling: mapping the readings", unit="map") as bar:
+                maps = reading_maps(x, neighbours, bar=bar)
+        by_map = _fits_by_map(maps)
         fits["place"] = [named for group in by_map.values() for named in group]
     if any(kind != "place" for kind in kinds):
         fits["load"] = [_norm_fit(norm, change, _principal_axes((x - x.mean(axis=0)) / x.std(axis=0), 3)[:, 1:],
@@ -150,27 +159,33 @@ def pseudo_labels(readings: np.ndarray, targets: np.ndarray, labelled: np.ndarra
             scored[id(fit), k] = _loo_rmse(fit, y[:, k], lab)
         return scored[id(fit), k]
 
-    for k, kind in enumerate(kinds):
-        best = None
-        for name, fit in fits[kind] if kind else [*fits["place"], *fits["load"]]:
-            err = score(fit, k)
-            if best is None or err < best[0]:
-                best = (err, name, fit)
-        loo[k], name, fit = best
-        values[:, k] = fit(lab, y[:, k])
-        values[lab, k] = y[lab, k]
-        methods.append(name)
+    with stages(total=y.shape[1], desc="labelling: each target's fit by leave-one-out", unit="target") as bar:
+        for k, kind in enumerate(kinds):
+            best = None
+            for name, fit in fits[kind] if kind else [*fits["place"], *fits["load"]]:
+                err = score(fit, k)
+                if best is None or err < best[0]:
+                    best = (err, name, fit)
+            loo[k], name, fit = best
+            values[:, k] = fit(lab, y[:, k])
+            values[lab, k] = y[lab, k]
+            methods.append(name)
+            bar.update()
     places = [k for k, kind in enumerate(kinds) if kind == "place"]
     if refine and len(places) in (1, 2) and (~lab).any():
         starts = _starts(by_map, places, score)
-        by_pass = _refined_loo(x, y[:, places], lab, starts)  # (passes, places)
+        held = len(list(_held_out(lab, REFINED_LOO)))
+        with stages(total=held * len(starts), desc="labelling: leave-one-out of the field model's refit",
+                    unit="refit") as bar:
+            by_pass = _refined_loo(x, y[:, places], lab, starts, bar=bar)  # (passes, places)
         count = int(np.argmin(np.sum(by_pass ** 2, axis=1))) + 1  # the passes of least leave-one-out error
         # where the leave-one-out keeps a pass that settling repeats, the places run all the passes and settle; the
         # leave-one-out stays that of the passes alone (holding the settling out too would cost four times the
         # leave-one-out above)
         settles = count > len(by_pass) - len(SETTLE_PASSES)
-        values[:, places] = (_refit(x, y[:, places], lab, starts, settled=True) if settles
-                             else _refit(x, y[:, places], lab, starts)[count - 1])
+        with stages(total=len(starts), desc="labelling: placing the unlabelled presses", unit="start") as bar:
+            values[:, places] = (_refit(x, y[:, places], lab, starts, settled=True, bar=bar) if settles
+                                 else _refit(x, y[:, places], lab, starts, bar=bar)[count - 1])
         loo[places] = by_pass[count - 1]
         done = (f"{len(by_pass)} passes, settled (leave-one-out least after {count})" if settles
                 else f"{count} pass{'es' if count > 1 else ''}")
@@ -198,15 +213,23 @@ def recency_weights(times_s: np.ndarray, rate: float, groups: np.ndarray | None 
     return np.exp(rate * (share - 1.0))
 
 
-def reading_maps(readings: np.ndarray, neighbours: int = 20) -> dict[str, np.ndarray]:
-    """The three maps (N, ``MAP_DIMS``) the labels are fitted on, by name, of ``readings`` (N, D) whose every
-    channel varies: Isomap of the reading's direction (its unit vector), the same measured evenly
-    (``isomap(..., even=True)``), and Isomap of the standardised reading."""
+MAPS = ("direction", "reading", "direction (even)")  # the maps of :func:`reading_maps`, in order
+
+
+def reading_maps(readings: np.ndarray, neighbours: int = 20, *, bar: Any = None) -> dict[str, np.ndarray]:
+    """The three maps (N, ``MAP_DIMS``) the labels are fitted on, by name (``MAPS``), of ``readings`` (N, D)
+    whose every channel varies: Isomap of the reading's direction (its unit vector), of the standardised reading,
+    and of the direction measured evenly (``isomap(..., even=True)``). ``bar``: a progress display, one step per
+    map."""
     x = np.asarray(readings, np.float64)
     direction = x / np.maximum(np.linalg.norm(x, axis=1), 1e-12)[:, None]
     standard = (x - x.mean(axis=0)) / x.std(axis=0)
-    return {"direction": isomap(direction, neighbours), "reading": isomap(standard, neighbours),
-            "direction (even)": isomap(direction, neighbours, even=True)}
+    maps = {}
+    for name, points, even in zip(MAPS, (direction, standard, direction), (False, False, True)):
+        maps[name] = isomap(points, neighbours, even=even)
+        if bar is not None:
+            bar.update()
+    return maps
 
 
 def isomap(points: np.ndarray, neighbours: int, dims: int = MAP_DIMS, *, even: bool = False) -> np.ndarray:
@@ -372,24 +395,28 @@ def _starts(by_map: dict[str, list[tuple[str, Fit]]], places: list[int],
 
 
 def _refit(x: np.ndarray, y: np.ndarray, lab: np.ndarray, starts: list[list[Fit]], *,
-           settled: bool = False) -> np.ndarray:
+           settled: bool = False, bar: Any = None) -> np.ndarray:
     """The places (passes, N, P) of every row after each pass of the field model's refit: from each start, the
     rows ``lab`` does not hold placed by its fits and refitted, the labelled rows at their labels ``y``; the mean
     over the starts. ``settled``: the places (N, P) after every pass and :func:`settle` (each start shaken by
-    its own seed), the mean over the starts."""
+    its own seed), the mean over the starts. ``bar``: a progress display, one step per start."""
     placed = []
     for seed, fits in enumerate(starts):
         first = np.stack([fit(lab, y[:, k]) for k, fit in enumerate(fits)], axis=1)
         first[lab] = y[lab]
         by_pass = places_by_pass(x, first, lab)
         placed.append(settle(x, by_pass[-1], lab, seed=seed) if settled else by_pass)
+        if bar is not None:
+            bar.update()
     return np.mean(placed, axis=0)
 
 
-def _refined_loo(x: np.ndarray, y: np.ndarray, lab: np.ndarray, starts: list[list[Fit]]) -> np.ndarray:
+def _refined_loo(x: np.ndarray, y: np.ndarray, lab: np.ndarray, starts: list[list[Fit]], *,
+                 bar: Any = None) -> np.ndarray:
     """After each pass (passes, P): per place coordinate, the leave-one-out RMSE over the labelled rows (at most
     ``REFINED_LOO``, evenly spaced) of the refit from ``starts`` (:func:`_refit`): with each held-out press, every
-    press the others do not label is placed and refitted, as the labeller does without it."""
-    errs = [_refit(x, y, keep, starts)[:, i] - y[i] for i, keep in _held_out(lab, REFINED_LOO)]
+    press the others do not label is placed and refitted, as the labeller does without it. ``bar``: a progress
+    display, one step per held-out press and start."""
+    errs = [_refit(x, y, keep, starts, bar=bar)[:, i] - y[i] for i, keep in _held_out(lab, REFINED_LOO)]
     err = np.sqrt(np.mean(np.square(errs), axis=0))
     return np.where(np.isfinite(err), err, np.inf)

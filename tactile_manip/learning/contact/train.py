@@ -46,6 +46,7 @@ from tactile_manip.learning.contact.model import (ContactModel, ContactModelConf
                                                   frame_features)
 from tactile_manip.learning.noise import ChipNoise
 from tactile_manip.learning.schedule import check_schedule, optimise_step
+from tactile_manip.learning.threads import limited_threads
 from tactile_manip.learning.cvae.train import THREADS_RANGE, check_finite_readings, check_training_rows, data_name
 from tactile_manip.perception.confidence import ONE_SIGMA, SigmaCalibration
 from tactile_manip.perception.contact_context import context_windows
@@ -85,7 +86,7 @@ class ContactTrainConfig:
     label_recency: float = 0.0    # the fit of the field norm weighs a labelled press by e ** (this x the share of
                                   # its run elapsed before it): later presses count more where the skin drifts
     seed: int = 0
-    threads: int = 0              # torch CPU threads (0: torch's default)
+    threads: int = 0              # CPU threads of torch and of numpy's BLAS each (0: each library's default)
 
     def __post_init__(self) -> None:
         check_schedule(self)
@@ -156,14 +157,24 @@ def chosen_targets(data: PairedDataset, cfg: ContactTrainConfig) -> list[str]:
 
 def train_contact(cfg: ContactTrainConfig, data_paths: list[str | Path], out: str | Path, *,
                   progress: Callable[[dict[str, Any]], None] | None = None,
-                  on_start: Callable[[int], None] | None = None) -> dict[str, Any]:
+                  on_start: Callable[[int], None] | None = None,
+                  stages: Callable[..., Any] | None = None) -> dict[str, Any]:
     """Train, write ``out/best.pt`` and ``out/history.json``, and return the summary.
 
-    ``on_start(total_epochs)`` is called once the data are loaded and checked; ``progress(row)`` after every
-    epoch of every member (``row``: member, epoch, loss, val_rmse).
+    ``on_start(total_epochs)`` is called once the data are loaded and checked and the unlabelled presses
+    labelled; ``progress(row)`` after every epoch of every member (``row``: member, epoch, loss, val_rmse);
+    ``stages`` makes the labeller's progress displays (``pseudo_labels``). Torch and numpy's BLAS run on
+    ``cfg.threads`` threads (:func:`~tactile_manip.learning.threads.limited_threads`). The summary's
+    ``train_seconds`` is the network's training alone; ``pseudo_labels["seconds"]`` the labelling's.
     """
-    if cfg.threads:
-        torch.set_num_threads(cfg.threads)
+    with limited_threads(cfg.threads):
+        return _train_contact(cfg, data_paths, out, progress=progress, on_start=on_start, stages=stages)
+
+
+def _train_contact(cfg: ContactTrainConfig, data_paths: list[str | Path], out: str | Path, *,
+                   progress: Callable[[dict[str, Any]], None] | None,
+                   on_start: Callable[[int], None] | None,
+                   stages: Callable[..., Any] | None) -> dict[str, Any]:
     data = load_datasets([Path(p) for p in data_paths], images=False)
     names = chosen_targets(data, cfg)
     check_training_rows(data, data_name(data_paths))
@@ -177,7 +188,7 @@ def train_contact(cfg: ContactTrainConfig, data_paths: list[str | Path], out: st
                       "not hold their promise; give more validation presses (import --val-fraction, or a larger "
                       "val_fraction), or set calibrate_sigma = false", UserWarning, stacklevel=2)
     windows = dataset_windows(data, cfg)
-    pseudo = _pseudo_labels(data, labels, names, cfg, windows) if labelling else None
+    pseudo = _pseudo_labels(data, labels, names, cfg, windows, stages) if labelling else None
     if len(train_idx) < 2:
         raise DatasetError(f"{len(train_idx)} training sample(s): too few to train on")
     windows = torch.from_numpy(windows)
@@ -236,12 +247,12 @@ def train_contact(cfg: ContactTrainConfig, data_paths: list[str | Path], out: st
 
 
 def _pseudo_labels(data: PairedDataset, labels: np.ndarray, names: list[str], cfg: ContactTrainConfig,
-                   windows: np.ndarray) -> dict[str, Any] | None:
+                   windows: np.ndarray, stages: Callable[..., Any] | None = None) -> dict[str, Any] | None:
     """Fill ``labels`` (N, K) of the targets ``names`` in place on the unlabelled training presses from the
     labelled ones (:func:`~tactile_manip.learning.contact.fewlabel.pseudo_labels`, given the oldest frame of each
     press's ``windows`` as its earlier reading, and, with ``label_recency`` above 0 and the presses' times, the
-    labelled presses weighed by :func:`~tactile_manip.learning.contact.fewlabel.recency_weights` per run); what was
-    done, or None where nothing is unlabelled."""
+    labelled presses weighed by :func:`~tactile_manip.learning.contact.fewlabel.recency_weights` per run; each
+    stage shown by ``stages``); what was done, or None where nothing is unlabelled."""
     from tactile_manip.learning.contact.fewlabel import pseudo_labels, recency_weights
 
     hidden = data.indices(UNLABELLED)
@@ -253,11 +264,14 @@ def _pseudo_labels(data: PairedDataset, labels: np.ndarray, names: list[str], cf
     if cfg.label_recency > 0 and data.has("time_s"):
         weights = recency_weights(data.extra("time_s")[rows], cfg.label_recency,
                                   None if data.groups is None else data.groups[rows])
+    start = time.perf_counter()
     found = pseudo_labels(data.readings[rows], labels[rows], labelled, neighbours=cfg.manifold_neighbours,
-                          earlier=windows[rows, -1] if windows.shape[1] > 1 else None, names=names, weights=weights)
+                          earlier=windows[rows, -1] if windows.shape[1] > 1 else None, names=names, weights=weights,
+                          stages=stages)
     labels[rows] = found.values
     return {"labelled": int(labelled.sum()), "unlabelled": int(len(hidden)),
-            "loo_rmse": [float(v) for v in found.loo_rmse], "methods": list(found.methods)}
+            "loo_rmse": [float(v) for v in found.loo_rmse], "methods": list(found.methods),
+            "seconds": round(time.perf_counter() - start, 1)}
 
 
 def widening(val_rmse: dict[str, float], loo_rmse: list[float], names: list[str]) -> list[float]:

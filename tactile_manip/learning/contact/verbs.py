@@ -13,9 +13,14 @@ if TYPE_CHECKING:
 def run_train(request: TrainRequest) -> int:
     """Train the contact network (:mod:`.train`; targets from labelled presses); the CVAE-only flags are
     refused."""
+    import functools
+    import time
+
     from tactile_manip.learning.contact.train import load_contact_config, train_contact
     from tactile_manip.learning.verbs import small_net_config, start_run
+    from tactile_manip.progress import progress_bar
 
+    began = time.perf_counter()
     cfg = small_net_config(request, 'a contact model (kind = "contact")', load_contact_config)
     bars = []
 
@@ -27,21 +32,30 @@ def run_train(request: TrainRequest) -> int:
         bars[0].set_postfix(member=row["member"], loss=f"{row['loss']:.3f}", val_rmse=f"{row['val_rmse']:.3f}")
 
     try:
-        summary = train_contact(cfg, list(request.data), request.out, progress=progress, on_start=start)
+        summary = train_contact(cfg, list(request.data), request.out, progress=progress, on_start=start,
+                                stages=functools.partial(progress_bar, quiet=request.quiet))
     finally:
         for bar in bars:
             bar.close()
     rmse = ", ".join(f"{k} {v:.3g}" for k, v in summary["val_rmse"].items())
     pseudo = summary.get("pseudo_labels")
+    took = f"network {_minutes(summary['train_seconds'])}"
     if pseudo:
         loo = ", ".join(f"{k} {v:.3g} ({m})" for k, v, m in zip(summary["targets"], pseudo["loo_rmse"],
                                                                pseudo["methods"]))
-        print(f"{pseudo['unlabelled']} unlabelled presses labelled from {pseudo['labelled']}; leave-one-out RMSE "
-              f"of each target's fit on the labelled: {loo}")
+        print(f"{pseudo['unlabelled']} unlabelled presses labelled from {pseudo['labelled']} in "
+              f"{_minutes(pseudo['seconds'])}; leave-one-out RMSE of each target's fit on the labelled: {loo}")
         rmse += " against those labels"
-    print(f"validation RMSE {rmse} ({summary['val_samples']} samples; {summary['train_seconds'] / 60:.1f} min); "
-          f"wrote {request.out}/best.pt, history.json")
+        took = f"labelling {_minutes(pseudo['seconds'])}, {took}"
+    # the whole command's wall time beside its parts: the network's time alone is not what the command took
+    print(f"validation RMSE {rmse} ({summary['val_samples']} samples); {took}, train in all "
+          f"{_minutes(time.perf_counter() - began)}; wrote {request.out}/best.pt, history.json")
     return 0
+
+
+def _minutes(seconds: float) -> str:
+    """A duration as people read it: seconds below two minutes, minutes above."""
+    return f"{seconds:.0f} s" if seconds < 120 else f"{seconds / 60:.1f} min"
 
 
 def run_export(request: ExportRequest) -> int:
