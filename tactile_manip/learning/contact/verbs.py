@@ -16,7 +16,7 @@ def run_train(request: TrainRequest) -> int:
     from tactile_manip.learning.contact.train import load_contact_config, train_contact
     from tactile_manip.learning.verbs import small_net_config, start_run
 
-    cfg = small_net_config(request, 'a contact model (kind = "contact")', load_contact_config)
+    cfg = small_net_config(request, 'a contact model (kind = "contact")', load_contact_config, takes_prior=True)
     bars = []
 
     def start(total: int) -> None:
@@ -27,7 +27,8 @@ def run_train(request: TrainRequest) -> int:
         bars[0].set_postfix(member=row["member"], loss=f"{row['loss']:.3f}", val_rmse=f"{row['val_rmse']:.3f}")
 
     try:
-        summary = train_contact(cfg, list(request.data), request.out, progress=progress, on_start=start)
+        summary = train_contact(cfg, list(request.data), request.out, progress=progress, on_start=start,
+                                prior=request.prior)
     finally:
         for bar in bars:
             bar.close()
@@ -36,8 +37,9 @@ def run_train(request: TrainRequest) -> int:
     if pseudo:
         loo = ", ".join(f"{k} {v:.3g} ({m})" for k, v, m in zip(summary["targets"], pseudo["loo_rmse"],
                                                                pseudo["methods"]))
-        print(f"{pseudo['unlabelled']} unlabelled presses labelled from {pseudo['labelled']}; leave-one-out RMSE "
-              f"of each target's fit on the labelled: {loo}")
+        source = f" and the twin {request.prior}" if request.prior else ""
+        print(f"{pseudo['unlabelled']} unlabelled presses labelled from {pseudo['labelled']}{source}; leave-one-out "
+              f"RMSE of each target's fit on the labelled: {loo}")
         rmse += " against those labels"
     print(f"validation RMSE {rmse} ({summary['val_samples']} samples; {summary['train_seconds'] / 60:.1f} min); "
           f"wrote {request.out}/best.pt, history.json")
