@@ -82,9 +82,9 @@ def test_what_the_twin_cannot_label_is_refused(labelled_presses) -> None:
     readings, targets, names = _bank(labelled_presses)
     y = data.targets.astype(np.float64)
     none = np.zeros(len(data), bool)
-    with pytest.raises(DatasetError, match="no target depth_mm"):
+    with pytest.raises(DatasetError, match="no target y_mm"):
         twin_labels(data.readings, y[:, :1], none, bank_readings=readings, bank_targets=targets,
-                    names=["depth_mm"], bank_names=names)
+                    names=["y_mm"], bank_names=["x_mm", "v_mm", "force_n"])
     with pytest.raises(DatasetError, match="readings of 18 values against the twin's bank of 27"):
         twin_labels(data.readings[:, :2], y, none, bank_readings=readings, bank_targets=targets, names=names,
                     bank_names=names)
@@ -158,3 +158,18 @@ def test_the_twin_recipe_is_the_few_label_recipe_with_the_twin_as_its_labeller()
     assert twin.unlabelled == "twin" and few.unlabelled == "manifold"
     same = ("context_frames", "features", "hidden", "layers", "members", "epochs", "lr", "label_recency")
     assert all(getattr(twin, f) == getattr(few, f) for f in same)
+
+
+def test_a_twin_of_stage_poses_stands_its_z_in_for_the_force_the_labels_then_fit(labelled_presses) -> None:
+    data = labelled_presses(600)
+    y = data.targets.astype(np.float64)
+    readings, targets, _ = _bank(labelled_presses)
+    stage = np.c_[targets[:, :2], 145.0 - 0.3 * targets[:, 2]]  # a deeper press: a smaller stage z
+    lab = _mask(len(data), 25, seed=4)
+    found = twin_labels(data.readings, y[:, 2:], lab, bank_readings=readings, bank_targets=stage,
+                        names=["force_n"], bank_names=["x_mm", "y_mm", "z_mm"])
+    assert "twin's z_mm" in found.methods[0]
+    assert _rmse(found.values[~lab], y[~lab, 2:]) < 0.25 * y[:, 2].std()
+    with pytest.raises(DatasetError, match="gives no force_n of its own.*from the twin's z_mm"):
+        twin_labels(data.readings, y[:, 2:], np.zeros(len(data), bool), bank_readings=readings,
+                    bank_targets=stage, names=["force_n"], bank_names=["x_mm", "y_mm", "z_mm"])

@@ -37,6 +37,8 @@ from tactile_manip.learning.contact.fewlabel import (LOAD_TARGETS, PLACE_TARGETS
 NEIGHBOURS = 8        # bank presses whose targets place a reading
 NORM_WEIGHT = 0.5     # weight of the log field norm beside the reading's direction in the bank distance
 LOO_MOST = 200        # labelled presses held out in turn to choose a correction
+LOAD_PROXIES = ("force_n", "depth_mm", "z_mm")  # what of the twin's stands for a load it does not give in newtons
+                                                # (a twin of a rig's log places its presses by the stage's pose)
 RIDGE = 1e-6          # of the affine fits
 TURNS = tuple(np.array(m, float) for m in (
     [[1, 0], [0, 1]], [[0, -1], [1, 0]], [[-1, 0], [0, -1]], [[0, 1], [-1, 0]],
@@ -78,7 +80,9 @@ def twin_labels(readings: np.ndarray, targets: np.ndarray, labelled: np.ndarray,
     """Label every row of ``readings`` (N, ...) from the twin's bank and the rows where ``labelled`` (N,) holds.
 
     ``targets`` (N, K) named ``names`` is read on the labelled rows only; every name must be among the bank's
-    ``bank_names`` (its targets (M, len(bank_names))). ``earlier`` and ``weights``: as for
+    ``bank_names`` (its targets (M, len(bank_names))), but for a load the bank lacks, which the labels then fit
+    from the first of ``LOAD_PROXIES`` the bank has (a twin that places its presses by a rig's stage pose gives the
+    stage's z, not the force). ``earlier`` and ``weights``: as for
     :func:`~tactile_manip.learning.contact.fewlabel.pseudo_labels` (the field norm's change, the labels' weights
     in the norm's fit). Without labelled rows the twin's answer is every label and the leave-one-out RMSE is NaN.
     Raises ``DatasetError`` for a target the bank lacks, readings of another layout than the bank's, non-finite
@@ -88,9 +92,15 @@ def twin_labels(readings: np.ndarray, targets: np.ndarray, labelled: np.ndarray,
     bank = np.asarray(bank_readings, np.float64).reshape(len(bank_readings), -1)
     y = np.asarray(targets, np.float64).reshape(len(readings), -1)
     lab = np.asarray(labelled, bool)
-    missing = [n for n in names if n not in bank_names]
+    proxy = next((n for n in LOAD_PROXIES if n in bank_names), None)
+    sources = [n if n in bank_names or n not in LOAD_TARGETS or proxy is None else proxy for n in names]
+    missing = [n for n in sources if n not in bank_names]
     if missing:
         raise DatasetError(f"the twin's bank has no target {', '.join(missing)} (it has {', '.join(bank_names)})")
+    if not lab.any() and sources != list(names):
+        raise DatasetError(f"the twin gives no {', '.join(n for n, s in zip(names, sources) if n != s)} of its own "
+                           f"(its bank has {', '.join(bank_names)}): label a few presses to fit it from the twin's "
+                           f"{proxy}")
     if x.shape[1] != bank.shape[1]:
         raise DatasetError(f"readings of {x.shape[1]} values against the twin's bank of {bank.shape[1]}: simulate "
                            "the bank on the board the presses were imported with")
@@ -98,7 +108,7 @@ def twin_labels(readings: np.ndarray, targets: np.ndarray, labelled: np.ndarray,
         raise DatasetError("the readings and the labels must be finite to be placed on the twin")
     if 0 < lab.sum() < 3:
         raise DatasetError(f"{int(lab.sum())} labelled press(es): the twin's correction needs 3 or more (or none)")
-    cols = [list(bank_names).index(n) for n in names]
+    cols = [list(bank_names).index(n) for n in sources]
     twin = twin_targets(x, bank, np.asarray(bank_targets, np.float64)[:, cols], neighbours=neighbours,
                         norm_weight=norm_weight)
     values, loo, methods = twin.copy(), np.full(len(names), np.nan), ["twin"] * len(names)
@@ -116,7 +126,7 @@ def twin_labels(readings: np.ndarray, targets: np.ndarray, labelled: np.ndarray,
                               for name, fit in _load_fits(x, twin[:, k], earlier, weights)), key=lambda t: t[0])
         values[:, k] = fit(lab, y[:, k])
         loo[k] = err
-        methods[k] = name
+        methods[k] = name if sources[k] == names[k] else name.replace("twin load", f"twin's {sources[k]}")
     values[lab] = y[lab]
     return PseudoLabels(values=values, loo_rmse=loo, methods=tuple(methods))
 
