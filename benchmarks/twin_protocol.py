@@ -23,7 +23,7 @@ contact model's) sees only the first 80 % of the run's rows; every score is on t
   tens of minutes). With K = 0 no label is used at all (no states.csv in the twin's fit); the positions are in the
   board file's pad frame, so a 2-D offset and the best of the 8 quarter turns and mirror images of the axes are
   fitted on the test presses (as benchmarks/eflesh_zero_label.py). The same recipe with a smooth map of the pose as
-  its twin (``--bound``) bounds what a perfect twin would give.
+  its twin (``--twins bound``) bounds what a perfect twin would give.
 
 Writes docs/results/twin/twin_protocol.{json,md} and plots (``--out``). It measures; it asserts nothing. Run it
 with ``nice``: a contact case trains an ensemble (about 2 minutes on two cores).
@@ -54,6 +54,7 @@ LABELS = {SPATIAL: "time_s,x_mm,y_mm,z_mm", NORMAL: "time_s,x_mm,y_mm,z_mm,force
 CONTACT = {SPATIAL: (["--contact", f"z_mm < {CONTACT_Z_MM}", "--targets", "x_mm,y_mm"], "position_rmse_mm"),
            NORMAL: (["--missing", "-1", "--targets", "force_n"], "force_rmse_n")}
 MANIFOLD = Path("docs/results/contact/fewlabel_k.json")
+MADE_S: dict[str, float] = {}  # seconds each cached file took to make (fit, twin's presses), by path
 TURNS = [np.array(m, float) for m in ([[1, 0], [0, 1]], [[0, -1], [1, 0]], [[-1, 0], [0, -1]], [[0, 1], [-1, 0]],
                                       [[1, 0], [0, -1]], [[-1, 0], [0, 1]], [[0, 1], [1, 0]], [[0, -1], [-1, 0]])]
 
@@ -172,9 +173,11 @@ def fit_board(run: Path, kind: str, work: Path, k: int | None, seed: int) -> Pat
     if not out.is_file():
         labels = [] if k is None else ["--labels", str(run / "states.csv"), "--label-columns", LABELS[kind],
                                        "--labelled", str(k), "--seed", str(seed)]
+        start = time.perf_counter()
         cli("fit-board", "--board", "eflesh", "--raw", str(run / "sensor.csv"), "--subtracted",
             str(run / "sensor_post_baselines.csv"), "--presses", str(run / "sensor_post_baselines.csv"), *labels,
             "--train-fraction", "0.8", "--out", str(out), quiet=False)
+        MADE_S[str(out)] = time.perf_counter() - start
     return out
 
 
@@ -182,8 +185,58 @@ def twin_bank(board: Path | str, work: Path, presses: int) -> Path:
     """The twin's simulated presses (``simulate --board``, a 6 mm sphere as the rig's probe), cached."""
     out = work / f"bank_{Path(str(board)).stem}_{presses}.npz"
     if not out.is_file():
+        start = time.perf_counter()
         cli("simulate", "--board", str(board), "--presses", str(presses), "--tip", "sphere", "--tip-diameter-mm",
             "6", "--seed", "0", "--out", str(out), quiet=False)
+        MADE_S[str(out)] = time.perf_counter() - start
+    return out
+
+
+def stage_grid(board_path: Path, *, step_mm: float = 0.5, margin_mm: float = 2.0, depth_mm: float = 6.0,
+               depths: int = 12) -> np.ndarray:
+    """(G, 3) stage poses (x, y, z mm) that press a fitted board's pad all over: its layer less ``margin_mm`` in
+    steps of ``step_mm``, ``depths`` approaches up to ``depth_mm``, taken to the stage by the board's ``[twin]``
+    rig frame (no label is read: the frame is the fit's)."""
+    from tactile_manip.boards import load_board
+
+    board = load_board(str(board_path))
+    twin = board.twin
+    half = np.array(board.layer.size_mm) / 2 - margin_mm
+    gx, gy = (np.arange(-h, h + step_mm / 2, step_mm) for h in half)
+    pad = np.stack(np.meshgrid(gx, gy, indexing="ij"), axis=-1).reshape(-1, 2)
+    turn = np.radians(twin.rig_turn_deg)
+    back = np.array([[np.cos(turn), np.sin(turn)], [-np.sin(turn), np.cos(turn)]])  # R(-turn)
+    xy = pad @ back.T
+    if twin.rig_mirror:
+        xy[:, 1] = -xy[:, 1]
+    xy += np.asarray(twin.rig_origin_mm)
+    z = twin.contact_z_mm + np.linspace(depth_mm / depths, depth_mm, depths) / twin.depth_per_z
+    return np.c_[np.repeat(xy, depths, axis=0), np.tile(z, len(xy))]
+
+
+def simlog_bank(board: Path, run: Path, kind: str, work: Path) -> Path:
+    """The fitted twin's readings at a grid of stage poses (``simulate-log`` on a log of those poses), as a dataset
+    of presses whose targets are the poses (x_mm, y_mm, z_mm): ``train --prior``'s bank, in the rig's frame."""
+    from tactile_manip.data import from_arrays, load_dataset, save_dataset
+
+    out = work / f"bank_{board.stem}.npz"
+    if out.is_file():
+        return out
+    start = time.perf_counter()
+    grid = stage_grid(board)
+    log = work / f"grid_{board.stem}.csv"
+    columns = LABELS[kind].split(",")
+    rows = np.c_[np.zeros(len(grid)), grid, -np.ones((len(grid), len(columns) - 4))]
+    np.savetxt(log, rows, delimiter=",", fmt="%.6f")
+    sim = work / f"grid_{board.stem}_readings.npz"
+    cli("simulate-log", "--board", str(board), "--labels", str(log), "--label-columns", LABELS[kind],
+        "--out", str(sim), quiet=False)
+    template = imported(run, kind, "sensor_post_baselines", work, ["--targets", "x_mm,y_mm,z_mm"], "pose")
+    readings = load_dataset(sim, images=False).readings
+    prov = {k: template.provenance[k] for k in ("layout", "board") if k in template.provenance}
+    save_dataset(out, from_arrays(readings, targets=dict(zip(("x_mm", "y_mm", "z_mm"), grid.T)), val_fraction=0.0,
+                                  test_fraction=0.0, provenance={**prov, "source": f"simulate-log of {board.name}"}))
+    MADE_S[str(out)] = time.perf_counter() - start
     return out
 
 
@@ -278,7 +331,7 @@ def knn(data: Any, names: list[str], test: np.ndarray) -> np.ndarray:
 
 
 def section_contact(runs: dict[str, Path], work: Path, ks: list[int], seeds: list[int], *, presses: int,
-                    bound: bool) -> dict[str, Any]:
+                    twins: list[str]) -> dict[str, Any]:
     out: dict[str, Any] = {}
     manifold = json.loads(MANIFOLD.read_text())["runs"] if MANIFOLD.is_file() else {}
     for kind, run in runs.items():
@@ -286,15 +339,23 @@ def section_contact(runs: dict[str, Path], work: Path, ks: list[int], seeds: lis
         for k in ks:
             per_seed: dict[str, Any] = {}
             for seed in seeds[:1] if k == 0 else seeds:
-                fitted = fit_board(run, kind, work, None if k == 0 else k, seed)
-                bank = twin_bank(fitted or "eflesh", work, presses)
-                case = contact_case(run, kind, k, seed, bank, work, "twin")
-                case["board"] = "fitted" if fitted else "eflesh (shipped)"
-                if bound:
-                    case["bound"] = contact_case(run, kind, k, seed, map_twin_bank(run, kind, work), work,
-                                                 "map")["twin"]
+                case: dict[str, Any] = {}
+                if "twin" in twins:
+                    fitted = fit_board(run, kind, work, None if k == 0 else k, seed)
+                    if fitted and kind == NORMAL and k == 0:
+                        break  # a twin of stage poses gives no force in newtons: the labels fit it (K > 0)
+                    bank = simlog_bank(fitted, run, kind, work) if fitted else twin_bank("eflesh", work, presses)
+                    case = contact_case(run, kind, k, seed, bank, work, "twin")
+                    case["board"] = "fitted" if fitted else "eflesh (shipped)"
+                    case["seconds"] = {"fit": MADE_S.get(str(fitted)), "twin_presses": MADE_S.get(str(bank)),
+                                       "train_and_export": case.pop("train_seconds")}
+                if "bound" in twins:
+                    bound = contact_case(run, kind, k, seed, map_twin_bank(run, kind, work), work, "map")
+                    case["bound"] = bound["twin"]
+                    case.setdefault("kNN", bound.get("kNN"))
                 per_seed[str(seed)] = case
-            methods = [m for m in ("twin", "kNN", "bound") if all(m in c for c in per_seed.values())]
+            methods = [m for m in ("twin", "kNN", "bound")
+                       if per_seed and all(c.get(m) is not None for c in per_seed.values())]
             mean = {m: float(np.mean([c[m] for c in per_seed.values()])) for m in methods}
             committed = manifold.get(run.name, {}).get(str(k), {}).get("mean", {})
             if "ours" in committed:
@@ -383,7 +444,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--k", type=int, nargs="+", default=[0, 10, 25, 100], help="labelled presses per case")
     p.add_argument("--seeds", type=int, nargs="+", default=[0, 1])
     p.add_argument("--presses", type=int, default=3000, help="the twin's simulated presses")
-    p.add_argument("--bound", action="store_true", help="also run each contact case with a smooth map as the twin")
+    p.add_argument("--twins", nargs="+", choices=("twin", "bound"), default=["twin"],
+                   help="contact cases: the fitted twin (the shipped board where fit-board is missing), and the bound "
+                        "(a smooth map of the pose fitted with every label of the first 80 % as the twin)")
     p.add_argument("--work", type=Path, default=None, help="cache folder (default: a temporary one)")
     p.add_argument("--out", type=Path, default=Path("docs/results/twin/twin_protocol.json"))
     p.add_argument("--update", action="store_true", help="keep the sections of --out this call does not run")
@@ -407,7 +470,7 @@ def main(argv: list[str] | None = None) -> int:
                 report["forward"] = section_forward(runs, work, boards)
             else:
                 report["contact"] = section_contact(runs, work, args.k, args.seeds, presses=args.presses,
-                                                    bound=args.bound)
+                                                    twins=args.twins)
             report.setdefault("seconds", {})[section] = round(time.perf_counter() - start, 1)
             print(f"== {section}: {time.perf_counter() - start:.0f} s", flush=True)
     publish(report, args.out, markdown)
