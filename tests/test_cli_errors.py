@@ -112,6 +112,16 @@ CASES = {
     "bench": {"missing": lambda p: ["--out", f"{p['tmp']}/bench", "--scene", p["missing"]],
               "readonly": lambda p: ["--out", f"{p['ro']}/bench"],
               "dir": lambda p: ["--out", p["file"]]},  # a file where the report folder goes
+    "fit-board": {"missing": lambda p: ["--board", "eflesh", "--raw", p["missing"], "--subtracted", p["missing"],
+                                        "--labels", p["missing"], "--out", f"{p['tmp']}/b.toml"],
+                  "readonly": lambda p: ["--board", "eflesh", "--raw", p["file"], "--subtracted", p["file"],
+                                         "--labels", p["file"], "--out", f"{p['ro']}/b.toml"],
+                  "dir": lambda p: ["--board", "eflesh", "--raw", p["dir"], "--subtracted", p["dir"],
+                                    "--labels", p["dir"], "--out", f"{p['tmp']}/b.toml"]},
+    "simulate-log": {"missing": lambda p: ["--board", p["missing"], "--labels", p["missing"],
+                                           "--out", f"{p['tmp']}/s.csv"],
+                     "readonly": lambda p: ["--board", p["file"], "--labels", p["file"], "--out", f"{p['ro']}/s.csv"],
+                     "dir": lambda p: ["--board", p["dir"], "--labels", p["dir"], "--out", f"{p['tmp']}/s.csv"]},
     "demo": {"readonly": lambda p: ["--out", f"{p['ro']}/demo"],
              "dir": lambda p: ["--out", p["file"]]},  # a file where the PNG folder goes
 }

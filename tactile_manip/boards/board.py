@@ -17,10 +17,11 @@ import functools
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
-from tactile_manip.boards.spec import BodySpec, ChipSpec, LayerSpec, WireSpec
+from tactile_manip.boards.spec import BodySpec, ChipSpec, LayerSpec, TwinSpec, WireSpec
 from tactile_manip.chips import ChipModelSpec
 from tactile_manip.errors import ConfigError
 
@@ -41,6 +42,8 @@ class Board:
         wire: the serial backend's wire format and baud rate.
         body: the magnetic body (None: not simulatable).
         layer: the compliant layer (None: not simulatable).
+        twin: a fitted board's rig frame, press kernel and chip readouts (``[twin]``; None: not fitted).
+        fit: what a fitted board was fitted on, and its residuals (``[fit]``, free-form; None: not fitted).
         path: the file it came from (None for ``generic:N`` and boards built in code).
 
     Raises:
@@ -55,6 +58,8 @@ class Board:
     wire: WireSpec = field(default_factory=WireSpec)
     body: BodySpec | None = None
     layer: LayerSpec | None = None
+    twin: TwinSpec | None = None
+    fit: dict[str, Any] | None = None
     description: str = ""
     source: str = ""
     path: Path | None = None

@@ -90,9 +90,13 @@ def board_from_file(path: str | Path) -> Board:
         raise ConfigError(f"{where}: {present} without {absent}: simulation needs both (or leave both out)")
     if spec.body is not None and spec.layer is not None:
         _check_magnets(where, spec.body, spec.layer)
+    if spec.twin is not None and spec.twin.readout and len(spec.twin.readout) != len(chips):
+        raise ConfigError(f"{where}: [[twin.readout]] has {len(spec.twin.readout)} entries for {len(chips)} chips; "
+                          "give one per chip, in firmware order")
     head = spec.board
     board = Board(name=head.name, grid=head.grid, pitch_mm=head.pitch_mm, chips=chips, chip=spec.chip,
-                  wire=spec.wire, body=spec.body, layer=spec.layer, description=head.description,
+                  wire=spec.wire, body=spec.body, layer=spec.layer, twin=spec.twin, fit=spec.fit,
+                  description=head.description,
                   source=head.source, path=path)
     _check_name(where, board, path)
     return board

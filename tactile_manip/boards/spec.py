@@ -11,7 +11,10 @@ These dataclasses mirror the tables of a board file (``tactile_manip/boards/*.to
 - ``[body]``: the magnetic body, a magnetised layer or discrete magnets (``[[body.magnets]]``, cylinders
   and cuboids), optional;
 - ``[layer]``: the compliant layer (size, thickness, Young's modulus, and the gap from its base down to the
-  chips' sensing plane), optional.
+  chips' sensing plane), optional;
+- ``[twin]``: a board fitted to its owner's logs (``tactile-manip fit-board``): the probe rig's frame, the press
+  kernel and each chip's 3x3 readout (:mod:`tactile_manip.sim.twin`), optional;
+- ``[fit]``: what the fit saw and how well it fits (file hashes, rows, residuals), free-form, optional.
 
 A board without ``[body]`` and ``[layer]`` can import, train and evaluate, but not be simulated. The pad frame is
 that of docs/design.md: origin at the centre of the undeformed top surface, z along the outward normal, so
@@ -25,7 +28,7 @@ from __future__ import annotations
 import math
 import unicodedata
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 
@@ -205,6 +208,57 @@ class LayerSpec:
 
 
 @dataclass(frozen=True)
+class ReadoutSpec:
+    """One chip's readout in a fitted board: its reading (chip axes, uT) is ``matrix @ B + offset_ut`` for the field
+    ``B`` at the chip in pad axes (the matrix holds the chip's turn, gain and misalignment)."""
+
+    matrix: tuple[tuple[float, float, float], tuple[float, float, float], tuple[float, float, float]]
+    offset_ut: tuple[float, float, float] = (0.0, 0.0, 0.0)   # uT, chip axes
+
+    def __post_init__(self) -> None:
+        for i, row in enumerate(self.matrix):
+            for j, v in enumerate(row):
+                _finite(f"twin.readout.matrix[{i}][{j}]", v, low=-100.0, high=100.0, low_open=False)
+        for i, v in enumerate(self.offset_ut):
+            _finite(f"twin.readout.offset_ut[{i}]", v, low=-1e5, high=1e5, low_open=False)
+        if abs(np.linalg.det(np.array(self.matrix, float))) < 1e-9:
+            raise ValueError("twin.readout.matrix is singular: a chip's readout must see every field direction")
+
+
+@dataclass(frozen=True)
+class TwinSpec:
+    """The ``[twin]`` table: a board fitted to a probe rig's logs (:mod:`tactile_manip.sim.twin`)."""
+
+    rig_origin_mm: tuple[float, float]     # stage (x, y) of the pad origin, mm
+    rig_turn_deg: float                    # turn of the stage axes onto the pad's, deg (counter-clockwise)
+    contact_z_mm: float                    # stage z at first touch, mm
+    press_gain: float                      # A in s = A d^n: press strength per approach^n, mm^(2-n)
+    press_exponent: float                  # n
+    kernel_depth_mm: float                 # depth of the press kernel below the surface, mm
+    depth_per_z: float = -1.0              # approach per mm of stage z (-1: a smaller z is deeper)
+    rig_mirror: bool = False               # the stage's y axis is mirrored before the turn (a left-handed rig)
+    lateral_scale: float = 1.0             # scale of the in-plane displacement against an isotropic solid
+    tilt_scale: float = 1.0                # scale of the magnets' turn against curl(u) / 2
+    softening_per_hour: float = 0.0        # the press strength grows by this share per hour of the run
+    readout: tuple[ReadoutSpec, ...] = ()  # one per chip, firmware order; empty: the chips' axis maps
+
+    def __post_init__(self) -> None:
+        for i, v in enumerate(self.rig_origin_mm):
+            _finite(f"twin.rig_origin_mm[{i}]", v, low=-1e4, high=1e4, low_open=False)
+        _finite("twin.rig_turn_deg", self.rig_turn_deg, low=-360.0, high=360.0, low_open=False)
+        _finite("twin.contact_z_mm", self.contact_z_mm, low=-1e4, high=1e4, low_open=False)
+        _finite("twin.press_gain", self.press_gain, low=0.0, high=1e4)
+        _finite("twin.press_exponent", self.press_exponent, low=0.0, high=5.0)
+        _finite("twin.kernel_depth_mm", self.kernel_depth_mm, low=0.0, high=1000.0)
+        _finite("twin.depth_per_z", self.depth_per_z, low=-100.0, high=100.0, low_open=False)
+        if self.depth_per_z == 0.0:
+            raise ValueError("twin.depth_per_z is 0: the stage's z must move the probe in (-1 or +1, usually)")
+        _finite("twin.lateral_scale", self.lateral_scale, low=0.0, high=100.0, low_open=False)
+        _finite("twin.tilt_scale", self.tilt_scale, low=0.0, high=100.0, low_open=False)
+        _finite("twin.softening_per_hour", self.softening_per_hour, low=-1.0, high=10.0, low_open=False)
+
+
+@dataclass(frozen=True)
 class BoardHeader:
     """The ``[board]`` table."""
 
@@ -237,3 +291,5 @@ class BoardFile:
     wire: WireSpec = field(default_factory=WireSpec)
     body: BodySpec | None = None
     layer: LayerSpec | None = None
+    twin: TwinSpec | None = None
+    fit: dict[str, Any] | None = None

@@ -1,0 +1,218 @@
+"""A board's twin: the reading at a probe rig's logged pose, from a press kernel and the magnets' closed-form field.
+
+The full press (:mod:`tactile_manip.sim.board_press`: a contact solve, then the layer's displacement by FFT) takes
+tens of milliseconds; a fit to a few thousand logged presses needs the reading at every row many hundreds of times.
+The twin therefore replaces the layer's solution by its far field: a press of approach ``d`` at ``p`` on the pad
+moves a magnet whose centre lies ``h`` below the surface at in-plane offset ``r`` as Boussinesq's point load on an
+incompressible half-space (Poisson ratio 1/2) does,
+
+    u_z = -s (1 + h^2 / R^2) / R,    u_r = a_r s r h / R^3,    R = sqrt(r^2 + h^2),    s = A d^n,
+
+(``s = P / (4 pi G)``, a length squared: the press's force over the shear modulus), with ``h`` a fitted kernel
+depth (the layer is bonded to a rigid base and the probe is no point, so the depth that fits is not the magnet's
+own), ``a_r`` a lateral scale (the printed lattice is not an isotropic solid) and the magnet turning by
+``a_w`` times the exact rotation of ``curl(u) / 2``. Each magnet's field is then the closed form of its disc at
+the moved and turned pose (:func:`~tactile_manip.sim.magnets.cylinder_field_t`), not linearised. A chip reads
+``M_c B + o_c``: ``M_c`` is the fitted 3x3 readout of chip ``c`` (its turn, gain and misalignment; default the
+board file's axis map) and ``o_c`` its offset (rest field only).
+
+The probe's stage pose maps onto the pad by the rig frame: ``p = R(turn) S (xy_stage - origin)`` (``S`` mirrors
+y on a left-handed rig) and
+``d = (z_stage - contact_z) * depth_per_z`` (``depth_per_z = -1``: a smaller stage z is a deeper press), clipped at
+0. A skin that softens over a run scales ``s`` by ``1 + softening_per_hour * t_h``.
+
+Lengths mm, fields uT in pad axes (``*_pad_ut``) or chip axes, firmware order. numpy only.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from tactile_manip.boards.load import Board
+from tactile_manip.boards.spec import TwinSpec
+from tactile_manip.checks import check_array
+from tactile_manip.errors import ConfigError
+from tactile_manip.sim.magnets import cylinder_field_t, magnet_field_t
+
+_TESLA_TO_UT = 1e6
+_CURL_STEP_MM = 0.05  # central differences of the kernel for its curl
+
+
+@dataclass(frozen=True)
+class Magnets:
+    """Discs as arrays: (M, 3) centres (mm, pad frame), (M,) signed polarisation along +z (T), (M, 2) size
+    (diameter, height, mm)."""
+
+    centres_mm: np.ndarray
+    polarisation_t: np.ndarray
+    size_mm: np.ndarray
+
+
+def board_magnets(board: Board) -> Magnets:
+    """The board file's discs (body kind "magnets", cylinders only) as :class:`Magnets`."""
+    board.require_simulation()
+    body = board.body
+    assert body is not None
+    if body.kind != "magnets" or any(m.shape != "cylinder" for m in body.magnets):
+        raise ConfigError(f"board {board.name}: the twin describes disc magnets ([[body.magnets]] with shape "
+                          "\"cylinder\"); a magnetised layer or cuboids are simulated by `simulate` only")
+    return Magnets(centres_mm=np.array([m.position_mm for m in body.magnets], float),
+                   polarisation_t=np.array([m.polarisation_t[2] for m in body.magnets], float),
+                   size_mm=np.array([m.size_mm for m in body.magnets], float))
+
+
+def rig_to_pad(stage_xyz_mm: np.ndarray, *, origin_mm: tuple[float, float], turn_deg: float, contact_z_mm: float,
+               depth_per_z: float, mirror: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """(N, 3) stage poses -> (N, 2) probe point in the pad frame (mm) and (N,) approach past first touch (mm, >= 0):
+    ``p = R(turn) S (xy - origin)``, ``S`` mirroring y where ``mirror``."""
+    a = math.radians(turn_deg)
+    rot = np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
+    if mirror:
+        rot = rot @ np.diag([1.0, -1.0])
+    xy = (stage_xyz_mm[:, :2] - np.asarray(origin_mm)) @ rot.T
+    return xy, np.maximum((stage_xyz_mm[:, 2] - contact_z_mm) * depth_per_z, 0.0)
+
+
+def kernel_displacement(dx: np.ndarray, dy: np.ndarray, depth_mm: np.ndarray, strength: np.ndarray,
+                        lateral_scale: float) -> np.ndarray:
+    """(..., 3) displacement (mm, pad axes, z outward) at in-plane offset (dx, dy) from the press and ``depth_mm``
+    below the surface, for a press of ``strength`` s = P / (4 pi G) (mm^2); see the module docstring."""
+    r_sq = dx * dx + dy * dy
+    big_r = np.sqrt(r_sq + depth_mm * depth_mm)
+    u_z = -strength * (1.0 + depth_mm * depth_mm / big_r ** 2) / big_r
+    u_r = lateral_scale * strength * depth_mm / big_r ** 3
+    return np.stack([u_r * dx, u_r * dy, u_z], axis=-1)
+
+
+def magnet_motion(probe_xy_mm: np.ndarray, strength: np.ndarray, centres_mm: np.ndarray, *, kernel_depth_mm: float,
+                  lateral_scale: float, tilt_scale: float) -> tuple[np.ndarray, np.ndarray]:
+    """Each magnet's displacement (N, M, 3) mm and rotation vector (N, M, 3) rad under N presses at (N, 2) points
+    of (N,) strengths."""
+    dx = centres_mm[None, :, 0] - probe_xy_mm[:, None, 0]
+    dy = centres_mm[None, :, 1] - probe_xy_mm[:, None, 1]
+    h = np.full_like(dx, kernel_depth_mm)
+    s = strength[:, None]
+    u = kernel_displacement(dx, dy, h, s, lateral_scale)
+    if tilt_scale == 0.0:
+        return u, np.zeros_like(u)
+    e = _CURL_STEP_MM
+    grad = np.empty(u.shape + (3,))  # [..., i, j] = d u_i / d x_j; pad z is minus the depth
+    for j, (ex, ey, eh) in enumerate(((e, 0.0, 0.0), (0.0, e, 0.0), (0.0, 0.0, -e))):
+        grad[..., j] = (kernel_displacement(dx + ex, dy + ey, h + eh, s, lateral_scale)
+                        - kernel_displacement(dx - ex, dy - ey, h - eh, s, lateral_scale)) / (2 * e)
+    omega = 0.5 * np.stack([grad[..., 2, 1] - grad[..., 1, 2], grad[..., 0, 2] - grad[..., 2, 0],
+                            grad[..., 1, 0] - grad[..., 0, 1]], axis=-1)
+    return u, tilt_scale * omega
+
+
+def rotations(omega: np.ndarray) -> np.ndarray:
+    """(..., 3, 3) exact rotations (Rodrigues) of rotation vectors (..., 3), rad."""
+    angle = np.linalg.norm(omega, axis=-1)[..., None, None]
+    k = omega / np.maximum(np.linalg.norm(omega, axis=-1, keepdims=True), 1e-15)
+    cross = np.zeros(omega.shape[:-1] + (3, 3))
+    cross[..., 0, 1], cross[..., 0, 2], cross[..., 1, 2] = -k[..., 2], k[..., 1], -k[..., 0]
+    cross[..., 1, 0], cross[..., 2, 0], cross[..., 2, 1] = k[..., 2], -k[..., 1], k[..., 0]
+    return np.eye(3) + np.sin(angle) * cross + (1.0 - np.cos(angle)) * cross @ cross
+
+
+def discs_field_pad_ut(chips_mm: np.ndarray, magnets: Magnets, centres_mm: np.ndarray,
+                       rotation: np.ndarray | None = None) -> np.ndarray:
+    """(N, C, 3) field (uT, pad axes) at (C, 3) chips of the discs at (N, M, 3) centres, turned by (N, M, 3, 3)
+    rotations (None: axis-aligned)."""
+    n, m = centres_mm.shape[:2]
+    out = np.zeros((n, len(chips_mm), 3))
+    for i in range(m):
+        rel = chips_mm[None] - centres_mm[:, i, None, :]                       # (N, C, 3) pad frame
+        local = rel if rotation is None else np.einsum("ncj,nji->nci", rel, rotation[:, i])  # R^T (p - c)
+        b = cylinder_field_t(local.reshape(-1, 3), diameter_mm=magnets.size_mm[i, 0],
+                             height_mm=magnets.size_mm[i, 1], polarisation_t=magnets.polarisation_t[i])
+        b = b.reshape(n, -1, 3)
+        out += b if rotation is None else np.einsum("nij,ncj->nci", rotation[:, i], b)
+    return out * _TESLA_TO_UT
+
+
+def press_change_pad_ut(chips_mm: np.ndarray, magnets: Magnets, probe_xy_mm: np.ndarray, strength: np.ndarray, *,
+                        kernel_depth_mm: float, lateral_scale: float, tilt_scale: float) -> np.ndarray:
+    """(N, C, 3) field change (uT, pad axes) at the chips under N presses (see :func:`magnet_motion`)."""
+    u, omega = magnet_motion(probe_xy_mm, strength, magnets.centres_mm, kernel_depth_mm=kernel_depth_mm,
+                             lateral_scale=lateral_scale, tilt_scale=tilt_scale)
+    rest = discs_field_pad_ut(chips_mm, magnets, magnets.centres_mm[None])
+    moved = discs_field_pad_ut(chips_mm, magnets, magnets.centres_mm[None] + u,
+                               None if tilt_scale == 0.0 else rotations(omega))
+    return moved - rest
+
+
+class BoardTwin:
+    """The twin of a fitted board file (one with a ``[twin]`` table, written by ``tactile-manip fit-board``).
+
+    Args:
+        board: a simulatable board with disc magnets and a ``[twin]`` table.
+
+    Raises:
+        ConfigError: the board has no ``[twin]`` table, or is not one the twin can simulate.
+    """
+
+    def __init__(self, board: Board) -> None:
+        if board.twin is None:
+            raise ConfigError(f"board {board.name} has no [twin] table: fit one to your logs with "
+                              "`tactile-manip fit-board` (docs/your_board.md)")
+        self.board, self.spec = board, board.twin
+        self.magnets = board_magnets(board)
+        self.chips_mm = board.chip_positions_mm()
+        self.readout, self.offset_ut = readout_arrays(board, board.twin)
+
+    def change_pad_ut(self, stage_xyz_mm: np.ndarray, time_h: np.ndarray | None = None) -> np.ndarray:
+        """(N, C, 3) field change (uT, pad axes) at logged stage poses (N, 3) mm, ``time_h`` hours into the run."""
+        stage = check_array("stage_xyz_mm", stage_xyz_mm, shape=(None, 3))
+        t = self.spec
+        xy, approach = rig_to_pad(stage, origin_mm=t.rig_origin_mm, turn_deg=t.rig_turn_deg,
+                                  contact_z_mm=t.contact_z_mm, depth_per_z=t.depth_per_z, mirror=t.rig_mirror)
+        strength = press_strength(approach, t, time_h)
+        return press_change_pad_ut(self.chips_mm, self.magnets, xy, strength, kernel_depth_mm=t.kernel_depth_mm,
+                                   lateral_scale=t.lateral_scale, tilt_scale=t.tilt_scale)
+
+    def readings_ut(self, stage_xyz_mm: np.ndarray, time_h: np.ndarray | None = None, *,
+                    raw: bool = False) -> np.ndarray:
+        """(N, C, 3) chip-axes readings (uT, firmware order) at logged stage poses: baseline-subtracted, or with
+        ``raw`` the rest field and offsets added (what the chips stream)."""
+        change = self.change_pad_ut(stage_xyz_mm, time_h)
+        out = np.einsum("cij,ncj->nci", self.readout, change)
+        return out + self.rest_readings_ut() if raw else out
+
+    def rest_readings_ut(self) -> np.ndarray:
+        """(C, 3) the untouched board's raw reading, chip axes, uT."""
+        rest = discs_field_pad_ut(self.chips_mm, self.magnets, self.magnets.centres_mm[None])[0]
+        return np.einsum("cij,cj->ci", self.readout, rest) + self.offset_ut
+
+
+def press_strength(approach_mm: np.ndarray, twin: TwinSpec, time_h: np.ndarray | None = None) -> np.ndarray:
+    """(N,) s = A d^n (mm^2), softened by ``1 + softening_per_hour * t_h`` where times are given."""
+    s = twin.press_gain * np.power(approach_mm, twin.press_exponent)
+    if time_h is not None and twin.softening_per_hour:
+        s = s * (1.0 + twin.softening_per_hour * np.asarray(time_h, float))
+    return s
+
+
+def readout_arrays(board: Board, twin: TwinSpec | None) -> tuple[np.ndarray, np.ndarray]:
+    """(C, 3, 3) pad field -> chip reading and (C, 3) offsets (uT): the twin's fitted readout, or the board file's
+    axis maps (transposed) and no offset."""
+    if twin is None or not twin.readout:
+        return np.transpose(board.chip_matrices(), (0, 2, 1)), np.zeros((board.n_chips, 3))
+    if len(twin.readout) != board.n_chips:
+        raise ConfigError(f"board {board.name}: [[twin.readout]] has {len(twin.readout)} entries for "
+                          f"{board.n_chips} chips; give one per chip, in firmware order")
+    return (np.array([r.matrix for r in twin.readout], float), np.array([r.offset_ut for r in twin.readout], float))
+
+
+def field_at_rest_ut(board: Board) -> np.ndarray:
+    """(C, 3) rest field of a board's discs at its chips, pad axes, uT (any magnets, via the closed forms)."""
+    board.require_simulation()
+    chips = board.chip_positions_mm()
+    total = np.zeros((len(chips), 3))
+    for m in board.body.magnets:  # type: ignore[union-attr]
+        total += magnet_field_t(chips, shape=m.shape, size_mm=m.size_mm, polarisation_t=m.polarisation_t,
+                                centre_mm=m.position_mm)
+    return total * _TESLA_TO_UT

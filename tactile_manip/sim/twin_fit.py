@@ -1,0 +1,319 @@
+"""Fit a board's twin (:mod:`tactile_manip.sim.twin`) to what its owner can record: the untouched board's raw
+field and labelled presses from a probe rig.
+
+The fit runs in stages, each starting from the last, so that what each term buys can be read off:
+
+1. ``file``: the board file's magnets and chip axes; the rig frame (origin, turn, contact height) and the press
+   kernel (strength law ``A d^n``, kernel depth, lateral and tilt scales) are fitted, with one gain per chip;
+2. ``magnets``: the magnets' places (x, y each, a common depth), strengths and polarities are freed, and each
+   chip's turn is searched among the 16 signed quarter turns and mirror images (with one gain per chip); the
+   untouched board's raw field joins the residual (the chips' offsets taken as nil);
+3. ``readout``: each chip's readout becomes a free 3x3 matrix (gain, turn and misalignment; the chips' offsets
+   follow from the rest field), and the skin may soften over the run.
+
+Every stage is a robust (soft-L1) least squares over the chosen presses on channels scaled by their spread
+(:func:`scipy.optimize.least_squares`); the chips' readout is solved in closed form inside it (variable
+projection). Results carry the explained variance (EV) of the fitting rows per stage and per channel.
+
+numpy and scipy only.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from tactile_manip.boards.load import Board
+from tactile_manip.boards.spec import MagnetSpec, ReadoutSpec, TwinSpec
+from tactile_manip.errors import SimulationError
+from tactile_manip.sim.twin import Magnets, board_magnets, discs_field_pad_ut, press_change_pad_ut, rig_to_pad
+
+STAGES = ("file", "magnets", "readout")
+MIN_FIT_EV = 0.3          # a fit that explains less of its own rows has not converged on this board
+READOUT_RIDGE = 0.05      # pull of a free readout towards its chip's turn at unit gain (share of the field's power)
+# share of the cost the untouched board's field carries per stage (the chips' offsets taken as nil): in "readout"
+# only enough to keep magnets that the presses do not pin (a press at one point) from wandering
+REST_WEIGHT = {"file": 0.0, "magnets": 0.2, "readout": 0.01}
+MAGNET_Z_LIMIT_MM = 0.5   # magnets' centres stay this far inside the layer
+
+
+class TwinFitError(SimulationError):
+    """A fit that did not converge (its residual says how far off it is); nothing is written."""
+
+
+@dataclass(frozen=True)
+class PressLog:
+    """Labelled presses of one run: (N, 3) stage poses (mm), (N, C, 3) baseline-subtracted chip-axes readings (uT,
+    firmware order) and (N,) hours since the run's first row."""
+
+    stage_xyz_mm: np.ndarray
+    readings_ut: np.ndarray
+    time_h: np.ndarray
+
+
+@dataclass
+class TwinFit:
+    """What :func:`fit_twin` found: the fitted board, and per stage its EV on the fitting rows (overall and per
+    channel), the rest field's rms residual (uT) and the time taken (s)."""
+
+    board: Board
+    stages: dict[str, dict] = field(default_factory=dict)
+    chip_turns: list[list[list[float]]] = field(default_factory=list)
+
+
+# 16 signed quarter turns and mirror images of a chip (in-plane axis permutations, z either way)
+def _turn_candidates() -> np.ndarray:
+    out = []
+    for k in range(4):
+        c, s = [1, 0, -1, 0][k], [0, 1, 0, -1][k]
+        for mirror in (1, -1):
+            for zsign in (1, -1):
+                out.append(np.array([[c, -s * mirror, 0], [s, c * mirror, 0], [0, 0, zsign]], float))
+    return np.stack(out)
+
+
+TURNS = _turn_candidates()
+
+
+@dataclass
+class _Params:
+    """The fitted numbers as one vector, and which of them a stage frees."""
+
+    names: list[str]
+    values: np.ndarray
+    low: np.ndarray
+    high: np.ndarray
+
+    def get(self, name: str) -> float:
+        return float(self.values[self.names.index(name)])
+
+
+def initial_params(board: Board, log: PressLog) -> _Params:
+    """Start values: the rig's origin at the presses' centre, contact at the shallowest logged z (or the deepest,
+    by the stage's direction), the board file's magnets."""
+    mag = board_magnets(board)
+    t = board.layer.thickness_mm  # type: ignore[union-attr]
+    xy = log.stage_xyz_mm[:, :2]
+    z = log.stage_xyz_mm[:, 2]
+    mean_z = float(np.mean(mag.centres_mm[:, 2]))
+    contact = float(z.max()) + 0.5 if _depth_per_z(log) < 0 else float(z.min()) - 0.5
+    rows = [("origin_x", np.median(xy[:, 0]), -1e4, 1e4), ("origin_y", np.median(xy[:, 1]), -1e4, 1e4),
+            ("turn_deg", 0.0, -360.0, 360.0), ("contact_z", contact, -1e4, 1e4),
+            ("log_gain", 0.0, -12.0, 8.0), ("exponent", 1.0, 0.3, 3.0), ("kernel_depth", max(2.0, -mean_z), 0.5, 60.0),
+            ("lateral", 1.0, 0.0, 5.0), ("tilt", 1.0, 0.0, 5.0), ("softening", 0.0, -0.5, 2.0), ("mirror", 0.0, 0.0, 1.0),
+            ("magnet_z", mean_z, -t + MAGNET_Z_LIMIT_MM, -MAGNET_Z_LIMIT_MM)]
+    half = max(board.layer.size_mm) / 2  # type: ignore[union-attr]
+    for i, (c, j) in enumerate(zip(mag.centres_mm, mag.polarisation_t)):
+        rows += [(f"magnet{i}_x", c[0], -half, half), (f"magnet{i}_y", c[1], -half, half),
+                 (f"magnet{i}_j", j, -2.0, 2.0)]
+    names = [r[0] for r in rows]
+    values = np.array([r[1] for r in rows], float)
+    low, high = np.array([r[2] for r in rows], float), np.array([r[3] for r in rows], float)
+    return _Params(names, np.clip(values, low, high), low, high)
+
+
+def _free(stage: str, names: list[str]) -> list[int]:
+    base = ["origin_x", "origin_y", "turn_deg", "contact_z", "log_gain", "exponent", "kernel_depth", "lateral", "tilt"]
+    if stage != "file":
+        base += ["magnet_z"] + [n for n in names if n.startswith("magnet") and n != "magnet_z"]
+    if stage == "readout":
+        base += ["softening"]
+    return [names.index(n) for n in base]
+
+
+def _magnets(p: _Params, size_mm: np.ndarray) -> Magnets:
+    m = len(size_mm)
+    centres = np.array([[p.get(f"magnet{i}_x"), p.get(f"magnet{i}_y"), p.get("magnet_z")] for i in range(m)])
+    return Magnets(centres_mm=centres, polarisation_t=np.array([p.get(f"magnet{i}_j") for i in range(m)]),
+                   size_mm=size_mm)
+
+
+def change_pad_ut(p: _Params, chips_mm: np.ndarray, size_mm: np.ndarray, log: PressLog) -> np.ndarray:
+    """(N, C, 3) the twin's field change (pad axes, uT) at the log's poses for parameters ``p``."""
+    xy, approach = rig_to_pad(log.stage_xyz_mm, origin_mm=(p.get("origin_x"), p.get("origin_y")),
+                              turn_deg=p.get("turn_deg"), contact_z_mm=p.get("contact_z"),
+                              depth_per_z=_depth_per_z(log), mirror=p.get("mirror") > 0.5)
+    strength = np.exp(p.get("log_gain")) * np.power(approach, p.get("exponent")) * (
+        1.0 + p.get("softening") * log.time_h)
+    return press_change_pad_ut(chips_mm, _magnets(p, size_mm), xy, strength, kernel_depth_mm=p.get("kernel_depth"),
+                               lateral_scale=p.get("lateral"), tilt_scale=p.get("tilt"))
+
+
+def _depth_per_z(log: PressLog) -> float:
+    """-1 where the presses go in as the stage's z falls (the eFlesh rigs), +1 where it rises: the readings change
+    most at the far end of z's range from where they change least."""
+    z = log.stage_xyz_mm[:, 2]
+    size = np.linalg.norm(log.readings_ut.reshape(len(z), -1), axis=1)
+    return -1.0 if np.corrcoef(z, size)[0, 1] < 0 else 1.0
+
+
+def solve_readout(stage: str, change: np.ndarray, readings: np.ndarray, axes: np.ndarray) -> np.ndarray:
+    """(C, 3, 3) readout per chip (pad field -> chip reading) that best maps ``change`` (N, C, 3) onto
+    ``readings`` (N, C, 3): a gain on the file's axes (``file``), a gain on the best of :data:`TURNS`
+    (``magnets``), or a 3x3 matrix drawn towards that turn at unit gain (``readout``: ridge regression, so a
+    field direction the presses hardly excite keeps the chip's turn). ``axes``: (C, 3, 3) the file's chip -> pad
+    matrices."""
+    out = np.empty((change.shape[1], 3, 3))
+    for c in range(change.shape[1]):
+        b, y = change[:, c], readings[:, c]
+        candidates = axes[c].T[None] if stage == "file" else TURNS
+        best = None
+        for turn in candidates:
+            pred = b @ turn.T
+            gain = max(float(np.sum(pred * y)) / max(float(np.sum(pred * pred)), 1e-12), 0.0)
+            err = float(np.sum((y - gain * pred) ** 2))
+            if best is None or err < best[0]:
+                best = (err, gain, turn)
+        if stage != "readout":
+            out[c] = best[1] * best[2]
+            continue
+        gram = b.T @ b
+        ridge = READOUT_RIDGE * max(float(np.trace(gram)) / 3.0, 1e-12)
+        out[c] = np.linalg.solve(gram + ridge * np.eye(3), b.T @ y + ridge * best[2].T).T
+    return out
+
+
+def fit_twin(board: Board, log: PressLog, *, rest_ut: np.ndarray | None = None, max_evaluations: int = 60,
+             report: Callable[[str], None] | None = None) -> TwinFit:
+    """Fit ``board``'s twin to a press log (and the untouched board's raw reading ``rest_ut``, (C, 3) chip axes).
+
+    The search starts from the rig's four quarter turns (the rig frame and press kernel fitted with free readouts
+    on a subset of rows), fits every term from the best start (stage ``readout``: the twin written), and then
+    refits the simpler stages ``file`` and ``magnets`` from there, to say what each term buys.
+
+    Raises:
+        TwinFitError: the twin explains less than :data:`MIN_FIT_EV` of its rows' variance.
+    """
+    say = report or (lambda line: None)
+    fitter = _Fitter(board, log, rest_ut)
+    p = initial_params(board, log)
+    start = time.monotonic()
+    starts = []
+    subset = np.linspace(0, len(log.readings_ut) - 1, min(300, len(log.readings_ut))).astype(int)
+    for mirror in (0.0, 1.0):
+        for turn in (0.0, 90.0, 180.0, 270.0):
+            q = dataclasses.replace(p, values=p.values.copy())
+            q.values[q.names.index("turn_deg")] = turn
+            q.values[q.names.index("mirror")] = mirror
+            cost = fitter.run(q, "readout", _free("file", q.names), max_evaluations // 4, rows=subset)
+            starts.append((cost, q))
+    p = min(starts, key=lambda item: item[0])[1]
+    say(f"stage start: rig turn {p.get('turn_deg'):.0f} deg{', mirrored' if p.get('mirror') > 0.5 else ''}, the best "
+        f"of 8 quarter turns and mirror images ({time.monotonic() - start:.1f} s)")
+    result = TwinFit(board=board)
+    final = dataclasses.replace(p, values=p.values.copy())
+    fitter.run(final, "readout", _free("readout", final.names), max_evaluations)
+    readout = fitter.readout("readout", final)
+    for stage, q in (("file", p), ("magnets", final), ("readout", final)):
+        begin = time.monotonic()
+        if stage != "readout":
+            q = dataclasses.replace(q, values=q.values.copy())
+            fitter.run(q, stage, _free(stage, q.names), max_evaluations // 2)
+        result.stages[stage] = fitter.describe(stage, q, round(time.monotonic() - begin, 1))
+        line = result.stages[stage]
+        say(f"stage {stage}: EV {line['ev']:.3f} on {len(log.readings_ut)} rows"
+            + ("" if line["rest_rms_ut"] is None else f", rest field rms {line['rest_rms_ut']:.0f} uT")
+            + f" ({line['seconds']:.1f} s)")
+        if stage == "magnets":
+            result.chip_turns = [np.round(m / np.abs(m).max(), 3).tolist() for m in fitter.readout(stage, q)]
+    last = result.stages["readout"]
+    if not last["ev"] >= MIN_FIT_EV:
+        raise TwinFitError(f"the fit did not converge: it explains {last['ev']:.2f} of its rows' reading variance "
+                           f"(less than {MIN_FIT_EV}); check the label columns, the rig's z direction and the board")
+    result.board = fitted_board(board, final, readout, rest_ut, _depth_per_z(log))
+    return result
+
+
+class _Fitter:
+    """The residual of one stage and its robust least squares, over a log's rows."""
+
+    def __init__(self, board: Board, log: PressLog, rest_ut: np.ndarray | None) -> None:
+        self.log, self.rest_ut = log, rest_ut
+        self.chips_mm = board.chip_positions_mm()
+        self.axes = board.chip_matrices()
+        self.size = board_magnets(board).size_mm
+        y = log.readings_ut
+        self.scale = np.maximum(y.reshape(len(y), -1).std(axis=0), 1e-6).reshape(1, -1, 3)
+
+    def _rows(self, rows: np.ndarray | None) -> PressLog:
+        if rows is None:
+            return self.log
+        return PressLog(self.log.stage_xyz_mm[rows], self.log.readings_ut[rows], self.log.time_h[rows])
+
+    def _rest_pad(self, q: _Params) -> np.ndarray:
+        mags = _magnets(q, self.size)
+        return discs_field_pad_ut(self.chips_mm, mags, mags.centres_mm[None])[0]
+
+    def run(self, p: _Params, stage: str, free: list[int], max_evaluations: int,
+            rows: np.ndarray | None = None) -> float:
+        """Fit the ``free`` entries of ``p`` (in place) for ``stage``'s readout; returns the final cost."""
+        log = self._rows(rows)
+        use_rest = self.rest_ut is not None and REST_WEIGHT[stage] > 0
+
+        def residual(x: np.ndarray) -> np.ndarray:
+            q = dataclasses.replace(p, values=p.values.copy())
+            q.values[free] = x
+            change = change_pad_ut(q, self.chips_mm, self.size, log)
+            m = solve_readout(stage, change, log.readings_ut, self.axes)
+            r = ((np.einsum("cij,ncj->nci", m, change) - log.readings_ut) / self.scale).ravel()
+            if use_rest:
+                miss = (np.einsum("cij,cj->ci", m, self._rest_pad(q)) - self.rest_ut) / self.scale[0]
+                r = np.concatenate([r, miss.ravel() * np.sqrt(REST_WEIGHT[stage] * r.size / miss.size)])
+            return r
+
+        sol = least_squares(residual, p.values[free], bounds=(p.low[free], p.high[free]), loss="soft_l1",
+                            f_scale=1.0, x_scale="jac", max_nfev=max(1, max_evaluations))
+        p.values[free] = sol.x
+        return float(sol.cost)
+
+    def readout(self, stage: str, p: _Params) -> np.ndarray:
+        change = change_pad_ut(p, self.chips_mm, self.size, self.log)
+        return solve_readout(stage, change, self.log.readings_ut, self.axes)
+
+    def describe(self, stage: str, p: _Params, seconds: float) -> dict:
+        change = change_pad_ut(p, self.chips_mm, self.size, self.log)
+        m = solve_readout(stage, change, self.log.readings_ut, self.axes)
+        ev, per_channel = explained_variance(self.log.readings_ut, np.einsum("cij,ncj->nci", m, change))
+        rest_rms = None if self.rest_ut is None else float(np.sqrt(np.mean(
+            (np.einsum("cij,cj->ci", m, self._rest_pad(p)) - self.rest_ut) ** 2)))
+        return {"ev": round(ev, 4), "ev_per_channel": [round(v, 4) for v in per_channel],
+                "rest_rms_ut": None if rest_rms is None else round(rest_rms, 1), "seconds": seconds}
+
+
+def fitted_board(board: Board, p: _Params, readout: np.ndarray, rest_ut: np.ndarray | None,
+                 depth_per_z: float) -> Board:
+    """``board`` with the fitted magnets and a ``[twin]`` table (offsets from the rest field, where given)."""
+    assert board.body is not None
+    mags = _magnets(p, board_magnets(board).size_mm)
+    magnets = tuple(MagnetSpec(shape="cylinder", size_mm=m.size_mm, position_mm=tuple(float(v) for v in c),
+                               polarisation_t=(0.0, 0.0, float(j)))
+                    for m, c, j in zip(board.body.magnets, mags.centres_mm, mags.polarisation_t))
+    chips_mm = board.chip_positions_mm()
+    rest_pad = discs_field_pad_ut(chips_mm, mags, mags.centres_mm[None])[0]
+    offsets = np.zeros((board.n_chips, 3)) if rest_ut is None else rest_ut - np.einsum("cij,cj->ci", readout, rest_pad)
+    twin = TwinSpec(rig_origin_mm=(p.get("origin_x"), p.get("origin_y")), rig_turn_deg=p.get("turn_deg"),
+                    contact_z_mm=p.get("contact_z"), press_gain=float(np.exp(p.get("log_gain"))),
+                    press_exponent=p.get("exponent"), kernel_depth_mm=p.get("kernel_depth"),
+                    depth_per_z=depth_per_z, rig_mirror=bool(p.get("mirror") > 0.5), lateral_scale=p.get("lateral"), tilt_scale=p.get("tilt"),
+                    softening_per_hour=p.get("softening"),
+                    readout=tuple(ReadoutSpec(matrix=tuple(tuple(float(v) for v in row) for row in m),  # type: ignore[arg-type]
+                                              offset_ut=tuple(float(v) for v in o))  # type: ignore[arg-type]
+                                  for m, o in zip(readout, offsets)))
+    body = dataclasses.replace(board.body, magnets=magnets)
+    return dataclasses.replace(board, body=body, twin=twin)
+
+
+def explained_variance(measured: np.ndarray, predicted: np.ndarray) -> tuple[float, list[float]]:
+    """Overall and per-channel EV, ``1 - sum (y - y_hat)^2 / sum (y - mean y)^2`` over rows (overall: both sums
+    pooled over channels, so a channel weighs by its variance). Arrays (N, ...) of the same shape."""
+    y = measured.reshape(len(measured), -1).astype(np.float64)
+    e = y - predicted.reshape(len(predicted), -1)
+    ss = ((y - y.mean(axis=0)) ** 2).sum(axis=0)
+    se = (e ** 2).sum(axis=0)
+    per = 1.0 - se / np.maximum(ss, 1e-12)
+    return float(1.0 - se.sum() / max(float(ss.sum()), 1e-12)), [float(v) for v in per]
