@@ -9,9 +9,12 @@ from __future__ import annotations
 
 import json
 import math
+import textwrap
 from typing import Any
 
 from tactile_manip.boards.board import Board
+
+_WRAP = 110  # longer strings are written over several lines
 
 
 def board_toml(board: Board, *, header: str = "") -> str:
@@ -80,6 +83,10 @@ def _value(v: Any) -> str:
             return "nan" if math.isnan(v) else ("inf" if v > 0 else "-inf")
         return repr(float(f"{v:.6g}")) if abs(v) >= 1e-4 or v == 0.0 else f"{v:.6g}"
     if isinstance(v, str):
+        if len(v) > _WRAP and "\n" not in v:  # a multi-line basic string whose lines end in "\" reads as one line
+            lines = textwrap.wrap(v, _WRAP, break_long_words=False, break_on_hyphens=False)
+            body = " \\\n".join(json.dumps(line, ensure_ascii=False)[1:-1] for line in lines)
+            return f'"""{body}"""'
         return json.dumps(v, ensure_ascii=False)  # a TOML basic string is JSON's escaping
     if isinstance(v, (list, tuple)):
         return "[" + ", ".join(_value(x) for x in v) + "]"

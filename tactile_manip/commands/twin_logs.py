@@ -19,6 +19,10 @@ MIN_REST_ROWS = 20          # fewer untouched rows cannot tell a steady field fr
 MIN_REST_SECONDS = 1.0
 REST_NOISE_MULTIPLE = 10.0  # an untouched row lies within this many chip noise sigmas of the median field
 REST_FLOOR_UT = 100.0       # ... or within this, whichever is wider
+# a logger's baseline drifts over hours of presses (13-60 uT rms in the eFlesh runs, 140 uT at their 99th
+# percentile); a press moves the field by hundreds to thousands of uT
+BASELINE_NOISE_MULTIPLE = 30.0
+BASELINE_FLOOR_UT = 300.0
 
 
 def add_log_arguments(p: argparse.ArgumentParser) -> None:
@@ -86,15 +90,16 @@ def rest_field(board: Board, raw: str | Path, subtracted: str | Path | None, tra
                                "stream must be the raw stream's rows, row for row")
         n = max(1, int(len(t) * train_fraction))
         values, t, what = (values - sub)[:n], t[:n], "the logger's baseline (raw - subtracted)"
+        multiple, floor = BASELINE_NOISE_MULTIPLE, BASELINE_FLOOR_UT
     else:
-        what = "an untouched capture"
+        what, multiple, floor = "an untouched capture", REST_NOISE_MULTIPLE, REST_FLOOR_UT
     if len(t) < MIN_REST_ROWS or t[-1] - t[0] < MIN_REST_SECONDS:
         raise DatasetError(f"{raw}: {len(t)} rows over {t[-1] - t[0] if len(t) else 0:.2g} s is too short to fit: "
                            f"record at least {MIN_REST_ROWS} rows and {MIN_REST_SECONDS:g} s of the untouched board "
                            "(tens of seconds is better)")
     median = np.median(values, axis=0)
     noise = np.array([board.chip.noise_xy_ut, board.chip.noise_xy_ut, board.chip.noise_z_ut])
-    limit = np.maximum(REST_NOISE_MULTIPLE * noise, REST_FLOOR_UT)
+    limit = np.maximum(multiple * noise, floor)
     spread = np.percentile(np.abs(values - median), 99, axis=0)
     if (spread > limit).any():
         c, a = np.unravel_index(int(np.argmax(spread / limit)), spread.shape)

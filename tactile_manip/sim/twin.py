@@ -35,7 +35,7 @@ from tactile_manip.boards.load import Board
 from tactile_manip.boards.spec import TwinSpec
 from tactile_manip.checks import check_array
 from tactile_manip.errors import ConfigError
-from tactile_manip.sim.magnets import cylinder_field_t, magnet_field_t
+from tactile_manip.sim.magnets import cylinder_field_t
 
 _TESLA_TO_UT = 1e6
 _CURL_STEP_MM = 0.05  # central differences of the kernel for its curl
@@ -205,14 +205,3 @@ def readout_arrays(board: Board, twin: TwinSpec | None) -> tuple[np.ndarray, np.
         raise ConfigError(f"board {board.name}: [[twin.readout]] has {len(twin.readout)} entries for "
                           f"{board.n_chips} chips; give one per chip, in firmware order")
     return (np.array([r.matrix for r in twin.readout], float), np.array([r.offset_ut for r in twin.readout], float))
-
-
-def field_at_rest_ut(board: Board) -> np.ndarray:
-    """(C, 3) rest field of a board's discs at its chips, pad axes, uT (any magnets, via the closed forms)."""
-    board.require_simulation()
-    chips = board.chip_positions_mm()
-    total = np.zeros((len(chips), 3))
-    for m in board.body.magnets:  # type: ignore[union-attr]
-        total += magnet_field_t(chips, shape=m.shape, size_mm=m.size_mm, polarisation_t=m.polarisation_t,
-                                centre_mm=m.position_mm)
-    return total * _TESLA_TO_UT

@@ -36,10 +36,14 @@ from tactile_manip.sim.twin import Magnets, board_magnets, discs_field_pad_ut, p
 STAGES = ("file", "magnets", "readout")
 MIN_FIT_EV = 0.3          # a fit that explains less of its own rows has not converged on this board
 READOUT_RIDGE = 0.05      # pull of a free readout towards its chip's turn at unit gain (share of the field's power)
-# share of the cost the untouched board's field carries per stage (the chips' offsets taken as nil): in "readout"
-# only enough to keep magnets that the presses do not pin (a press at one point) from wandering
-REST_WEIGHT = {"file": 0.0, "magnets": 0.2, "readout": 0.01}
-MAGNET_Z_LIMIT_MM = 0.5   # magnets' centres stay this far inside the layer
+# share of the cost the untouched board's field carries per stage (the chips' offsets taken as nil); in "readout"
+# only where the presses do not pin the magnets (all at one point: less than PINNING_SPAN_MM apart), and then only
+# enough to keep them from wandering; elsewhere the offsets take up what the geometry leaves of the rest field
+REST_WEIGHT = {"file": 0.0, "magnets": 0.2, "readout": 0.0}
+UNPINNED_REST_WEIGHT = 0.01
+PINNING_SPAN_MM = 5.0
+MAGNET_Z_LIMIT_MM = 0.1   # discs' faces stay this far inside the layer
+MAX_POLARISATION_T = 1.5  # N52, the strongest grade of NdFeB, has a remanence of 1.42-1.48 T
 
 
 class TwinFitError(SimulationError):
@@ -101,16 +105,17 @@ def initial_params(board: Board, log: PressLog) -> _Params:
     xy = log.stage_xyz_mm[:, :2]
     z = log.stage_xyz_mm[:, 2]
     mean_z = float(np.mean(mag.centres_mm[:, 2]))
+    top = float(mag.size_mm[:, 1].max()) / 2 + MAGNET_Z_LIMIT_MM  # a disc's faces stay inside the layer
     contact = float(z.max()) + 0.5 if _depth_per_z(log) < 0 else float(z.min()) - 0.5
     rows = [("origin_x", np.median(xy[:, 0]), -1e4, 1e4), ("origin_y", np.median(xy[:, 1]), -1e4, 1e4),
             ("turn_deg", 0.0, -360.0, 360.0), ("contact_z", contact, -1e4, 1e4),
             ("log_gain", 0.0, -12.0, 8.0), ("exponent", 1.0, 0.3, 3.0), ("kernel_depth", max(2.0, -mean_z), 0.5, 60.0),
             ("lateral", 1.0, 0.0, 5.0), ("tilt", 1.0, 0.0, 5.0), ("softening", 0.0, -0.5, 2.0), ("mirror", 0.0, 0.0, 1.0),
-            ("magnet_z", mean_z, -t + MAGNET_Z_LIMIT_MM, -MAGNET_Z_LIMIT_MM)]
+            ("magnet_z", mean_z, -t + top, -top)]
     half = max(board.layer.size_mm) / 2  # type: ignore[union-attr]
     for i, (c, j) in enumerate(zip(mag.centres_mm, mag.polarisation_t)):
         rows += [(f"magnet{i}_x", c[0], -half, half), (f"magnet{i}_y", c[1], -half, half),
-                 (f"magnet{i}_j", j, -2.0, 2.0)]
+                 (f"magnet{i}_j", j, -MAX_POLARISATION_T, MAX_POLARISATION_T)]
     names = [r[0] for r in rows]
     values = np.array([r[1] for r in rows], float)
     low, high = np.array([r[2] for r in rows], float), np.array([r[3] for r in rows], float)
@@ -253,7 +258,10 @@ class _Fitter:
             rows: np.ndarray | None = None) -> float:
         """Fit the ``free`` entries of ``p`` (in place) for ``stage``'s readout; returns the final cost."""
         log = self._rows(rows)
-        use_rest = self.rest_ut is not None and REST_WEIGHT[stage] > 0
+        weight = REST_WEIGHT[stage]
+        if stage == "readout" and np.ptp(log.stage_xyz_mm[:, :2], axis=0).max() < PINNING_SPAN_MM:
+            weight = UNPINNED_REST_WEIGHT
+        use_rest = self.rest_ut is not None and weight > 0
 
         def residual(x: np.ndarray) -> np.ndarray:
             q = dataclasses.replace(p, values=p.values.copy())
@@ -263,7 +271,7 @@ class _Fitter:
             r = ((np.einsum("cij,ncj->nci", m, change) - log.readings_ut) / self.scale).ravel()
             if use_rest:
                 miss = (np.einsum("cij,cj->ci", m, self._rest_pad(q)) - self.rest_ut) / self.scale[0]
-                r = np.concatenate([r, miss.ravel() * np.sqrt(REST_WEIGHT[stage] * r.size / miss.size)])
+                r = np.concatenate([r, miss.ravel() * np.sqrt(weight * r.size / miss.size)])
             return r
 
         sol = least_squares(residual, p.values[free], bounds=(p.low[free], p.high[free]), loss="soft_l1",
