@@ -212,11 +212,12 @@ def twin_bank(board: Path | str, work: Path, presses: int) -> Path:
     return out
 
 
-def stage_grid(board_path: Path, *, step_mm: float = 0.5, margin_mm: float = 2.0, depth_mm: float = 6.0,
+def stage_grid(board_path: Path, *, step_mm: float = 0.5, margin_mm: float = -4.0, depth_mm: float = 6.0,
                depths: int = 12) -> np.ndarray:
-    """(G, 3) stage poses (x, y, z mm) that press a fitted board's pad all over: its layer less ``margin_mm`` in
-    steps of ``step_mm``, ``depths`` approaches up to ``depth_mm``, taken to the stage by the board's ``[twin]``
-    rig frame (no label is read: the frame is the fit's)."""
+    """(G, 3) stage poses (x, y, z mm) that press a fitted board's pad all over: its layer less ``margin_mm`` (less
+    than nothing: a little beyond it, since a frame fitted on a few labels may sit millimetres off) in steps of
+    ``step_mm``, ``depths`` approaches up to ``depth_mm``, taken to the stage by the board's ``[twin]`` rig frame (no
+    label is read: the frame is the fit's)."""
     from tactile_manip.boards import load_board
 
     board = load_board(str(board_path))
@@ -491,8 +492,11 @@ def main(argv: list[str] | None = None) -> int:
             elif section == "forward":
                 report["forward"] = section_forward(runs, work)
             else:
-                report["contact"] = section_contact(runs, work, args.k, args.seeds, presses=args.presses,
-                                                    twins=args.twins)
+                new = section_contact(runs, work, args.k, args.seeds, presses=args.presses, twins=args.twins)
+                for kind, block in new.items():  # --update keeps the other runs' and the other K's rows
+                    kept = report.setdefault("contact", {}).setdefault(kind, block)
+                    kept["k"] = {**kept["k"], **block["k"]}
+                    kept["k"] = dict(sorted(kept["k"].items(), key=lambda kv: int(kv[0])))
             report.setdefault("seconds", {})[section] = round(time.perf_counter() - start, 1)
             print(f"== {section}: {time.perf_counter() - start:.0f} s", flush=True)
     publish(report, args.out, markdown)

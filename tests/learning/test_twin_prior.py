@@ -173,3 +173,20 @@ def test_a_twin_of_stage_poses_stands_its_z_in_for_the_force_the_labels_then_fit
     with pytest.raises(DatasetError, match="gives no force_n of its own.*from the twin's z_mm"):
         twin_labels(data.readings, y[:, 2:], np.zeros(len(data), bool), bank_readings=readings,
                     bank_targets=stage, names=["force_n"], bank_names=["x_mm", "y_mm", "z_mm"])
+
+
+def test_labels_correct_a_stage_pose_twin_whose_readings_are_off_by_a_smooth_gain(labelled_presses) -> None:
+    data = labelled_presses(600)
+    y = data.targets.astype(np.float64)
+    readings, targets, _ = _bank(labelled_presses)
+    gain = 1.0 + 0.6 * np.tanh(targets[:, 0] / 4.0)  # the twin reads weak on one side of the pad, strong on the other
+    off = (readings * gain[:, None, None, None] * np.array([1.0, 0.7, 1.0])).astype(np.float32)
+    stage = np.c_[targets[:, :2], 145.0 - 0.3 * targets[:, 2]]
+    lab = _mask(len(data), 40, seed=5)
+    found = twin_labels(data.readings, y[:, :2], lab, bank_readings=off, bank_targets=stage,
+                        names=["x_mm", "y_mm"], bank_names=["x_mm", "y_mm", "z_mm"])
+    plain = twin_labels(data.readings, y[:, :2], lab, bank_readings=off, bank_targets=np.c_[stage[:, :2]],
+                        names=["x_mm", "y_mm"], bank_names=["x_mm", "y_mm"])  # no z: not a stage twin, no correction
+    strong = (y[:, 2] > 2.0) & ~lab
+    assert "readings corrected" in found.methods[0] and "corrected" not in plain.methods[0]
+    assert _rmse(found.values[strong], y[strong, :2]) < 0.8 * _rmse(plain.values[strong], y[strong, :2])

@@ -40,6 +40,9 @@ LOO_MOST = 200        # labelled presses held out in turn to choose a correction
 LOAD_PROXIES = ("force_n", "depth_mm", "z_mm")  # what of the twin's stands for a load it does not give in newtons
                                                 # (a twin of a rig's log places its presses by the stage's pose)
 RIDGE = 1e-6          # of the affine fits
+CORRECTION_WIDTHS_MM = (5.0, 10.0, 20.0)  # widths of the smooth correction of the twin's readings tried (none, too)
+CORRECTION_ALPHA = 0.1              # its ridge, on residuals relative to the field norm
+CORRECTION_LOO = 25                 # labelled presses held out in turn to choose its width
 TURNS = tuple(np.array(m, float) for m in (
     [[1, 0], [0, 1]], [[0, -1], [1, 0]], [[-1, 0], [0, -1]], [[0, 1], [-1, 0]],
     [[1, 0], [0, -1]], [[-1, 0], [0, 1]], [[0, 1], [1, 0]], [[0, -1], [-1, 0]]))
@@ -109,18 +112,24 @@ def twin_labels(readings: np.ndarray, targets: np.ndarray, labelled: np.ndarray,
     if 0 < lab.sum() < 3:
         raise DatasetError(f"{int(lab.sum())} labelled press(es): the twin's correction needs 3 or more (or none)")
     cols = [list(bank_names).index(n) for n in sources]
+    places = [k for k, n in enumerate(names) if n in PLACE_TARGETS]
+    corrected, corrected_loo = "", 0.0
+    if len(places) == 2 and lab.sum() >= 5 and "z_mm" in bank_names:
+        bank_places = np.asarray(bank_targets, np.float64)[:, [list(bank_names).index(names[k]) for k in places]]
+        bank, corrected, corrected_loo = _corrected_bank(x, bank, bank_places, y[:, places], lab, neighbours,
+                                                         norm_weight)
     twin = twin_targets(x, bank, np.asarray(bank_targets, np.float64)[:, cols], neighbours=neighbours,
                         norm_weight=norm_weight)
     values, loo, methods = twin.copy(), np.full(len(names), np.nan), ["twin"] * len(names)
     if not lab.any():
         return PseudoLabels(values=values, loo_rmse=loo, methods=tuple(methods))
-    places = [k for k, n in enumerate(names) if n in PLACE_TARGETS]
     if len(places) == 2:
         err, name, fit = min(((_place_loo(fit, y[:, places], lab), name, fit)
                               for name, fit in _place_fits(twin[:, places])), key=lambda t: t[0])
         values[:, places] = fit(lab, y[:, places])
-        loo[places] = err
-        methods = [f"twin place, {name}" if k in places else m for k, m in enumerate(methods)]
+        # the correction of the readings saw every label: its own leave-one-out error bounds the place's from below
+        loo[places] = max(err, corrected_loo)
+        methods = [f"twin place{corrected}, {name}" if k in places else m for k, m in enumerate(methods)]
     for k in (k for k in range(len(names)) if k not in places or len(places) != 2):
         err, name, fit = min(((_loo_rmse(fit, y[:, k], lab), name, fit)
                               for name, fit in _load_fits(x, twin[:, k], earlier, weights)), key=lambda t: t[0])
@@ -129,6 +138,47 @@ def twin_labels(readings: np.ndarray, targets: np.ndarray, labelled: np.ndarray,
         methods[k] = name if sources[k] == names[k] else name.replace("twin load", f"twin's {sources[k]}")
     values[lab] = y[lab]
     return PseudoLabels(values=values, loo_rmse=loo, methods=tuple(methods))
+
+
+def _corrected_bank(x: np.ndarray, bank: np.ndarray, bank_places: np.ndarray, y: np.ndarray, lab: np.ndarray,
+                    neighbours: int, norm_weight: float) -> tuple[np.ndarray, str, float]:
+    """The bank's readings (M, D) corrected by the labelled presses, where the bank's presses are placed in the
+    labels' frame (a twin of stage poses): at each labelled press, the twin's reading at its place (the bank press
+    nearest it in place whose reading is nearest its own, over depth) misses the real one by a residual; a
+    Gaussian-kernel ridge of those residuals, relative to the field norm, over the place, scaled by each bank
+    press's norm, is added to the bank. The width (or none) of least leave-one-out place error on the labels;
+    the name of what was done ("" for none) and that leave-one-out RMSE (per coordinate)."""
+    from scipy.spatial import cKDTree
+
+    rows = np.flatnonzero(lab)
+    near = cKDTree(bank_places).query(y[rows], k=min(60, len(bank)))[1]
+    best = near[np.arange(len(rows)), np.argmin(((bank[near] - x[rows, None]) ** 2).sum(-1), axis=1)]
+    norm = np.maximum(np.linalg.norm(bank, axis=1), 1e-9)
+    rel = (x[rows] - bank[best]) / norm[best, None]
+    places = y[rows]
+
+    def corrected(width: float | None, keep: np.ndarray) -> np.ndarray:
+        if width is None:
+            return bank
+        p = places[keep]
+        k = np.exp(-((p[:, None] - p[None]) ** 2).sum(-1) / (2 * width ** 2))
+        w = np.linalg.solve(k + CORRECTION_ALPHA * np.eye(len(p)), rel[keep])
+        kb = np.exp(-((bank_places[:, None] - p[None]) ** 2).sum(-1) / (2 * width ** 2))
+        return bank + norm[:, None] * (kb @ w)
+
+    errs = {}
+    held = np.unique(np.linspace(0, len(rows) - 1, min(len(rows), CORRECTION_LOO)).round().astype(int))
+    for width in (None, *CORRECTION_WIDTHS_MM):
+        miss = []
+        for i in held:
+            keep = np.arange(len(rows)) != i
+            placed = twin_targets(x[rows[i:i + 1]], corrected(width, keep), bank_places, neighbours=neighbours,
+                                  norm_weight=norm_weight)
+            miss.append(placed[0] - places[i])
+        errs[width] = float(np.sqrt(np.mean(np.square(miss))))
+    width = min(errs, key=errs.get)
+    return (corrected(width, np.ones(len(rows), bool)), "" if width is None else f" (readings corrected, {width:g} mm)",
+            errs[width])
 
 
 def _place_fits(twin: np.ndarray) -> list[tuple[str, PlaceFit]]:
