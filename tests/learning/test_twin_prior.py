@@ -190,3 +190,22 @@ def test_labels_correct_a_stage_pose_twin_whose_readings_are_off_by_a_smooth_gai
     strong = (y[:, 2] > 2.0) & ~lab
     assert "readings corrected" in found.methods[0] and "corrected" not in plain.methods[0]
     assert _rmse(found.values[strong], y[strong, :2]) < 0.8 * _rmse(plain.values[strong], y[strong, :2])
+
+
+def test_the_command_line_refuses_a_prior_where_no_twin_labels_in_one_line(tiny_data, tmp_path, capsys) -> None:
+    pytest.importorskip("torch", reason="train needs torch")
+    from checks import assert_one_line_error
+
+    from tactile_manip.cli import main
+
+    (tmp_path / "cvae.toml").write_text('preset = "small"\nepochs = 1\n')
+    assert main(["train", "--config", str(tmp_path / "cvae.toml"), "--data", str(tiny_data), "--prior",
+                 str(tiny_data), "--out", str(tmp_path / "a")]) == 2
+    assert_one_line_error(capsys.readouterr().err, "train", "--prior: for a contact model")
+    assert main(["train", "--config", "configs/train/contact.toml", "--data", str(tiny_data), "--prior",
+                 str(tiny_data), "--out", str(tmp_path / "b")]) == 2
+    assert_one_line_error(capsys.readouterr().err, "train", "--prior only with it")
+    assert main(["train", "--config", "configs/train/angle_head.toml", "--data", str(tiny_data), "--prior",
+                 str(tiny_data), "--out", str(tmp_path / "c")]) == 2
+    assert_one_line_error(capsys.readouterr().err, "train", "--prior")
+    assert not any((tmp_path / d).exists() for d in "abc")
