@@ -36,6 +36,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="fit on K labelled presses drawn at random (with --seed) from the fitting rows (default all)")
     p.add_argument("--rows", type=int, default=DEFAULT_ROWS, help=f"presses fitted at most (default {DEFAULT_ROWS})")
     p.add_argument("--evaluations", type=int, default=60, help="least-squares evaluations per stage (default 60)")
+    p.add_argument("--search-chip-order", action="store_true",
+                   help="search the chips' order too: every placement of them on their positions, up to the pad's "
+                        "turns and mirror images (15 for the five-chip cross; minutes more)")
     p.add_argument("--seed", type=int, default=0, help="seed of --labelled's draw")
     p.add_argument("--name", help="the fitted board's name (default: the board's name + '-fitted')")
     p.add_argument("--out", required=True, metavar="TOML", help="the fitted board file to write")
@@ -44,6 +47,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    import dataclasses
     import os
     import sys
     import tempfile
@@ -94,7 +98,8 @@ def run(args: argparse.Namespace) -> int:
     log = PressLog(rows.stage_xyz_mm[chosen], rows.readings_ut[chosen], time_h[chosen])
     say(f"presses: {len(chosen)} of the {len(fit_rows)} labelled fitting rows (first {args.train_fraction:g} of "
         f"{len(rows.split)} matched rows)")
-    fit = fit_twin(board, log, rest_ut=rest, max_evaluations=args.evaluations, report=say)
+    fit = fit_twin(board, log, rest_ut=rest, max_evaluations=args.evaluations, search_order=args.search_chip_order,
+                   report=say)
     inputs = {"board": str(args.board), "raw": str(args.raw), "subtracted": args.subtracted, "presses": args.presses,
               "labels": str(args.labels)}
     provenance = {
@@ -111,8 +116,11 @@ def run(args: argparse.Namespace) -> int:
         "ev_per_channel": fit.stages["readout"]["ev_per_channel"],
         "chip_turns_found": fit.chip_turns, "seconds": round(time.monotonic() - started, 1),
     }
-    import dataclasses
-
+    if fit.orders:  # chip i sits at the file's chip order[i]'s place: EV and rest field of each placement
+        provenance["chip_orders"] = {"best": fit.orders[0]["order"], "searched": len(fit.orders),
+                                     "ev_by_order": {"-".join(map(str, o["order"])): o["ev"] for o in fit.orders},
+                                     "rest_rms_ut_by_order": {"-".join(map(str, o["order"])): o["rest_rms_ut"]
+                                                              for o in fit.orders}}
     name = args.name or f"{board.name}-fitted"
     source = (f"fitted by tactile-manip fit-board to {Path(args.raw).name} and {Path(args.labels).name} "
               f"(first {args.train_fraction:g} of the rows) from the board file {board.name}; [fit] says what on what")

@@ -20,9 +20,9 @@ MIN_REST_SECONDS = 1.0
 REST_NOISE_MULTIPLE = 10.0  # an untouched row lies within this many chip noise sigmas of the median field
 REST_FLOOR_UT = 100.0       # ... or within this, whichever is wider
 # a logger's baseline drifts over hours of presses (13-60 uT rms in the eFlesh runs, 140 uT at their 99th
-# percentile); a press moves the field by hundreds to thousands of uT
-BASELINE_NOISE_MULTIPLE = 30.0
-BASELINE_FLOOR_UT = 300.0
+# percentile); only a baseline that moves as much as a hard press (thousands of uT) is no baseline
+BASELINE_NOISE_MULTIPLE = 100.0
+BASELINE_FLOOR_UT = 1000.0
 
 
 def add_log_arguments(p: argparse.ArgumentParser) -> None:

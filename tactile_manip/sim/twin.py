@@ -166,20 +166,40 @@ class BoardTwin:
 
     def change_pad_ut(self, stage_xyz_mm: np.ndarray, time_h: np.ndarray | None = None) -> np.ndarray:
         """(N, C, 3) field change (uT, pad axes) at logged stage poses (N, 3) mm, ``time_h`` hours into the run."""
+        xy, approach = self.pad_poses(stage_xyz_mm)
+        return self.change_at_pad_ut(xy, approach, time_h)
+
+    def pad_poses(self, stage_xyz_mm: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(N, 3) stage poses (mm) -> (N, 2) press points in the pad frame (mm) and (N,) approaches (mm, >= 0)."""
         stage = check_array("stage_xyz_mm", stage_xyz_mm, shape=(None, 3))
         t = self.spec
-        xy, approach = rig_to_pad(stage, origin_mm=t.rig_origin_mm, turn_deg=t.rig_turn_deg,
-                                  contact_z_mm=t.contact_z_mm, depth_per_z=t.depth_per_z, mirror=t.rig_mirror)
-        strength = press_strength(approach, t, time_h)
-        return press_change_pad_ut(self.chips_mm, self.magnets, xy, strength, kernel_depth_mm=t.kernel_depth_mm,
-                                   lateral_scale=t.lateral_scale, tilt_scale=t.tilt_scale)
+        return rig_to_pad(stage, origin_mm=t.rig_origin_mm, turn_deg=t.rig_turn_deg, contact_z_mm=t.contact_z_mm,
+                          depth_per_z=t.depth_per_z, mirror=t.rig_mirror)
+
+    def change_at_pad_ut(self, probe_xy_mm: np.ndarray, approach_mm: np.ndarray,
+                         time_h: np.ndarray | None = None) -> np.ndarray:
+        """(N, C, 3) field change (uT, pad axes) under presses at (N, 2) pad points (mm) of (N,) approaches (mm):
+        presses anywhere on the pad, without a rig (simulated presses to train a contact model on, say)."""
+        xy = check_array("probe_xy_mm", probe_xy_mm, shape=(None, 2))
+        approach = np.maximum(check_array("approach_mm", approach_mm, shape=(len(xy),)), 0.0)
+        t = self.spec
+        return press_change_pad_ut(self.chips_mm, self.magnets, xy, press_strength(approach, t, time_h),
+                                   kernel_depth_mm=t.kernel_depth_mm, lateral_scale=t.lateral_scale,
+                                   tilt_scale=t.tilt_scale)
 
     def readings_ut(self, stage_xyz_mm: np.ndarray, time_h: np.ndarray | None = None, *,
                     raw: bool = False) -> np.ndarray:
         """(N, C, 3) chip-axes readings (uT, firmware order) at logged stage poses: baseline-subtracted, or with
         ``raw`` the rest field and offsets added (what the chips stream)."""
-        change = self.change_pad_ut(stage_xyz_mm, time_h)
-        out = np.einsum("cij,ncj->nci", self.readout, change)
+        return self._read(self.change_pad_ut(stage_xyz_mm, time_h), raw)
+
+    def readings_at_pad_ut(self, probe_xy_mm: np.ndarray, approach_mm: np.ndarray,
+                           time_h: np.ndarray | None = None, *, raw: bool = False) -> np.ndarray:
+        """(N, C, 3) chip-axes readings (uT) under presses at pad points (see :meth:`change_at_pad_ut`)."""
+        return self._read(self.change_at_pad_ut(probe_xy_mm, approach_mm, time_h), raw)
+
+    def _read(self, change_pad_ut: np.ndarray, raw: bool) -> np.ndarray:
+        out = np.einsum("cij,ncj->nci", self.readout, change_pad_ut)
         return out + self.rest_readings_ut() if raw else out
 
     def rest_readings_ut(self) -> np.ndarray:

@@ -36,6 +36,7 @@ from tactile_manip.sim.twin import Magnets, board_magnets, discs_field_pad_ut, p
 STAGES = ("file", "magnets", "readout")
 MIN_FIT_EV = 0.3          # a fit that explains less of its own rows has not converged on this board
 READOUT_RIDGE = 0.05      # pull of a free readout towards its chip's turn at unit gain (share of the field's power)
+READOUT_PRIOR_ROWS = 12   # ... and at least as much as this many presses would weigh (a handful of labels)
 # share of the cost the untouched board's field carries per stage (the chips' offsets taken as nil); in "readout"
 # only where the presses do not pin the magnets (all at one point: less than PINNING_SPAN_MM apart), and then only
 # enough to keep them from wandering; elsewhere the offsets take up what the geometry leaves of the rest field
@@ -68,6 +69,7 @@ class TwinFit:
     board: Board
     stages: dict[str, dict] = field(default_factory=dict)
     chip_turns: list[list[list[float]]] = field(default_factory=list)
+    orders: list[dict] = field(default_factory=list)
 
 
 # 16 signed quarter turns and mirror images of a chip (in-plane axis permutations, z either way)
@@ -151,17 +153,20 @@ def change_pad_ut(p: _Params, chips_mm: np.ndarray, size_mm: np.ndarray, log: Pr
 
 def _depth_per_z(log: PressLog) -> float:
     """-1 where the presses go in as the stage's z falls (the eFlesh rigs), +1 where it rises: the readings change
-    most at the far end of z's range from where they change least."""
+    most at the far end of z's range from where they change least (-1 where z or the readings do not vary)."""
     z = log.stage_xyz_mm[:, 2]
     size = np.linalg.norm(log.readings_ut.reshape(len(z), -1), axis=1)
-    return -1.0 if np.corrcoef(z, size)[0, 1] < 0 else 1.0
+    if np.ptp(z) == 0.0 or np.ptp(size) == 0.0:  # nothing to tell by: the rigs' usual way
+        return -1.0
+    return 1.0 if np.corrcoef(z, size)[0, 1] > 0 else -1.0
 
 
 def solve_readout(stage: str, change: np.ndarray, readings: np.ndarray, axes: np.ndarray) -> np.ndarray:
     """(C, 3, 3) readout per chip (pad field -> chip reading) that best maps ``change`` (N, C, 3) onto
     ``readings`` (N, C, 3): a gain on the file's axes (``file``), a gain on the best of :data:`TURNS`
     (``magnets``), or a 3x3 matrix drawn towards that turn at unit gain (``readout``: ridge regression, so a
-    field direction the presses hardly excite keeps the chip's turn). ``axes``: (C, 3, 3) the file's chip -> pad
+    field direction the presses hardly excite keeps the chip's turn, and a handful of presses cannot pull the
+    readout far). ``axes``: (C, 3, 3) the file's chip -> pad
     matrices."""
     out = np.empty((change.shape[1], 3, 3))
     for c in range(change.shape[1]):
@@ -178,18 +183,20 @@ def solve_readout(stage: str, change: np.ndarray, readings: np.ndarray, axes: np
             out[c] = best[1] * best[2]
             continue
         gram = b.T @ b
-        ridge = READOUT_RIDGE * max(float(np.trace(gram)) / 3.0, 1e-12)
+        share = max(READOUT_RIDGE, READOUT_PRIOR_ROWS / len(b))
+        ridge = share * max(float(np.trace(gram)) / 3.0, 1e-12)
         out[c] = np.linalg.solve(gram + ridge * np.eye(3), b.T @ y + ridge * best[2].T).T
     return out
 
 
 def fit_twin(board: Board, log: PressLog, *, rest_ut: np.ndarray | None = None, max_evaluations: int = 60,
-             report: Callable[[str], None] | None = None) -> TwinFit:
+             search_order: bool = False, report: Callable[[str], None] | None = None) -> TwinFit:
     """Fit ``board``'s twin to a press log (and the untouched board's raw reading ``rest_ut``, (C, 3) chip axes).
 
     The search starts from the rig's four quarter turns (the rig frame and press kernel fitted with free readouts
     on a subset of rows), fits every term from the best start (stage ``readout``: the twin written), and then
-    refits the simpler stages ``file`` and ``magnets`` from there, to say what each term buys.
+    refits the simpler stages ``file`` and ``magnets`` from there, to say what each term buys. With
+    ``search_order`` the chips' order is searched first (:func:`search_chip_orders`) and the best order fitted.
 
     Raises:
         TwinFitError: the twin explains less than :data:`MIN_FIT_EV` of its rows' variance.
@@ -211,15 +218,26 @@ def fit_twin(board: Board, log: PressLog, *, rest_ut: np.ndarray | None = None, 
     say(f"stage start: rig turn {p.get('turn_deg'):.0f} deg{', mirrored' if p.get('mirror') > 0.5 else ''}, the best "
         f"of 8 quarter turns and mirror images ({time.monotonic() - start:.1f} s)")
     result = TwinFit(board=board)
+    file_fitter = fitter
+    if search_order:
+        begin = time.monotonic()
+        result.orders = search_chip_orders(board, log, p, rest_ut=rest_ut, max_evaluations=max_evaluations // 3)
+        best = result.orders[0]
+        say(f"stage order: of {len(result.orders)} placements of the chips, the best explains {best['ev']:.3f} "
+            f"(rest field rms {best['rest_rms_ut']:.0f} uT), the file's {_file_order(result.orders)['ev']:.3f} "
+            f"({time.monotonic() - begin:.1f} s)")
+        board = with_chip_order(board, best["order"])
+        fitter = _Fitter(board, log, rest_ut)
     final = dataclasses.replace(p, values=p.values.copy())
     fitter.run(final, "readout", _free("readout", final.names), max_evaluations)
     readout = fitter.readout("readout", final)
     for stage, q in (("file", p), ("magnets", final), ("readout", final)):
         begin = time.monotonic()
+        use = file_fitter if stage == "file" else fitter
         if stage != "readout":
             q = dataclasses.replace(q, values=q.values.copy())
-            fitter.run(q, stage, _free(stage, q.names), max_evaluations // 2)
-        result.stages[stage] = fitter.describe(stage, q, round(time.monotonic() - begin, 1))
+            use.run(q, stage, _free(stage, q.names), max_evaluations // 2)
+        result.stages[stage] = use.describe(stage, q, round(time.monotonic() - begin, 1))
         line = result.stages[stage]
         say(f"stage {stage}: EV {line['ev']:.3f} on {len(log.readings_ut)} rows"
             + ("" if line["rest_rms_ut"] is None else f", rest field rms {line['rest_rms_ut']:.0f} uT")
@@ -232,6 +250,67 @@ def fit_twin(board: Board, log: PressLog, *, rest_ut: np.ndarray | None = None, 
                            f"(less than {MIN_FIT_EV}); check the label columns, the rig's z direction and the board")
     result.board = fitted_board(board, final, readout, rest_ut, _depth_per_z(log))
     return result
+
+
+MAX_ORDER_SEARCH_CHIPS = 6  # 6! placements, fewer up to the pad's symmetries; more chips: no exhaustive search
+
+
+def chip_orders(positions_mm: np.ndarray) -> list[tuple[int, ...]]:
+    """The placements of the chips on their positions (``order[i]``: the position chip i sits at) that no turn or
+    mirror image of the pad mapping the positions onto themselves turns into one another; the identity first.
+
+    Raises:
+        ValueError: more than :data:`MAX_ORDER_SEARCH_CHIPS` chips.
+    """
+    import itertools
+
+    n = len(positions_mm)
+    if n > MAX_ORDER_SEARCH_CHIPS:
+        raise ValueError(f"the chips' order is searched for at most {MAX_ORDER_SEARCH_CHIPS} chips, not {n}")
+    xy = np.asarray(positions_mm, float)[:, :2]
+    maps = []
+    for g in TURNS[::2, :2, :2]:  # the 8 turns and mirror images of the plane
+        moved = xy @ g.T
+        dist = np.linalg.norm(moved[:, None] - xy[None], axis=-1)
+        if np.all(dist.min(axis=1) < 1e-6):
+            maps.append(dist.argmin(axis=1))  # position k goes to position maps[k]
+    seen, out = set(), []
+    for order in itertools.permutations(range(n)):
+        key = min(tuple(int(m[k]) for k in order) for m in maps)
+        if key not in seen:
+            seen.add(key)
+            out.append(order)
+    return out
+
+
+def with_chip_order(board: Board, order: tuple[int, ...]) -> Board:
+    """``board`` with chip i moved to chip ``order[i]``'s position and cell (its turn kept)."""
+    chips = tuple(dataclasses.replace(c, position_mm=board.chips[k].position_mm, cell=board.chips[k].cell)
+                  for c, k in zip(board.chips, order))
+    return dataclasses.replace(board, chips=chips)
+
+
+def search_chip_orders(board: Board, log: PressLog, start: _Params, *, rest_ut: np.ndarray | None,
+                       max_evaluations: int, rows: int = 200) -> list[dict]:
+    """Fit the ``magnets`` stage (one gain and quarter turn per chip, free magnets, the rest field) for each of
+    :func:`chip_orders` on ``rows`` of the log, from ``start``; best first, each ``{"order", "ev",
+    "rest_rms_ut", "cost"}``."""
+    subset = np.linspace(0, len(log.readings_ut) - 1, min(rows, len(log.readings_ut))).astype(int)
+    part = PressLog(log.stage_xyz_mm[subset], log.readings_ut[subset], log.time_h[subset])
+    out = []
+    for order in chip_orders(board.chip_positions_mm()):
+        candidate = with_chip_order(board, order)
+        fitter = _Fitter(candidate, part, rest_ut)
+        q = dataclasses.replace(start, values=start.values.copy())
+        cost = fitter.run(q, "magnets", _free("magnets", q.names), max_evaluations)
+        line = fitter.describe("magnets", q, 0.0)
+        out.append({"order": [int(k) for k in order], "ev": line["ev"], "rest_rms_ut": line["rest_rms_ut"],
+                    "cost": round(cost, 3)})
+    return sorted(out, key=lambda item: item["cost"])
+
+
+def _file_order(orders: list[dict]) -> dict:
+    return next(o for o in orders if o["order"] == sorted(o["order"]))
 
 
 class _Fitter:

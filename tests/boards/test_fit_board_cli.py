@@ -94,3 +94,23 @@ def test_a_fit_that_does_not_converge_is_not_written(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "did not converge" in err and len(err.strip().splitlines()) == 1
     assert not out.exists() and not list(tmp_path.glob("*.toml"))
+
+
+def test_an_untouched_capture_and_raw_presses_fit_a_twin(tmp_path, capsys):
+    paths = write_log(tmp_path / "log", rows=120)
+    raw = np.loadtxt(paths["raw"], delimiter=",")
+    sub = np.loadtxt(paths["sub"], delimiter=",")
+    rng = np.random.default_rng(3)
+    rest = (raw - sub)[0, 1:] + rng.normal(0.0, 5.0, (100, 15))  # 10 s of the untouched board at 10 Hz
+    untouched = tmp_path / "untouched.csv"
+    np.savetxt(untouched, np.column_stack([np.arange(100) * 0.1, rest]), delimiter=",")
+    out = tmp_path / "cube.toml"
+    argv = ["fit-board", "--board", "eflesh", "--raw", str(untouched), "--presses", str(paths["raw"]),
+            "--labels", str(paths["states"]), "--label-columns", COLUMNS, "--rows", "80", "--evaluations", "12",
+            "--out", str(out)]
+    assert main(argv) == 0
+    err = capsys.readouterr().err
+    assert "rest field: median of an untouched capture, 100 rows" in err
+    assert all(f"stage {stage}: EV" in err for stage in ("file", "magnets", "readout"))
+    board = load_board(out)
+    assert board.fit["rest"]["from"] == "an untouched capture" and board.fit["ev_on_fitted_rows"]["readout"] > 0.5

@@ -11,7 +11,7 @@ from tactile_manip.boards.spec import ReadoutSpec, TwinSpec
 from tactile_manip.boards.write import board_toml
 from tactile_manip.errors import ConfigError
 from tactile_manip.sim.twin import BoardTwin, kernel_displacement, rig_to_pad
-from tactile_manip.sim.twin_fit import PressLog, explained_variance, fit_twin
+from tactile_manip.sim.twin_fit import PressLog, chip_orders, explained_variance, fit_twin, with_chip_order
 
 TURNED = ((0.0, 1.0, 0.0), (-1.0, 0.0, 0.0), (0.0, 0.0, 1.0))
 
@@ -75,6 +75,14 @@ def test_a_probe_above_the_pad_changes_nothing_and_raw_adds_the_rest_field():
     assert np.abs(deep).max() > 50.0  # a 3 mm press moves the field by tens of uT at least
 
 
+def test_presses_at_pad_points_are_the_logged_poses_through_the_rig_frame():
+    twin = BoardTwin(known_board())
+    stage = grid_log(np.random.default_rng(1), 40)
+    xy, approach = twin.pad_poses(stage)
+    np.testing.assert_allclose(twin.readings_at_pad_ut(xy, approach), twin.readings_ut(stage), rtol=1e-12)
+    assert not twin.readings_at_pad_ut(np.zeros((1, 2)), np.array([-1.0])).any()  # above the pad: no press
+
+
 def test_a_board_without_twin_is_refused():
     with pytest.raises(ConfigError, match="fit-board"):
         BoardTwin(load_board("eflesh"))
@@ -94,3 +102,20 @@ def test_fit_finds_a_known_twin_again():
     pred = BoardTwin(fit.board).readings_ut(stage[test_part])
     ev, per_channel = explained_variance(readings[test_part], pred)
     assert ev > 0.95 and min(per_channel) > 0.8
+
+
+def test_the_chip_orders_searched_are_the_crosss_placements_up_to_its_symmetries():
+    board = load_board("eflesh")
+    orders = chip_orders(board.chip_positions_mm())
+    assert len(orders) == 120 // 8 and orders[0] == (0, 1, 2, 3, 4)
+    # a quarter turn of the pad (left -> down, right -> up, up -> left, down -> right) or a mirror image (left <->
+    # right) gives a placement that is the same board turned: never listed beside the one it came from
+    for symmetry in ({0: 0, 1: 4, 2: 3, 3: 1, 4: 2}, {0: 0, 1: 2, 2: 1, 3: 3, 4: 4}):
+        for order in orders:
+            image = tuple(symmetry[k] for k in order)
+            assert image == order or image not in orders
+    swapped = with_chip_order(board, (0, 2, 1, 3, 4))
+    assert swapped.chips[1].position_mm == board.chips[2].position_mm and swapped.chips[1].cell == board.chips[2].cell
+    assert swapped.chips[1].rotation_deg == board.chips[1].rotation_deg
+    with pytest.raises(ValueError, match="at most 6 chips"):
+        chip_orders(load_board("supermag-4x4").chip_positions_mm())
