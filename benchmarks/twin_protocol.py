@@ -54,6 +54,7 @@ LABELS = {SPATIAL: "time_s,x_mm,y_mm,z_mm", NORMAL: "time_s,x_mm,y_mm,z_mm,force
 CONTACT = {SPATIAL: (["--contact", f"z_mm < {CONTACT_Z_MM}", "--targets", "x_mm,y_mm"], "position_rmse_mm"),
            NORMAL: (["--missing", "-1", "--targets", "force_n"], "force_rmse_n")}
 MANIFOLD = Path("docs/results/contact/fewlabel_k.json")
+ORDER = ("twin", "bound", "manifold (committed)", "kNN")  # the contact table's columns
 MADE_S: dict[str, float] = {}  # seconds each cached file took to make (fit, twin's presses), by path
 FIT_ERRORS: dict[str, str] = {}  # fit-board's one-line refusal, by the path it would have written
 TURNS = [np.array(m, float) for m in ([[1, 0], [0, 1]], [[0, -1], [1, 0]], [[-1, 0], [0, -1]], [[0, 1], [-1, 0]],
@@ -425,10 +426,15 @@ def markdown(report: dict[str, Any]) -> str:
         lines += ["", "## Contact from the twin against the number of labelled presses K (mean of seeds)"]
         for kind, block in contact.items():
             unit = "mm (2-D position)" if block["figure"] == "position_rmse_mm" else "N (normal force)"
-            methods = sorted({m for row in block["k"].values() for m in row["mean"]})
+            found = {m for row in block["k"].values() for m in row["mean"]}
+            methods = [m for m in ORDER if m in found] + sorted(found - set(ORDER))
             lines += ["", f"{block['run']}: test RMSE, {unit}", "",
                       "| K | " + " | ".join(methods) + " |", "|---" * (len(methods) + 1) + "|"]
             for k, row in block["k"].items():
+                seeds = row.get("seeds", {})  # where a mean covers fewer seeds than the others, which
+                most = max((len(v) for v in seeds.values()), default=0)
+                fewer = [f"{m}: seed {', '.join(map(str, v))}" for m, v in seeds.items() if len(v) < most]
+                k = f"{k} ({'; '.join(fewer)})" if fewer else k
                 lines.append(f"| {k} | " + " | ".join(f"{row['mean'][m]:.3f}" if m in row["mean"] else "-"
                                                       for m in methods) + " |")
     return "\n".join(lines)

@@ -91,6 +91,6 @@ def test_the_report_prints_every_section_and_plots_error_against_k(tmp_path) -> 
     text = markdown(_report())
     assert "| spatial/sensor | kNN | 0.920 | 0.970 | kNN |" in text
     assert "0.50 mm RMSE off" in text and "no simulate-log" in text
-    assert "| 25 | 6.000 | 1.100 | 0.900 |" in text and "| 0 | - | - | 3.000 |" in text
+    assert "| 25 | 0.900 | 1.100 | 6.000 |" in text and "| 0 | 3.000 | - | - |" in text
     plot(_report(), tmp_path / "k.png")
     assert (tmp_path / "k.png").stat().st_size > 1000
