@@ -239,7 +239,7 @@ def stage_grid(board_path: Path, *, step_mm: float = 0.5, margin_mm: float = -4.
 def simlog_bank(board: Path, run: Path, kind: str, work: Path) -> Path:
     """The fitted twin's readings at a grid of stage poses (``simulate-log`` on a log of those poses), as a dataset
     of presses whose targets are the poses (x_mm, y_mm, z_mm): ``train --prior``'s bank, in the rig's frame."""
-    from tactile_manip.data import from_arrays, load_dataset, save_dataset
+    from tactile_manip.data import from_arrays, save_dataset
 
     out = work / f"bank_{board.stem}.npz"
     if out.is_file():
