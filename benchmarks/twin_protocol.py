@@ -434,6 +434,8 @@ def markdown(report: dict[str, Any]) -> str:
                 seeds = row.get("seeds", {})  # where a mean covers fewer seeds than the others, which
                 most = max((len(v) for v in seeds.values()), default=0)
                 fewer = [f"{m}: seed {', '.join(map(str, v))}" for m, v in seeds.items() if len(v) < most]
+                if most == 1 and k != "0":  # every mean of the row is one seed's
+                    fewer = [f"seed {next(iter(seeds.values()))[0]}"]
                 k = f"{k} ({'; '.join(fewer)})" if fewer else k
                 lines.append(f"| {k} | " + " | ".join(f"{row['mean'][m]:.3f}" if m in row["mean"] else "-"
                                                       for m in methods) + " |")
