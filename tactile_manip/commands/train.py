@@ -37,6 +37,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--device", default=None, help="override the config's device: auto, cpu, cuda or cuda:N")
     p.add_argument("--max-minutes", type=float, default=None,
                    help="override the config's wall-time cap in minutes (0: none)")
+    p.add_argument("--prior", default=None, metavar="TWIN.npz",
+                   help="contact models with unlabelled = \"twin\" (configs/train/contact_twin.toml): simulated "
+                        "presses of the pad's twin (tactile-manip simulate --board fitted.toml), which label the "
+                        "unlabelled presses")
     p.add_argument("--quiet", action="store_true",
                    help="no progress display (off a terminal it is a line per stage anyway); the summary is printed")
 
@@ -50,4 +54,4 @@ def run(args: argparse.Namespace) -> int:
     return kind.run_train(TrainRequest(
         config=args.config, data=tuple(args.data), out=args.out, resume=args.resume, force=args.force, init=args.init,
         epochs=args.epochs, seed=args.seed, threads=args.threads, device=args.device, max_minutes=args.max_minutes,
-        quiet=args.quiet))
+        quiet=args.quiet, prior=args.prior))

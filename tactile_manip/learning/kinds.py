@@ -35,6 +35,8 @@ class TrainRequest:
         device: the config's device replaced (image models), or None.
         max_minutes: the config's wall-time cap replaced, min (image models), or None.
         quiet: no progress display (the closing summary line is still printed).
+        prior: contact models: simulated presses of the pad's twin that label its unlabelled presses
+            (``unlabelled = "twin"``), or None.
     """
 
     config: str
@@ -49,6 +51,7 @@ class TrainRequest:
     device: str | None = None
     max_minutes: float | None = None
     quiet: bool = False
+    prior: str | None = None
 
 
 @dataclass(frozen=True)

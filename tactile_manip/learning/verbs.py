@@ -46,14 +46,17 @@ def check_run_folder(request: TrainRequest) -> None:
                         hint="pass --resume to continue it, --force to start over (replacing it), or give a new --out")
 
 
-def small_net_config(request: TrainRequest, what: str, load: Callable[[str], Any]) -> Any:
+def small_net_config(request: TrainRequest, what: str, load: Callable[[str], Any], *, takes_prior: bool = False
+                     ) -> Any:
     """The config of a small network (``load(path)``), with the command line's overrides, once the CVAE-only
-    flags are refused, the run folder checked and every dataset found (each a one-line error)."""
+    flags (and ``--prior``, unless it ``takes_prior``) are refused, the run folder checked and every dataset found
+    (each a one-line error)."""
     from tactile_manip.data import check_dataset_file
     from tactile_manip.errors import ConfigError
 
     given = [f for f, v in (("--resume", request.resume), ("--init", request.init), ("--device", request.device),
-                            ("--max-minutes", request.max_minutes)) if v]
+                            ("--max-minutes", request.max_minutes),
+                            ("--prior", None if takes_prior else request.prior)) if v]
     if given:
         raise ConfigError(f"{', '.join(given)}: not for {what}, which trains in minutes on the CPU")
     check_run_folder(request)

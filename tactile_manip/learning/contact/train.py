@@ -80,9 +80,12 @@ class ContactTrainConfig:
     sigma_map: bool = True        # then map it so that holds wherever the sigma lies (needs 80+ val samples)
     redraw_noise: bool = False    # each epoch reads the training presses through new chip drift and noise
                                   # (simulated datasets, one frame of context: tactile_manip.learning.noise)
-    unlabelled: Literal["ignore", "manifold"] = "ignore"  # the dataset's unlabelled training presses: left out,
-                                  # or labelled from the labelled ones (.fewlabel)
+    unlabelled: Literal["ignore", "manifold", "twin"] = "ignore"  # the dataset's unlabelled training presses: left
+                                  # out, labelled from the labelled ones (.fewlabel), or from the twin's simulated
+                                  # presses (train --prior) corrected by the labelled ones (.twin_prior)
     manifold_neighbours: int = 20  # neighbours per reading in that map
+    twin_neighbours: int = 8      # the twin's presses whose targets place a reading
+    twin_norm_weight: float = 0.5  # weight of the log field norm beside the field's direction in that search
     label_recency: float = 0.0    # the fit of the field norm weighs a labelled press by e ** (this x the share of
                                   # its run elapsed before it): later presses count more where the skin drifts
     seed: int = 0
@@ -95,7 +98,8 @@ class ContactTrainConfig:
         if not 0 < self.val_fraction < 1:
             raise ValueError(f"val_fraction must be in (0, 1), got {self.val_fraction}")
         check_ranges(self, {"context_max_gap_s": (0.0, 3600.0), "threads": THREADS_RANGE,
-                            "manifold_neighbours": (3, 200), "label_recency": (0.0, 10.0)},
+                            "manifold_neighbours": (3, 200), "label_recency": (0.0, 10.0),
+                            "twin_neighbours": (1, 200), "twin_norm_weight": (0.0, 100.0)},
                      units={"context_max_gap_s": "s"})
         if self.redraw_noise and self.context_frames != 1:
             raise ValueError(f"redraw_noise draws the noise of one frame; it needs context_frames = 1, got "
@@ -158,29 +162,35 @@ def chosen_targets(data: PairedDataset, cfg: ContactTrainConfig) -> list[str]:
 def train_contact(cfg: ContactTrainConfig, data_paths: list[str | Path], out: str | Path, *,
                   progress: Callable[[dict[str, Any]], None] | None = None,
                   on_start: Callable[[int], None] | None = None,
-                  stages: Callable[..., Any] | None = None) -> dict[str, Any]:
+                  stages: Callable[..., Any] | None = None, prior: str | Path | None = None) -> dict[str, Any]:
     """Train, write ``out/best.pt`` and ``out/history.json``, and return the summary.
 
     ``on_start(total_epochs)`` is called once the data are loaded and checked and the unlabelled presses
     labelled; ``progress(row)`` after every epoch of every member (``row``: member, epoch, loss, val_rmse);
-    ``stages`` makes the labeller's progress displays (``pseudo_labels``). Torch and numpy's BLAS run on
-    ``cfg.threads`` threads (:func:`~tactile_manip.learning.threads.limited_threads`). The summary's
-    ``train_seconds`` is the network's training alone; ``pseudo_labels["seconds"]`` the labelling's.
+    ``stages`` makes the labeller's progress displays (``pseudo_labels``). ``prior``: a dataset of the twin's
+    simulated presses (``unlabelled = "twin"``, which needs it; with the twin, a dataset whose training presses are
+    all unlabelled trains on the twin's labels alone). Torch and numpy's BLAS run on ``cfg.threads`` threads
+    (:func:`~tactile_manip.learning.threads.limited_threads`). The summary's ``train_seconds`` is the network's
+    training alone; ``pseudo_labels["seconds"]`` the labelling's.
     """
+    if (cfg.unlabelled == "twin") != (prior is not None):
+        raise ConfigError('unlabelled = "twin" labels the presses from the twin\'s simulated presses: give them with '
+                          '--prior TWIN.npz (tactile-manip simulate --board fitted.toml), and --prior only with it')
     with limited_threads(cfg.threads):
-        return _train_contact(cfg, data_paths, out, progress=progress, on_start=on_start, stages=stages)
+        return _train_contact(cfg, data_paths, out, progress=progress, on_start=on_start, stages=stages, prior=prior)
 
 
 def _train_contact(cfg: ContactTrainConfig, data_paths: list[str | Path], out: str | Path, *,
                    progress: Callable[[dict[str, Any]], None] | None,
                    on_start: Callable[[int], None] | None,
-                   stages: Callable[..., Any] | None) -> dict[str, Any]:
+                   stages: Callable[..., Any] | None, prior: str | Path | None) -> dict[str, Any]:
     data = load_datasets([Path(p) for p in data_paths], images=False)
     names = chosen_targets(data, cfg)
-    check_training_rows(data, data_name(data_paths))
+    if not (cfg.unlabelled == "twin" and len(data.indices(UNLABELLED))):
+        check_training_rows(data, data_name(data_paths))
     check_finite_readings(data, np.arange(len(data)), data_name(data_paths))  # any row may be a context frame
     labels = np.stack([data.target(n) for n in names], axis=1)
-    labelling = cfg.unlabelled == "manifold" and len(data.indices(UNLABELLED)) > 0
+    labelling = cfg.unlabelled != "ignore" and len(data.indices(UNLABELLED)) > 0
     train_idx, val_idx = split_indices(data, cfg.val_fraction, unlabelled=labelling)
     if cfg.calibrate_sigma and len(val_idx) < MIN_SIGMA_SAMPLES:  # said before the labelling and the training
         warnings.warn(f"{data_name(data_paths)}: sigma is calibrated on {len(val_idx)} validation sample(s), fewer "
@@ -188,7 +198,10 @@ def _train_contact(cfg: ContactTrainConfig, data_paths: list[str | Path], out: s
                       "not hold their promise; give more validation presses (import --val-fraction, or a larger "
                       "val_fraction), or set calibrate_sigma = false", UserWarning, stacklevel=2)
     windows = dataset_windows(data, cfg)
-    pseudo = _pseudo_labels(data, labels, names, cfg, windows, stages) if labelling else None
+    pseudo = None
+    if labelling:
+        pseudo = (_twin_labels(data, labels, names, cfg, windows, Path(prior)) if prior is not None
+                  else _pseudo_labels(data, labels, names, cfg, windows, stages))
     if len(train_idx) < 2:
         raise DatasetError(f"{len(train_idx)} training sample(s): too few to train on")
     windows = torch.from_numpy(windows)
@@ -222,7 +235,8 @@ def _train_contact(cfg: ContactTrainConfig, data_paths: list[str | Path], out: s
     val_rmse = _rmse_per_target(model, windows[val_idx], targets[val_idx], names)
     if cfg.calibrate_sigma:
         fit_sigma_scale(model, windows[val_idx], targets[val_idx])
-        if pseudo is not None:  # validated against labels of the map: widened by those labels' own error
+        if pseudo is not None and np.isfinite(pseudo["loo_rmse"]).all():
+            # validated against labels of the map or the twin: widened by those labels' own error
             wider = widening(val_rmse, pseudo["loo_rmse"], names)
             model.sigma_scale.mul_(torch.tensor(wider, dtype=torch.float32))
         elif cfg.sigma_map and len(val_idx) >= 2 * SIGMA_MAP_RUN:
@@ -239,6 +253,8 @@ def _train_contact(cfg: ContactTrainConfig, data_paths: list[str | Path], out: s
                "input": _input_record(data, cfg), "targets": names, "sigma_calibration": sigma_maps,
                "data": {"fingerprint": data.fingerprint(), "samples": len(data), "provenance_source":
                         data.provenance.get("source"), "val_rmse": val_rmse, "pseudo_labels": pseudo}}
+    if prior is not None:
+        summary["prior"] = payload["data"]["prior"] = pseudo["prior"] if pseudo else {"path": str(prior)}
     tmp = out / "best.pt.partial"
     torch.save(payload, tmp)
     tmp.replace(out / "best.pt")
@@ -272,6 +288,44 @@ def _pseudo_labels(data: PairedDataset, labels: np.ndarray, names: list[str], cf
     return {"labelled": int(labelled.sum()), "unlabelled": int(len(hidden)),
             "loo_rmse": [float(v) for v in found.loo_rmse], "methods": list(found.methods),
             "seconds": round(time.perf_counter() - start, 1)}
+
+
+def _twin_labels(data: PairedDataset, labels: np.ndarray, names: list[str], cfg: ContactTrainConfig,
+                 windows: np.ndarray, prior: Path) -> dict[str, Any]:
+    """As :func:`_pseudo_labels`, the unlabelled training presses labelled from the twin's simulated presses in
+    the dataset at ``prior`` (:func:`~tactile_manip.learning.contact.twin_prior.twin_labels`), corrected by the
+    labelled ones; refuses a prior of another reading layout or board than the data's."""
+    from tactile_manip.boards.identity import check_same_board
+    from tactile_manip.data import load_dataset
+    from tactile_manip.learning.contact.fewlabel import recency_weights
+    from tactile_manip.learning.contact.twin_prior import check_bank_targets, twin_labels
+
+    check_bank_targets(names)
+    bank = load_dataset(prior, images=False)
+    if bank.readings.shape[1:] != data.readings.shape[1:]:
+        raise DatasetError(f"--prior {prior} holds {bank.readings.shape[1:]} readings, the data "
+                           f"{data.readings.shape[1:]}: simulate the twin on the board the presses were imported with")
+    check_same_board(f"--prior {prior}", record_of_provenance(bank.provenance), "the training data",
+                     record_of_provenance(data.provenance))
+    hidden = data.indices(UNLABELLED)
+    rows = np.sort(np.concatenate([data.indices("train"), hidden]))
+    labelled = np.isin(rows, data.indices("train"))
+    weights = None
+    if cfg.label_recency > 0 and data.has("time_s"):
+        weights = recency_weights(data.extra("time_s")[rows], cfg.label_recency,
+                                  None if data.groups is None else data.groups[rows])
+    start = time.perf_counter()
+    found = twin_labels(data.readings[rows], labels[rows], labelled, bank_readings=bank.readings,
+                        bank_targets=np.stack([bank.target(n) for n in bank.target_names], axis=1),
+                        names=names, bank_names=list(bank.target_names),
+                        earlier=windows[rows, -1] if windows.shape[1] > 1 else None, weights=weights,
+                        neighbours=cfg.twin_neighbours, norm_weight=cfg.twin_norm_weight)
+    labels[rows] = found.values
+    return {"labelled": int(labelled.sum()), "unlabelled": int(len(hidden)),
+            "loo_rmse": [float(v) for v in found.loo_rmse], "methods": list(found.methods),
+            "seconds": round(time.perf_counter() - start, 1),
+            "prior": {"path": str(prior), "presses": len(bank), "fingerprint": bank.fingerprint(),
+                      "board": record_of_provenance(bank.provenance)}}
 
 
 def widening(val_rmse: dict[str, float], loo_rmse: list[float], names: list[str]) -> list[float]:

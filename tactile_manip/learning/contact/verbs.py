@@ -21,7 +21,7 @@ def run_train(request: TrainRequest) -> int:
     from tactile_manip.progress import progress_bar
 
     began = time.perf_counter()
-    cfg = small_net_config(request, 'a contact model (kind = "contact")', load_contact_config)
+    cfg = small_net_config(request, 'a contact model (kind = "contact")', load_contact_config, takes_prior=True)
     bars = []
 
     def start(total: int) -> None:
@@ -33,7 +33,7 @@ def run_train(request: TrainRequest) -> int:
 
     try:
         summary = train_contact(cfg, list(request.data), request.out, progress=progress, on_start=start,
-                                stages=functools.partial(progress_bar, quiet=request.quiet))
+                                stages=functools.partial(progress_bar, quiet=request.quiet), prior=request.prior)
     finally:
         for bar in bars:
             bar.close()
@@ -43,7 +43,8 @@ def run_train(request: TrainRequest) -> int:
     if pseudo:
         loo = ", ".join(f"{k} {v:.3g} ({m})" for k, v, m in zip(summary["targets"], pseudo["loo_rmse"],
                                                                pseudo["methods"]))
-        print(f"{pseudo['unlabelled']} unlabelled presses labelled from {pseudo['labelled']} in "
+        source = f" and the twin {request.prior}" if request.prior else ""
+        print(f"{pseudo['unlabelled']} unlabelled presses labelled from {pseudo['labelled']}{source} in "
               f"{_minutes(pseudo['seconds'])}; leave-one-out RMSE of each target's fit on the labelled: {loo}")
         rmse += " against those labels"
         took = f"labelling {_minutes(pseudo['seconds'])}, {took}"

@@ -17,6 +17,9 @@ def run_train(request: TrainRequest) -> int:
     from tactile_manip.learning.cvae.train import load_train_config, resolve_device, train, with_overrides
     from tactile_manip.learning.verbs import check_run_folder, start_run
 
+    if request.prior:
+        raise ConfigError("--prior: for a contact model that labels its presses from a twin "
+                          "(configs/train/contact_twin.toml), not for the image model")
     check_run_folder(request)
     for path in request.data:
         check_dataset_file(path)  # before the progress bar: a missing file is one line
