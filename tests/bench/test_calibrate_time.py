@@ -46,13 +46,15 @@ def test_the_manifold_route_is_the_owner_s_four_commands_and_splits_train_at_the
 
 def test_a_command_s_time_is_split_at_the_last_marked_line_and_its_longest_silence_kept() -> None:
     script = ("import time; print('labelling: a: 1/1 map in 0.0 s', flush=True); time.sleep(0.6); "
-              "print('labelling: b: 1/1 start in 0.6 s', flush=True); time.sleep(0.9); print('done')")
+              "print('labelling: b: 1/1 start in 0.6 s', flush=True); time.sleep(1.5); print('done')")
     done = run_step(Step("train", (), split=("label", r"^labelling: .* in [0-9.]+ s$")),
                     program=(sys.executable, "-c", script))
     assert set(done["stages"]) == {"label", "train"}
-    assert done["stages"]["label"] >= 0.6 and done["stages"]["train"] >= 0.9
+    # lines are timed when read: on a busy machine a line may arrive late, moving time from train to label, so
+    # train is held to half its sleep
+    assert done["stages"]["label"] >= 0.6 and done["stages"]["train"] >= 0.75
     assert done["stages"]["label"] + done["stages"]["train"] == pytest.approx(done["wall_s"])
-    assert 0.9 <= done["longest_silence_s"] < done["wall_s"]
+    assert 0.75 <= done["longest_silence_s"] < done["wall_s"]
     assert done["lines"][-1] == "done" and done["cpu_s"] >= 0.0
     unmarked = run_step(Step("export", ()), program=(sys.executable, "-c", "print('x')"))
     assert set(unmarked["stages"]) == {"export"}
