@@ -94,6 +94,7 @@ QUOTES: tuple[Quote, ...] = (
     _layout("file", "board file"),
     _layout("right_down_half_turn", "right and down chips half a turn"),
     _layout("mirror_image", "mirror image, or left-handed chips at the file's places"),
+    _layout("upside_down", "the left-handed chips upside down, discs polarised -z"),
 )
 
 

@@ -1,5 +1,5 @@
 """Which layout of the five chips the eFlesh runs ask for: the board file's, its right and down chips turned
-half a turn, or the file's mirror image.
+half a turn, the file's mirror image, left-handed chips, or those chips upside down over reversed discs.
 
     python -m benchmarks.eflesh_chip_layout
     python -m benchmarks.eflesh_chip_layout --data /path/to/eflesh_dev --rows 400
@@ -11,7 +11,11 @@ z-polarised, so the mirrored discs' field is the mirror of their field), so the 
 each chip reads a left-handed frame at the file's places, or the board is the file's mirror image (right-handed
 chips; seen as the file has it, the up and down chips trade places and the right and down chips turn half a
 turn; the rig's axes then meet the pad's as a mirror image). Turning the right and down chips alone, at the
-file's places, is neither. Each layout is scored on what does not depend on the rig at all and on the presses:
+file's places, is neither. A reading is the chip's axes dotted with the field, and reversing every disc's
+polarisation reverses the field, so the left-handed chips' axes negated (each a proper turn, det +1: a chip read
+upside down, through its board) over discs polarised -z read exactly what the left-handed chips read over the
+file's discs: right-handed chips at the file's places, with no mirror between rig and pad (``upside_down``).
+Each layout is scored on what does not depend on the rig at all and on the presses:
 
 - **rest field**: the median of the logger's baseline (``sensor.csv`` minus ``sensor_post_baselines.csv``) over
   each run's first 80 %, against four equal discs on a rigid square (its centre, turn, depth, side and the discs'
@@ -69,12 +73,24 @@ def layouts(board: Board) -> dict[str, tuple[Board, str]]:
         mirror[i] = dataclasses.replace(half[i], position_mm=chips[j].position_mm, cell=chips[j].cell)
     left_handed = tuple(ChipSpec(cell=c.cell, position_mm=c.position_mm, axes=a)
                         for c, a in zip(chips, FIT_READOUT_AXES))
+    upside_down = tuple(ChipSpec(cell=c.cell, position_mm=c.position_mm, axes=tuple(negated(n) for n in a))
+                        for c, a in zip(chips, FIT_READOUT_AXES))
+    assert board.body is not None
+    reversed_discs = dataclasses.replace(board.body, magnets=tuple(
+        dataclasses.replace(m, polarisation_t=tuple(-v for v in m.polarisation_t)) for m in board.body.magnets))
     return {"file": (board, "board file"),
             "right_down_half_turn": (dataclasses.replace(board, chips=half), "right and down chips half a turn"),
             "mirror_image": (dataclasses.replace(board, chips=tuple(mirror)),
                              "mirror image (up and down chips traded, right and down chips half a turn)"),
             "left_handed": (dataclasses.replace(board, chips=left_handed),
-                            "left-handed chips at the file's places (the twin's readouts)")}
+                            "left-handed chips at the file's places (the twin's readouts)"),
+            "upside_down": (dataclasses.replace(board, chips=upside_down, body=reversed_discs),
+                            "the left-handed chips' axes negated (right-handed: upside down), discs polarised -z")}
+
+
+def negated(axis: str) -> str:
+    """The signed axis name pointing the other way ("-y" -> "+y")."""
+    return ("-" if axis[0] == "+" else "+") + axis[1:]
 
 
 def square_field_ut(x: np.ndarray, chips_mm: np.ndarray, size_mm: np.ndarray) -> np.ndarray:
@@ -89,13 +105,15 @@ def square_field_ut(x: np.ndarray, chips_mm: np.ndarray, size_mm: np.ndarray) ->
 
 
 def rest_fit(board: Board, rest_ut: np.ndarray) -> dict[str, Any]:
-    """The rigid square of discs that best gives ``rest_ut`` (C, 3, chip axes) through ``board``'s chip axes."""
+    """The rigid square of discs that best gives ``rest_ut`` (C, 3, chip axes) through ``board``'s chip axes, the
+    discs polarised along +z or -z as the board's are (the square's strength is a size, not a sign)."""
     chips_mm, readout = board.chip_positions_mm(), np.transpose(board.chip_matrices(), (0, 2, 1))
-    size = board_magnets(board).size_mm
+    discs = board_magnets(board)
+    size, polarity = discs.size_mm, float(np.sign(discs.polarisation_t.sum()))
     lo, hi = [-15.0, -15.0, -np.pi, -20.0, 8.0, 0.2], [15.0, 15.0, np.pi, -1.7, 35.0, 1.5]
 
     def residual(x: np.ndarray) -> np.ndarray:
-        return (np.einsum("cij,cj->ci", readout, square_field_ut(x, chips_mm, size)) - rest_ut).ravel()
+        return (np.einsum("cij,cj->ci", readout, polarity * square_field_ut(x, chips_mm, size)) - rest_ut).ravel()
 
     best = min((least_squares(residual, [dx, dy, turn, -6.5, 20.0, 1.4], bounds=(lo, hi))
                 for turn in (0.0, 0.4, 0.8) for dx in (-3.0, 0.0, 3.0) for dy in (-3.0, 0.0, 3.0)),
@@ -105,7 +123,7 @@ def rest_fit(board: Board, rest_ut: np.ndarray) -> dict[str, Any]:
             "in_plane_rms_ut": round(float(np.sqrt(np.mean(miss[:, :2] ** 2))), 1),
             "z_rms_ut": round(float(np.sqrt(np.mean(miss[:, 2] ** 2))), 1),
             "square": dict(zip(("centre_x_mm", "centre_y_mm", "turn_rad", "depth_mm", "side_mm", "polarisation_t"),
-                               [round(float(v), 3) for v in best.x]))}
+                               [round(float(v), 3) for v in best.x * [1, 1, 1, 1, 1, polarity]]))}
 
 
 def press_fit(board: Board, fit: twin_fit.PressLog, test: twin_fit.PressLog, evaluations: int) -> dict[str, Any]:
@@ -179,6 +197,7 @@ def main(argv: list[str] | None = None) -> int:
         report["layouts"][name] = {"description": description,
             "rotation_deg_or_axes": [c.axes if c.axes is not None else c.rotation_deg for c in candidate.chips],
             "position_mm": [list(c.position_mm) for c in candidate.chips],
+            "discs_polarisation_z_t": [float(j) for j in board_magnets(candidate).polarisation_t],
             "rest": {run: rest_fit(candidate, rest) for run, rest in rests.items()},
             "presses": press_fit(candidate, fit, test, args.evaluations)}
         print(f"{name}: {report['layouts'][name]['presses']['seconds']:.0f} s", flush=True)
