@@ -24,6 +24,7 @@ ROOT = Path(__file__).resolve().parent.parent
 FEWLABEL = "docs/results/contact/fewlabel_k.json"  # python -m benchmarks.fewlabel_k
 DEPTH = "docs/results/benchmarks/depth.json"  # python -m benchmarks.bench_depth
 SERVE = "docs/results/benchmarks/serve.json"  # python -m benchmarks.bench_serve --seconds 60
+LAYOUT = "docs/results/eflesh/twin/chip_layout.json"  # python -m benchmarks.eflesh_chip_layout
 SPATIAL, NORMAL = "runs/spatial_20250316_155729", "runs/normal_20250401_014340"
 
 
@@ -56,6 +57,13 @@ class Quote:
 
     def expected(self, root: Path) -> str:
         return self.sentence.format(*(v.text(root) for v in self.values))
+
+
+def _layout(name: str, label: str) -> Quote:
+    """The row of your_board.md's table of chip layouts for layout ``name``."""
+    rest = [Value(LAYOUT, f"layouts/{name}/rest/{run.split('/')[-1]}/rms_ut", ".0f") for run in (SPATIAL, NORMAL)]
+    ev = [Value(LAYOUT, f"layouts/{name}/presses/{key}") for key in ("ev_fit_rows", "ev_test_tail")]
+    return Quote("docs/your_board.md", f"| {label} | {{}}; {{}} | {{}}; {{}} |", (*rest, *ev))
 
 
 def _few(run: str, k: str, method: str, seed: str | None = None, fmt: str = ".2f") -> Value:
@@ -96,6 +104,10 @@ QUOTES: tuple[Quote, ...] = (
                                 "against {} / {} ms for the four passes",
           (Value(DEPTH, "choices/none/p50_ms", ".1f"), Value(DEPTH, "choices/none/cpu_p99_ms", ".1f"),
            Value(DEPTH, "choices/rotations/p50_ms", ".1f"), Value(DEPTH, "choices/rotations/cpu_p99_ms", ".1f"))),
+    _layout("file", "board file"),
+    _layout("right_down_half_turn", "right and down chips half a turn"),
+    _layout("mirror_image", "mirror image, or left-handed chips at the file's places"),
+    _layout("upside_down", "the left-handed chips upside down, discs polarised -z"),
 )
 
 
