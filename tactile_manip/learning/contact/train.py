@@ -269,25 +269,13 @@ def _pseudo_labels(data: PairedDataset, labels: np.ndarray, names: list[str], cf
     press's ``windows`` as its earlier reading, and, with ``label_recency`` above 0 and the presses' times, the
     labelled presses weighed by :func:`~tactile_manip.learning.contact.fewlabel.recency_weights` per run; each
     stage shown by ``stages``); what was done, or None where nothing is unlabelled."""
-    from tactile_manip.learning.contact.fewlabel import pseudo_labels, recency_weights
+    from tactile_manip.learning.contact.fewlabel import pseudo_labels
 
-    hidden = data.indices(UNLABELLED)
-    if not len(hidden):
+    if not len(data.indices(UNLABELLED)):
         return None
-    rows = np.sort(np.concatenate([data.indices("train"), hidden]))
-    labelled = np.isin(rows, data.indices("train"))
-    weights = None
-    if cfg.label_recency > 0 and data.has("time_s"):
-        weights = recency_weights(data.extra("time_s")[rows], cfg.label_recency,
-                                  None if data.groups is None else data.groups[rows])
-    start = time.perf_counter()
-    found = pseudo_labels(data.readings[rows], labels[rows], labelled, neighbours=cfg.manifold_neighbours,
-                          earlier=windows[rows, -1] if windows.shape[1] > 1 else None, names=names, weights=weights,
-                          stages=stages)
-    labels[rows] = found.values
-    return {"labelled": int(labelled.sum()), "unlabelled": int(len(hidden)),
-            "loo_rmse": [float(v) for v in found.loo_rmse], "methods": list(found.methods),
-            "seconds": round(time.perf_counter() - start, 1)}
+    return _label_unlabelled(data, labels, cfg, windows, lambda readings, known, labelled, earlier, weights: (
+        pseudo_labels(readings, known, labelled, neighbours=cfg.manifold_neighbours, earlier=earlier, names=names,
+                      weights=weights, stages=stages)))
 
 
 def _twin_labels(data: PairedDataset, labels: np.ndarray, names: list[str], cfg: ContactTrainConfig,
@@ -297,7 +285,6 @@ def _twin_labels(data: PairedDataset, labels: np.ndarray, names: list[str], cfg:
     labelled ones; refuses a prior of another reading layout or board than the data's."""
     from tactile_manip.boards.identity import check_same_board
     from tactile_manip.data import load_dataset
-    from tactile_manip.learning.contact.fewlabel import recency_weights
     from tactile_manip.learning.contact.twin_prior import check_bank_targets, twin_labels
 
     check_bank_targets(names)
@@ -307,6 +294,24 @@ def _twin_labels(data: PairedDataset, labels: np.ndarray, names: list[str], cfg:
                            f"{data.readings.shape[1:]}: simulate the twin on the board the presses were imported with")
     check_same_board(f"--prior {prior}", record_of_provenance(bank.provenance), "the training data",
                      record_of_provenance(data.provenance))
+    bank_targets = np.stack([bank.target(n) for n in bank.target_names], axis=1)
+    done = _label_unlabelled(data, labels, cfg, windows, lambda readings, known, labelled, earlier, weights: (
+        twin_labels(readings, known, labelled, bank_readings=bank.readings, bank_targets=bank_targets, names=names,
+                    bank_names=list(bank.target_names), earlier=earlier, weights=weights,
+                    neighbours=cfg.twin_neighbours, norm_weight=cfg.twin_norm_weight)))
+    done["prior"] = {"path": str(prior), "presses": len(bank), "fingerprint": bank.fingerprint(),
+                     "board": record_of_provenance(bank.provenance)}
+    return done
+
+
+def _label_unlabelled(data: PairedDataset, labels: np.ndarray, cfg: ContactTrainConfig, windows: np.ndarray,
+                      labeller: Callable[..., Any]) -> dict[str, Any]:
+    """The training and unlabelled rows handed to ``labeller(readings, labels, labelled, earlier, weights)``
+    (each press's oldest frame as its earlier reading where windows hold more than one; recency weights per run
+    where ``label_recency`` is above 0 and the presses have times); its values written into ``labels`` in place,
+    and what was done, with the labelling's seconds."""
+    from tactile_manip.learning.contact.fewlabel import recency_weights
+
     hidden = data.indices(UNLABELLED)
     rows = np.sort(np.concatenate([data.indices("train"), hidden]))
     labelled = np.isin(rows, data.indices("train"))
@@ -315,17 +320,12 @@ def _twin_labels(data: PairedDataset, labels: np.ndarray, names: list[str], cfg:
         weights = recency_weights(data.extra("time_s")[rows], cfg.label_recency,
                                   None if data.groups is None else data.groups[rows])
     start = time.perf_counter()
-    found = twin_labels(data.readings[rows], labels[rows], labelled, bank_readings=bank.readings,
-                        bank_targets=np.stack([bank.target(n) for n in bank.target_names], axis=1),
-                        names=names, bank_names=list(bank.target_names),
-                        earlier=windows[rows, -1] if windows.shape[1] > 1 else None, weights=weights,
-                        neighbours=cfg.twin_neighbours, norm_weight=cfg.twin_norm_weight)
+    found = labeller(data.readings[rows], labels[rows], labelled,
+                     windows[rows, -1] if windows.shape[1] > 1 else None, weights)
     labels[rows] = found.values
     return {"labelled": int(labelled.sum()), "unlabelled": int(len(hidden)),
             "loo_rmse": [float(v) for v in found.loo_rmse], "methods": list(found.methods),
-            "seconds": round(time.perf_counter() - start, 1),
-            "prior": {"path": str(prior), "presses": len(bank), "fingerprint": bank.fingerprint(),
-                      "board": record_of_provenance(bank.provenance)}}
+            "seconds": round(time.perf_counter() - start, 1)}
 
 
 def widening(val_rmse: dict[str, float], loo_rmse: list[float], names: list[str]) -> list[float]:
