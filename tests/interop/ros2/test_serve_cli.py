@@ -110,6 +110,7 @@ def test_no_listener_outlives_serve(sig, status):
     assert wait_no_listener(port), f"port {port} still taken after {sig!r}"
 
 
+@pytest.mark.slow  # a second client or source of what the default tests serve; CI runs it
 def test_serve_replays_a_recording_as_several_pads(tmp_path, defs):
     pytest.importorskip("mcap_ros2._dynamic", reason="mcap-ros2-support is not installed")
     rec = tmp_path / "press.tmrec"
@@ -134,6 +135,7 @@ def test_serve_replays_a_recording_as_several_pads(tmp_path, defs):
     assert "from 2 pad(s)" in err
 
 
+@pytest.mark.slow  # a second client or source of what the default tests serve; CI runs it
 def test_serve_joins_a_zenoh_router_instead_of_listening(tmp_path, defs):
     """Where a router holds the port (rmw_zenohd on a ROS 2 machine), serve connects to it and listens nowhere;
     a client of the router sees the graph and the topics."""

@@ -222,6 +222,7 @@ def test_a_foxglove_port_in_use_is_one_line_and_exit_2():
     assert out == ""
 
 
+@pytest.mark.slow  # a second client or source of what the default tests serve; CI runs it
 def test_serve_over_both_transports_listens_on_both_and_foxglove_streams(tmp_path):
     pytest.importorskip("zenoh", reason="eclipse-zenoh is not installed (extra 'ros2')")
     fox_port, zenoh_port = free_port(), free_port()

@@ -24,6 +24,7 @@ from tactile_manip.interop.ros_msgs import MESSAGES  # noqa: E402
 SDK_CLIENT = Path(__file__).resolve().parent / "sdk_client.py"
 
 
+@pytest.mark.slow  # a second client or source of what the default tests serve; CI runs it
 def test_zenoh_ros2_sdk_receives_every_topic_and_calls_a_service(tmp_path):
     defs = tmp_path / "defs.json"  # the .msg text of every type, as a ROS 2 machine's packages hold it
     defs.write_text(json.dumps({t.replace("/", "/msg/"): msg_text(t) for t in MESSAGES if not t.endswith("_Request")}))
