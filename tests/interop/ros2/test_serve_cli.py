@@ -4,33 +4,15 @@ bad input refused in one line with exit 2; and no listener left behind by Ctrl-C
 from __future__ import annotations
 
 import json
-import os
-import signal
-import socket
 import subprocess
 import sys
-import time
 
 import pytest
 
 pytest.importorskip("zenoh", reason="eclipse-zenoh is not installed (extra 'ros2')")
 
-from ros2_helpers import Client, free_port, listening, wait_no_listener
-
-
-def serve(*args: str) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", "tactile_manip", "serve", *args], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, env={**os.environ, "PYTHONUNBUFFERED": "1"})
-
-
-def wait_listening(proc: subprocess.Popen, port: int, timeout_s: float = 60.0) -> None:
-    end = time.monotonic() + timeout_s
-    while time.monotonic() < end:
-        assert proc.poll() is None, proc.communicate()[1][-2000:]
-        if listening(port):
-            return
-        time.sleep(0.1)
-    raise AssertionError("serve did not listen")
+from ros2_helpers import (STOPS, Client, free_port, serve, serve_on_taken_port, stop_frees_port, wait_listening,
+                          wait_no_listener)
 
 
 def test_serve_sim_shows_topics_services_and_diagnostics_to_a_client(tmp_path, defs):
@@ -88,26 +70,15 @@ def test_bad_input_is_one_line_and_exit_2(args, says):
 
 
 def test_a_port_in_use_is_one_line_and_exit_2():
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        s.listen()
-        port = s.getsockname()[1]
-        proc = serve("--sim", "--seconds", "1", "--zenoh-port", str(port))
-        _, err = proc.communicate(timeout=60)
-    assert proc.returncode == 2, err
+    _, status, _, err = serve_on_taken_port("--zenoh-port", "--sim", "--seconds", "1")
+    assert status == 2, err
     assert len(err.strip().splitlines()) == 1 and "port is in use" in err and "--connect" in err, err
 
 
-@pytest.mark.parametrize("sig, status", [(signal.SIGINT, 130), (signal.SIGTERM, 143), (signal.SIGKILL, -9)])
+@pytest.mark.parametrize("sig, status", STOPS)
 def test_no_listener_outlives_serve(sig, status):
     port = free_port()
-    proc = serve("--sim", "--zenoh-port", str(port))
-    wait_listening(proc, port)
-    time.sleep(1.5)  # streaming by now
-    proc.send_signal(sig)
-    proc.communicate(timeout=30)
-    assert proc.returncode == status
-    assert wait_no_listener(port), f"port {port} still taken after {sig!r}"
+    stop_frees_port(("--sim", "--zenoh-port", str(port)), port, sig, status)
 
 
 @pytest.mark.slow  # a second client or source of what the default tests serve; CI runs it

@@ -6,10 +6,6 @@ services and diagnostics included; a port in use is one line, and no listener ou
 from __future__ import annotations
 
 import json
-import math
-import os
-import signal
-import socket
 import subprocess
 import sys
 import time
@@ -22,25 +18,16 @@ pytest.importorskip("foxglove", reason="the Foxglove transport needs foxglove-sd
 pytest.importorskip("websockets", reason="the test client needs websockets (extra 'dev')")
 pytest.importorskip("mcap_ros2._dynamic", reason="the test client decodes with mcap-ros2-support")
 
+from ros2_helpers import (STOPS, TOPICS, check_values, free_port, listening, serve_on_taken_port, stop_frees_port,
+                          stream_a_press, wait_listening)
+from ros2_helpers import serve as _serve
+from ros2_helpers import wait_no_listener as nothing_listens
+
 from tactile_manip.interop.ros2.foxglove_transport import FoxgloveTransport
 from tactile_manip.interop.ros2.publisher import TactilePublisher
 from tactile_manip.perception.tactile_estimator import TactileEstimator
-from tactile_manip.sensors import SimulatedSensor, parse_press
 
 CLIENT = Path(__file__).with_name("foxglove_ws_client.py")
-TOPICS = {"/tactile/field_raw": "std_msgs/msg/Float32MultiArray", "/tactile/field": "std_msgs/msg/Float32MultiArray",
-          "/tactile/angle": "tactile_manip_msgs/msg/Angle", "/tactile/contact": "tactile_manip_msgs/msg/Contact"}
-
-
-def _f32(x) -> float:
-    return float(np.float32(x))
-
-
-def _same(got, want) -> bool:
-    """A decoded number equals the published one (NaN equals NaN, None stands for NaN)."""
-    if want is None or (isinstance(want, float) and math.isnan(want)):
-        return isinstance(got, float) and math.isnan(got)
-    return got == want
 
 
 def _client(url: str, out: Path, *extra: str) -> subprocess.Popen:
@@ -63,7 +50,6 @@ def serve_to_client(tmp_path, seconds: float):
     """Publish a simulated pad's every reading for ``seconds`` through Foxglove while the client listens; returns
     (what the client got, the readings and estimates published, the publisher, elapsed s)."""
     est = TactileEstimator.load()
-    published = []
     out = tmp_path / "got.json"
     with FoxgloveTransport(port=0) as fox:
         pub = TactilePublisher(est, fox, namespace="/tactile")
@@ -72,15 +58,7 @@ def serve_to_client(tmp_path, seconds: float):
         while not all(p.channel.has_sinks() for p in fox.publishers.values()):
             assert time.monotonic() < end, "the client's subscriptions never reached the server"
             time.sleep(0.01)
-        with SimulatedSensor() as sensor:
-            est.set_noise_floor(sensor.calibrate_baseline(125).noise_ut)
-            sensor.play([parse_press("letter_r,t=0.2,force=10,yaw=20,rise=0.3,hold=0.5")], period_s=1.5)
-            with sensor.subscribe() as frames:
-                start = time.monotonic()
-                while time.monotonic() - start < seconds:
-                    reading = frames.get(1.0).reading
-                    published.append((reading, pub.estimate(reading)))
-                elapsed = time.monotonic() - start
+        published, elapsed = stream_a_press(est, pub, seconds)
         got = _result(client, out)
     return got, published, pub, elapsed
 
@@ -99,24 +77,7 @@ def check_stream(got, published, pub, elapsed) -> None:
         assert abs(rate - source_hz) / source_hz < 0.05, (topic, rate, source_hz)
     assert pub.drops == 0
     vals = {topic: [m for _, m, _ in got["messages"][topic]] for topic in TOPICS}
-    contacts = 0
-    for i, (reading, e) in enumerate(published):
-        assert vals["/tactile/field_raw"][i]["data"] == [_f32(v) for v in np.ravel(reading.field_raw_ut)]
-        assert vals["/tactile/field"][i]["data"] == [_f32(v) for v in np.ravel(reading.field_ut)]
-        a = vals["/tactile/angle"][i]
-        assert _same(a["angle"], _f32(e.angle.angle_rad)) and _same(a["confidence"], _f32(e.angle.confidence))
-        assert (a["defined"], a["plausible"]) == (e.angle.defined, e.angle.plausible)
-        assert a["header"]["stamp"]["sec"] * 10**9 + a["header"]["stamp"]["nanosec"] == stamps[i]
-        c, s = vals["/tactile/contact"][i], e.contact
-        assert (c["in_contact"], c["plausible"]) == (e.in_contact, e.plausible)
-        assert _same(c["force"]["z"], s.force_n) and _same(c["force_sigma"]["z"], s.force_sigma_n)
-        if e.in_contact:
-            contacts += 1
-            assert _same(c["position"]["x"], s.x_mm * 1e-3) and _same(c["position"]["y"], s.y_mm * 1e-3)
-            assert _same(c["position_sigma"]["x"], s.x_sigma_mm * 1e-3)
-        else:
-            assert math.isnan(c["position"]["x"])
-    assert contacts > 20  # the press was seen, so contact values were compared, not only NaNs
+    check_values(vals, published, stamps)
 
 
 def test_a_foxglove_client_gets_every_topic_with_the_estimators_values(tmp_path):
@@ -130,48 +91,9 @@ def test_a_foxglove_client_gets_every_topic_for_a_minute_at_125_hz(tmp_path):
     assert len(published) > 0.95 * 125 * 60  # the source kept the board's rate (a loaded machine's may not)
 
 
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-def listening(port: int) -> bool:
-    """Whether a socket listens on 127.0.0.1:``port``. The probe binds with SO_REUSEADDR, which a listener
-    refuses but the TIME_WAIT of a connection the server closed does not."""
-    with socket.socket() as s:
-        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        try:
-            s.bind(("127.0.0.1", port))
-        except OSError:
-            return True
-        return False
-
-
-def nothing_listens(port: int, timeout_s: float = 5.0) -> bool:
-    end = time.monotonic() + timeout_s
-    while listening(port):
-        if time.monotonic() > end:
-            return False
-        time.sleep(0.05)
-    return True
-
-
-def serve(*args: str) -> subprocess.Popen:
+def serve(*args: str):
     """``tactile-manip serve --transport foxglove ARGS`` (a later ``--transport`` in ARGS wins)."""
-    return subprocess.Popen([sys.executable, "-m", "tactile_manip", "serve", "--transport", "foxglove", *args],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            env={**os.environ, "PYTHONUNBUFFERED": "1"})
-
-
-def wait_listening(proc: subprocess.Popen, port: int, timeout_s: float = 60.0) -> None:
-    end = time.monotonic() + timeout_s
-    while time.monotonic() < end:
-        assert proc.poll() is None, proc.communicate()[1][-2000:]
-        if listening(port):
-            return
-        time.sleep(0.1)
-    raise AssertionError("serve did not listen")
+    return _serve("--transport", "foxglove", *args)
 
 
 def test_serve_over_foxglove_shows_topics_services_and_diagnostics(tmp_path):
@@ -211,13 +133,8 @@ def test_serve_over_foxglove_shows_topics_services_and_diagnostics(tmp_path):
 
 
 def test_a_foxglove_port_in_use_is_one_line_and_exit_2():
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        s.listen()
-        port = s.getsockname()[1]
-        proc = serve("--sim", "--seconds", "1", "--foxglove-port", str(port))
-        out, err = proc.communicate(timeout=60)
-    assert proc.returncode == 2, err
+    port, status, out, err = serve_on_taken_port("--foxglove-port", "--transport", "foxglove", "--sim", "--seconds", "1")
+    assert status == 2, err
     assert len(err.strip().splitlines()) == 1 and f"127.0.0.1:{port}: the port is in use" in err, err
     assert out == ""
 
@@ -242,13 +159,7 @@ def test_serve_over_both_transports_listens_on_both_and_foxglove_streams(tmp_pat
     assert nothing_listens(fox_port) and nothing_listens(zenoh_port)
 
 
-@pytest.mark.parametrize("sig, status", [(signal.SIGINT, 130), (signal.SIGTERM, 143), (signal.SIGKILL, -9)])
+@pytest.mark.parametrize("sig, status", STOPS)
 def test_no_foxglove_listener_outlives_serve(sig, status):
     port = free_port()
-    proc = serve("--sim", "--foxglove-port", str(port))
-    wait_listening(proc, port)
-    time.sleep(1.5)  # streaming by now
-    proc.send_signal(sig)
-    proc.communicate(timeout=30)
-    assert proc.returncode == status
-    assert nothing_listens(port), f"port {port} still taken after {sig!r}"
+    stop_frees_port(("--transport", "foxglove", "--sim", "--foxglove-port", str(port)), port, sig, status)

@@ -14,8 +14,7 @@ import pytest
 pytest.importorskip("zenoh", reason="eclipse-zenoh is not installed (extra 'ros2')")
 pytest.importorskip("zenoh_ros2_sdk", reason="zenoh-ros2-sdk is not installed (CI installs it)")
 
-from ros2_helpers import free_port  # noqa: E402
-from test_serve_cli import serve, wait_listening  # noqa: E402
+from ros2_helpers import free_port, serve, wait_listening  # noqa: E402
 
 from tactile_manip.interop.ros2.messages import msg_text  # noqa: E402
 from tactile_manip.interop.ros2.type_hash import type_hash  # noqa: E402
