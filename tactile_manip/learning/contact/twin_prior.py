@@ -92,7 +92,7 @@ def twin_labels(readings: np.ndarray, targets: np.ndarray, labelled: np.ndarray,
     :func:`~tactile_manip.learning.contact.fewlabel.pseudo_labels` (the field norm's change, the labels' weights
     in the norm's fit). Without labelled rows the twin's answer is every label and the leave-one-out RMSE is NaN.
     Raises ``DatasetError`` for a target the bank lacks, readings of another layout than the bank's, non-finite
-    readings or labels, or one or two labelled rows (too few for a correction, too many to ignore).
+    readings, labels or bank, or one or two labelled rows (too few for a correction, too many to ignore).
     """
     x = np.asarray(readings, np.float64).reshape(len(readings), -1)
     bank = np.asarray(bank_readings, np.float64).reshape(len(bank_readings), -1)
@@ -112,6 +112,8 @@ def twin_labels(readings: np.ndarray, targets: np.ndarray, labelled: np.ndarray,
                            "the bank on the board the presses were imported with")
     if not (np.isfinite(x).all() and np.isfinite(y[lab]).all()):
         raise DatasetError("the readings and the labels must be finite to be placed on the twin")
+    if not (np.isfinite(bank).all() and np.isfinite(np.asarray(bank_targets, np.float64)).all()):
+        raise DatasetError("the twin's bank holds a NaN or infinite reading or target: simulate it again")
     if 0 < lab.sum() < 3:
         raise DatasetError(f"{int(lab.sum())} labelled press(es): the twin's correction needs 3 or more (or none)")
     cols = [list(bank_names).index(n) for n in sources]
@@ -134,7 +136,7 @@ def twin_labels(readings: np.ndarray, targets: np.ndarray, labelled: np.ndarray,
         loo[places] = max(err, corrected_loo)
         methods = [f"twin place{corrected}, {name}" if k in places else m for k, m in enumerate(methods)]
     for k in (k for k in range(len(names)) if k not in places or len(places) != 2):
-        name, fit = _load_fit(x, twin[:, k], earlier, weights, labelled=int(lab.sum()))
+        name, fit = _load_fit(x, twin[:, k], earlier, weights, labelled=lab)
         err = _loo_rmse(fit, y[:, k], lab)
         values[:, k] = fit(lab, y[:, k])
         loo[k] = err
@@ -226,8 +228,8 @@ def _place_loo(fit: PlaceFit, y: np.ndarray, lab: np.ndarray) -> float:
 
 
 def _load_fit(x: np.ndarray, twin: np.ndarray, earlier: np.ndarray | None, weights: np.ndarray | None, *,
-              labelled: int) -> tuple[str, Callable]:
-    """The fit of a load target on the labels: the field norm's shrunk fit (``labelled`` presses set its knots)
+              labelled: np.ndarray) -> tuple[str, Callable]:
+    """The fit of a load target on the labels: the field norm's shrunk fit (the ``labelled`` rows set its knots)
     with the twin's load (N,) as one more shrunk term."""
     live = x.std(axis=0) > 0
     xs = x[:, live]
