@@ -18,9 +18,9 @@ either, the fit chosen by leave-one-out error on the labels:
   frames, alone and times the norm (an elastomer gives less force for the same field while it is pressed in than
   while it springs back, and the sign and speed of that change say which). On the eFlesh normal run the force
   against the norm is nearly straight with one soft bend, which a cubic follows badly where the labels are few:
-  over 40 draws of 25 labels the fit's answers on the run's last 20 % were 0.633 N off with a cubic and 0.565 N
-  with the bent line (closer in 78 % of the draws; 10 labels 0.883 and 0.876 N; 100 labels, eight knots, 0.437
-  and 0.399 N).
+  over 40 draws of 25 labels the fit's answers on the run's last 20 % were 0.635 N off with a cubic and 0.568 N
+  with the bent line, closer in 75 % of the draws (``python -m benchmarks.force_limit``; 10 labels about even,
+  0.88 N; 100 labels, eight knots, 0.44 against 0.40 N).
   Every term but the norm's linear one is shrunk by a ridge; the fits of several ridge weights are averaged,
   each weighted by how well it holds out on the labels (leave-one-out). Where the presses come with times, the
   later labelled presses can weigh more (:func:`recency_weights`): a skin softens as it is pressed, so the force
