@@ -488,7 +488,8 @@ def main(argv: list[str] | None = None) -> int:
     args = p.parse_args(argv)
     runs = {k: v for k, v in run_folders(args.runs).items() if k in args.kind}
     report: dict[str, Any] = json.loads(args.out.read_text()) if args.update and args.out.is_file() else {}
-    report.update({"machine": machine_info(), "runs": {k: v.name for k, v in runs.items()}})
+    report.update({"machine": machine_info(),  # --update keeps the runs this call does not measure
+                   "runs": {**report.get("runs", {}), **{k: v.name for k, v in runs.items()}}})
     with tempfile.TemporaryDirectory() as tmp:
         work = args.work or Path(tmp)
         work.mkdir(parents=True, exist_ok=True)

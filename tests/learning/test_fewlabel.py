@@ -433,3 +433,64 @@ def test_the_train_command_shows_each_labelling_stage_and_the_true_time_of_each_
     times = re.search(r"labelling (\d+) s, network (\d+) s, train in all (\d+) s;", out)
     assert times and int(times.group(3)) >= int(times.group(1)) + int(times.group(2)) - 1, out
     assert blas and set(blas) == {1}, blas
+
+
+def _bent_presses(seed: int, n: int = 900):
+    """Readings (N, 15) and force (N,) of presses at one place whose force bends with depth: stiff to 60 % of the
+    stroke, then a fifth as stiff (the eFlesh normal run's force against the field norm bends, more softly)."""
+    rng = np.random.default_rng(seed)
+    depth = rng.uniform(0, 1, n)
+    force = np.where(depth < 0.6, 40.0 * depth, 24.0 + 8.0 * (depth - 0.6))
+    direction = rng.normal(size=15)
+    readings = depth[:, None] * 2000.0 * direction / np.linalg.norm(direction) + rng.normal(0, 2.0, (n, 15))
+    return readings, force
+
+
+def test_the_field_norm_s_line_bends_where_the_force_does() -> None:
+    errors = []
+    for seed in range(6):
+        readings, force = _bent_presses(seed)
+        lab = _labelled_mask(len(force), 25, seed=seed)
+        found = pseudo_labels(readings, force[:, None], lab)
+        assert found.methods[0].startswith("field norm, bent at 2 knots"), found.methods
+        errors.append(float(np.sqrt(np.mean((found.values[~lab, 0] - force[~lab]) ** 2))))
+    # the bent line: 0.45 N mean over these draws; a cubic of the norm in its place (the fit before): 0.60 N
+    assert np.mean(errors) < 0.52, errors
+
+
+def test_the_norm_s_knots_follow_the_labels_and_the_readings() -> None:
+    from tactile_manip.learning.contact.fewlabel import LABELS_PER_KNOT, NORM_KNOTS, norm_knots
+
+    scaled = np.random.default_rng(0).uniform(0, 3, 500)
+
+    def knots(labels):
+        return norm_knots(scaled, _labelled_mask(500, labels))
+
+    assert len(knots(5)) == NORM_KNOTS[0]                      # the fewest knots below a dozen labels
+    assert len(knots(4 * LABELS_PER_KNOT)) == 4
+    assert len(knots(400)) == NORM_KNOTS[1]
+    found = knots(100)
+    np.testing.assert_allclose(found, np.quantile(scaled, np.arange(1, 9) / 9))  # at the readings' quantiles
+    few = norm_knots(np.repeat([0.0, 1.0, 2.0], 100), _labelled_mask(300, 100))
+    assert len(few) < NORM_KNOTS[1] and np.all(np.diff(few) > 0)  # readings at three norms: knots that coincide
+                                                                  # count once
+
+
+def test_presses_all_at_one_force_are_labelled_with_it() -> None:
+    readings, _ = _bent_presses(1, 400)
+    earlier = np.roll(readings, 2, axis=0)
+    lab = _labelled_mask(400, 25, seed=1)
+    found = pseudo_labels(readings, np.full((400, 1), 12.5), lab, earlier=earlier)
+    np.testing.assert_allclose(found.values[:, 0], 12.5, atol=1e-6)
+    assert found.loo_rmse[0] < 1e-6
+
+
+def test_fewer_labels_than_the_norm_fit_s_terms_still_give_finite_nearby_labels() -> None:
+    readings, earlier, force = _hysteretic_presses()
+    errors = []
+    for seed in range(4):  # 5 labels; the fit has 1 + 2 + 2 + 2 terms and an intercept
+        lab = _labelled_mask(len(force), MIN_LABELLED, seed=seed)
+        found = pseudo_labels(readings, force[:, None], lab, earlier=earlier, names=["force_n"])
+        assert np.isfinite(found.values).all() and np.isfinite(found.loo_rmse).all()
+        errors.append(float(np.sqrt(np.mean((found.values[~lab, 0] - force[~lab]) ** 2))))
+    assert max(errors) < 0.25 * force.std(), errors

@@ -209,3 +209,20 @@ def test_the_command_line_refuses_a_prior_where_no_twin_labels_in_one_line(tiny_
                  str(tiny_data), "--out", str(tmp_path / "c")]) == 2
     assert_one_line_error(capsys.readouterr().err, "train", "--prior")
     assert not any((tmp_path / d).exists() for d in "abc")
+
+
+def test_the_twin_s_load_is_one_term_of_the_norm_s_fit_not_a_route_of_its_own(labelled_presses) -> None:
+    data = labelled_presses(600)
+    y = data.targets.astype(np.float64)
+    readings, targets, names = _bank(labelled_presses)
+    lab = _mask(len(data), 25, seed=6)
+    noise = np.random.default_rng(6).normal(0, 5.0 * y[:, 2].std(), len(targets))  # a twin whose force says little
+    found = twin_labels(data.readings, y[:, 2:], lab, bank_readings=readings,
+                        bank_targets=np.c_[targets[:, :2], targets[:, 2] + noise], names=["force_n"], bank_names=names)
+    assert found.methods[0].startswith("field norm, bent at") and "the twin load" in found.methods[0]
+    assert _rmse(found.values[~lab], y[~lab, 2:]) < 0.25 * y[:, 2].std()   # the norm carries it; the twin is shrunk
+    bad = targets.copy()
+    bad[3, 2] = np.nan
+    with pytest.raises(DatasetError, match="bank holds a NaN"):
+        twin_labels(data.readings, y[:, 2:], lab, bank_readings=readings, bank_targets=bad, names=["force_n"],
+                    bank_names=names)
