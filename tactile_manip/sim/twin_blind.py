@@ -38,8 +38,7 @@ from scipy.spatial import cKDTree
 from tactile_manip.boards.load import Board
 from tactile_manip.boards.spec import MagnetSpec, ReadoutSpec, TwinSpec
 from tactile_manip.sim.twin import Magnets, board_magnets, discs_field_pad_ut, press_change_pad_ut
-from tactile_manip.sim.twin_fit import MAGNET_Z_LIMIT_MM, MAX_POLARISATION_T, MIN_FIT_EV, TwinFitError, \
-    explained_variance
+from tactile_manip.sim.twin_fit import MAGNET_Z_LIMIT_MM, MAX_POLARISATION_T, TwinFitError, explained_variance
 
 KERNEL_GRID = {"kernel_depth_mm": (5.0, 8.0, 11.0, 14.0, 17.0, 20.0), "lateral_scale": (0.0, 1.0, 2.0),
                "tilt_scale": (0.0, 1.0, 2.0)}
@@ -51,6 +50,9 @@ READOUT_ROUNDS = 6
 ROUNDS = 1                 # kernel searches, each followed by the readouts' fit (a second moved nothing on the eFlesh runs)
 NOMINAL_DEPTH_MM = 5.0     # the depth the strongest fitted presses are given: no reading tells depth in mm
 MIN_PRESSES = 50           # fewer unlabelled presses cannot place a kernel
+# each reading chooses its latent press and that press's scale freely, so even readings of no press of the board
+# (random ones) are explained about 0.6 by them; the eFlesh run's 0.95, a simulated board's 0.99
+MIN_BLIND_EV = 0.8
 
 
 @dataclass
@@ -157,7 +159,8 @@ def fit_twin_unlabelled(board: Board, readings_ut: np.ndarray, rest_ut: np.ndarr
     the untouched board's raw reading ``rest_ut`` (C, 3); see the module docstring.
 
     Raises:
-        TwinFitError: too few presses, or the twin explains less than :data:`MIN_FIT_EV` of its rows' variance.
+        TwinFitError: too few presses, or the latent presses explain less than :data:`MIN_BLIND_EV` of the
+            readings' variance.
     """
     say = report or (lambda line: None)
     y = np.asarray(readings_ut, np.float64)
@@ -192,9 +195,9 @@ def fit_twin_unlabelled(board: Board, readings_ut: np.ndarray, rest_ut: np.ndarr
         result.stages[f"readout {round_}"] = line = _describe(y, change, readout, time.monotonic() - begin)
         say(f"stage readout {round_}: chamfer {line['chamfer']:.4f}, EV {line['ev']:.3f} on {len(y)} presses "
             f"({line['seconds']:.1f} s)")
-    if not line["ev"] >= MIN_FIT_EV:
+    if not line["ev"] >= MIN_BLIND_EV:
         raise TwinFitError(f"the fit did not converge: its latent presses explain {line['ev']:.2f} of the readings' "
-                           f"variance (less than {MIN_FIT_EV}); check that the presses are this board's")
+                           f"variance (less than {MIN_BLIND_EV}); check that the presses are this board's")
     _, index, scale = _latent(y, change, readout)
     strongest = float(np.percentile(strength[index] * np.maximum(scale, 1e-3), 99))
     result.kernel = kernel
