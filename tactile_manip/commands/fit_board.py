@@ -62,7 +62,12 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
 
     from tactile_manip.boards import load_board
-    from tactile_manip.commands.twin_logs import file_hash, probe_rows, read_chip_stream, rest_field
+    from tactile_manip.commands.twin_logs import (
+        file_hash,
+        probe_rows,
+        read_chip_stream,
+        rest_field,
+    )
     from tactile_manip.errors import ConfigError
     from tactile_manip.outputs import check_output_file
     from tactile_manip.sim.twin_fit import PressLog, fit_twin
@@ -116,7 +121,7 @@ def run(args: argparse.Namespace) -> int:
         "sha256_16": {k: file_hash(v) for k, v in inputs.items() if v is not None and k != "board"},
         "label_columns": args.label_columns or "", "train_fraction": args.train_fraction,
         "labelled": "all" if labelled is None else labelled, "seed": args.seed,
-        "rows": {"matched": int(len(rows.split)), "fitting": int(len(fit_rows)), "fitted": int(len(chosen))},
+        "rows": {"matched": len(rows.split), "fitting": len(fit_rows), "fitted": len(chosen)},
         "rest": rest_info, "stream_scored": "baseline-subtracted",
         "ev_on_fitted_rows": {name: s["ev"] for name, s in fit.stages.items()},
         "rest_rms_ut": {name: s["rest_rms_ut"] for name, s in fit.stages.items() if s["rest_rms_ut"] is not None},
@@ -191,8 +196,8 @@ def _fit_unlabelled(args, board, stream, rest, rest_info, say):
         "files": {k: str(v) for k, v in inputs.items() if v is not None},
         "sha256_16": {k: file_hash(v) for k, v in inputs.items() if v is not None and k != "board"},
         "train_fraction": args.train_fraction, "labelled": 0, "frame": "pad (no rig frame: no labels)",
-        "rows": {"stream": int(len(t)), "fitting": int(n_fit), "pressed": int(len(pressed)),
-                 "fitted": int(len(chosen))},
+        "rows": {"stream": len(t), "fitting": int(n_fit), "pressed": len(pressed),
+                 "fitted": len(chosen)},
         "rest": rest_info, "stream_scored": "baseline-subtracted",
         "stages": fit.stages, "seconds": round(time.monotonic() - started, 1),
     }

@@ -37,8 +37,18 @@ from scipy.spatial import cKDTree
 
 from tactile_manip.boards.load import Board
 from tactile_manip.boards.spec import MagnetSpec, ReadoutSpec, TwinSpec
-from tactile_manip.sim.twin import Magnets, board_magnets, discs_field_pad_ut, press_change_pad_ut
-from tactile_manip.sim.twin_fit import MAGNET_Z_LIMIT_MM, MAX_POLARISATION_T, TwinFitError, explained_variance
+from tactile_manip.sim.twin import (
+    Magnets,
+    board_magnets,
+    discs_field_pad_ut,
+    press_change_pad_ut,
+)
+from tactile_manip.sim.twin_fit import (
+    MAGNET_Z_LIMIT_MM,
+    MAX_POLARISATION_T,
+    TwinFitError,
+    explained_variance,
+)
 
 KERNEL_GRID = {"kernel_depth_mm": (5.0, 8.0, 11.0, 14.0, 17.0, 20.0), "lateral_scale": (0.0, 1.0, 2.0),
                "tilt_scale": (0.0, 1.0, 2.0)}
@@ -183,7 +193,7 @@ def fit_twin_unlabelled(board: Board, readings_ut: np.ndarray, rest_ut: np.ndarr
             tried.append((direction_chamfer(y, _read(readout, change))[0], values))
         cost, values = min(tried)
         kernel = dict(zip(KERNEL_GRID, values))
-        change, where, strength = press_bank(board, magnets, kernel, BANK_STEP_MM)
+        change, _, strength = press_bank(board, magnets, kernel, BANK_STEP_MM)
         result.stages[f"kernel {round_}"] = _describe(y, change, readout, time.monotonic() - begin)
         say(f"stage kernel {round_}: depth {kernel['kernel_depth_mm']:g} mm, lateral {kernel['lateral_scale']:g}, "
             f"tilt {kernel['tilt_scale']:g}, the nearest of {len(tried)} to the readings (chamfer {cost:.4f}, EV "
