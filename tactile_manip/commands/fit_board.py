@@ -205,7 +205,7 @@ def _fit_unlabelled(args, board, stream, rest, rest_info, say):
     source = (f"fitted by tactile-manip fit-board without labels to {Path(args.raw).name} (first "
               f"{args.train_fraction:g} of the rows) from the board file {board.name}; [fit] says what on what")
     fitted = dataclasses.replace(fit.board, name=name, source=source, fit=provenance, path=None)
-    last = fit.stages[[k for k in fit.stages if k.startswith("readout")][-1]]
+    last = fit.stages["readout"]
     return fitted, provenance, (f"no labels: EV {last['ev']:.3f} of the {len(chosen)} fitted presses by their "
                                 f"latent places, rest field rms {fit.stages['rest']['rest_rms_ut']:.0f} uT")
 

@@ -7,10 +7,11 @@ frees one thing at a time:
 
 1. ``rest``: the discs' places (x, y each, a common depth) and strengths from the rest field alone, read through
    the board file's chip axes at unit gain (the chips' offsets nil; the discs' polarity as the file has it);
-2. ``kernel``: the press kernel's depth, lateral and tilt scales from a grid (:data:`KERNEL_GRID`), the one whose
-   bank of simulated presses over the pad (every place of a grid, :data:`STRENGTHS`) lies nearest the real
-   readings: the mean squared distance of each real reading's direction (its unit vector over the channels) to
-   the nearest bank reading's (a one-sided chamfer: every real press must be some press of the twin's);
+2. ``kernel``: the press kernel's depth, lateral and tilt scales from a grid (:data:`KERNEL_GRID`), each with its
+   chips' readouts fitted as in 3., the one whose bank of simulated presses over the pad (every place of a grid,
+   every strength of :data:`STRENGTHS`) lies nearest the real readings both ways (:func:`symmetric_chamfer`: the
+   mean squared distance of each real reading's direction, its unit vector over the channels, to the nearest bank
+   reading's, plus that of each bank press where and as hard as the real ones land to the nearest real reading);
 3. ``readout``: each chip's 3x3 readout, alternating with the presses' latent places: each real reading takes the
    bank press nearest it in direction and the best scale of it, and the readouts are refitted to those presses
    by ridge regression towards the file's axes at unit gain (:data:`READOUT_RIDGE`), :data:`READOUT_ROUNDS` times.
@@ -50,14 +51,13 @@ from tactile_manip.sim.twin_fit import (
     explained_variance,
 )
 
-KERNEL_GRID = {"kernel_depth_mm": (5.0, 8.0, 11.0, 14.0, 17.0, 20.0), "lateral_scale": (0.0, 1.0, 2.0),
-               "tilt_scale": (0.0, 1.0, 2.0)}
+KERNEL_GRID = {"kernel_depth_mm": (8.0, 11.0, 14.0, 17.0, 20.0), "lateral_scale": (0.0, 1.0),
+               "tilt_scale": (0.5, 1.0, 1.5)}
 STRENGTHS = tuple(np.geomspace(0.2, 60.0, 14))  # press strengths s of the bank, mm^2 (a touch to a hard press)
 SEARCH_STEP_MM = 1.0       # bank grid over the pad while the kernel is searched
 BANK_STEP_MM = 0.5         # ... and while the readouts are fitted
 READOUT_RIDGE = 0.05       # pull of a chip's readout towards the file's axes at unit gain (share of the field power)
 READOUT_ROUNDS = 6
-ROUNDS = 1                 # kernel searches, each followed by the readouts' fit (a second moved nothing on the eFlesh runs)
 NOMINAL_DEPTH_MM = 5.0     # the depth the strongest fitted presses are given: no reading tells depth in mm
 MIN_PRESSES = 50           # fewer unlabelled presses cannot place a kernel
 # each reading chooses its latent press and that press's scale freely, so even readings of no press of the board
@@ -183,28 +183,26 @@ def fit_twin_unlabelled(board: Board, readings_ut: np.ndarray, rest_ut: np.ndarr
     say(f"stage rest: discs from the rest field, rms {rest_rms:.0f} uT ({time.monotonic() - begin:.1f} s)")
 
     prior = np.transpose(board.chip_matrices(), (0, 2, 1))
-    readout = prior.copy()
-    for round_ in range(1, ROUNDS + 1):
-        begin = time.monotonic()
-        tried = []
-        for values in itertools.product(*KERNEL_GRID.values()):
-            kernel = dict(zip(KERNEL_GRID, values))
-            change, _, _ = press_bank(board, magnets, kernel, SEARCH_STEP_MM)
-            tried.append((direction_chamfer(y, _read(readout, change))[0], values))
-        cost, values = min(tried)
+    begin = time.monotonic()
+    tried = []
+    for values in itertools.product(*KERNEL_GRID.values()):
         kernel = dict(zip(KERNEL_GRID, values))
-        change, _, strength = press_bank(board, magnets, kernel, BANK_STEP_MM)
-        result.stages[f"kernel {round_}"] = _describe(y, change, readout, time.monotonic() - begin)
-        say(f"stage kernel {round_}: depth {kernel['kernel_depth_mm']:g} mm, lateral {kernel['lateral_scale']:g}, "
-            f"tilt {kernel['tilt_scale']:g}, the nearest of {len(tried)} to the readings (chamfer {cost:.4f}, EV "
-            f"{result.stages[f'kernel {round_}']['ev']:.3f}; {time.monotonic() - begin:.1f} s)")
-        begin = time.monotonic()
-        for _ in range(READOUT_ROUNDS):
-            _, index, scale = _latent(y, change, readout)
-            readout = solve_readouts(scale[:, None, None] * change[index], y, prior)
-        result.stages[f"readout {round_}"] = line = _describe(y, change, readout, time.monotonic() - begin)
-        say(f"stage readout {round_}: chamfer {line['chamfer']:.4f}, EV {line['ev']:.3f} on {len(y)} presses "
-            f"({line['seconds']:.1f} s)")
+        change, where, strength = press_bank(board, magnets, kernel, SEARCH_STEP_MM)
+        readout = fit_readouts(y, change, prior)
+        tried.append((sum(symmetric_chamfer(y, change, where, strength, readout)), values))
+    cost, values = min(tried)
+    kernel = dict(zip(KERNEL_GRID, values))
+    result.stages["kernel"] = {"chamfer_both_ways": round(cost, 5), **kernel,
+                               "seconds": round(time.monotonic() - begin, 1)}
+    say(f"stage kernel: depth {kernel['kernel_depth_mm']:g} mm, lateral {kernel['lateral_scale']:g}, tilt "
+        f"{kernel['tilt_scale']:g}, the nearest of {len(tried)} to the readings both ways (chamfer {cost:.4f}; "
+        f"{time.monotonic() - begin:.1f} s)")
+    begin = time.monotonic()
+    change, _, strength = press_bank(board, magnets, kernel, BANK_STEP_MM)
+    readout = fit_readouts(y, change, prior)
+    result.stages["readout"] = line = _describe(y, change, readout, time.monotonic() - begin)
+    say(f"stage readout: chamfer {line['chamfer']:.4f}, EV {line['ev']:.3f} on {len(y)} presses "
+        f"({line['seconds']:.1f} s)")
     if not line["ev"] >= MIN_BLIND_EV:
         raise TwinFitError(f"the fit did not converge: its latent presses explain {line['ev']:.2f} of the readings' "
                            f"variance (less than {MIN_BLIND_EV}); check that the presses are this board's")
@@ -213,6 +211,32 @@ def fit_twin_unlabelled(board: Board, readings_ut: np.ndarray, rest_ut: np.ndarr
     result.kernel = kernel
     result.board = blind_board(board, magnets, kernel, readout, rest_ut, press_gain=strongest / NOMINAL_DEPTH_MM)
     return result
+
+
+def fit_readouts(readings: np.ndarray, change: np.ndarray, prior: np.ndarray) -> np.ndarray:
+    """(C, 3, 3) readouts fitted to ``readings`` (N, C, 3) against their latent presses among the bank's field
+    changes ``change`` (M, C, 3), alternating :data:`READOUT_ROUNDS` times from ``prior``."""
+    readout = prior.copy()
+    for _ in range(READOUT_ROUNDS):
+        _, index, scale = _latent(readings, change, readout)
+        readout = solve_readouts(scale[:, None, None] * change[index], readings, prior)
+    return readout
+
+
+def symmetric_chamfer(readings: np.ndarray, change: np.ndarray, where: np.ndarray, strength: np.ndarray,
+                      readout: np.ndarray) -> tuple[float, float]:
+    """The direction chamfer both ways: from the readings to the twin's presses, and from the twin's presses where
+    and as hard as the readings' latent presses are (their 5-95th percentiles of place and strength) to the
+    readings. The second keeps a twin from winning by reading every direction somewhere."""
+    bank = _read(readout, change)
+    forward, index = direction_chamfer(readings, bank)
+    low, high = np.percentile(where[index], 5, axis=0), np.percentile(where[index], 95, axis=0)
+    weak, strong = np.percentile(strength[index], 5), np.percentile(strength[index], 95)
+    inside = np.all((where >= low) & (where <= high), axis=1) & (strength >= weak) & (strength <= strong)
+    if not inside.any():
+        return forward, np.inf
+    back = cKDTree(unit_rows(readings)).query(unit_rows(bank[inside]))[0]
+    return forward, float(np.mean(back ** 2))
 
 
 def _describe(y: np.ndarray, change: np.ndarray, readout: np.ndarray, seconds: float) -> dict:

@@ -131,7 +131,7 @@ def test_a_fit_without_labels_reads_no_label_and_writes_a_pad_frame_twin(tmp_pat
     board = load_board(out)
     assert board.twin is not None and board.twin.rig_origin_mm == (0.0, 0.0) and board.fit["labelled"] == 0
     assert "labels" not in board.fit["files"] and board.fit["rows"]["fitting"] == 160
-    assert board.fit["stages"]["readout 1"]["ev"] > 0.8
+    assert board.fit["stages"]["readout"]["ev"] > 0.8
 
 
 def test_a_fit_without_labels_refuses_a_stream_not_at_rest_or_too_short(tmp_path, capsys):
