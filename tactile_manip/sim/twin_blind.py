@@ -5,8 +5,9 @@ Without poses the twin is not identifiable by a free fit (a twin with a free pos
 and readouts explains its rows well and places the presses anywhere), so the fit holds to physical priors and
 frees one thing at a time:
 
-1. ``rest``: the discs' places (x, y each, a common depth) and strengths from the rest field alone, read through
-   the board file's chip axes at unit gain (the chips' offsets nil; the discs' polarity as the file has it);
+1. ``rest``: the discs from the rest field alone, read through the board file's chip axes at unit gain (the
+   chips' offsets nil): the file's layout of discs as one rigid body, shifted, turned and scaled in the plane, at
+   one depth, of one strength (polarity as the file has it);
 2. ``kernel``: the press kernel's depth, lateral and tilt scales from a grid (:data:`KERNEL_GRID`), each with its
    chips' readouts fitted as in 3., the one whose bank of simulated presses over the pad (every place of a grid,
    every strength of :data:`STRENGTHS`) lies nearest the real readings both ways (:func:`symmetric_chamfer`: the
@@ -75,20 +76,28 @@ class BlindFit:
     kernel: dict[str, float] = field(default_factory=dict)
 
 
-def fit_rest_magnets(board: Board, rest_ut: np.ndarray) -> tuple[Magnets, float]:
-    """The discs (places, common depth, strengths; polarity as the file's) that best give ``rest_ut`` (C, 3, chip
-    axes, uT) through the file's chip axes at unit gain, and the rms residual (uT). Several starts: the file's
-    square shifted by up to 3 mm."""
+def fit_rest_magnets(board: Board, rest_ut: np.ndarray, *, each_strength: bool = False) -> tuple[Magnets, float]:
+    """The board file's discs as one rigid body (their layout shifted, turned and scaled in the plane, at one depth,
+    of one strength, or of one strength each with ``each_strength``; polarity as the file's) that best gives
+    ``rest_ut`` (C, 3, chip axes, uT) through the file's chip axes at unit gain, and the rms residual (uT).
+    A printed body holds its discs as placed, so the layout's shape is kept: 15 numbers of five chips cannot place
+    four discs one by one (a free fit leaves less of the rest field and skews the layout). Several starts."""
     chips, readout = board.chip_positions_mm(), np.transpose(board.chip_matrices(), (0, 2, 1))
     start = board_magnets(board)
     sign = np.where(start.polarisation_t < 0, -1.0, 1.0)
     size, m = start.size_mm, len(start.size_mm)
+    centre = start.centres_mm[:, :2].mean(axis=0)
+    layout = start.centres_mm[:, :2] - centre
     thick = board.layer.thickness_mm  # type: ignore[union-attr]
     half = max(board.layer.size_mm) / 2  # type: ignore[union-attr]
     top = float(size[:, 1].max()) / 2 + MAGNET_Z_LIMIT_MM
+    strengths = m if each_strength else 1
 
     def magnets(x: np.ndarray) -> Magnets:
-        return Magnets(np.c_[x[:2 * m].reshape(m, 2), np.full(m, x[2 * m])], sign * x[2 * m + 1:], size)
+        cx, cy, turn, scale, z = x[:5]
+        c, s = np.cos(turn), np.sin(turn)
+        xy = scale * layout @ np.array([[c, -s], [s, c]]).T + [cx, cy]
+        return Magnets(np.c_[xy, np.full(m, z)], sign * np.broadcast_to(x[5:], (m,)), size)
 
     def residual(x: np.ndarray) -> np.ndarray:
         mags = magnets(x)
@@ -96,11 +105,12 @@ def fit_rest_magnets(board: Board, rest_ut: np.ndarray) -> tuple[Magnets, float]
         return (np.einsum("cij,cj->ci", readout, field_pad) - rest_ut).ravel()
 
     z0 = float(np.clip(start.centres_mm[:, 2].mean(), -thick + top, -top))
-    low = np.r_[np.full(2 * m, -half), -thick + top, np.full(m, 0.05)]
-    high = np.r_[np.full(2 * m, half), -top, np.full(m, MAX_POLARISATION_T)]
+    j0 = float(np.clip(np.abs(start.polarisation_t).mean(), 0.1, 1.4))
+    low = np.r_[-half, -half, -np.pi, 0.3, -thick + top, np.full(strengths, 0.05)]
+    high = np.r_[half, half, np.pi, 3.0, -top, np.full(strengths, MAX_POLARISATION_T)]
     best = None
-    for dx, dy in itertools.product((-3.0, 0.0, 3.0), repeat=2):
-        x0 = np.r_[(start.centres_mm[:, :2] + [dx, dy]).ravel(), z0, np.clip(np.abs(start.polarisation_t), 0.1, 1.4)]
+    for dx, dy, turn in itertools.product((-3.0, 0.0, 3.0), (-3.0, 0.0, 3.0), (0.0, 0.4)):
+        x0 = np.r_[centre[0] + dx, centre[1] + dy, turn, 1.0, z0, np.full(strengths, j0)]
         sol = least_squares(residual, np.clip(x0, low, high), bounds=(low, high))
         if best is None or sol.cost < best.cost:
             best = sol
