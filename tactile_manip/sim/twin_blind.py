@@ -7,7 +7,8 @@ frees one thing at a time:
 
 1. ``rest``: the discs from the rest field alone, read through the board file's chip axes at unit gain (the
    chips' offsets nil): the file's layout of discs as one rigid body, shifted, turned and scaled in the plane, at
-   one depth, of one strength (polarity as the file has it);
+   one depth, each disc of its own strength (polarity as the file has it; N52 discs vary by a few per cent, and a
+   disc set a little deeper reads as a weaker one);
 2. ``kernel``: the press kernel's depth, lateral and tilt scales from a grid (:data:`KERNEL_GRID`), each with its
    chips' readouts fitted as in 3., the one whose bank of simulated presses over the pad (every place of a grid,
    every strength of :data:`STRENGTHS`) lies nearest the real readings both ways (:func:`symmetric_chamfer`: the
@@ -188,7 +189,7 @@ def fit_twin_unlabelled(board: Board, readings_ut: np.ndarray, rest_ut: np.ndarr
         raise TwinFitError(f"{len(y)} unlabelled presses: a fit without labels needs at least {MIN_PRESSES}")
     result = BlindFit(board=board)
     begin = time.monotonic()
-    magnets, rest_rms = fit_rest_magnets(board, rest_ut)
+    magnets, rest_rms = fit_rest_magnets(board, rest_ut, each_strength=True)
     result.stages["rest"] = {"rest_rms_ut": round(rest_rms, 1), "seconds": round(time.monotonic() - begin, 1)}
     say(f"stage rest: discs from the rest field, rms {rest_rms:.0f} uT ({time.monotonic() - begin:.1f} s)")
 
