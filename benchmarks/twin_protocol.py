@@ -452,6 +452,15 @@ def section_contact(runs: dict[str, Path], work: Path, ks: list[int], seeds: lis
     return out
 
 
+def merged_row(old: dict[str, Any], new: dict[str, Any]) -> dict[str, Any]:
+    """A contact table row of a new call over the one it updates: the methods the new call did not run keep their
+    figures (a K = 0 twin case leaves the bound's)."""
+    seeds = dict(old.get("per_seed", {}))
+    for seed, case in new.get("per_seed", {}).items():
+        seeds[seed] = {**seeds.get(seed, {}), **case}
+    return {**old, **new, "per_seed": seeds, "mean": {**old.get("mean", {}), **new.get("mean", {})}}
+
+
 # -- report --------------------------------------------------------------------------------------------------------
 
 def markdown(report: dict[str, Any]) -> str:
@@ -566,7 +575,8 @@ def main(argv: list[str] | None = None) -> int:
     runs = {k: v for k, v in run_folders(args.runs).items() if k in args.kind}
     TEMPLATE[0] = args.board
     report: dict[str, Any] = json.loads(args.out.read_text()) if args.update and args.out.is_file() else {}
-    report.update({"machine": machine_info(), "runs": {k: v.name for k, v in runs.items()}})
+    report.update({"machine": machine_info(),
+                   "runs": {**report.get("runs", {}), **{k: v.name for k, v in runs.items()}}})
     if args.board != "eflesh":
         report.setdefault("board_by_section", {}).update({s: args.board for s in args.sections})
     with tempfile.TemporaryDirectory() as tmp:
@@ -583,9 +593,10 @@ def main(argv: list[str] | None = None) -> int:
                 report.setdefault("forward", {}).update(section_zero_label(runs, work))
             else:
                 new = section_contact(runs, work, args.k, args.seeds, presses=args.presses, twins=args.twins)
-                for kind, block in new.items():  # --update keeps the other runs' and the other K's rows
+                for kind, block in new.items():  # --update keeps the other runs', K's and methods' figures
                     kept = report.setdefault("contact", {}).setdefault(kind, block)
-                    kept["k"] = {**kept["k"], **block["k"]}
+                    kept["k"] = {**kept["k"], **{k: merged_row(kept["k"].get(k, {}), row)
+                                                 for k, row in block["k"].items()}}
                     kept["k"] = dict(sorted(kept["k"].items(), key=lambda kv: int(kv[0])))
             report.setdefault("seconds", {})[section] = round(time.perf_counter() - start, 1)
             print(f"== {section}: {time.perf_counter() - start:.0f} s", flush=True)
