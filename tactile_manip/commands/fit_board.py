@@ -23,8 +23,16 @@ and the chips' readouts from the readings), in the pad frame of the board file, 
 from __future__ import annotations
 
 import argparse
+from collections.abc import Callable
+from pathlib import Path
+from typing import TYPE_CHECKING
 
 from tactile_manip.commands.twin_logs import add_log_arguments
+
+if TYPE_CHECKING:
+    import numpy as np
+
+    from tactile_manip.boards.load import Board
 
 DEFAULT_ROWS = 800  # presses fitted at most (evenly drawn from the fitting rows): a fit in about two minutes
 PRESS_NOISE_MULTIPLE = 3.0  # without labels, a row is a press where its field norm exceeds this many times the
@@ -57,7 +65,6 @@ def run(args: argparse.Namespace) -> int:
     import dataclasses
     import sys
     import time
-    from pathlib import Path
 
     import numpy as np
 
@@ -144,7 +151,7 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _write(out, fitted, board, *, header: str) -> None:
+def _write(out: Path, fitted: Board, board: Board, *, header: str) -> None:
     """Write ``fitted`` as a board file at ``out``, through a temporary file that must read back as a board."""
     import os
     import tempfile
@@ -163,12 +170,12 @@ def _write(out, fitted, board, *, header: str) -> None:
             os.unlink(tmp)
 
 
-def _fit_unlabelled(args, board, stream, rest, rest_info, say):
+def _fit_unlabelled(args: argparse.Namespace, board: Board, stream: str | tuple[np.ndarray, np.ndarray],
+                    rest: np.ndarray, rest_info: dict, say: Callable[[str], None]) -> tuple[Board, dict, str]:
     """The twin fitted to the rest field and the fitting rows' presses without any label: the fitted board (with
     its ``[fit]`` table), and a summary line."""
     import dataclasses
     import time
-    from pathlib import Path
 
     import numpy as np
 
