@@ -3,6 +3,7 @@
     python -m benchmarks.twin_protocol                                   # the dev runs, every section
     python -m benchmarks.twin_protocol --runs /path/to/runs --sections forward limit
     python -m benchmarks.twin_protocol --sections contact --k 0 25 --work /tmp/twin_cache
+    python -m benchmarks.twin_protocol --kind spatial --sections zero_label --board LAYOUT.toml --update
 
 Per run, the chronological 80/20 split of ``tactile-manip import``: every fit (the board's, a smooth map's, a
 contact model's) sees only the first 80 % of the run's rows; every score is on the last 20 %. Sections:
@@ -11,6 +12,10 @@ contact model's) sees only the first 80 % of the run's rows; every score is on t
   overall) of the test readings given the logged probe pose, for the shipped ``eflesh`` board file and for a board
   fitted by ``tactile-manip fit-board`` on the first 80 % (where the command exists), through ``tactile-manip
   simulate-log``; baseline-subtracted stream.
+- ``zero_label`` (also run by ``forward``): ``fit-board`` without labels on each run's first 80 % (its readings
+  alone), and on the spatial run the position RMSE of the test presses read backwards on that twin, the pad frame's
+  offset and best quarter turn fitted on them, beside the twin fitted with every label read the same way (the bound
+  of the twin's model family). ``--board`` names the board file fitted and imported with (the template).
 - ``limit``: the best explained variance any smooth map of the probe pose reaches on the same split (kNN and
   thin-plate RBF over x, y, z, hyper-parameters by cross-validation inside the first 80 %), raw and
   baseline-subtracted streams, with and without the run's elapsed time as a fourth coordinate (reported apart: a

@@ -87,6 +87,9 @@ def run(args: argparse.Namespace) -> int:
     board = load_board(args.board)
     board.require_simulation()
     labelled = _labelled(args.labelled)
+    if args.labels is None and labelled is not None:
+        raise ConfigError(f"--labelled {labelled} draws labelled presses from --labels, which is not given (without "
+                          "--labels the fit reads no label at all)")
     if (args.subtracted is None) == (args.presses is None):
         raise ConfigError("give the presses either as --subtracted (the baseline-subtracted copy of --raw) or as "
                           "--presses (raw press rows, with --raw an untouched capture), one of the two")

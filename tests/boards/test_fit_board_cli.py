@@ -171,3 +171,11 @@ def test_a_fit_without_labels_that_does_not_converge_is_not_written(tmp_path, ca
     err = capsys.readouterr().err
     assert "did not converge" in err and len(err.strip().splitlines()) == 1
     assert not out.exists() and not list(tmp_path.glob("*.toml"))
+
+
+def test_labelled_presses_without_a_label_log_are_refused(tmp_path, capsys):
+    paths = write_log(tmp_path / "log", rows=60)
+    assert main(blind_args(paths, tmp_path / "a.toml", "--labelled", "25")) == 2
+    err = capsys.readouterr().err
+    assert "--labelled 25 draws labelled presses from --labels" in err and len(err.strip().splitlines()) == 1
+    assert not list(tmp_path.glob("*.toml"))
