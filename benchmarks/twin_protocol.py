@@ -3,6 +3,7 @@
     python -m benchmarks.twin_protocol                                   # the dev runs, every section
     python -m benchmarks.twin_protocol --runs /path/to/runs --sections forward limit
     python -m benchmarks.twin_protocol --sections contact --k 0 25 --work /tmp/twin_cache
+    python -m benchmarks.twin_protocol --kind spatial --sections zero_label --board LAYOUT.toml --update
 
 Per run, the chronological 80/20 split of ``tactile-manip import``: every fit (the board's, a smooth map's, a
 contact model's) sees only the first 80 % of the run's rows; every score is on the last 20 %. Sections:
@@ -11,6 +12,10 @@ contact model's) sees only the first 80 % of the run's rows; every score is on t
   overall) of the test readings given the logged probe pose, for the shipped ``eflesh`` board file and for a board
   fitted by ``tactile-manip fit-board`` on the first 80 % (where the command exists), through ``tactile-manip
   simulate-log``; baseline-subtracted stream.
+- ``zero_label`` (also run by ``forward``): ``fit-board`` without labels on each run's first 80 % (its readings
+  alone), and on the spatial run the position RMSE of the test presses read backwards on that twin, the pad frame's
+  offset and best quarter turn fitted on them, beside the twin fitted with every label read the same way (the bound
+  of the twin's model family). ``--board`` names the board file fitted and imported with (the template).
 - ``limit``: the best explained variance any smooth map of the probe pose reaches on the same split (kNN and
   thin-plate RBF over x, y, z, hyper-parameters by cross-validation inside the first 80 %), raw and
   baseline-subtracted streams, with and without the run's elapsed time as a fourth coordinate (reported apart: a
@@ -57,6 +62,8 @@ MANIFOLD = Path("docs/results/contact/fewlabel_k.json")
 ORDER = ("twin", "bound", "manifold (committed)", "kNN")  # the contact table's columns
 MADE_S: dict[str, float] = {}  # seconds each cached file took to make (fit, twin's presses), by path
 FIT_ERRORS: dict[str, str] = {}  # fit-board's one-line refusal, by the path it would have written
+TEMPLATE = ["eflesh"]  # the board file fitted and imported with (--board)
+NO_LABELS = "fitted, no labels"
 TURNS = [np.array(m, float) for m in ([[1, 0], [0, 1]], [[0, -1], [1, 0]], [[-1, 0], [0, -1]], [[0, 1], [-1, 0]],
                                       [[1, 0], [0, -1]], [[-1, 0], [0, 1]], [[0, 1], [1, 0]], [[0, -1], [-1, 0]])]
 
@@ -95,7 +102,7 @@ def imported(run: Path, kind: str, stream: str, work: Path, extra: list[str], ta
     out = work / f"{run.name}_{stream}_{tag}.npz"
     if not out.is_file():
         cli("import", "--readings-csv", str(run / f"{stream}.csv"), "--labels-csv", str(run / "states.csv"),
-            "--label-columns", LABELS[kind], *extra, "--board", "eflesh", "--out", str(out))
+            "--label-columns", LABELS[kind], *extra, "--board", TEMPLATE[0], "--out", str(out))
     return load_dataset(out, images=False)
 
 
@@ -154,7 +161,8 @@ def section_forward(runs: dict[str, Path], work: Path) -> dict[str, Any]:
         measured = data.readings.reshape(len(data), -1).astype(np.float64)
         live, test = measured.std(axis=0) > 0, data.indices("test")
         boards = {"eflesh (shipped)": "eflesh", "fitted, every label of the first 80 %": fit_board(
-            run, kind, work, "all", 0), "fitted, no labels": fit_board(run, kind, work, None, 0)}
+            run, kind, work, "all", 0)}
+        out.update(section_zero_label({kind: run}, work))
         for name, board in boards.items():
             if board is None:
                 fits = [e for p, e in FIT_ERRORS.items() if run.name in p and ("nolabels" in p) == ("no" in name)]
@@ -178,6 +186,63 @@ def section_forward(runs: dict[str, Path], work: Path) -> dict[str, Any]:
     return out
 
 
+def section_zero_label(runs: dict[str, Path], work: Path) -> dict[str, Any]:
+    """The forward table's "fitted, no labels" rows: ``fit-board`` without labels on each run's first 80 % (its
+    readings alone: no states.csv), and on the spatial run the position RMSE (mm) of its test presses read backwards
+    on the twin (:func:`~tactile_manip.learning.contact.twin_prior.twin_targets` over a bank of the twin's presses
+    all over the pad), the pad frame's offset and the best quarter turn fitted on those presses (and of the 8 quarter
+    turns and mirror images). A twin without labels has no rig frame, so no forward EV at logged poses."""
+    from tactile_manip.boards import load_board
+
+    out: dict[str, Any] = {}
+    for kind, run in runs.items():
+        fitted = fit_board(run, kind, work, None, 0)
+        if fitted is None:
+            fits = [e for p, e in FIT_ERRORS.items() if run.name in p and "nolabels" in p]
+            out[f"{NO_LABELS}/{kind}"] = {"note": fits[-1] if fits else "no fit"}
+            continue
+        board = load_board(str(fitted))
+        row: dict[str, Any] = {"fit_seconds": MADE_S.get(str(fitted)), "fit_stages": board.fit["stages"]}
+        if kind == SPATIAL:  # the labels are read here only to score
+            row.update(placed_backwards(board, run))
+            bound = fit_board(run, kind, work, "all", 0)  # the same family fitted with every label: its bound
+            if bound is not None:
+                row["bound_every_label"] = placed_backwards(load_board(str(bound)), run)
+            print(f"zero labels {kind}: {row['position_rmse_mm']:.2f} mm on {row['test_presses']} test presses"
+                  + (f" (every label: {row['bound_every_label']['position_rmse_mm']:.2f} mm)" if bound else ""),
+                  flush=True)
+        out[f"{NO_LABELS}/{kind}"] = row
+    return out
+
+
+def placed_backwards(board: Any, run: Path) -> dict[str, Any]:
+    """The spatial run's test presses read backwards on ``board``'s twin in its pad frame (no rig frame: a bank of
+    the twin's presses over the pad, 0.5 mm apart, 16 depths), scored after the best offset and quarter turn (and
+    of the 8 quarter turns and mirror images) fitted on them; the labels are read only to score."""
+    from tactile_manip.commands.twin_logs import probe_rows
+    from tactile_manip.learning.contact.twin_prior import twin_targets
+    from tactile_manip.sim.twin import BoardTwin
+    from tactile_manip.sim.twin_blind import NOMINAL_DEPTH_MM, pad_points
+
+    rows = probe_rows(board, run / "sensor_post_baselines.csv", run / "states.csv", LABELS[SPATIAL].split(","), 0.8)
+    assert rows.readings_ut is not None
+    test = np.flatnonzero((rows.split == "test") & (rows.stage_xyz_mm[:, 2] < CONTACT_Z_MM))
+    twin = BoardTwin(board)
+    points = pad_points(board, 0.5)
+    depths = np.geomspace(0.01, 1.6, 16) * (NOMINAL_DEPTH_MM if board.fit.get("labelled") == 0 else 6.0)
+    where = np.repeat(points, len(depths), axis=0)
+    placed = twin_targets(rows.readings_ut[test], twin.readings_at_pad_ut(where, np.tile(depths, len(points))), where)
+    true = rows.stage_xyz_mm[test, :2]
+    return {"test_presses": len(test), "position_rmse_mm": frame_rmse(placed, true, TURNS[:4]),
+            "position_rmse_mm_with_mirrors": frame_rmse(placed, true, TURNS)}
+
+
+def frame_rmse(placed: np.ndarray, true: np.ndarray, turns: list[np.ndarray]) -> float:
+    """2-D RMSE (mm) of ``placed`` against ``true`` (N, 2) after the best of ``turns`` and an offset."""
+    return min(float(np.sqrt(np.mean(np.sum((placed @ r.T - (placed @ r.T).mean(0) - (true - true.mean(0))) ** 2,
+                                            axis=1)))) for r in turns)
+
+
 def fit_board(run: Path, kind: str, work: Path, k: int | str | None, seed: int) -> Path | None:
     """A board fitted by ``fit-board`` on the run's first 80 % (its readings, and K labels where ``k``; every label
     of them where ``k`` is ``"all"``), or None where the command is not in this checkout or fits nothing without
@@ -190,7 +255,7 @@ def fit_board(run: Path, kind: str, work: Path, k: int | str | None, seed: int) 
     labels = [] if k is None else ["--labels", str(run / "states.csv"), "--label-columns", LABELS[kind],
                                    "--labelled", str(k), "--seed", str(seed)]
     start = time.perf_counter()
-    done = subprocess.run([sys.executable, "-m", "tactile_manip", "fit-board", "--board", "eflesh", "--raw",
+    done = subprocess.run([sys.executable, "-m", "tactile_manip", "fit-board", "--board", TEMPLATE[0], "--raw",
                            str(run / "sensor.csv"), "--subtracted", str(run / "sensor_post_baselines.csv"), *labels,
                            "--train-fraction", "0.8", "--out", str(out), "--quiet"], capture_output=True, text=True)
     if done.returncode:  # e.g. a fit from the readings alone, not in this checkout; the caller says so
@@ -305,7 +370,7 @@ def contact_case(run: Path, kind: str, k: int, seed: int, bank: Path, work: Path
     data_path = work / f"{run.name}_k{k}_s{seed}.npz"
     if not data_path.is_file():
         cli("import", "--readings-csv", str(run / "sensor_post_baselines.csv"), "--labels-csv",
-            str(run / "states.csv"), "--label-columns", LABELS[kind], *flags, "--board", "eflesh", "--labelled",
+            str(run / "states.csv"), "--label-columns", LABELS[kind], *flags, "--board", TEMPLATE[0], "--labelled",
             str(k), "--seed", str(seed), "--out", str(data_path))
     done = work / f"{name}.seconds"  # a case trained by an earlier call on the same cache is read, not retrained
     if not (done.is_file() and (work / f"{name}.onnx").is_file()):
@@ -392,6 +457,15 @@ def section_contact(runs: dict[str, Path], work: Path, ks: list[int], seeds: lis
     return out
 
 
+def merged_row(old: dict[str, Any], new: dict[str, Any]) -> dict[str, Any]:
+    """A contact table row of a new call over the one it updates: the methods the new call did not run keep their
+    figures (a K = 0 twin case leaves the bound's)."""
+    seeds = dict(old.get("per_seed", {}))
+    for seed, case in new.get("per_seed", {}).items():
+        seeds[seed] = {**seeds.get(seed, {}), **case}
+    return {**old, **new, "per_seed": seeds, "mean": {**old.get("mean", {}), **new.get("mean", {})}}
+
+
 # -- report --------------------------------------------------------------------------------------------------------
 
 def markdown(report: dict[str, Any]) -> str:
@@ -419,8 +493,7 @@ def markdown(report: dict[str, Any]) -> str:
             lines.append(forward["note"])
         else:
             lines += ["| board / run | test EV |", "|---|---|"]
-            lines += [f"| {key} | " + (f"{row['test_ev']:.3f}" if "test_ev" in row else row["note"]) + " |"
-                      for key, row in forward.items()]
+            lines += [f"| {key} | " + _forward_cell(row) + " |" for key, row in forward.items()]
     contact = report.get("contact")
     if contact:
         lines += ["", "## Contact from the twin against the number of labelled presses K (mean of seeds)"]
@@ -440,6 +513,23 @@ def markdown(report: dict[str, Any]) -> str:
                 lines.append(f"| {k} | " + " | ".join(f"{row['mean'][m]:.3f}" if m in row["mean"] else "-"
                                                       for m in methods) + " |")
     return "\n".join(lines)
+
+
+def _forward_cell(row: dict[str, Any]) -> str:
+    if "test_ev" in row:
+        return f"{row['test_ev']:.3f}"
+    if "note" in row:
+        return row["note"]
+    stages = row["fit_stages"]
+    ev = stages["readout"]["ev"]
+    cell = f"no rig frame without labels (its latent presses explain {ev:.3f} of the fitted readings)"
+    if "position_rmse_mm" in row:
+        cell += (f"; zero labels: position RMSE {row['position_rmse_mm']:.2f} mm on the {row['test_presses']} test "
+                 "presses read backwards on the twin, offset and quarter turn fitted on them")
+    if "bound_every_label" in row:
+        cell += (f" (the twin fitted with every label of the first 80 %, read the same way: "
+                 f"{row['bound_every_label']['position_rmse_mm']:.2f} mm)")
+    return cell
 
 
 def plot(report: dict[str, Any], path: Path) -> None:
@@ -474,7 +564,7 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--runs", type=Path, default=DEFAULT_RUNS, help="folder holding spatial_* and normal_* runs")
     p.add_argument("--kind", nargs="+", choices=(SPATIAL, NORMAL), default=[SPATIAL, NORMAL], help="which runs")
-    p.add_argument("--sections", nargs="+", choices=("limit", "forward", "contact"),
+    p.add_argument("--sections", nargs="+", choices=("limit", "forward", "zero_label", "contact"),
                    default=["limit", "forward", "contact"])
     p.add_argument("--k", type=int, nargs="+", default=[0, 10, 25, 100], help="labelled presses per case")
     p.add_argument("--seeds", type=int, nargs="+", default=[0, 1])
@@ -483,13 +573,17 @@ def main(argv: list[str] | None = None) -> int:
                    help="contact cases: the fitted twin (the shipped board where fit-board is missing), and the bound "
                         "(a smooth map of the pose fitted with every label of the first 80 % as the twin)")
     p.add_argument("--work", type=Path, default=None, help="cache folder (default: a temporary one)")
+    p.add_argument("--board", default="eflesh", help="the board file fitted and imported with (default eflesh)")
     p.add_argument("--out", type=Path, default=Path("docs/results/twin/twin_protocol.json"))
     p.add_argument("--update", action="store_true", help="keep the sections of --out this call does not run")
     args = p.parse_args(argv)
     runs = {k: v for k, v in run_folders(args.runs).items() if k in args.kind}
+    TEMPLATE[0] = args.board
     report: dict[str, Any] = json.loads(args.out.read_text()) if args.update and args.out.is_file() else {}
     report.update({"machine": machine_info(),  # --update keeps the runs this call does not measure
                    "runs": {**report.get("runs", {}), **{k: v.name for k, v in runs.items()}}})
+    if args.board != "eflesh":
+        report.setdefault("board_by_section", {}).update({s: args.board for s in args.sections})
     with tempfile.TemporaryDirectory() as tmp:
         work = args.work or Path(tmp)
         work.mkdir(parents=True, exist_ok=True)
@@ -500,11 +594,14 @@ def main(argv: list[str] | None = None) -> int:
                 report["limit"] = section_limit(runs, work)
             elif section == "forward":
                 report["forward"] = section_forward(runs, work)
+            elif section == "zero_label":  # the forward table's no-label rows alone
+                report.setdefault("forward", {}).update(section_zero_label(runs, work))
             else:
                 new = section_contact(runs, work, args.k, args.seeds, presses=args.presses, twins=args.twins)
-                for kind, block in new.items():  # --update keeps the other runs' and the other K's rows
+                for kind, block in new.items():  # --update keeps the other runs', K's and methods' figures
                     kept = report.setdefault("contact", {}).setdefault(kind, block)
-                    kept["k"] = {**kept["k"], **block["k"]}
+                    kept["k"] = {**kept["k"], **{k: merged_row(kept["k"].get(k, {}), row)
+                                                 for k, row in block["k"].items()}}
                     kept["k"] = dict(sorted(kept["k"].items(), key=lambda kv: int(kv[0])))
             report.setdefault("seconds", {})[section] = round(time.perf_counter() - start, 1)
             print(f"== {section}: {time.perf_counter() - start:.0f} s", flush=True)

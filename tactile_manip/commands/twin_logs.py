@@ -27,7 +27,8 @@ BASELINE_FLOOR_UT = 1000.0
 
 def add_log_arguments(p: argparse.ArgumentParser) -> None:
     """The label options both commands share."""
-    p.add_argument("--labels", metavar="CSV", help="the rig's label log (states.csv): time (s), probe x, y, z (mm), ...")
+    p.add_argument("--labels", metavar="CSV", help="the rig's label log (states.csv): time (s), probe x, y, z "
+                   "(mm), ... (fit-board without it fits the readings alone, no label)")
     p.add_argument("--label-columns", metavar="A,B,...",
                    help="names of the label CSV's columns, with units, e.g. time_s,x_mm,y_mm,z_mm,force_gf "
                         "(default: the CSV's header); the probe pose is x_mm, y_mm, z_mm")

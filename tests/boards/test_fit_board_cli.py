@@ -114,3 +114,68 @@ def test_an_untouched_capture_and_raw_presses_fit_a_twin(tmp_path, capsys):
     assert all(f"stage {stage}: EV" in err for stage in ("file", "magnets", "readout"))
     board = load_board(out)
     assert board.fit["rest"]["from"] == "an untouched capture" and board.fit["ev_on_fitted_rows"]["readout"] > 0.5
+
+
+def blind_args(paths, out, *more):
+    return ["fit-board", "--board", "eflesh", "--raw", str(paths["raw"]), "--subtracted", str(paths["sub"]),
+            "--out", str(out), "--quiet", *more]
+
+
+@pytest.mark.slow
+def test_a_fit_without_labels_reads_no_label_and_writes_a_pad_frame_twin(tmp_path, capsys):
+    paths = write_log(tmp_path / "log", rows=200)
+    paths["states"].unlink()  # no label log anywhere near the fit
+    out = tmp_path / "cube.toml"
+    assert main(blind_args(paths, out, "--rows", "120")) == 0
+    assert "no labels: EV" in capsys.readouterr().out
+    board = load_board(out)
+    assert board.twin is not None and board.twin.rig_origin_mm == (0.0, 0.0) and board.fit["labelled"] == 0
+    assert "labels" not in board.fit["files"] and board.fit["rows"]["fitting"] == 160
+    assert board.fit["stages"]["readout"]["ev"] > 0.8
+
+
+def test_a_fit_without_labels_refuses_a_stream_not_at_rest_or_too_short(tmp_path, capsys):
+    paths = write_log(tmp_path / "log", rows=60)
+    assert main(["fit-board", "--board", "eflesh", "--raw", str(paths["raw"]), "--presses", str(paths["raw"]),
+                 "--out", str(tmp_path / "a.toml")]) == 2
+    err = capsys.readouterr().err
+    assert "is not at rest" in err and len(err.strip().splitlines()) == 1
+    short = write_log(tmp_path / "short", rows=8)
+    assert main(blind_args(short, tmp_path / "b.toml")) == 2
+    err = capsys.readouterr().err
+    assert "too short to fit" in err and len(err.strip().splitlines()) == 1
+    assert not list(tmp_path.glob("*.toml"))
+
+
+def test_a_fit_without_labels_refuses_too_few_presses(tmp_path, capsys):
+    paths = write_log(tmp_path / "log", rows=40)  # 32 fitting rows: fewer than a kernel can be placed by
+    out = tmp_path / "cube.toml"
+    assert main(blind_args(paths, out)) == 2
+    err = capsys.readouterr().err
+    assert "a fit without labels needs at least 50" in err and len(err.strip().splitlines()) == 1
+    assert not out.exists()
+
+
+@pytest.mark.slow
+def test_a_fit_without_labels_that_does_not_converge_is_not_written(tmp_path, capsys):
+    paths = write_log(tmp_path / "log", rows=120)
+    sub, raw = (np.loadtxt(paths[k], delimiter=",") for k in ("sub", "raw"))
+    baseline = raw[:, 1:] - sub[:, 1:]
+    rng = np.random.default_rng(5)  # readings no press of this board gives: each channel's own noise
+    sub[:, 1:] = rng.normal(0.0, 1.0, sub[:, 1:].shape) * np.abs(sub[:, 1:]).max(axis=0)
+    raw[:, 1:] = sub[:, 1:] + baseline
+    np.savetxt(paths["sub"], sub, delimiter=",")
+    np.savetxt(paths["raw"], raw, delimiter=",")
+    out = tmp_path / "cube.toml"
+    assert main(blind_args(paths, out, "--rows", "80")) == 2
+    err = capsys.readouterr().err
+    assert "did not converge" in err and len(err.strip().splitlines()) == 1
+    assert not out.exists() and not list(tmp_path.glob("*.toml"))
+
+
+def test_labelled_presses_without_a_label_log_are_refused(tmp_path, capsys):
+    paths = write_log(tmp_path / "log", rows=60)
+    assert main(blind_args(paths, tmp_path / "a.toml", "--labelled", "25")) == 2
+    err = capsys.readouterr().err
+    assert "--labelled 25 draws labelled presses from --labels" in err and len(err.strip().splitlines()) == 1
+    assert not list(tmp_path.glob("*.toml"))
