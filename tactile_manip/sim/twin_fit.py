@@ -14,9 +14,11 @@ The fit runs in stages, each starting from the last, so that what each term buys
 5. ``cells``: the printed lattice's nodes (pitch, turn and phase searched over a few starts, then the node's
    sharpness and its factors on strength, kernel depth and tilt; :mod:`tactile_manip.sim.twin`).
 
-The last two need presses spread over the pad (at least :data:`CELLS_MIN_ROWS` over :data:`CELLS_MIN_SPAN` lattice
-pitches for the cells, :data:`PINNING_SPAN_MM` for the base); with fewer (a handful of labelled presses, one place
-pressed again and again) they stay off and their stages repeat the last fitted one.
+The last two need a rig's many presses spread over the pad (at least :data:`SKIN_MIN_ROWS`, over
+:data:`PINNING_SPAN_MM` for the base and :data:`CELLS_MIN_SPAN` lattice pitches for the cells); with fewer (a
+handful of labelled presses, one place pressed again and again) they stay off and their stages repeat the last
+fitted one: on 25 labelled presses of the spatial eFlesh run the base's one share raised the fitted rows' EV and
+placed the test presses worse through the twin.
 
 Every stage is a robust (soft-L1) least squares over the chosen presses on channels scaled by their spread
 (:func:`scipy.optimize.least_squares`); the chips' readout is solved in closed form inside it (variable
@@ -54,8 +56,8 @@ UNPINNED_REST_WEIGHT = 0.01
 PINNING_SPAN_MM = 5.0
 MAGNET_Z_LIMIT_MM = 0.1   # discs' faces stay this far inside the layer
 MAX_POLARISATION_T = 1.5  # N52, the strongest grade of NdFeB, has a remanence of 1.42-1.48 T
-CELLS_MIN_ROWS = 200      # presses a lattice term is fitted on at least (its phase is a place on the pad) ...
-CELLS_MIN_SPAN = 2.0      # ... spread over at least this many pitches along both of the pad's axes
+SKIN_MIN_ROWS = 200       # presses the base and cells terms are fitted on at least ...
+CELLS_MIN_SPAN = 2.0      # ... spread, for the cells, over this many lattice pitches along both of the pad's axes
 CELL_STARTS_MM = (6.0, 8.0, 10.0)  # lattice pitches the search starts from (printed cut cells: a few mm)
 CELL_START_PHASES = ((0.0, 0.0), (0.5, 0.0), (0.0, 0.5), (0.5, 0.5))
 CELL_SEARCH_ROWS = 300    # presses each start of the search is fitted on
@@ -78,12 +80,14 @@ class PressLog:
 @dataclass
 class TwinFit:
     """What :func:`fit_twin` found: the fitted board, and per stage its EV on the fitting rows (overall and per
-    channel), the rest field's rms residual (uT) and the time taken (s)."""
+    channel), the rest field's rms residual (uT) and the time taken (s); the boards of the stages with free
+    readouts, to score what each term buys."""
 
     board: Board
     stages: dict[str, dict] = field(default_factory=dict)
     chip_turns: list[list[list[float]]] = field(default_factory=list)
     orders: list[dict] = field(default_factory=list)
+    stage_boards: dict[str, Board] = field(default_factory=dict)  # the board as fitted at stages readout, base, cells
 
 
 # 16 signed quarter turns and mirror images of a chip (in-plane axis permutations, z either way)
@@ -284,8 +288,9 @@ def fit_twin(board: Board, log: PressLog, *, rest_ut: np.ndarray | None = None, 
     if not last["ev"] >= MIN_FIT_EV:
         raise TwinFitError(f"the fit did not converge: it explains {last['ev']:.2f} of its rows' reading variance "
                            f"(less than {MIN_FIT_EV}); check the label columns, the rig's z direction and the board")
-    result.board = fitted_board(board, fitted["cells"], fitter.readout("cells", fitted["cells"]), rest_ut,
-                                _depth_per_z(log))
+    result.stage_boards = {stage: fitted_board(board, q, fitter.readout(stage, q), rest_ut, _depth_per_z(log))
+                           for stage, q in fitted.items()}
+    result.board = result.stage_boards["cells"]
     return result
 
 
@@ -295,7 +300,8 @@ def _skin_terms(fitter: _Fitter, start: _Params, max_evaluations: int) -> tuple[
     notes: dict[str, str] = {}
     span = np.ptp(fitter.log.stage_xyz_mm[:, :2], axis=0)
     base = dataclasses.replace(start, values=start.values.copy())
-    if span.max() >= PINNING_SPAN_MM:
+    rows = len(fitter.log.readings_ut)
+    if rows >= SKIN_MIN_ROWS and span.max() >= PINNING_SPAN_MM:
         begin = time.monotonic()
         trial = dataclasses.replace(base, values=base.values.copy())
         trial.values[trial.names.index("base_image")] = 0.3
@@ -303,11 +309,11 @@ def _skin_terms(fitter: _Fitter, start: _Params, max_evaluations: int) -> tuple[
             base = trial
         notes["base"] = f"image share {base.get('base_image'):.2f} ({time.monotonic() - begin:.1f} s)"
     else:
-        notes["base"] = f"off: the presses span {span.max():.1f} mm"
+        notes["base"] = (f"off: {rows} presses over {span.max():.0f} mm (the base needs {SKIN_MIN_ROWS} over "
+                         f"{PINNING_SPAN_MM:g} mm)")
     cells = dataclasses.replace(base, values=base.values.copy())
-    rows = len(fitter.log.readings_ut)
-    if rows < CELLS_MIN_ROWS or span.min() < CELLS_MIN_SPAN * max(CELL_STARTS_MM):
-        notes["cells"] = (f"off: {rows} presses over {span.min():.0f} mm (a lattice needs {CELLS_MIN_ROWS} over "
+    if rows < SKIN_MIN_ROWS or span.min() < CELLS_MIN_SPAN * max(CELL_STARTS_MM):
+        notes["cells"] = (f"off: {rows} presses over {span.min():.0f} mm (a lattice needs {SKIN_MIN_ROWS} over "
                           f"{CELLS_MIN_SPAN * max(CELL_STARTS_MM):.0f} mm)")
         return base, cells, notes
     begin = time.monotonic()

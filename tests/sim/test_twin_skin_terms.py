@@ -112,11 +112,11 @@ def test_bad_skin_terms_are_refused_by_name(field, value):
         skin_board(**{field: value})
 
 
-def test_a_handful_of_presses_leaves_the_lattice_off():
+def test_a_handful_of_presses_leaves_the_skin_terms_off():
     truth = BoardTwin(skin_board(**LATTICE))
     rng = np.random.default_rng(2)
     stage = np.column_stack([rng.uniform(274, 304, 25), rng.uniform(-115, -85, 25), rng.uniform(141, 145, 25)])
     log = PressLog(stage, truth.readings_ut(stage), np.zeros(25))
     fit = fit_twin(load_board("eflesh"), log, rest_ut=truth.rest_readings_ut(), max_evaluations=8)
-    assert fit.stages["cells"]["note"].startswith("off")
-    assert fit.board.twin.cell_period_mm == 0.0
+    assert fit.stages["cells"]["note"].startswith("off") and fit.stages["base"]["note"].startswith("off")
+    assert fit.board.twin.cell_period_mm == 0.0 and fit.board.twin.base_image == 0.0
