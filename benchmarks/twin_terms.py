@@ -1,7 +1,7 @@
 """What each of the twin's terms buys on the spatial eFlesh run, forward and read backwards.
 
-    python -m benchmarks.twin_terms --board eflesh
-    python -m benchmarks.twin_terms --board my-layout.toml --runs /path/to/runs --out /tmp/terms.json
+    python -m benchmarks.twin_terms --layout upside_down      # eflesh.toml with the right-handed chip layout
+    python -m benchmarks.twin_terms --board my-cube.toml --runs /path/to/runs --out /tmp/terms.json
 
 The chronological 80/20 split of ``tactile-manip import``: ``fit_twin`` (what ``fit-board`` runs, every label of
 the first 80 %, 800 presses of them) fits the board; each stage with free readouts (``readout``: the point-load
@@ -79,12 +79,18 @@ def main(argv: list[str] | None = None) -> int:
 
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--board", default="eflesh", metavar="NAME|FILE", help="the board file to fit (default eflesh)")
+    p.add_argument("--layout", default=None, help="fit the board with one of benchmarks.eflesh_chip_layout's chip "
+                   "layouts instead of its own (e.g. upside_down: the right-handed chips over discs polarised -z)")
     p.add_argument("--runs", type=Path, default=DEFAULT_RUNS, help="folder holding a spatial_* run")
     p.add_argument("--rows", type=int, default=800, help="presses fitted (fit-board's default)")
     p.add_argument("--out", type=Path, default=Path("docs/results/twin/twin_terms.json"))
     args = p.parse_args(argv)
     run = run_folders(args.runs)["spatial"]
     board = load_board(args.board)
+    if args.layout:
+        from benchmarks.eflesh_chip_layout import layouts
+
+        board = layouts(board)[args.layout][0]
     rows = spatial_rows(board, run)
     hours = (rows.time_s - rows.time_s[0]) / 3600.0
     train, test = np.flatnonzero(rows.split == "train"), np.flatnonzero(rows.split == "test")
@@ -94,8 +100,8 @@ def main(argv: list[str] | None = None) -> int:
     start = time.perf_counter()
     fit = fit_twin(board, PressLog(rows.stage_xyz_mm[chosen], rows.readings_ut[chosen], hours[chosen]), rest_ut=rest,
                    report=lambda line: print(line, flush=True))
-    report: dict[str, Any] = {"board": str(args.board), "run": run.name, "fit_seconds": round(time.perf_counter() - start, 1),
-                              "fitted_rows": int(len(chosen)), "test_presses": int(len(test)), "stages": {},
+    report: dict[str, Any] = {"board": str(args.board), "layout": args.layout or "the board file's", "run": run.name, "fit_seconds": round(time.perf_counter() - start, 1),
+                              "fitted_rows": len(chosen), "test_presses": len(test), "stages": {},
                               "smoothed_residual": {}, "machine": machine_info()}
     for stage, fitted in fit.stage_boards.items():
         twin = BoardTwin(fitted)
@@ -130,7 +136,8 @@ def stage_grid_of(board: Any) -> np.ndarray:
 
 
 def markdown(report: dict[str, Any]) -> str:
-    lines = [f"# What the twin's terms buy ({report['run']}, board {Path(report['board']).stem}; fitted on "
+    lines = [f"# What the twin's terms buy ({report['run']}, board {Path(report['board']).stem}, chip layout "
+             f"{report.get('layout', 'of the file')}; fitted on "
              f"{report['fitted_rows']} presses of the first 80 %, scored on the {report['test_presses']} test presses)",
              "", "| stage | EV, fitted rows | EV, test tail | placed by the twin alone (mm RMSE) | |",
              "|---|---|---|---|---|"]

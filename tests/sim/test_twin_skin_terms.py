@@ -23,8 +23,8 @@ def skin_board(**terms):
     return dataclasses.replace(board, name="cube-skin", twin=twin, path=None)
 
 
-LATTICE = dict(base_image=0.4, cell_period_mm=8.0, cell_angle_deg=10.0, cell_phase=(0.2, -0.3), cell_sharpness=1.5,
-               cell_stiffness=0.3, cell_depth=-0.2, cell_tilt=0.4)
+LATTICE = {"base_image": 0.4, "cell_period_mm": 8.0, "cell_angle_deg": 10.0, "cell_phase": (0.2, -0.3),
+           "cell_sharpness": 1.5, "cell_stiffness": 0.3, "cell_depth": -0.2, "cell_tilt": 0.4}
 
 
 def nodes_of(cells, rows=range(-2, 3)):
