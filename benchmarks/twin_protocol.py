@@ -311,7 +311,8 @@ def contact_case(run: Path, kind: str, k: int, seed: int, bank: Path, work: Path
     data_path = work / f"{run.name}_k{k}_s{seed}.npz"
     if not data_path.is_file():
         cli("import", "--readings-csv", str(run / "sensor_post_baselines.csv"), "--labels-csv",
-            str(run / "states.csv"), "--label-columns", LABELS[kind], *flags, "--board", TEMPLATE["board"], "--labelled",
+            str(run / "states.csv"), "--label-columns", LABELS[kind], *flags, "--board", TEMPLATE["board"],
+            "--labelled",
             str(k), "--seed", str(seed), "--out", str(data_path))
     done = work / f"{name}.seconds"  # a case trained by an earlier call on the same cache is read, not retrained
     if not (done.is_file() and (work / f"{name}.onnx").is_file()):
@@ -376,7 +377,8 @@ def section_contact(runs: dict[str, Path], work: Path, ks: list[int], seeds: lis
                     fitted = fit_board(run, kind, work, None if k == 0 else k, seed)
                     if fitted and kind == NORMAL and k == 0:
                         break  # a twin of stage poses gives no force in newtons: the labels fit it (K > 0)
-                    bank = simlog_bank(fitted, run, kind, work) if fitted else twin_bank(TEMPLATE["board"], work, presses)
+                    bank = (simlog_bank(fitted, run, kind, work) if fitted
+                            else twin_bank(TEMPLATE["board"], work, presses))
                     case = contact_case(run, kind, k, seed, bank, work, "twin")
                     case["board"] = "fitted" if fitted else given_name() + ", " + FIT_ERRORS.get(
                         str(work / f"fitted_{run.name}_{'nolabels' if k == 0 else f'k{k}_s{seed}'}.toml"), "")

@@ -55,7 +55,8 @@ def score(predict: Any, rows: Any, test: np.ndarray, grid: np.ndarray, hours: np
 
     ev, per = explained_variance(rows.readings_ut[test], predict(rows.stage_xyz_mm[test], hours[test]))
     rmse = placed_rmse(rows.readings_ut[test], rows.stage_xyz_mm[test], predict(grid, None), grid)
-    return {"test_ev": round(ev, 4), "test_ev_per_channel": [round(v, 3) for v in per], "placed_rmse_mm": round(rmse, 3)}
+    return {"test_ev": round(ev, 4), "test_ev_per_channel": [round(v, 3) for v in per],
+            "placed_rmse_mm": round(rmse, 3)}
 
 
 def smoothed(twin: Any, rows: Any, train: np.ndarray, hours: np.ndarray, smoothing: float) -> Any:
@@ -100,7 +101,8 @@ def main(argv: list[str] | None = None) -> int:
     start = time.perf_counter()
     fit = fit_twin(board, PressLog(rows.stage_xyz_mm[chosen], rows.readings_ut[chosen], hours[chosen]), rest_ut=rest,
                    report=lambda line: print(line, flush=True))
-    report: dict[str, Any] = {"board": str(args.board), "layout": args.layout or "the board file's", "run": run.name, "fit_seconds": round(time.perf_counter() - start, 1),
+    report: dict[str, Any] = {"board": str(args.board), "layout": args.layout or "the board file's", "run": run.name,
+                              "fit_seconds": round(time.perf_counter() - start, 1),
                               "fitted_rows": len(chosen), "test_presses": len(test), "stages": {},
                               "smoothed_residual": {}, "machine": machine_info()}
     for stage, fitted in fit.stage_boards.items():

@@ -120,8 +120,9 @@ class Cells:
         """The ``[twin]`` table's lattice term, or None where it has none (``cell_period_mm`` 0)."""
         if twin.cell_period_mm <= 0.0:
             return None
-        return cls(twin.cell_period_mm, twin.cell_angle_deg, tuple(twin.cell_phase), twin.cell_sharpness,  # type: ignore[arg-type]
-                   twin.cell_stiffness, twin.cell_depth, twin.cell_tilt)
+        phase = (float(twin.cell_phase[0]), float(twin.cell_phase[1]))
+        return cls(twin.cell_period_mm, twin.cell_angle_deg, phase, twin.cell_sharpness, twin.cell_stiffness,
+                   twin.cell_depth, twin.cell_tilt)
 
 
 def node_closeness(probe_xy_mm: np.ndarray, cells: Cells) -> np.ndarray:
