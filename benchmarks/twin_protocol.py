@@ -59,13 +59,18 @@ LABELS = {SPATIAL: "time_s,x_mm,y_mm,z_mm", NORMAL: "time_s,x_mm,y_mm,z_mm,force
 CONTACT = {SPATIAL: (["--contact", f"z_mm < {CONTACT_Z_MM}", "--targets", "x_mm,y_mm"], "position_rmse_mm"),
            NORMAL: (["--missing", "-1", "--targets", "force_n"], "force_rmse_n")}
 MANIFOLD = Path("docs/results/contact/fewlabel_k.json")
+TEMPLATE = {"board": "eflesh"}  # the board file every run is imported with and fitted from (--board)
 ORDER = ("twin", "bound", "manifold (committed)", "kNN")  # the contact table's columns
 MADE_S: dict[str, float] = {}  # seconds each cached file took to make (fit, twin's presses), by path
 FIT_ERRORS: dict[str, str] = {}  # fit-board's one-line refusal, by the path it would have written
-TEMPLATE = ["eflesh"]  # the board file fitted and imported with (--board)
 NO_LABELS = "fitted, no labels"
 TURNS = [np.array(m, float) for m in ([[1, 0], [0, 1]], [[0, -1], [1, 0]], [[-1, 0], [0, -1]], [[0, 1], [-1, 0]],
                                       [[1, 0], [0, -1]], [[-1, 0], [0, 1]], [[0, 1], [1, 0]], [[0, -1], [-1, 0]])]
+
+
+def given_name() -> str:
+    """How the tables name the board file as given (not fitted)."""
+    return "eflesh (shipped)" if TEMPLATE["board"] == "eflesh" else f"{Path(TEMPLATE['board']).stem} (as given)"
 
 
 def run_folders(runs: Path) -> dict[str, Path]:
@@ -102,7 +107,7 @@ def imported(run: Path, kind: str, stream: str, work: Path, extra: list[str], ta
     out = work / f"{run.name}_{stream}_{tag}.npz"
     if not out.is_file():
         cli("import", "--readings-csv", str(run / f"{stream}.csv"), "--labels-csv", str(run / "states.csv"),
-            "--label-columns", LABELS[kind], *extra, "--board", TEMPLATE[0], "--out", str(out))
+            "--label-columns", LABELS[kind], *extra, "--board", TEMPLATE["board"], "--out", str(out))
     return load_dataset(out, images=False)
 
 
@@ -160,7 +165,7 @@ def section_forward(runs: dict[str, Path], work: Path) -> dict[str, Any]:
         data = imported(run, kind, "sensor_post_baselines", work, ["--targets", "x_mm,y_mm,z_mm"], "pose")
         measured = data.readings.reshape(len(data), -1).astype(np.float64)
         live, test = measured.std(axis=0) > 0, data.indices("test")
-        boards = {"eflesh (shipped)": "eflesh", "fitted, every label of the first 80 %": fit_board(
+        boards = {given_name(): TEMPLATE["board"], "fitted, every label of the first 80 %": fit_board(
             run, kind, work, "all", 0)}
         out.update(section_zero_label({kind: run}, work))
         for name, board in boards.items():
@@ -255,7 +260,7 @@ def fit_board(run: Path, kind: str, work: Path, k: int | str | None, seed: int) 
     labels = [] if k is None else ["--labels", str(run / "states.csv"), "--label-columns", LABELS[kind],
                                    "--labelled", str(k), "--seed", str(seed)]
     start = time.perf_counter()
-    done = subprocess.run([sys.executable, "-m", "tactile_manip", "fit-board", "--board", TEMPLATE[0], "--raw",
+    done = subprocess.run([sys.executable, "-m", "tactile_manip", "fit-board", "--board", TEMPLATE["board"], "--raw",
                            str(run / "sensor.csv"), "--subtracted", str(run / "sensor_post_baselines.csv"), *labels,
                            "--train-fraction", "0.8", "--out", str(out), "--quiet"], capture_output=True, text=True)
     if done.returncode:  # e.g. a fit from the readings alone, not in this checkout; the caller says so
@@ -370,7 +375,8 @@ def contact_case(run: Path, kind: str, k: int, seed: int, bank: Path, work: Path
     data_path = work / f"{run.name}_k{k}_s{seed}.npz"
     if not data_path.is_file():
         cli("import", "--readings-csv", str(run / "sensor_post_baselines.csv"), "--labels-csv",
-            str(run / "states.csv"), "--label-columns", LABELS[kind], *flags, "--board", TEMPLATE[0], "--labelled",
+            str(run / "states.csv"), "--label-columns", LABELS[kind], *flags, "--board", TEMPLATE["board"],
+            "--labelled",
             str(k), "--seed", str(seed), "--out", str(data_path))
     done = work / f"{name}.seconds"  # a case trained by an earlier call on the same cache is read, not retrained
     if not (done.is_file() and (work / f"{name}.onnx").is_file()):
@@ -435,9 +441,10 @@ def section_contact(runs: dict[str, Path], work: Path, ks: list[int], seeds: lis
                     fitted = fit_board(run, kind, work, None if k == 0 else k, seed)
                     if fitted and kind == NORMAL and k == 0:
                         break  # a twin of stage poses gives no force in newtons: the labels fit it (K > 0)
-                    bank = simlog_bank(fitted, run, kind, work) if fitted else twin_bank("eflesh", work, presses)
+                    bank = (simlog_bank(fitted, run, kind, work) if fitted
+                            else twin_bank(TEMPLATE["board"], work, presses))
                     case = contact_case(run, kind, k, seed, bank, work, "twin")
-                    case["board"] = "fitted" if fitted else "eflesh (shipped), " + FIT_ERRORS.get(
+                    case["board"] = "fitted" if fitted else given_name() + ", " + FIT_ERRORS.get(
                         str(work / f"fitted_{run.name}_{'nolabels' if k == 0 else f'k{k}_s{seed}'}.toml"), "")
                     case["seconds"] = {"fit": MADE_S.get(str(fitted)), "twin_presses": MADE_S.get(str(bank)),
                                        "train_and_export": case.pop("train_seconds")}
@@ -572,13 +579,15 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--twins", nargs="+", choices=("twin", "bound"), default=["twin"],
                    help="contact cases: the fitted twin (the shipped board where fit-board is missing), and the bound "
                         "(a smooth map of the pose fitted with every label of the first 80 % as the twin)")
+    p.add_argument("--board", default="eflesh", metavar="NAME|FILE",
+                   help="the board file the runs are imported with and fitted from (default eflesh); a cache folder "
+                        "(--work) holds one board's files")
     p.add_argument("--work", type=Path, default=None, help="cache folder (default: a temporary one)")
-    p.add_argument("--board", default="eflesh", help="the board file fitted and imported with (default eflesh)")
     p.add_argument("--out", type=Path, default=Path("docs/results/twin/twin_protocol.json"))
     p.add_argument("--update", action="store_true", help="keep the sections of --out this call does not run")
     args = p.parse_args(argv)
+    TEMPLATE["board"] = args.board
     runs = {k: v for k, v in run_folders(args.runs).items() if k in args.kind}
-    TEMPLATE[0] = args.board
     report: dict[str, Any] = json.loads(args.out.read_text()) if args.update and args.out.is_file() else {}
     report.update({"machine": machine_info(),  # --update keeps the runs this call does not measure
                    "runs": {**report.get("runs", {}), **{k: v.name for k, v in runs.items()}}})

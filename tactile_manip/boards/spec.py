@@ -240,6 +240,14 @@ class TwinSpec:
     lateral_scale: float = 1.0             # scale of the in-plane displacement against an isotropic solid
     tilt_scale: float = 1.0                # scale of the magnets' turn against curl(u) / 2
     softening_per_hour: float = 0.0        # the press strength grows by this share per hour of the run
+    base_image: float = 0.0                # share of the press's image in the rigid base the layer is bonded to
+    cell_period_mm: float = 0.0            # pitch of the printed lattice's nodes, mm (0: no lattice term)
+    cell_angle_deg: float = 0.0            # turn of the lattice's rows from the pad's x axis, deg
+    cell_phase: tuple[float, float] = (0.0, 0.0)  # a node's place along the lattice's two axes, periods
+    cell_sharpness: float = 1.0            # how narrow a node's region is (the power of its raised cosines)
+    cell_stiffness: float = 0.0            # log of the press strength's factor on a node
+    cell_depth: float = 0.0                # log of the kernel depth's factor on a node
+    cell_tilt: float = 0.0                 # log of the tilt scale's factor on a node
     readout: tuple[ReadoutSpec, ...] = ()  # one per chip, firmware order; empty: the chips' axis maps
 
     def __post_init__(self) -> None:
@@ -256,6 +264,14 @@ class TwinSpec:
         _finite("twin.lateral_scale", self.lateral_scale, low=0.0, high=100.0, low_open=False)
         _finite("twin.tilt_scale", self.tilt_scale, low=0.0, high=100.0, low_open=False)
         _finite("twin.softening_per_hour", self.softening_per_hour, low=-1.0, high=10.0, low_open=False)
+        _finite("twin.base_image", self.base_image, low=0.0, high=1.0, low_open=False)
+        _finite("twin.cell_period_mm", self.cell_period_mm, low=0.0, high=1000.0, low_open=False)
+        _finite("twin.cell_angle_deg", self.cell_angle_deg, low=-360.0, high=360.0, low_open=False)
+        for i, v in enumerate(self.cell_phase):
+            _finite(f"twin.cell_phase[{i}]", v, low=-100.0, high=100.0, low_open=False)
+        _finite("twin.cell_sharpness", self.cell_sharpness, low=0.0, high=1000.0)
+        for name in ("cell_stiffness", "cell_depth", "cell_tilt"):
+            _finite(f"twin.{name}", getattr(self, name), low=-10.0, high=10.0, low_open=False)
 
 
 @dataclass(frozen=True)

@@ -135,7 +135,8 @@ def run(args: argparse.Namespace) -> int:
         "rest": rest_info, "stream_scored": "baseline-subtracted",
         "ev_on_fitted_rows": {name: s["ev"] for name, s in fit.stages.items()},
         "rest_rms_ut": {name: s["rest_rms_ut"] for name, s in fit.stages.items() if s["rest_rms_ut"] is not None},
-        "ev_per_channel": fit.stages["readout"]["ev_per_channel"],
+        "ev_per_channel": fit.stages["cells"]["ev_per_channel"],
+        "stage_notes": {name: s["note"] for name, s in fit.stages.items() if "note" in s},
         "chip_turns_found": fit.chip_turns, "seconds": round(time.monotonic() - started, 1),
     }
     if fit.orders:  # chip i sits at the file's chip order[i]'s place: EV and rest field of each placement

@@ -21,6 +21,20 @@ y on a left-handed rig) and
 ``d = (z_stage - contact_z) * depth_per_z`` (``depth_per_z = -1``: a smaller stage z is a deeper press), clipped at
 0. A skin that softens over a run scales ``s`` by ``1 + softening_per_hour * t_h``.
 
+Two terms describe the printed skin better than a half-space, each off unless fitted:
+
+- the base: the layer is bonded to a rigid base (the chips' board) ``T`` below the surface, which the half-space
+  kernel ignores; the press's image in that base (a point load of ``-base_image`` times the press, at depth
+  ``h + 2 (T - depth of the magnet)`` below the magnet) takes out the motion a base does not allow far from the
+  press;
+- the cells: the eFlesh skin is a printed cut-cell lattice (TPU), not a solid. A press on one of its nodes loads the
+  struts under it, one between nodes the cell's face, so how the press moves the magnets depends on where it lands
+  in a cell. The lattice is a square of pitch ``cell_period_mm`` turned ``cell_angle_deg`` on the pad, its nodes at
+  ``cell_phase`` periods along its axes; a press's closeness to a node is
+  ``g = ((1 + cos a1) (1 + cos a2) / 4)^cell_sharpness`` (``a_i`` its phase along axis i, rad; 1 on a node, 0 midway
+  between rows), and on a node the strength, the kernel depth and the tilt scale are multiplied by
+  ``exp(cell_stiffness g)``, ``exp(cell_depth g)`` and ``exp(cell_tilt g)``.
+
 Lengths mm, fields uT in pad axes (``*_pad_ut``) or chip axes, firmware order. numpy only.
 """
 
@@ -87,16 +101,53 @@ def kernel_displacement(dx: np.ndarray, dy: np.ndarray, depth_mm: np.ndarray, st
     return np.stack([u_r * dx, u_r * dy, u_z], axis=-1)
 
 
-def magnet_motion(probe_xy_mm: np.ndarray, strength: np.ndarray, centres_mm: np.ndarray, *, kernel_depth_mm: float,
-                  lateral_scale: float, tilt_scale: float) -> tuple[np.ndarray, np.ndarray]:
+@dataclass(frozen=True)
+class Cells:
+    """The printed lattice's nodes and what a press on one changes (see the module docstring): pitch (mm), turn
+    (deg), a node's phase along each axis (periods), sharpness, and the logs of the factors on strength, kernel depth
+    and tilt scale."""
+
+    period_mm: float
+    angle_deg: float = 0.0
+    phase: tuple[float, float] = (0.0, 0.0)
+    sharpness: float = 1.0
+    stiffness: float = 0.0
+    depth: float = 0.0
+    tilt: float = 0.0
+
+    @classmethod
+    def of(cls, twin: TwinSpec) -> Cells | None:
+        """The ``[twin]`` table's lattice term, or None where it has none (``cell_period_mm`` 0)."""
+        if twin.cell_period_mm <= 0.0:
+            return None
+        phase = (float(twin.cell_phase[0]), float(twin.cell_phase[1]))
+        return cls(twin.cell_period_mm, twin.cell_angle_deg, phase, twin.cell_sharpness, twin.cell_stiffness,
+                   twin.cell_depth, twin.cell_tilt)
+
+
+def node_closeness(probe_xy_mm: np.ndarray, cells: Cells) -> np.ndarray:
+    """(N,) how close each of (N, 2) pad points (mm) lies to a node of the lattice: 1 on a node, 0 midway between
+    two rows of nodes."""
+    a = math.radians(cells.angle_deg)
+    along = probe_xy_mm @ np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])  # lattice axes
+    phase = 2.0 * np.pi * (along / cells.period_mm - np.asarray(cells.phase))
+    return (0.25 * (1.0 + np.cos(phase[:, 0])) * (1.0 + np.cos(phase[:, 1]))) ** cells.sharpness
+
+
+def magnet_motion(probe_xy_mm: np.ndarray, strength: np.ndarray, centres_mm: np.ndarray, *,
+                  kernel_depth_mm: float | np.ndarray, lateral_scale: float,
+                  tilt_scale: float | np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Each magnet's displacement (N, M, 3) mm and rotation vector (N, M, 3) rad under N presses at (N, 2) points
-    of (N,) strengths."""
+    of (N,) strengths; the kernel depth a number or one per press (N,) or per press and magnet (N, M), the tilt
+    scale a number or one per press (N,)."""
     dx = centres_mm[None, :, 0] - probe_xy_mm[:, None, 0]
     dy = centres_mm[None, :, 1] - probe_xy_mm[:, None, 1]
-    h = np.full_like(dx, kernel_depth_mm)
+    h = np.asarray(kernel_depth_mm, float)
+    h = np.broadcast_to(h[:, None] if h.ndim == 1 else h, dx.shape).copy()
     s = strength[:, None]
     u = kernel_displacement(dx, dy, h, s, lateral_scale)
-    if tilt_scale == 0.0:
+    tilt = np.asarray(tilt_scale, float)
+    if not np.any(tilt):
         return u, np.zeros_like(u)
     e = _CURL_STEP_MM
     grad = np.empty(u.shape + (3,))  # [..., i, j] = d u_i / d x_j; pad z is minus the depth
@@ -105,7 +156,7 @@ def magnet_motion(probe_xy_mm: np.ndarray, strength: np.ndarray, centres_mm: np.
                         - kernel_displacement(dx - ex, dy - ey, h - eh, s, lateral_scale)) / (2 * e)
     omega = 0.5 * np.stack([grad[..., 2, 1] - grad[..., 1, 2], grad[..., 0, 2] - grad[..., 2, 0],
                             grad[..., 1, 0] - grad[..., 0, 1]], axis=-1)
-    return u, tilt_scale * omega
+    return u, (tilt[:, None, None] if tilt.ndim == 1 else tilt) * omega
 
 
 def rotations(omega: np.ndarray) -> np.ndarray:
@@ -135,13 +186,27 @@ def discs_field_pad_ut(chips_mm: np.ndarray, magnets: Magnets, centres_mm: np.nd
 
 
 def press_change_pad_ut(chips_mm: np.ndarray, magnets: Magnets, probe_xy_mm: np.ndarray, strength: np.ndarray, *,
-                        kernel_depth_mm: float, lateral_scale: float, tilt_scale: float) -> np.ndarray:
-    """(N, C, 3) field change (uT, pad axes) at the chips under N presses (see :func:`magnet_motion`)."""
-    u, omega = magnet_motion(probe_xy_mm, strength, magnets.centres_mm, kernel_depth_mm=kernel_depth_mm,
-                             lateral_scale=lateral_scale, tilt_scale=tilt_scale)
+                        kernel_depth_mm: float, lateral_scale: float, tilt_scale: float, base_image: float = 0.0,
+                        base_depth_mm: float = 0.0, cells: Cells | None = None) -> np.ndarray:
+    """(N, C, 3) field change (uT, pad axes) at the chips under N presses (see :func:`magnet_motion`), with the
+    press's image in a rigid base ``base_depth_mm`` below the surface (share ``base_image``; 0: none) and the
+    lattice's nodes (``cells``; None: none), as the module docstring says."""
+    n = len(probe_xy_mm)
+    depth, tilt = np.full(n, float(kernel_depth_mm)), np.full(n, float(tilt_scale))
+    if cells is not None:
+        g = node_closeness(probe_xy_mm, cells)
+        strength = strength * np.exp(cells.stiffness * g)
+        depth, tilt = depth * np.exp(cells.depth * g), tilt * np.exp(cells.tilt * g)
+    u, omega = magnet_motion(probe_xy_mm, strength, magnets.centres_mm, kernel_depth_mm=depth,
+                             lateral_scale=lateral_scale, tilt_scale=tilt)
+    if base_image > 0.0:
+        image = depth[:, None] + 2.0 * np.maximum(base_depth_mm + magnets.centres_mm[None, :, 2], 0.0)
+        u_image, omega_image = magnet_motion(probe_xy_mm, base_image * strength, magnets.centres_mm,
+                                             kernel_depth_mm=image, lateral_scale=lateral_scale, tilt_scale=tilt)
+        u, omega = u - u_image, omega - omega_image
     rest = discs_field_pad_ut(chips_mm, magnets, magnets.centres_mm[None])
     moved = discs_field_pad_ut(chips_mm, magnets, magnets.centres_mm[None] + u,
-                               None if tilt_scale == 0.0 else rotations(omega))
+                               None if not np.any(tilt) else rotations(omega))
     return moved - rest
 
 
@@ -185,7 +250,9 @@ class BoardTwin:
         t = self.spec
         return press_change_pad_ut(self.chips_mm, self.magnets, xy, press_strength(approach, t, time_h),
                                    kernel_depth_mm=t.kernel_depth_mm, lateral_scale=t.lateral_scale,
-                                   tilt_scale=t.tilt_scale)
+                                   tilt_scale=t.tilt_scale, base_image=t.base_image,
+                                   base_depth_mm=self.board.layer.thickness_mm,  # type: ignore[union-attr]
+                                   cells=Cells.of(t))
 
     def readings_ut(self, stage_xyz_mm: np.ndarray, time_h: np.ndarray | None = None, *,
                     raw: bool = False) -> np.ndarray:

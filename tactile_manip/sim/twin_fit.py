@@ -9,7 +9,16 @@ The fit runs in stages, each starting from the last, so that what each term buys
    chip's turn is searched among the 16 signed quarter turns and mirror images (with one gain per chip); the
    untouched board's raw field joins the residual (the chips' offsets taken as nil);
 3. ``readout``: each chip's readout becomes a free 3x3 matrix (gain, turn and misalignment; the chips' offsets
-   follow from the rest field), and the skin may soften over the run.
+   follow from the rest field), and the skin may soften over the run;
+4. ``base``: the press's image in the rigid base the layer is bonded to (one share);
+5. ``cells``: the printed lattice's nodes (pitch, turn and phase searched over a few starts, then the node's
+   sharpness and its factors on strength, kernel depth and tilt; :mod:`tactile_manip.sim.twin`).
+
+The last two need a rig's many presses spread over the pad (at least :data:`SKIN_MIN_ROWS`, over
+:data:`PINNING_SPAN_MM` for the base and :data:`CELLS_MIN_SPAN` lattice pitches for the cells); with fewer (a
+handful of labelled presses, one place pressed again and again) they stay off and their stages repeat the last
+fitted one: on 25 labelled presses of the spatial eFlesh run the base's one share raised the fitted rows' EV and
+placed the test presses worse through the twin.
 
 Every stage is a robust (soft-L1) least squares over the chosen presses on channels scaled by their spread
 (:func:`scipy.optimize.least_squares`); the chips' readout is solved in closed form inside it (variable
@@ -31,20 +40,27 @@ from scipy.optimize import least_squares
 from tactile_manip.boards.load import Board
 from tactile_manip.boards.spec import MagnetSpec, ReadoutSpec, TwinSpec
 from tactile_manip.errors import SimulationError
-from tactile_manip.sim.twin import Magnets, board_magnets, discs_field_pad_ut, press_change_pad_ut, rig_to_pad
+from tactile_manip.sim.twin import (Cells, Magnets, board_magnets, discs_field_pad_ut, press_change_pad_ut,
+                                    rig_to_pad)
 
-STAGES = ("file", "magnets", "readout")
+STAGES = ("file", "magnets", "readout", "base", "cells")
+FREE_READOUT = ("readout", "base", "cells")  # the stages whose chips read through a free 3x3 readout
 MIN_FIT_EV = 0.3          # a fit that explains less of its own rows has not converged on this board
 READOUT_RIDGE = 0.05      # pull of a free readout towards its chip's turn at unit gain (share of the field's power)
 READOUT_PRIOR_ROWS = 12   # ... and at least as much as this many presses would weigh (a handful of labels)
 # share of the cost the untouched board's field carries per stage (the chips' offsets taken as nil); in "readout"
 # only where the presses do not pin the magnets (all at one point: less than PINNING_SPAN_MM apart), and then only
 # enough to keep them from wandering; elsewhere the offsets take up what the geometry leaves of the rest field
-REST_WEIGHT = {"file": 0.0, "magnets": 0.2, "readout": 0.0}
+REST_WEIGHT = {"file": 0.0, "magnets": 0.2, "readout": 0.0, "base": 0.0, "cells": 0.0}
 UNPINNED_REST_WEIGHT = 0.01
 PINNING_SPAN_MM = 5.0
 MAGNET_Z_LIMIT_MM = 0.1   # discs' faces stay this far inside the layer
 MAX_POLARISATION_T = 1.5  # N52, the strongest grade of NdFeB, has a remanence of 1.42-1.48 T
+SKIN_MIN_ROWS = 200       # presses the base and cells terms are fitted on at least ...
+CELLS_MIN_SPAN = 2.0      # ... spread, for the cells, over this many lattice pitches along both of the pad's axes
+CELL_STARTS_MM = (6.0, 8.0, 10.0)  # lattice pitches the search starts from (printed cut cells: a few mm)
+CELL_START_PHASES = ((0.0, 0.0), (0.5, 0.0), (0.0, 0.5), (0.5, 0.5))
+CELL_SEARCH_ROWS = 300    # presses each start of the search is fitted on
 
 
 class TwinFitError(SimulationError):
@@ -64,12 +80,14 @@ class PressLog:
 @dataclass
 class TwinFit:
     """What :func:`fit_twin` found: the fitted board, and per stage its EV on the fitting rows (overall and per
-    channel), the rest field's rms residual (uT) and the time taken (s)."""
+    channel), the rest field's rms residual (uT) and the time taken (s); the boards of the stages with free
+    readouts, to score what each term buys."""
 
     board: Board
     stages: dict[str, dict] = field(default_factory=dict)
     chip_turns: list[list[list[float]]] = field(default_factory=list)
     orders: list[dict] = field(default_factory=list)
+    stage_boards: dict[str, Board] = field(default_factory=dict)  # the board as fitted at stages readout, base, cells
 
 
 # 16 signed quarter turns and mirror images of a chip (in-plane axis permutations, z either way)
@@ -113,7 +131,10 @@ def initial_params(board: Board, log: PressLog) -> _Params:
             ("turn_deg", 0.0, -360.0, 360.0), ("contact_z", contact, -1e4, 1e4),
             ("log_gain", 0.0, -12.0, 8.0), ("exponent", 1.0, 0.3, 3.0), ("kernel_depth", max(2.0, -mean_z), 0.5, 60.0),
             ("lateral", 1.0, 0.0, 5.0), ("tilt", 1.0, 0.0, 5.0), ("softening", 0.0, -0.5, 2.0), ("mirror", 0.0, 0.0, 1.0),
-            ("magnet_z", mean_z, -t + top, -top)]
+            ("magnet_z", mean_z, -t + top, -top), ("base_image", 0.0, 0.0, 1.0),
+            ("cell_period", 0.0, 2.0, 30.0), ("cell_angle", 0.0, -45.0, 45.0), ("cell_phase1", 0.0, -2.0, 2.0),
+            ("cell_phase2", 0.0, -2.0, 2.0), ("cell_log_sharpness", 0.0, -2.5, 4.0), ("cell_stiffness", 0.0, -3.0, 3.0),
+            ("cell_depth", 0.0, -3.0, 3.0), ("cell_tilt", 0.0, -3.0, 3.0)]
     half = max(board.layer.size_mm) / 2  # type: ignore[union-attr]
     for i, (c, j) in enumerate(zip(mag.centres_mm, mag.polarisation_t)):
         rows += [(f"magnet{i}_x", c[0], -half, half), (f"magnet{i}_y", c[1], -half, half),
@@ -121,16 +142,30 @@ def initial_params(board: Board, log: PressLog) -> _Params:
     names = [r[0] for r in rows]
     values = np.array([r[1] for r in rows], float)
     low, high = np.array([r[2] for r in rows], float), np.array([r[3] for r in rows], float)
-    return _Params(names, np.clip(values, low, high), low, high)
+    values = np.clip(values, low, high)
+    values[names.index("cell_period")] = 0.0  # no lattice until the cells stage searches one (2-30 mm then)
+    return _Params(names, values, low, high)
 
 
 def _free(stage: str, names: list[str]) -> list[int]:
     base = ["origin_x", "origin_y", "turn_deg", "contact_z", "log_gain", "exponent", "kernel_depth", "lateral", "tilt"]
     if stage != "file":
         base += ["magnet_z"] + [n for n in names if n.startswith("magnet") and n != "magnet_z"]
-    if stage == "readout":
+    if stage in FREE_READOUT:
         base += ["softening"]
+    if stage in ("base", "cells"):
+        base += ["base_image"]
+    if stage == "cells":
+        base += [n for n in names if n.startswith("cell_")]
     return [names.index(n) for n in base]
+
+
+def _cells(p: _Params) -> Cells | None:
+    if p.get("cell_period") <= 0.0:
+        return None
+    return Cells(p.get("cell_period"), p.get("cell_angle"), (p.get("cell_phase1"), p.get("cell_phase2")),
+                 float(np.exp(p.get("cell_log_sharpness"))), p.get("cell_stiffness"), p.get("cell_depth"),
+                 p.get("cell_tilt"))
 
 
 def _magnets(p: _Params, size_mm: np.ndarray) -> Magnets:
@@ -140,7 +175,8 @@ def _magnets(p: _Params, size_mm: np.ndarray) -> Magnets:
                    size_mm=size_mm)
 
 
-def change_pad_ut(p: _Params, chips_mm: np.ndarray, size_mm: np.ndarray, log: PressLog) -> np.ndarray:
+def change_pad_ut(p: _Params, chips_mm: np.ndarray, size_mm: np.ndarray, log: PressLog,
+                  base_depth_mm: float = 0.0) -> np.ndarray:
     """(N, C, 3) the twin's field change (pad axes, uT) at the log's poses for parameters ``p``."""
     xy, approach = rig_to_pad(log.stage_xyz_mm, origin_mm=(p.get("origin_x"), p.get("origin_y")),
                               turn_deg=p.get("turn_deg"), contact_z_mm=p.get("contact_z"),
@@ -148,7 +184,8 @@ def change_pad_ut(p: _Params, chips_mm: np.ndarray, size_mm: np.ndarray, log: Pr
     strength = np.exp(p.get("log_gain")) * np.power(approach, p.get("exponent")) * (
         1.0 + p.get("softening") * log.time_h)
     return press_change_pad_ut(chips_mm, _magnets(p, size_mm), xy, strength, kernel_depth_mm=p.get("kernel_depth"),
-                               lateral_scale=p.get("lateral"), tilt_scale=p.get("tilt"))
+                               lateral_scale=p.get("lateral"), tilt_scale=p.get("tilt"),
+                               base_image=p.get("base_image"), base_depth_mm=base_depth_mm, cells=_cells(p))
 
 
 def _depth_per_z(log: PressLog) -> float:
@@ -179,7 +216,7 @@ def solve_readout(stage: str, change: np.ndarray, readings: np.ndarray, axes: np
             err = float(np.sum((y - gain * pred) ** 2))
             if best is None or err < best[0]:
                 best = (err, gain, turn)
-        if stage != "readout":
+        if stage not in FREE_READOUT:
             out[c] = best[1] * best[2]
             continue
         gram = b.T @ b
@@ -230,26 +267,74 @@ def fit_twin(board: Board, log: PressLog, *, rest_ut: np.ndarray | None = None, 
         fitter = _Fitter(board, log, rest_ut)
     final = dataclasses.replace(p, values=p.values.copy())
     fitter.run(final, "readout", _free("readout", final.names), max_evaluations)
-    readout = fitter.readout("readout", final)
-    for stage, q in (("file", p), ("magnets", final), ("readout", final)):
+    fitted = {"readout": final}
+    fitted["base"], fitted["cells"], notes = _skin_terms(fitter, final, max_evaluations)
+    for stage, q in (("file", p), ("magnets", final), *fitted.items()):
         begin = time.monotonic()
         use = file_fitter if stage == "file" else fitter
-        if stage != "readout":
+        if stage not in FREE_READOUT:
             q = dataclasses.replace(q, values=q.values.copy())
             use.run(q, stage, _free(stage, q.names), max_evaluations // 2)
         result.stages[stage] = use.describe(stage, q, round(time.monotonic() - begin, 1))
         line = result.stages[stage]
+        if stage in notes:
+            line["note"] = notes[stage]
         say(f"stage {stage}: EV {line['ev']:.3f} on {len(log.readings_ut)} rows"
             + ("" if line["rest_rms_ut"] is None else f", rest field rms {line['rest_rms_ut']:.0f} uT")
-            + f" ({line['seconds']:.1f} s)")
+            + (f"; {notes[stage]}" if stage in notes else f" ({line['seconds']:.1f} s)"))
         if stage == "magnets":
             result.chip_turns = [np.round(m / np.abs(m).max(), 3).tolist() for m in fitter.readout(stage, q)]
-    last = result.stages["readout"]
+    last = result.stages["cells"]
     if not last["ev"] >= MIN_FIT_EV:
         raise TwinFitError(f"the fit did not converge: it explains {last['ev']:.2f} of its rows' reading variance "
                            f"(less than {MIN_FIT_EV}); check the label columns, the rig's z direction and the board")
-    result.board = fitted_board(board, final, readout, rest_ut, _depth_per_z(log))
+    result.stage_boards = {stage: fitted_board(board, q, fitter.readout(stage, q), rest_ut, _depth_per_z(log))
+                           for stage, q in fitted.items()}
+    result.board = result.stage_boards["cells"]
     return result
+
+
+def _skin_terms(fitter: _Fitter, start: _Params, max_evaluations: int) -> tuple[_Params, _Params, dict[str, str]]:
+    """The ``base`` and ``cells`` stages from the ``readout`` stage's ``start``: each term fitted where the presses
+    can tell it, and kept where it lowers the cost (else the stage repeats the one before, with a note why)."""
+    notes: dict[str, str] = {}
+    span = np.ptp(fitter.log.stage_xyz_mm[:, :2], axis=0)
+    base = dataclasses.replace(start, values=start.values.copy())
+    rows = len(fitter.log.readings_ut)
+    if rows >= SKIN_MIN_ROWS and span.max() >= PINNING_SPAN_MM:
+        begin = time.monotonic()
+        trial = dataclasses.replace(base, values=base.values.copy())
+        trial.values[trial.names.index("base_image")] = 0.3
+        if fitter.run(trial, "base", _free("base", trial.names), max_evaluations // 2) < fitter.cost("base", base):
+            base = trial
+        notes["base"] = f"image share {base.get('base_image'):.2f} ({time.monotonic() - begin:.1f} s)"
+    else:
+        notes["base"] = (f"off: {rows} presses over {span.max():.0f} mm (the base needs {SKIN_MIN_ROWS} over "
+                         f"{PINNING_SPAN_MM:g} mm)")
+    cells = dataclasses.replace(base, values=base.values.copy())
+    if rows < SKIN_MIN_ROWS or span.min() < CELLS_MIN_SPAN * max(CELL_STARTS_MM):
+        notes["cells"] = (f"off: {rows} presses over {span.min():.0f} mm (a lattice needs {SKIN_MIN_ROWS} over "
+                          f"{CELLS_MIN_SPAN * max(CELL_STARTS_MM):.0f} mm)")
+        return base, cells, notes
+    begin = time.monotonic()
+    subset = np.linspace(0, rows - 1, min(CELL_SEARCH_ROWS, rows)).astype(int)
+    names = [n for n in cells.names if n.startswith("cell_")]
+    starts = []
+    for period in CELL_STARTS_MM:
+        for phase in CELL_START_PHASES:
+            q = dataclasses.replace(cells, values=cells.values.copy())
+            for name, value in zip(("cell_period", "cell_phase1", "cell_phase2"), (period, *phase)):
+                q.values[q.names.index(name)] = value
+            starts.append((fitter.run(q, "cells", [q.names.index(n) for n in names], max_evaluations // 4,
+                                      rows=subset), q))
+    trial = min(starts, key=lambda item: item[0])[1]
+    if fitter.run(trial, "cells", _free("cells", trial.names), max_evaluations) < fitter.cost("cells", base):
+        cells = trial
+        notes["cells"] = (f"pitch {cells.get('cell_period'):.2f} mm, turned {cells.get('cell_angle'):.1f} deg, "
+                          f"{len(starts)} starts ({time.monotonic() - begin:.1f} s)")
+    else:
+        notes["cells"] = f"off: no lattice of {len(starts)} starts lowers the cost ({time.monotonic() - begin:.1f} s)"
+    return base, cells, notes
 
 
 MAX_ORDER_SEARCH_CHIPS = 6  # 6! placements, fewer up to the pad's symmetries; more chips: no exhaustive search
@@ -321,6 +406,7 @@ class _Fitter:
         self.chips_mm = board.chip_positions_mm()
         self.axes = board.chip_matrices()
         self.size = board_magnets(board).size_mm
+        self.base_mm = board.layer.thickness_mm  # type: ignore[union-attr]
         y = log.readings_ut
         self.scale = np.maximum(y.reshape(len(y), -1).std(axis=0), 1e-6).reshape(1, -1, 3)
 
@@ -338,14 +424,14 @@ class _Fitter:
         """Fit the ``free`` entries of ``p`` (in place) for ``stage``'s readout; returns the final cost."""
         log = self._rows(rows)
         weight = REST_WEIGHT[stage]
-        if stage == "readout" and np.ptp(log.stage_xyz_mm[:, :2], axis=0).max() < PINNING_SPAN_MM:
+        if stage in FREE_READOUT and np.ptp(log.stage_xyz_mm[:, :2], axis=0).max() < PINNING_SPAN_MM:
             weight = UNPINNED_REST_WEIGHT
         use_rest = self.rest_ut is not None and weight > 0
 
         def residual(x: np.ndarray) -> np.ndarray:
             q = dataclasses.replace(p, values=p.values.copy())
             q.values[free] = x
-            change = change_pad_ut(q, self.chips_mm, self.size, log)
+            change = change_pad_ut(q, self.chips_mm, self.size, log, self.base_mm)
             m = solve_readout(stage, change, log.readings_ut, self.axes)
             r = ((np.einsum("cij,ncj->nci", m, change) - log.readings_ut) / self.scale).ravel()
             if use_rest:
@@ -353,17 +439,24 @@ class _Fitter:
                 r = np.concatenate([r, miss.ravel() * np.sqrt(weight * r.size / miss.size)])
             return r
 
+        if not free:  # the cost where it stands: least_squares' soft-L1 cost, 0.5 sum 2 (sqrt(1 + r^2) - 1)
+            r = residual(p.values[free])
+            return float(np.sum(np.sqrt(1.0 + r * r) - 1.0))
         sol = least_squares(residual, p.values[free], bounds=(p.low[free], p.high[free]), loss="soft_l1",
                             f_scale=1.0, x_scale="jac", max_nfev=max(1, max_evaluations))
         p.values[free] = sol.x
         return float(sol.cost)
 
+    def cost(self, stage: str, p: _Params) -> float:
+        """The robust cost :meth:`run` minimises, at ``p`` (nothing fitted)."""
+        return self.run(dataclasses.replace(p, values=p.values.copy()), stage, [], 0)
+
     def readout(self, stage: str, p: _Params) -> np.ndarray:
-        change = change_pad_ut(p, self.chips_mm, self.size, self.log)
+        change = change_pad_ut(p, self.chips_mm, self.size, self.log, self.base_mm)
         return solve_readout(stage, change, self.log.readings_ut, self.axes)
 
     def describe(self, stage: str, p: _Params, seconds: float) -> dict:
-        change = change_pad_ut(p, self.chips_mm, self.size, self.log)
+        change = change_pad_ut(p, self.chips_mm, self.size, self.log, self.base_mm)
         m = solve_readout(stage, change, self.log.readings_ut, self.axes)
         ev, per_channel = explained_variance(self.log.readings_ut, np.einsum("cij,ncj->nci", m, change))
         rest_rms = None if self.rest_ut is None else float(np.sqrt(np.mean(
@@ -387,7 +480,11 @@ def fitted_board(board: Board, p: _Params, readout: np.ndarray, rest_ut: np.ndar
                     contact_z_mm=p.get("contact_z"), press_gain=float(np.exp(p.get("log_gain"))),
                     press_exponent=p.get("exponent"), kernel_depth_mm=p.get("kernel_depth"),
                     depth_per_z=depth_per_z, rig_mirror=bool(p.get("mirror") > 0.5), lateral_scale=p.get("lateral"), tilt_scale=p.get("tilt"),
-                    softening_per_hour=p.get("softening"),
+                    softening_per_hour=p.get("softening"), base_image=p.get("base_image"),
+                    cell_period_mm=p.get("cell_period"), cell_angle_deg=p.get("cell_angle"),
+                    cell_phase=(p.get("cell_phase1"), p.get("cell_phase2")),
+                    cell_sharpness=float(np.exp(p.get("cell_log_sharpness"))), cell_stiffness=p.get("cell_stiffness"),
+                    cell_depth=p.get("cell_depth"), cell_tilt=p.get("cell_tilt"),
                     readout=tuple(ReadoutSpec(matrix=tuple(tuple(float(v) for v in row) for row in m),  # type: ignore[arg-type]
                                               offset_ut=tuple(float(v) for v in o))  # type: ignore[arg-type]
                                   for m, o in zip(readout, offsets)))
