@@ -481,7 +481,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--presses", type=int, default=3000, help="the twin's simulated presses")
     p.add_argument("--twins", nargs="+", choices=("twin", "bound"), default=["twin"],
                    help="contact cases: the fitted twin (the shipped board where fit-board is missing), and the bound "
-                        "(a smooth map of the pose fitted with every label of the first 80 % as the twin)")
+                        "(a smooth map of the pose fitted with every label of the first 80 %% as the twin)")
     p.add_argument("--work", type=Path, default=None, help="cache folder (default: a temporary one)")
     p.add_argument("--out", type=Path, default=Path("docs/results/twin/twin_protocol.json"))
     p.add_argument("--update", action="store_true", help="keep the sections of --out this call does not run")
