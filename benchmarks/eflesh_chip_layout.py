@@ -102,8 +102,8 @@ def layouts(board: Board) -> dict[str, tuple[Board, str]]:
             "left_handed": (dataclasses.replace(board, chips=left_handed),
                             "left-handed chips at the file's places (the twin's readouts)"),
             "upside_down": (dataclasses.replace(board, chips=upside_down, body=reversed_discs),
-                            "the left-handed chips' axes negated (right-handed: upside down), discs polarised -z: "
-                            "the board file")}
+                            ("the left-handed chips' axes negated (right-handed: upside down), discs polarised -z: "
+                             "the board file"))}
 
 
 def negated(axis: str) -> str:
