@@ -104,10 +104,10 @@ QUOTES: tuple[Quote, ...] = (
                                 "against {} / {} ms for the four passes",
           (Value(DEPTH, "choices/none/p50_ms", ".1f"), Value(DEPTH, "choices/none/cpu_p99_ms", ".1f"),
            Value(DEPTH, "choices/rotations/p50_ms", ".1f"), Value(DEPTH, "choices/rotations/cpu_p99_ms", ".1f"))),
-    _layout("file", "board file"),
+    _layout("former_file", "former board file (the AnySkin visualiser's turns)"),
     _layout("right_down_half_turn", "right and down chips half a turn"),
     _layout("mirror_image", "mirror image, or left-handed chips at the file's places"),
-    _layout("upside_down", "the left-handed chips upside down, discs polarised -z"),
+    _layout("upside_down", "the left-handed chips upside down, discs polarised -z: the board file"),
 )
 
 

@@ -1,5 +1,6 @@
-"""Which layout of the five chips the eFlesh runs ask for: the board file's, its right and down chips turned
-half a turn, the file's mirror image, left-handed chips, or those chips upside down over reversed discs.
+"""Which layout of the five chips the eFlesh runs ask for: the board file's former turns, those with the right and
+down chips turned half a turn, their mirror image, left-handed chips, or those chips upside down over reversed
+discs (what tactile_manip/boards/eflesh.toml holds since this comparison).
 
     python -m benchmarks.eflesh_chip_layout
     python -m benchmarks.eflesh_chip_layout --data /path/to/eflesh_dev --rows 400
@@ -14,7 +15,8 @@ turn; the rig's axes then meet the pad's as a mirror image). Turning the right a
 file's places, is neither. A reading is the chip's axes dotted with the field, and reversing every disc's
 polarisation reverses the field, so the left-handed chips' axes negated (each a proper turn, det +1: a chip read
 upside down, through its board) over discs polarised -z read exactly what the left-handed chips read over the
-file's discs: right-handed chips at the file's places, with no mirror between rig and pad (``upside_down``).
+file's discs: right-handed chips at the file's places, with no mirror between rig and pad (``upside_down``, the
+layout the board file now holds; the others are built from the turns it held before, ``former_file``).
 Each layout is scored on what does not depend on the rig at all and on the presses:
 
 - **rest field**: the median of the logger's baseline (``sensor.csv`` minus ``sensor_post_baselines.csv``) over
@@ -42,6 +44,7 @@ from scipy.optimize import least_squares
 
 from benchmarks._common import machine_info, publish
 from tactile_manip.boards import load_board
+from tactile_manip.boards.identity import TURNS_BEFORE_RECORDS_DEG
 from tactile_manip.boards.load import Board
 from tactile_manip.boards.spec import ChipSpec
 from tactile_manip.commands.twin_logs import probe_rows, rest_field
@@ -58,10 +61,24 @@ FIT_READOUT_AXES = (("-y", "-x", "+z"), ("-y", "-x", "+z"), ("+x", "-y", "+z"), 
                     ("-x", "+y", "+z"))
 
 
+def former(board: Board) -> Board:
+    """``board`` (the eflesh file) with the chip turns and discs its file gave before the layout was fitted: the
+    AnySkin visualiser's turns (:data:`~tactile_manip.boards.identity.TURNS_BEFORE_RECORDS_DEG`) over discs
+    polarised +z."""
+    assert board.body is not None
+    chips = tuple(dataclasses.replace(c, axes=None, rotation_deg=turn)
+                  for c, turn in zip(board.chips, TURNS_BEFORE_RECORDS_DEG["eflesh"], strict=True))
+    discs = dataclasses.replace(board.body, magnets=tuple(
+        dataclasses.replace(m, polarisation_t=tuple(abs(v) for v in m.polarisation_t)) for m in board.body.magnets))
+    return dataclasses.replace(board, chips=chips, body=discs)
+
+
 def layouts(board: Board) -> dict[str, tuple[Board, str]]:
-    """The layouts scored, by key (with a description): the file's, its right and down chips half a turn round,
-    its mirror image (up and down chips' places traded, right and down chips half a turn round) and the twin's
-    left-handed chips at the file's places."""
+    """The layouts scored, by key (with a description), all at ``board``'s chip places (the eflesh file's): the
+    former file's turns (:func:`former`), those with the right and down chips half a turn round, their mirror image
+    (up and down chips' places traded, right and down chips half a turn round), the twin's left-handed chips, and
+    those chips upside down over discs polarised -z (what the file now holds)."""
+    board = former(board)
     chips = board.chips
 
     def turned(i: int) -> ChipSpec:
@@ -78,14 +95,15 @@ def layouts(board: Board) -> dict[str, tuple[Board, str]]:
     assert board.body is not None
     reversed_discs = dataclasses.replace(board.body, magnets=tuple(
         dataclasses.replace(m, polarisation_t=tuple(-v for v in m.polarisation_t)) for m in board.body.magnets))
-    return {"file": (board, "board file"),
+    return {"former_file": (board, "former board file (the AnySkin visualiser's turns)"),
             "right_down_half_turn": (dataclasses.replace(board, chips=half), "right and down chips half a turn"),
             "mirror_image": (dataclasses.replace(board, chips=tuple(mirror)),
                              "mirror image (up and down chips traded, right and down chips half a turn)"),
             "left_handed": (dataclasses.replace(board, chips=left_handed),
                             "left-handed chips at the file's places (the twin's readouts)"),
             "upside_down": (dataclasses.replace(board, chips=upside_down, body=reversed_discs),
-                            "the left-handed chips' axes negated (right-handed: upside down), discs polarised -z")}
+                            ("the left-handed chips' axes negated (right-handed: upside down), discs polarised -z: "
+                             "the board file"))}
 
 
 def negated(axis: str) -> str:

@@ -578,7 +578,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--presses", type=int, default=3000, help="the twin's simulated presses")
     p.add_argument("--twins", nargs="+", choices=("twin", "bound"), default=["twin"],
                    help="contact cases: the fitted twin (the shipped board where fit-board is missing), and the bound "
-                        "(a smooth map of the pose fitted with every label of the first 80 % as the twin)")
+                        "(a smooth map of the pose fitted with every label of the first 80 %% as the twin)")
     p.add_argument("--board", default="eflesh", metavar="NAME|FILE",
                    help="the board file the runs are imported with and fitted from (default eflesh); a cache folder "
                         "(--work) holds one board's files")

@@ -10,11 +10,15 @@ what differs.
 A record is ``{"name": ..., "fingerprint": ..., "identity": {...}}`` (:func:`board_record`), JSON-ready; a dataset
 keeps it in its provenance (``"board"``) and a model in its metadata (``"board"``). Files made before records
 existed name only their board (``layout`` / ``board_layout``): :func:`record_of_name` rebuilds the record of a
-shipped board from that name.
+shipped board from that name, as that board's file read then (:data:`TURNS_BEFORE_RECORDS_DEG`).
+
+A shipped board's file can change (its chips' turns corrected, say); a model trained on it before then reads the
+chips as they were, so :func:`check_model_of_current_board` refuses to load it against the file as it is now.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
 import math
@@ -26,6 +30,10 @@ if TYPE_CHECKING:
     from tactile_manip.boards.board import Board
 
 UNIT = "uT"  # readings are microtesla
+# Each chip's turn (deg, firmware order) in a shipped board's file while datasets and models named their board only,
+# for the boards whose chips have changed since: a file of that time that names the board was made on these.
+# eflesh: the AnySkin visualiser's turns, until the chips' axes were fitted to the eFlesh runs (eflesh.toml).
+TURNS_BEFORE_RECORDS_DEG: dict[str, tuple[float, ...]] = {"eflesh": (90.0, 90.0, 180.0, -90.0, 0.0)}
 
 
 class BoardMismatchError(ConfigError):
@@ -62,9 +70,16 @@ def record_of_name(name: Any) -> dict[str, Any] | None:
     if not isinstance(name, str) or not name:
         return None
     try:
-        return board_record(load_board(name)) if _known(name) else None
+        if not _known(name):
+            return None
+        board = load_board(name)
     except ConfigError:
         return None
+    if name in TURNS_BEFORE_RECORDS_DEG:
+        chips = tuple(dataclasses.replace(chip, axes=None, rotation_deg=turn)
+                      for chip, turn in zip(board.chips, TURNS_BEFORE_RECORDS_DEG[name], strict=True))
+        board = dataclasses.replace(board, chips=chips)
+    return board_record(board)
 
 
 def record_of_provenance(provenance: dict[str, Any]) -> dict[str, Any] | None:
@@ -125,6 +140,30 @@ def check_same_board(what_a: str, a: dict[str, Any] | None, what_b: str, b: dict
                              f"{b.get('name')!r} ({b.get('fingerprint')}): "
                              f"{difference(a.get('identity', {}), b.get('identity', {}))} differ; a model reads only "
                              "the readings of the board it was trained on")
+
+
+def check_model_of_current_board(what: str, metadata: dict[str, Any], recipe: str) -> None:
+    """Refuse a model (``metadata``) of a shipped board whose file no longer reads as it did when the model was
+    trained: the fingerprint its metadata stores (or, for a model that names its board only, the one that board's
+    file had then) against that board's file now. A model of a user's own board file is checked against a
+    sensor's board instead (:func:`check_board_of`).
+
+    Raises:
+        BoardMismatchError: one line naming both fingerprints, what differs and ``recipe``, how to retrain it.
+    """
+    from tactile_manip.boards.load import board_names, load_board
+
+    mine = record_of_metadata(metadata) if isinstance(metadata, dict) else None
+    if mine is None or mine.get("name") not in board_names():
+        return
+    name, now = mine["name"], load_board(mine["name"]).record
+    if mine["fingerprint"] == now["fingerprint"]:
+        return
+    raise BoardMismatchError(f"{what} was trained on board {name!r} as its file read then ({mine['fingerprint']}), "
+                             f"but tactile_manip/boards/{name}.toml now reads as {now['fingerprint']} "
+                             f"({difference(mine.get('identity', {}), now['identity'])} differ): it would misread "
+                             f"the board's readings; retrain it by its recipe ({recipe}) on data made with the "
+                             "current file")
 
 
 def check_board_of(what: str, metadata: dict[str, Any], board: Any) -> bool:

@@ -73,7 +73,7 @@ from typing import Any
 
 import numpy as np
 
-from tactile_manip.boards.identity import check_board_of
+from tactile_manip.boards.identity import check_board_of, check_model_of_current_board
 from tactile_manip.extras import require
 from tactile_manip.perception.confidence import SigmaCalibration
 from tactile_manip.perception.contact_context import ContextBuffer
@@ -81,7 +81,7 @@ from tactile_manip.perception.estimator import implausible_field, plausible_limi
 from tactile_manip.perception.model_metadata import check_metadata
 from tactile_manip.perception.onnx_session import session_options
 from tactile_manip.perception.press_check import PressCheck, press_check_for
-from tactile_manip.perception.reconstruct import ModelFileError, read_metadata
+from tactile_manip.perception.reconstruct import ModelFileError, read_metadata, recipe_of
 from tactile_manip.shipped import resolve_model_path
 from tactile_manip.types import TactileReading
 
@@ -172,6 +172,7 @@ class ContactEstimator:
         if self.metadata.get("kind") != "contact":
             raise ModelFileError(f"{self.path}: not a contact model (kind {self.metadata.get('kind', 'image')!r}); "
                                  "export one from a `kind = \"contact\"` training run")
+        check_model_of_current_board(str(self.path), self.metadata, recipe_of(self.path))
         try:
             shape = self.metadata["input"]["shape"]
             self.context_frames = int(shape[1])

@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 from scipy import ndimage
 
-from tactile_manip.boards.identity import check_board_of
+from tactile_manip.boards.identity import check_board_of, check_model_of_current_board
 from tactile_manip.chips import MLX90393, full_scale_ut
 from tactile_manip.perception.angle_head import AngleHead, open_angle_head
 from tactile_manip.perception.board_symmetry import average_images, image_subgroup
@@ -202,6 +202,7 @@ class OnnxReconstructor(Reconstructor):
         if self.metadata.get("kind", "image") != "image":
             raise ModelFileError(f"{self.path}: a {self.metadata['kind']} model, not an image model: load it with "
                                  "tactile_manip.perception.contact.ContactEstimator (evaluate takes either)")
+        check_model_of_current_board(str(self.path), self.metadata, recipe_of(self.path))
         self.samples = samples
         self.deterministic = samples == 1
         self._rng = np.random.default_rng(seed)
@@ -326,6 +327,13 @@ def _describe(tensors: dict) -> str:
 
 
 PARTIAL_SUFFIX = ".partial"  # what an export's file is called until its parity check passed
+
+
+def recipe_of(path: Path) -> str:
+    """Where the recipe that made the model at ``path`` is written: its card beside it (a shipped model's
+    ``models/NAME.md``), else the training config its metadata stores."""
+    card = path.with_suffix(".md")
+    return str(card) if card.is_file() else "the train_config its metadata stores"
 
 
 def read_metadata(path: str | Path) -> dict[str, Any]:

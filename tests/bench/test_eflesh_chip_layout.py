@@ -1,6 +1,7 @@
-"""The chip layouts the eFlesh layout benchmark scores: the mirror image of the board reads what left-handed chips
-at the file's places read of the mirrored discs, those chips' axes negated over discs polarised -z read the same
-(right-handed: the chips upside down), and turning two chips alone is neither (no data here)."""
+"""The chip layouts the eFlesh layout benchmark scores: the mirror image of the former board file reads what
+left-handed chips at the file's places read of the mirrored discs, those chips' axes negated over discs polarised -z
+read the same (right-handed: the chips upside down; the layout the board file holds), and turning two chips alone is
+neither (no data here)."""
 
 from __future__ import annotations
 
@@ -25,7 +26,8 @@ def test_the_mirror_image_reads_as_left_handed_chips_do_and_two_turned_chips_do_
     found = {name: b for name, (b, _) in layouts(board).items()}
     assert [round(float(np.linalg.det(m))) for m in found["left_handed"].chip_matrices()] == [-1] * 5
     assert [round(float(np.linalg.det(m))) for m in found["mirror_image"].chip_matrices()] == [1] * 5
-    assert found["file"] is board
+    assert [c.rotation_deg for c in found["former_file"].chips] == [90.0, 90.0, 180.0, -90.0, 0.0]
+    assert [m.polarisation_t for m in found["former_file"].body.magnets] == [(0.0, 0.0, 1.45)] * 4
     rng = np.random.default_rng(0)
     centres = np.c_[rng.uniform(-14.0, 14.0, (4, 2)), np.full(4, -6.5)]
     mirrored = centres * [1.0, -1.0, 1.0]  # the discs seen in a mirror across the pad's x axis
@@ -44,6 +46,9 @@ def test_upside_down_chips_over_reversed_discs_read_as_the_left_handed_chips_do(
     np.testing.assert_array_equal(upside_down.chip_positions_mm(), board.chip_positions_mm())
     assert [m.polarisation_t for m in upside_down.body.magnets] == [(0.0, 0.0, -1.45)] * 4
     assert [m.polarisation_t for m in left.body.magnets] == [(0.0, 0.0, 1.45)] * 4
+    # the board file holds this layout: its chips' axes and its discs are these
+    assert [c.axes for c in upside_down.chips] == [c.axes for c in board.chips]
+    assert upside_down.body == board.body and upside_down.fingerprint == board.fingerprint
     rng = np.random.default_rng(1)
     centres = np.c_[rng.uniform(-14.0, 14.0, (4, 2)), np.full(4, -6.5)]
     np.testing.assert_allclose(_readings(upside_down, centres, -1.4), _readings(left, centres), rtol=1e-12,

@@ -79,7 +79,15 @@ def test_the_shipped_files_give_the_layouts_the_boards_always_had():
     assert _same_layout(supermag, grid)
     assert supermag._identity                                      # the default board's frames stay a reshape
     assert _same_layout(anyskin, _cross(7.0))
-    assert _same_layout(load_board("eflesh"), anyskin)             # the eFlesh cube sits on the AnySkin board
+    # the eFlesh cube sits on the AnySkin board: the same chips at the same places in the same firmware order; its
+    # chips' axes are the ones its runs ask for (each chip read upside down, a proper turn, over discs polarised -z),
+    # where anyskin-5 keeps the AnySkin visualiser's turns, having no data of its own skin to fit them on
+    eflesh = load_board("eflesh")
+    assert eflesh.grid == anyskin.grid and np.array_equal(eflesh._index, anyskin._index)
+    np.testing.assert_array_equal(eflesh.positions_mm(), anyskin.positions_mm())
+    assert [round(float(np.linalg.det(m))) for m in eflesh.chip_matrices()] == [1] * 5
+    assert [m[2, 2] for m in eflesh.chip_matrices()] == [-1.0] * 5         # each chip's z along the pad's -z
+    assert [m.polarisation_t for m in eflesh.body.magnets] == [(0.0, 0.0, -1.45)] * 4
 
 
 def test_every_shipped_board_but_generic_can_be_simulated_and_says_its_chip_model():

@@ -25,7 +25,7 @@ NORMAL = "normal_20250401_014340"
 def _run(run_dir, tmp_path, name: str, import_args: list[str]) -> dict:
     data = tmp_path / f"{name}.npz"
     assert main(["import", "--readings-csv", str(run_dir / "sensor_post_baselines.csv"),
-                 "--labels-csv", str(run_dir / "states.csv"), *import_args, "--layout", "anyskin-5",
+                 "--labels-csv", str(run_dir / "states.csv"), *import_args, "--board", "eflesh",
                  "--out", str(data)]) == 0
     assert main(["train", "--config", "configs/train/contact.toml", "--data", str(data),
                  "--out", str(tmp_path / f"run_{name}")]) == 0
