@@ -167,7 +167,6 @@ def section_forward(runs: dict[str, Path], work: Path) -> dict[str, Any]:
         live, test = measured.std(axis=0) > 0, data.indices("test")
         boards = {given_name(): TEMPLATE["board"], "fitted, every label of the first 80 %": fit_board(
             run, kind, work, "all", 0)}
-        out.update(section_zero_label({kind: run}, work))
         for name, board in boards.items():
             if board is None:
                 fits = [e for p, e in FIT_ERRORS.items() if run.name in p and ("nolabels" in p) == ("no" in name)]
@@ -188,6 +187,7 @@ def section_forward(runs: dict[str, Path], work: Path) -> dict[str, Any]:
             out[f"{name}/{kind}"] = {"test_ev": overall, "test_ev_per_channel": per_channel.tolist(),
                                      "fit_seconds": MADE_S.get(str(board))}
             print(f"forward {name} {kind}: EV {overall:.3f}", flush=True)
+        out.update(section_zero_label({kind: run}, work))
     return out
 
 
