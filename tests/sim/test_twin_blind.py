@@ -14,7 +14,8 @@ def test_the_rest_field_places_a_shifted_turned_layout_of_discs():
     turn = np.radians(4.0)
     rot = np.array([[np.cos(turn), -np.sin(turn)], [np.sin(turn), np.cos(turn)]])
     xy = 1.05 * start.centres_mm[:, :2] @ rot.T + [1.5, -2.0]
-    true = Magnets(np.c_[xy, np.full(4, -7.5)], np.array([1.3, 1.25, 1.35, 1.2]), start.size_mm)
+    polarity = np.sign(start.polarisation_t)  # the file's: the fit keeps each disc's polarity
+    true = Magnets(np.c_[xy, np.full(4, -7.5)], polarity * np.array([1.3, 1.25, 1.35, 1.2]), start.size_mm)
     readout = np.transpose(board.chip_matrices(), (0, 2, 1))
     rest = np.einsum("cij,cj->ci", readout, discs_field_pad_ut(board.chip_positions_mm(), true, true.centres_mm[None])[0])
     found, rms = twin_blind.fit_rest_magnets(board, rest, each_strength=True)
