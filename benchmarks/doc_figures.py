@@ -25,21 +25,23 @@ FEWLABEL = "docs/results/contact/fewlabel_k.json"  # python -m benchmarks.fewlab
 DEPTH = "docs/results/benchmarks/depth.json"  # python -m benchmarks.bench_depth
 SERVE = "docs/results/benchmarks/serve.json"  # python -m benchmarks.bench_serve --seconds 60
 LAYOUT = "docs/results/eflesh/twin/chip_layout.json"  # python -m benchmarks.eflesh_chip_layout
+TWIN = "docs/results/twin/twin_protocol.json"  # python -m benchmarks.twin_protocol
+NO_LABELS = ("forward", "fitted, no labels/spatial")  # its zero-label row
 SPATIAL, NORMAL = "runs/spatial_20250316_155729", "runs/normal_20250401_014340"
 
 
 @dataclass(frozen=True)
 class Value:
-    """One figure: ``source`` (a JSON file under the repository), the ``/``-separated key path into it, and the
-    format of its text (e.g. ``.2f``)."""
+    """One figure: ``source`` (a JSON file under the repository), the key path into it (``/``-separated, or a tuple
+    of keys where a key holds a ``/``), and the format of its text (e.g. ``.2f``)."""
 
     source: str
-    path: str
+    path: str | tuple[str, ...]
     fmt: str = ".2f"
 
     def read(self, root: Path) -> Any:
         node = json.loads((root / self.source).read_text())
-        for key in self.path.split("/"):
+        for key in self.path.split("/") if isinstance(self.path, str) else self.path:
             node = node[key]
         return node
 
@@ -104,6 +106,16 @@ QUOTES: tuple[Quote, ...] = (
                                 "against {} / {} ms for the four passes",
           (Value(DEPTH, "choices/none/p50_ms", ".1f"), Value(DEPTH, "choices/none/cpu_p99_ms", ".1f"),
            Value(DEPTH, "choices/rotations/p50_ms", ".1f"), Value(DEPTH, "choices/rotations/cpu_p99_ms", ".1f"))),
+    Quote("README.md", "its places refitted on a smooth model of the real readings, places the spatial run's held-out "
+                       "presses {} mm off (a contact network trained on its labels {} mm)",
+          (Value(TWIN, (*NO_LABELS, "position_rmse_mm")), Value(TWIN, "contact/spatial/k/0/mean/twin"))),
+    Quote("docs/your_board.md", "Its 961 test presses read backwards on it are {} mm RMS from the stage's positions",
+          (Value(TWIN, (*NO_LABELS, "read_backwards_position_rmse_mm")),)),
+    Quote("docs/your_board.md", "the models fitted on the first 80 %'s presses alone and the test presses placed on "
+                                "them: **{} mm**",
+          (Value(TWIN, (*NO_LABELS, "position_rmse_mm")),)),
+    Quote("docs/your_board.md", "the contact network trained on those labels places the test presses **{} mm** off",
+          (Value(TWIN, "contact/spatial/k/0/mean/twin"),)),
     _layout("former_file", "former board file (the AnySkin visualiser's turns)"),
     _layout("right_down_half_turn", "right and down chips half a turn"),
     _layout("mirror_image", "mirror image, or left-handed chips at the file's places"),

@@ -13,9 +13,10 @@ contact model's) sees only the first 80 % of the run's rows; every score is on t
   fitted by ``tactile-manip fit-board`` on the first 80 % (where the command exists), through ``tactile-manip
   simulate-log``; baseline-subtracted stream.
 - ``zero_label`` (also run by ``forward``): ``fit-board`` without labels on each run's first 80 % (its readings
-  alone), and on the spatial run the position RMSE of the test presses read backwards on that twin, the pad frame's
-  offset and best quarter turn fitted on them, beside the twin fitted with every label read the same way (the bound
-  of the twin's model family). ``--board`` names the board file fitted and imported with (the template).
+  alone), and on the spatial run the position RMSE of the test presses read backwards on that twin and refitted on
+  a smooth model of the real field fitted on the first 80 %'s presses at their twin places (the raw read-back
+  beside it), the pad frame's offset and best quarter turn fitted on them, beside the twin fitted with every label
+  placed the same way. ``--board`` names the board file fitted and imported with (the template).
 - ``limit``: the best explained variance any smooth map of the probe pose reaches on the same split (kNN and
   thin-plate RBF over x, y, z, hyper-parameters by cross-validation inside the first 80 %), raw and
   baseline-subtracted streams, with and without the run's elapsed time as a fourth coordinate (reported apart: a
@@ -28,7 +29,7 @@ contact model's) sees only the first 80 % of the run's rows; every score is on t
   tens of minutes). With K = 0 no label is used at all (no states.csv in the twin's fit); the positions are in the
   board file's pad frame, so a 2-D offset and the best of the 8 quarter turns and mirror images of the axes are
   fitted on the test presses (as benchmarks/eflesh_zero_label.py). The same recipe with a smooth map of the pose as
-  its twin (``--twins bound``) bounds what a perfect twin would give.
+  its twin (``--twins bound``; its places as read, ``twin_refine`` off) bounds what a perfect twin would give.
 
 Writes docs/results/twin/twin_protocol.{json,md} and plots (``--out``). It measures; it asserts nothing. Run it
 with ``nice``: a contact case trains an ensemble (about 2 minutes on two cores).
@@ -213,7 +214,8 @@ def section_zero_label(runs: dict[str, Path], work: Path) -> dict[str, Any]:
             bound = fit_board(run, kind, work, "all", 0)  # the same family fitted with every label: its bound
             if bound is not None:
                 row["bound_every_label"] = placed_backwards(load_board(str(bound)), run)
-            print(f"zero labels {kind}: {row['position_rmse_mm']:.2f} mm on {row['test_presses']} test presses"
+            print(f"zero labels {kind}: {row['position_rmse_mm']:.2f} mm on {row['test_presses']} test presses "
+                  f"(read backwards alone {row['read_backwards_position_rmse_mm']:.2f} mm)"
                   + (f" (every label: {row['bound_every_label']['position_rmse_mm']:.2f} mm)" if bound else ""),
                   flush=True)
         out[f"{NO_LABELS}/{kind}"] = row
@@ -221,25 +223,35 @@ def section_zero_label(runs: dict[str, Path], work: Path) -> dict[str, Any]:
 
 
 def placed_backwards(board: Any, run: Path) -> dict[str, Any]:
-    """The spatial run's test presses read backwards on ``board``'s twin in its pad frame (no rig frame: a bank of
-    the twin's presses over the pad, 0.5 mm apart, 16 depths), scored after the best offset and quarter turn (and
-    of the 8 quarter turns and mirror images) fitted on them; the labels are read only to score."""
+    """The spatial run's presses read backwards on ``board``'s twin in its pad frame (no rig frame: a bank of the
+    twin's presses over the pad, 0.5 mm apart, 16 depths), then refitted on a smooth model of the real field
+    (:func:`~tactile_manip.learning.contact.twin_prior.refined_places`: its models fitted on the first 80 %'s
+    presses alone, the test presses placed on them); the test presses scored, read backwards and refitted, after
+    the best offset and quarter turn (and of the 8 quarter turns and mirror images) fitted on them. The labels are
+    read only to score."""
     from tactile_manip.commands.twin_logs import probe_rows
-    from tactile_manip.learning.contact.twin_prior import twin_targets
+    from tactile_manip.learning.contact.twin_prior import refined_places, twin_targets
     from tactile_manip.sim.twin import BoardTwin
     from tactile_manip.sim.twin_blind import NOMINAL_DEPTH_MM, pad_points
 
     rows = probe_rows(board, run / "sensor_post_baselines.csv", run / "states.csv", LABELS[SPATIAL].split(","), 0.8)
     assert rows.readings_ut is not None
-    test = np.flatnonzero((rows.split == "test") & (rows.stage_xyz_mm[:, 2] < CONTACT_Z_MM))
+    pressed = rows.stage_xyz_mm[:, 2] < CONTACT_Z_MM
+    train, test = (np.flatnonzero((rows.split == part) & pressed) for part in ("train", "test"))
+    both = np.r_[train, test]
     twin = BoardTwin(board)
     points = pad_points(board, 0.5)
     depths = np.geomspace(0.01, 1.6, 16) * (NOMINAL_DEPTH_MM if board.fit.get("labelled") == 0 else 6.0)
     where = np.repeat(points, len(depths), axis=0)
-    placed = twin_targets(rows.readings_ut[test], twin.readings_at_pad_ut(where, np.tile(depths, len(points))), where)
+    placed = twin_targets(rows.readings_ut[both], twin.readings_at_pad_ut(where, np.tile(depths, len(points))), where)
+    refined = refined_places(rows.readings_ut[both], placed, fitted=np.arange(len(both)) < len(train))
     true = rows.stage_xyz_mm[test, :2]
-    return {"test_presses": len(test), "position_rmse_mm": frame_rmse(placed, true, TURNS[:4]),
-            "position_rmse_mm_with_mirrors": frame_rmse(placed, true, TURNS)}
+    read, fit = placed[len(train):], refined[len(train):]
+    return {"test_presses": len(test), "train_presses": len(train),
+            "position_rmse_mm": frame_rmse(fit, true, TURNS[:4]),
+            "position_rmse_mm_with_mirrors": frame_rmse(fit, true, TURNS),
+            "read_backwards_position_rmse_mm": frame_rmse(read, true, TURNS[:4]),
+            "read_backwards_position_rmse_mm_with_mirrors": frame_rmse(read, true, TURNS)}
 
 
 def frame_rmse(placed: np.ndarray, true: np.ndarray, turns: list[np.ndarray]) -> float:
@@ -381,7 +393,8 @@ def contact_case(run: Path, kind: str, k: int, seed: int, bank: Path, work: Path
     done = work / f"{name}.seconds"  # a case trained by an earlier call on the same cache is read, not retrained
     if not (done.is_file() and (work / f"{name}.onnx").is_file()):
         start = time.perf_counter()
-        cli("train", "--config", "configs/train/contact_twin.toml", "--data", str(data_path), "--prior", str(bank),
+        config = twin_config(work, refit=tag != "map")
+        cli("train", "--config", str(config), "--data", str(data_path), "--prior", str(bank),
             "--out", str(work / name), "--force", "--seed", str(seed), "--quiet")
         cli("export", "--checkpoint", str(work / name / "best.pt"), "--out", str(work / f"{name}.onnx"), "--force")
         done.write_text(f"{time.perf_counter() - start:.1f}\n")
@@ -398,6 +411,21 @@ def contact_case(run: Path, kind: str, k: int, seed: int, bank: Path, work: Path
     out["labels"] = (history.get("pseudo_labels") or {}).get("methods")
     print(f"  {kind} K={k} seed {seed} ({tag}): twin {out['twin']:.3f}"
           + (f", kNN {out['kNN']:.3f}" if "kNN" in out else "") + f" ({seconds:.0f} s)", flush=True)
+    return out
+
+
+def twin_config(work: Path, *, refit: bool) -> Path:
+    """``configs/train/contact_twin.toml``, or where not ``refit`` a copy of it in ``work`` with ``twin_refine``
+    off: a smooth map of the pose as the twin (the bound) places presses closer than the field model it would be
+    refitted on (on the spatial run with no label, 0.48 mm as read and 0.97 mm refitted)."""
+    config = Path("configs/train/contact_twin.toml")
+    if refit:
+        return config
+    text = config.read_text()
+    if "twin_refine = true" not in text:
+        raise SystemExit(f"{config} no longer sets twin_refine = true: the bound's copy cannot turn it off")
+    out = work / "contact_twin_as_read.toml"
+    out.write_text(text.replace("twin_refine = true", "twin_refine = false"))
     return out
 
 
@@ -532,10 +560,15 @@ def _forward_cell(row: dict[str, Any]) -> str:
     cell = f"no rig frame without labels (its latent presses explain {ev:.3f} of the fitted readings)"
     if "position_rmse_mm" in row:
         cell += (f"; zero labels: position RMSE {row['position_rmse_mm']:.2f} mm on the {row['test_presses']} test "
-                 "presses read backwards on the twin, offset and quarter turn fitted on them")
+                 "presses read backwards on the twin and refitted on a smooth model of the first 80 %'s readings "
+                 "(read backwards alone: " + (f"{row['read_backwards_position_rmse_mm']:.2f} mm"
+                                              if "read_backwards_position_rmse_mm" in row else "-")
+                 + "), offset and quarter turn fitted on them")
     if "bound_every_label" in row:
-        cell += (f" (the twin fitted with every label of the first 80 %, read the same way: "
-                 f"{row['bound_every_label']['position_rmse_mm']:.2f} mm)")
+        b = row["bound_every_label"]
+        cell += (f" (the twin fitted with every label of the first 80 %, the same way: {b['position_rmse_mm']:.2f} mm"
+                 + (f", read backwards alone {b['read_backwards_position_rmse_mm']:.2f} mm"
+                    if "read_backwards_position_rmse_mm" in b else "") + ")")
     return cell
 
 

@@ -22,3 +22,14 @@ def test_a_moved_result_names_the_page_and_the_sentence_it_needs(tmp_path):
     assert problems and all(p.split(":")[0] in ("README.md", "docs/your_board.md") for p in problems)
     assert any("and 25 of the normal run 0.44 N" in p for p in problems)
     assert df.main(["--check", "--root", str(tmp_path)]) == 1
+
+
+def test_a_key_that_holds_a_slash_is_given_as_a_tuple_of_keys(tmp_path):
+    (tmp_path / "r.json").write_text(json.dumps({"forward": {"fitted, no labels/spatial": {"mm": 1.234}}}))
+    assert df.Value("r.json", ("forward", "fitted, no labels/spatial", "mm")).text(tmp_path) == "1.23"
+    try:  # split at every "/", the same path as a string misses the key
+        df.Value("r.json", "forward/fitted, no labels/spatial/mm").read(tmp_path)
+    except KeyError as e:
+        assert "fitted, no labels" in str(e)
+    else:
+        raise AssertionError("a string path split a key that holds a slash")

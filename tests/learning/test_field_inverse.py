@@ -96,6 +96,25 @@ def test_only_the_rows_asked_for_move(presses) -> None:
     assert np.all(moved[rows] != scattered[rows])
 
 
+def test_rows_left_out_of_the_fit_are_placed_on_models_that_never_saw_them(presses) -> None:
+    # a run's test presses are placed on the models of its training presses, which they do not move
+    readings, truth, labelled = presses
+    scattered = truth + np.random.default_rng(1).normal(0.0, 1.0, truth.shape) * ~labelled[:, None]
+    unseen = np.zeros(len(truth), bool)
+    unseen[-300:] = True
+    seen = field_inverse.places_by_pass(readings[~unseen], scattered[~unseen], labelled[~unseen])
+    both = field_inverse.places_by_pass(readings, scattered, labelled, fitted=~unseen)
+    np.testing.assert_array_equal(both[:, ~unseen], seen)  # the fitted rows as if the others were not there
+    free = unseen & ~labelled
+    assert _rmse(both[-1][free], truth[free]) < 0.5 * _rmse(scattered[free], truth[free])
+    # where the unseen rows start changes nothing: the models are the fitted rows', the search the whole pad's
+    wild = scattered.copy()
+    wild[free] = np.random.default_rng(5).uniform(-12.0, 12.0, (free.sum(), 2))
+    np.testing.assert_array_equal(field_inverse.places_by_pass(readings, wild, labelled, fitted=~unseen), both)
+    with pytest.raises(ValueError, match="fitted-rows mask of shape"):
+        field_inverse.places_by_pass(readings, scattered, labelled, fitted=~unseen[:10])
+
+
 def test_presses_of_one_depth_per_place_are_placed_by_the_direction_alone(presses, monkeypatch) -> None:
     _, truth, labelled = presses
     readings = _field(truth, 1.0 + truth[:, 0] / 24.0, noise=0.05)   # the place sets how hard the press is

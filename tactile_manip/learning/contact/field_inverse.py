@@ -96,35 +96,40 @@ def refine_places(readings: np.ndarray, places: np.ndarray, labelled: np.ndarray
 
 
 def places_by_pass(readings: np.ndarray, places: np.ndarray, labelled: np.ndarray,
-                   rows: np.ndarray | None = None) -> np.ndarray:
+                   rows: np.ndarray | None = None, fitted: np.ndarray | None = None) -> np.ndarray:
     """The places (len(``PASSES``), N, P) after each pass of the refit of ``rows`` (default: every row not
     ``labelled``) of ``readings`` (N, D), given every row's current ``places`` (N, P), P = 1 or 2; the other rows
     keep theirs. ``readings`` must be finite and not all zero. Each of ``PASSES`` fits its model on the places the
-    pass before left and moves ``rows``. A pass whose model has more terms than the readings allow
-    (``MIN_ROWS_PER_TERM`` rows per term) is left out, and with it every finer one, as is a pass of the repeating
-    pattern on a pad too small for it: its places are those of the pass before, or ``places`` themselves (a copy)
-    where no pass runs or the places do not spread."""
+    pass before left and moves ``rows``. ``fitted`` (N,) bool: the rows each model is fitted on (default: every
+    row); the others are only placed on it, as readings a fit must not see (a run's test presses) are. A pass whose
+    model has more terms than the fitted rows allow (``MIN_ROWS_PER_TERM`` rows per term) is left out, and with it
+    every finer one, as is a pass of the repeating pattern on a pad too small for it: its places are those of the
+    pass before, or ``places`` themselves (a copy) where no pass runs or the places do not spread."""
     x = np.asarray(readings, np.float64).reshape(len(readings), -1)
     z = np.asarray(places, np.float64).reshape(len(readings), -1)
     out = z.copy()
     lab = np.asarray(labelled, bool)
     move = np.flatnonzero(~lab) if rows is None else np.asarray(rows, int)
+    fit = np.ones(len(x), bool) if fitted is None else np.asarray(fitted, bool)
     if z.shape[1] not in (1, 2):
         raise ValueError(f"places of {z.shape[1]} coordinates: the field model places in 1 or 2")
-    # the passes, coarse to fine, up to the first whose model has more terms than the readings allow
-    passes = list(itertools.takewhile(lambda spec: len(x) >= MIN_ROWS_PER_TERM * _terms(z.shape[1], *spec), PASSES))
-    if not len(move) or not passes or _frame(z)[1] <= 0:
+    if fit.shape != (len(x),):
+        raise ValueError(f"a fitted-rows mask of shape {fit.shape} for {len(x)} readings")
+    # the passes, coarse to fine, up to the first whose model has more terms than the fitted rows allow
+    passes = list(itertools.takewhile(lambda spec: fit.sum() >= MIN_ROWS_PER_TERM * _terms(z.shape[1], *spec),
+                                      PASSES))
+    if not len(move) or not passes or _frame(z[fit])[1] <= 0:
         return np.repeat(out[None], len(PASSES), axis=0)
-    direction, level, weight = _inputs(x, lab)
+    direction, level, weight = _inputs(x, lab, fit)
     period, sought = None, False
     after = []
     for degree, norm_degree, lattice in passes:
         if lattice and not sought:  # the skin's period, found once, on the places the passes before left
-            period, sought = _lattice_period(direction, out, weight, degree), True
+            period, sought = _lattice_period(direction[fit], out[fit], weight[fit], degree), True
         if not lattice or period is not None:  # (a pad too small for the pattern to repeat: the pass is left out)
             out = out.copy()
             out[move] = _one_pass(direction, level, out, weight, move, degree, norm_degree,
-                                  period if lattice else None)
+                                  period if lattice else None, fit=fit)
         after.append(out)
     return np.stack(after + [out] * (len(PASSES) - len(after)))
 
@@ -171,14 +176,17 @@ def settle(readings: np.ndarray, places: np.ndarray, labelled: np.ndarray, rows:
     return z
 
 
-def _inputs(x: np.ndarray, lab: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _inputs(x: np.ndarray, lab: np.ndarray, fit: np.ndarray | None = None
+            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The models' inputs from readings ``x`` (N, D) and the labelled rows ``lab`` (N,): each reading's direction
-    (N, D), its standardised log norm (N,), and each row's weight in the fits (N, 1), so that the labelled places
-    (exact) weigh as much together as the others (scattered) together."""
+    (N, D), its log norm (N,) standardised on the rows ``fit`` (N,) bool (default: every row), and each row's weight
+    in the fits (N, 1), so that the labelled places (exact) weigh as much together as the others (scattered)
+    together."""
+    fit = np.ones(len(x), bool) if fit is None else fit
     norm = np.maximum(np.linalg.norm(x, axis=1), 1e-12)
     level = np.log(norm)
-    level = (level - level.mean()) / max(float(level.std()), 1e-12)
-    weight = np.sqrt(np.where(lab, max(1.0, (~lab).sum() / max(lab.sum(), 1)), 1.0))[:, None]
+    level = (level - level[fit].mean()) / max(float(level[fit].std()), 1e-12)
+    weight = np.sqrt(np.where(lab, max(1.0, (~lab & fit).sum() / max((lab & fit).sum(), 1)), 1.0))[:, None]
     return x / norm[:, None], level, weight
 
 
@@ -230,31 +238,36 @@ def _lattice_period(direction: np.ndarray, z: np.ndarray, weight: np.ndarray, de
 
 
 def _one_pass(direction: np.ndarray, level: np.ndarray, z: np.ndarray, weight: np.ndarray, move: np.ndarray,
-              degree: int, norm_degree: int, period: float | None = None) -> np.ndarray:
+              degree: int, norm_degree: int, period: float | None = None, *,
+              fit: np.ndarray | None = None) -> np.ndarray:
     """The places (len(move), P) of the rows ``move``, on the model of ``degree`` in the place and
-    ``norm_degree`` in the standardised log norm ``level`` fitted at the places ``z`` (N, P), plus the repeating
-    terms at ``period`` where one is given."""
-    centre, spread = _frame(z)
-    scaled = (z - centre) / spread
+    ``norm_degree`` in the standardised log norm ``level`` fitted at the places ``z`` (N, P) of the rows ``fit``
+    (N,) bool (default: every row), plus the repeating terms at ``period`` where one is given."""
+    if fit is not None:
+        direction_fit, level_fit, z_fit, weight_fit = direction[fit], level[fit], z[fit], weight[fit]
+    else:
+        direction_fit, level_fit, z_fit, weight_fit = direction, level, z, weight
+    centre, spread = _frame(z_fit)
+    scaled = (z_fit - centre) / spread
     if norm_degree:
         at_places = _monomials(scaled, degree)
-        fitted, *_ = np.linalg.lstsq(at_places, level, rcond=None)
+        fitted, *_ = np.linalg.lstsq(at_places, level_fit, rcond=None)
         # where the place sets the norm (one depth per place), a place searched at a norm it never had is
         # unseen: the model then follows the direction alone
-        explained = 1.0 - float(np.var(level - at_places @ fitted)) / max(float(np.var(level)), 1e-300)
+        explained = 1.0 - float(np.var(level_fit - at_places @ fitted)) / max(float(np.var(level_fit)), 1e-300)
         norm_degree = 0 if explained > LEVEL_EXPLAINED else norm_degree
-    design = _design(scaled, level, degree, norm_degree)
+    design = _design(scaled, level_fit, degree, norm_degree)
     if period is not None:
-        design = np.hstack([design, _repeating(z, period, centre, spread)])
-    coef, *_ = np.linalg.lstsq(design * weight, direction * weight, rcond=None)
-    resid = direction - design @ coef
+        design = np.hstack([design, _repeating(z_fit, period, centre, spread)])
+    coef, *_ = np.linalg.lstsq(design * weight_fit, direction_fit * weight_fit, rcond=None)
+    resid = direction_fit - design @ coef
     cov = np.cov(resid.T).reshape(direction.shape[1], -1)
     floor = max(1e-12, 1e-9 * float(np.trace(cov)))
     # d @ white: residuals of unit covariance. From the eigenvectors, not a Cholesky factor of the inverse: where
     # the readings span fewer dimensions than their channels, the inverse's rounding can leave it indefinite.
     vals, vecs = np.linalg.eigh(cov)
     white = vecs / np.sqrt(np.maximum(vals, 0.0) + floor)
-    lo, hi = z.min(axis=0), z.max(axis=0)
+    lo, hi = z_fit.min(axis=0), z_fit.max(axis=0)
     pad = MARGIN * (hi - lo)
     axes = [np.linspace(a - p, b + p, GRID_STEPS + 1) for a, b, p in zip(lo, hi, pad)]
     grid = np.stack([g.ravel() for g in np.meshgrid(*axes, indexing="ij")], axis=1)

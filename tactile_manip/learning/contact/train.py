@@ -86,6 +86,7 @@ class ContactTrainConfig:
     manifold_neighbours: int = 20  # neighbours per reading in that map
     twin_neighbours: int = 8      # the twin's presses whose targets place a reading
     twin_norm_weight: float = 0.5  # weight of the log field norm beside the field's direction in that search
+    twin_refine: bool = True      # with no label, the twin's places refitted on a smooth model of the real field
     label_recency: float = 0.0    # the fit of the field norm weighs a labelled press by e ** (this x the share of
                                   # its run elapsed before it): later presses count more where the skin drifts
     seed: int = 0
@@ -298,7 +299,7 @@ def _twin_labels(data: PairedDataset, labels: np.ndarray, names: list[str], cfg:
     done = _label_unlabelled(data, labels, cfg, windows, lambda readings, known, labelled, earlier, weights: (
         twin_labels(readings, known, labelled, bank_readings=bank.readings, bank_targets=bank_targets, names=names,
                     bank_names=list(bank.target_names), earlier=earlier, weights=weights,
-                    neighbours=cfg.twin_neighbours, norm_weight=cfg.twin_norm_weight)))
+                    neighbours=cfg.twin_neighbours, norm_weight=cfg.twin_norm_weight, refine=cfg.twin_refine)))
     done["prior"] = {"path": str(prior), "presses": len(bank), "fingerprint": bank.fingerprint(),
                      "board": record_of_provenance(bank.provenance)}
     return done

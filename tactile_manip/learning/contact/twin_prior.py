@@ -34,6 +34,7 @@ from collections.abc import Callable, Sequence
 import numpy as np
 
 from tactile_manip.errors import DatasetError
+from tactile_manip.learning.contact.field_inverse import places_by_pass
 from tactile_manip.learning.contact.fewlabel import (LOAD_TARGETS, PLACE_TARGETS, RBF_ALPHA, RBF_WIDTHS,
                                                      PseudoLabels, _loo_rmse, _norm_fit, _principal_axes)
 
@@ -82,7 +83,7 @@ def twin_targets(readings: np.ndarray, bank_readings: np.ndarray, bank_targets: 
 def twin_labels(readings: np.ndarray, targets: np.ndarray, labelled: np.ndarray, *, bank_readings: np.ndarray,
                 bank_targets: np.ndarray, names: Sequence[str], bank_names: Sequence[str],
                 earlier: np.ndarray | None = None, weights: np.ndarray | None = None,
-                neighbours: int = NEIGHBOURS, norm_weight: float = NORM_WEIGHT) -> PseudoLabels:
+                neighbours: int = NEIGHBOURS, norm_weight: float = NORM_WEIGHT, refine: bool = True) -> PseudoLabels:
     """Label every row of ``readings`` (N, ...) from the twin's bank and the rows where ``labelled`` (N,) holds.
 
     ``targets`` (N, K) named ``names`` is read on the labelled rows only; every name must be among the bank's
@@ -90,7 +91,9 @@ def twin_labels(readings: np.ndarray, targets: np.ndarray, labelled: np.ndarray,
     from the first of ``LOAD_PROXIES`` the bank has (a twin that places its presses by a rig's stage pose gives the
     stage's z, not the force). ``earlier`` and ``weights``: as for
     :func:`~tactile_manip.learning.contact.fewlabel.pseudo_labels` (the field norm's change, the labels' weights
-    in the norm's fit). Without labelled rows the twin's answer is every label and the leave-one-out RMSE is NaN.
+    in the norm's fit). Without labelled rows the twin's answer is every label and the leave-one-out RMSE is NaN;
+    with ``refine`` its places (one or two place targets) are then refitted on a smooth model of the real field
+    (:func:`refined_places`).
     Raises ``DatasetError`` for a target the bank lacks, readings of another layout than the bank's, non-finite
     readings, labels or bank, or one or two labelled rows (too few for a correction, too many to ignore).
     """
@@ -127,6 +130,10 @@ def twin_labels(readings: np.ndarray, targets: np.ndarray, labelled: np.ndarray,
                         norm_weight=norm_weight)
     values, loo, methods = twin.copy(), np.full(len(names), np.nan), ["twin"] * len(names)
     if not lab.any():
+        if refine and len(places) in (1, 2):
+            values[:, places] = refined_places(x, twin[:, places])
+            methods = ["twin, refined on the field model" if k in places else m
+                       for k, m in enumerate(methods)]
         return PseudoLabels(values=values, loo_rmse=loo, methods=tuple(methods))
     if len(places) == 2:
         err, name, fit = min(((_place_loo(fit, y[:, places], lab), name, fit)
@@ -143,6 +150,18 @@ def twin_labels(readings: np.ndarray, targets: np.ndarray, labelled: np.ndarray,
         methods[k] = name if sources[k] == names[k] else name.replace("twin load", f"twin's {sources[k]}")
     values[lab] = y[lab]
     return PseudoLabels(values=values, loo_rmse=loo, methods=tuple(methods))
+
+
+def refined_places(readings: np.ndarray, places: np.ndarray, fitted: np.ndarray | None = None) -> np.ndarray:
+    """(N, P) the twin's ``places`` (N, P) of ``readings`` (N, ...), with no label, refitted on a smooth model of
+    the real field: :func:`~tactile_manip.learning.contact.field_inverse.places_by_pass` from the twin's places,
+    after its last pass. The twin's field misses the real one in detail, and a reading read backwards on it lands
+    where the twin's detail, not the pad's, is like it; a model fitted on the real readings at those places keeps
+    the twin's layout of the pad at large and takes out the scatter of its detail. ``fitted`` (N,) bool: the rows
+    the models are fitted on (default: every row); the others, such as a run's test presses, are only placed.
+    Where too few rows are fitted for the models, the places come back as they are."""
+    x = np.asarray(readings, np.float64).reshape(len(readings), -1)
+    return places_by_pass(x, places, np.zeros(len(x), bool), fitted=fitted)[-1]
 
 
 def _corrected_bank(x: np.ndarray, bank: np.ndarray, bank_places: np.ndarray, y: np.ndarray, lab: np.ndarray,
