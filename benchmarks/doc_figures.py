@@ -109,6 +109,13 @@ QUOTES: tuple[Quote, ...] = (
     Quote("README.md", "its places refitted on a smooth model of the real readings, places the spatial run's held-out "
                        "presses {} mm off (a contact network trained on its labels {} mm)",
           (Value(TWIN, (*NO_LABELS, "position_rmse_mm")), Value(TWIN, "contact/spatial/k/0/mean/twin"))),
+    Quote("README.md", "with 25 labels {} mm and {} N on those runs today, with 10 labels {} mm against the "
+                       "recipe's {} mm",
+          (Value(TWIN, "contact/spatial/k/25/mean/twin"), Value(TWIN, "contact/normal/k/25/mean/twin"),
+           Value(TWIN, "contact/spatial/k/10/mean/twin"), _few(SPATIAL, "10", "ours"))),
+    Quote("docs/your_board.md", "At K = 25 (means of seeds 0 and 1): the spatial run's position {} mm ({} and {} mm;",
+          tuple(Value(TWIN, f"contact/spatial/k/25/{tail}", ".3f") for tail in ("mean/twin", "per_seed/0/twin",
+                                                                               "per_seed/1/twin"))),
     Quote("docs/your_board.md", "Its 961 test presses read backwards on it are {} mm RMS from the stage's positions",
           (Value(TWIN, (*NO_LABELS, "read_backwards_position_rmse_mm")),)),
     Quote("docs/your_board.md", "the models fitted on the first 80 %'s presses alone and the test presses placed on "

@@ -23,7 +23,9 @@ contact model's) sees only the first 80 % of the run's rows; every score is on t
   twin has no clock); and the bound of the zero-label goal: the position RMSE on the spatial run's test presses of
   the best smooth map (fitted with every label of the first 80 %) read backwards.
 - ``contact``: per K (0, 10, 25, 100) and seed (0, 1), the contact model of ``configs/train/contact_twin.toml``
-  (the twin's simulated presses label the unlabelled ones, the K labels correct them; ``train --prior``), beside
+  (the twin's simulated presses label the unlabelled ones, the K labels correct them; ``train --prior``), the twin
+  being ``fit-board`` without labels on the run's first 80 % whatever K (the twin's places, refitted on the real
+  readings, start the few-label recipe's refit beside its maps; the labels say how much they weigh), beside
   kNN (k = 5) on the same K labels and today's few-label recipe (``configs/train/contact_fewlabel.toml``: its
   committed figures in docs/results/contact/fewlabel_k.json, the same runs, split and seeds, since a case takes it
   tens of minutes). With K = 0 no label is used at all (no states.csv in the twin's fit); the positions are in the
@@ -466,14 +468,16 @@ def section_contact(runs: dict[str, Path], work: Path, ks: list[int], seeds: lis
             for seed in seeds[:1] if k == 0 else seeds:
                 case: dict[str, Any] = {}
                 if "twin" in twins:
-                    fitted = fit_board(run, kind, work, None if k == 0 else k, seed)
+                    # the twin fitted to the readings alone, whatever K: the labels bring its places into their
+                    # frame (with the refit, it places presses closer than a twin fitted on the K labels)
+                    fitted = fit_board(run, kind, work, None, 0)
                     if fitted and kind == NORMAL and k == 0:
                         break  # a twin of stage poses gives no force in newtons: the labels fit it (K > 0)
                     bank = (simlog_bank(fitted, run, kind, work) if fitted
                             else twin_bank(TEMPLATE["board"], work, presses))
                     case = contact_case(run, kind, k, seed, bank, work, "twin")
-                    case["board"] = "fitted" if fitted else given_name() + ", " + FIT_ERRORS.get(
-                        str(work / f"fitted_{run.name}_{'nolabels' if k == 0 else f'k{k}_s{seed}'}.toml"), "")
+                    case["board"] = "fitted, no labels" if fitted else given_name() + ", " + FIT_ERRORS.get(
+                        str(work / f"fitted_{run.name}_nolabels.toml"), "")
                     case["seconds"] = {"fit": MADE_S.get(str(fitted)), "twin_presses": MADE_S.get(str(bank)),
                                        "train_and_export": case.pop("train_seconds")}
                 if "bound" in twins:

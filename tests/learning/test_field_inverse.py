@@ -318,7 +318,7 @@ def test_the_labeller_settles_the_places_where_a_pass_that_settling_repeats_hold
     first_repeated = passes - len(field_inverse.SETTLE_PASSES) + 1   # the first pass that settling repeats
     for best in range(1, passes + 1):
         loo = np.tile(np.abs(np.arange(1.0, passes + 1) - best)[:, None] + 1.0, (1, 2))  # least after `best`
-        monkeypatch.setattr(fewlabel, "_refined_loo", lambda *args, loo=loo, **kwargs: loo)
+        monkeypatch.setattr(fewlabel, "_refined_errors", lambda *args, loo=loo, **kwargs: loo[None])  # one held out
         found = pseudo_labels(readings, truth, labelled, names=names, maps=maps)
         np.testing.assert_array_equal(found.loo_rmse, loo[best - 1])  # the passes' own leave-one-out
         if best >= first_repeated:

@@ -74,6 +74,7 @@ LABELS_PER_KNOT = 12      # labelled presses per knot of that line (between thos
 REFINED_LOO = 25          # labelled presses held out in turn for the refitted places' leave-one-out RMSE
 START_SPREAD = 1.5        # a map starts the refit if its fits' leave-one-out error is within this of the best one's
 STARTS_PER_MAP = 2        # fits per such map that start the refit: the best and the next best per coordinate
+PRIOR_SHARES = (0.0, 1 / 3, 0.5, 2 / 3, 1.0)  # shares of a start from elsewhere (a twin) in the refit's places
 PLACE_TARGETS = ("x_mm", "y_mm")        # where the press is: fitted on the maps only
 LOAD_TARGETS = ("force_n", "depth_mm")  # how hard it is: fitted on the field norm only
 
@@ -91,7 +92,8 @@ class PseudoLabels:
 def pseudo_labels(readings: np.ndarray, targets: np.ndarray, labelled: np.ndarray, *, neighbours: int = 20,
                   earlier: np.ndarray | None = None, names: Sequence[str] | None = None,
                   maps: dict[str, np.ndarray] | None = None, refine: bool = True,
-                  weights: np.ndarray | None = None, stages: Callable[..., Any] | None = None) -> PseudoLabels:
+                  weights: np.ndarray | None = None, stages: Callable[..., Any] | None = None,
+                  start: tuple[str, Sequence[Fit]] | None = None) -> PseudoLabels:
     """Label every row of ``readings`` (N, ...) from the rows where ``labelled`` (N,) holds.
 
     ``targets`` (N, K) is read only on the labelled rows. ``earlier`` (N, ...): the reading a few frames before
@@ -108,7 +110,11 @@ def pseudo_labels(readings: np.ndarray, targets: np.ndarray, labelled: np.ndarra
     positive weights. ``stages``: makes the progress display of each stage, given the keywords ``total``,
     ``desc`` and ``unit`` (:func:`~tactile_manip.progress.progress_bar`; default: nothing shown): the maps, the
     fits' leave-one-out, the refit's leave-one-out (one step per held-out press and start: most of the time) and
-    the placing. Raises ``DatasetError`` with fewer than ``MIN_LABELLED`` labelled rows, a non-finite label or
+    the placing. ``start``: one more first placing of the places, from elsewhere (a twin's places brought into the
+    labels' frame: :mod:`~tactile_manip.learning.contact.twin_prior`), as its name and a fit per place target; the
+    refit from it and the refit from the maps' starts are blended, the share of each (``PRIOR_SHARES``) and the
+    number of passes chosen together by the leave-one-out. Raises ``DatasetError`` with fewer than
+    ``MIN_LABELLED`` labelled rows, a non-finite label or
     reading, fewer rows than ``neighbours`` + 1, names that do not match the targets, maps with other rows than the
     readings, or weights of another length or not finite and positive on the labelled rows.
     """
@@ -181,24 +187,37 @@ def pseudo_labels(readings: np.ndarray, targets: np.ndarray, labelled: np.ndarra
             bar.update()
     places = [k for k, kind in enumerate(kinds) if kind == "place"]
     if refine and len(places) in (1, 2) and (~lab).any():
-        starts = _starts(by_map, places, score)
+        groups = [_starts(by_map, places, score)] + ([[list(start[1])]] if start is not None else [])
         held = len(list(_held_out(lab, REFINED_LOO)))
-        with stages(total=held * len(starts), desc="labelling: leave-one-out of the field model's refit",
+        with stages(total=held * sum(map(len, groups)), desc="labelling: leave-one-out of the field model's refit",
                     unit="refit") as bar:
-            by_pass = _refined_loo(x, y[:, places], lab, starts, bar=bar)  # (passes, places)
+            errs = [_refined_errors(x, y[:, places], lab, group, bar=bar) for group in groups]  # (held, passes, P)
+        shares = PRIOR_SHARES if start is not None else (0.0,)
+        # the share of the other start and the passes of least leave-one-out error, the places of each blend being
+        # the blend of each group's (so are their errors)
+        by_share = [np.sqrt(np.mean(np.square(_blend(errs[0], errs[-1], w)), axis=0)) for w in shares]
+        pick = int(np.argmin([np.min(np.sum(b ** 2, axis=1)) for b in by_share]))
+        share, by_pass = shares[pick], by_share[pick]
         count = int(np.argmin(np.sum(by_pass ** 2, axis=1))) + 1  # the passes of least leave-one-out error
         # where the leave-one-out keeps a pass that settling repeats, the places run all the passes and settle; the
         # leave-one-out stays that of the passes alone (holding the settling out too would cost four times the
         # leave-one-out above)
         settles = count > len(by_pass) - len(SETTLE_PASSES)
-        with stages(total=len(starts), desc="labelling: placing the unlabelled presses", unit="start") as bar:
-            values[:, places] = (_refit(x, y[:, places], lab, starts, settled=True, bar=bar) if settles
-                                 else _refit(x, y[:, places], lab, starts, bar=bar)[count - 1])
+        used = [(w, g) for w, g in zip((1.0 - share, share), groups) if w > 0]
+        with stages(total=sum(len(g) for _, g in used), desc="labelling: placing the unlabelled presses",
+                    unit="start") as bar:
+            values[:, places] = sum(w * (_refit(x, y[:, places], lab, g, settled=True, bar=bar) if settles
+                                         else _refit(x, y[:, places], lab, g, bar=bar)[count - 1]) for w, g in used)
         loo[places] = by_pass[count - 1]
         done = (f"{len(by_pass)} passes, settled (leave-one-out least after {count})" if settles
                 else f"{count} pass{'es' if count > 1 else ''}")
         for k in places:
-            methods[k] += f", refined on the field model in {done} (mean of {len(starts)} starts)"
+            if start is not None and share >= 1.0:  # the maps' starts held out worse: none of their fits is used
+                methods[k] = f"{start[0]}, refined on the field model in {done} (the maps' starts held out worse)"
+                continue
+            blend = ("" if start is None else f", and {start[0]} at {share:.0%}" if share > 0
+                     else f"; not {start[0]}, which held out worse")
+            methods[k] += f", refined on the field model in {done} (mean of {len(groups[0])} starts{blend})"
     return PseudoLabels(values=values, loo_rmse=loo, methods=tuple(methods))
 
 
@@ -437,6 +456,23 @@ def _refined_loo(x: np.ndarray, y: np.ndarray, lab: np.ndarray, starts: list[lis
     ``REFINED_LOO``, evenly spaced) of the refit from ``starts`` (:func:`_refit`): with each held-out press, every
     press the others do not label is placed and refitted, as the labeller does without it. ``bar``: a progress
     display, one step per held-out press and start."""
-    errs = [_refit(x, y, keep, starts, bar=bar)[:, i] - y[i] for i, keep in _held_out(lab, REFINED_LOO)]
-    err = np.sqrt(np.mean(np.square(errs), axis=0))
-    return np.where(np.isfinite(err), err, np.inf)
+    return np.sqrt(np.mean(np.square(_refined_errors(x, y, lab, starts, bar=bar)), axis=0))
+
+
+def _blend(a: np.ndarray, b: np.ndarray, share: float) -> np.ndarray:
+    """``a`` and ``b`` blended, ``share`` of ``b``: either alone at a share of 0 or 1 (an infinite error of the
+    other counts for nothing), else infinite wherever either is."""
+    if share <= 0.0:
+        return a
+    if share >= 1.0:
+        return b
+    out = (1.0 - share) * a + share * b
+    return np.where(np.isfinite(out), out, np.inf)
+
+
+def _refined_errors(x: np.ndarray, y: np.ndarray, lab: np.ndarray, starts: list[list[Fit]], *,
+                    bar: Any = None) -> np.ndarray:
+    """The errors (held, passes, P) behind :func:`_refined_loo`: each held-out press's refitted place after each
+    pass less its label; a refit that fails to a non-finite place counts as infinitely wrong."""
+    errs = np.array([_refit(x, y, keep, starts, bar=bar)[:, i] - y[i] for i, keep in _held_out(lab, REFINED_LOO)])
+    return np.where(np.isfinite(errs), errs, np.inf)

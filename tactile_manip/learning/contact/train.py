@@ -86,7 +86,8 @@ class ContactTrainConfig:
     manifold_neighbours: int = 20  # neighbours per reading in that map
     twin_neighbours: int = 8      # the twin's presses whose targets place a reading
     twin_norm_weight: float = 0.5  # weight of the log field norm beside the field's direction in that search
-    twin_refine: bool = True      # with no label, the twin's places refitted on a smooth model of the real field
+    twin_refine: bool = True      # the twin's places refitted on a smooth model of the real field; with labels,
+                                  # they then start the few-label recipe's refit beside its maps (.twin_prior)
     label_recency: float = 0.0    # the fit of the field norm weighs a labelled press by e ** (this x the share of
                                   # its run elapsed before it): later presses count more where the skin drifts
     seed: int = 0
@@ -201,7 +202,7 @@ def _train_contact(cfg: ContactTrainConfig, data_paths: list[str | Path], out: s
     windows = dataset_windows(data, cfg)
     pseudo = None
     if labelling:
-        pseudo = (_twin_labels(data, labels, names, cfg, windows, Path(prior)) if prior is not None
+        pseudo = (_twin_labels(data, labels, names, cfg, windows, Path(prior), stages) if prior is not None
                   else _pseudo_labels(data, labels, names, cfg, windows, stages))
     if len(train_idx) < 2:
         raise DatasetError(f"{len(train_idx)} training sample(s): too few to train on")
@@ -280,7 +281,7 @@ def _pseudo_labels(data: PairedDataset, labels: np.ndarray, names: list[str], cf
 
 
 def _twin_labels(data: PairedDataset, labels: np.ndarray, names: list[str], cfg: ContactTrainConfig,
-                 windows: np.ndarray, prior: Path) -> dict[str, Any]:
+                 windows: np.ndarray, prior: Path, stages: Callable[..., Any] | None = None) -> dict[str, Any]:
     """As :func:`_pseudo_labels`, the unlabelled training presses labelled from the twin's simulated presses in
     the dataset at ``prior`` (:func:`~tactile_manip.learning.contact.twin_prior.twin_labels`), corrected by the
     labelled ones; refuses a prior of another reading layout or board than the data's."""
@@ -299,7 +300,8 @@ def _twin_labels(data: PairedDataset, labels: np.ndarray, names: list[str], cfg:
     done = _label_unlabelled(data, labels, cfg, windows, lambda readings, known, labelled, earlier, weights: (
         twin_labels(readings, known, labelled, bank_readings=bank.readings, bank_targets=bank_targets, names=names,
                     bank_names=list(bank.target_names), earlier=earlier, weights=weights,
-                    neighbours=cfg.twin_neighbours, norm_weight=cfg.twin_norm_weight, refine=cfg.twin_refine)))
+                    neighbours=cfg.twin_neighbours, norm_weight=cfg.twin_norm_weight, refine=cfg.twin_refine,
+                    map_neighbours=cfg.manifold_neighbours, stages=stages)))
     done["prior"] = {"path": str(prior), "presses": len(bank), "fingerprint": bank.fingerprint(),
                      "board": record_of_provenance(bank.provenance)}
     return done

@@ -6,8 +6,10 @@ presses whose place, depth and force are known (``tactile-manip simulate --board
 is placed where the bank's readings most like it were made: the inverse-distance mean of the targets of its
 ``neighbours`` nearest bank presses, the distance taken between the readings' directions (unit vectors over the
 channels: where the press is, whatever its depth) and, weighed by ``norm_weight``, their log field norms (how
-hard). With no label at all (:func:`twin_labels` with nothing labelled) that is every press's label: places in the
-pad frame of the board file, which a rig's frame may turn and shift.
+hard). The places are then refitted on a smooth model of the real readings (:func:`refined_places`, no label: the
+twin's layout of the pad at large kept, the scatter its detail leaves taken out; on the eFlesh spatial run 2.67 to
+1.76 mm). With no label at all (:func:`twin_labels` with nothing labelled) that is every press's label: places in
+the pad frame of the board file, which a rig's frame may turn and shift.
 
 With labelled presses, the twin's answer is the start and the labels correct it, each correction chosen by its
 leave-one-out error on the labels (at most ``LOO_MOST`` of them held out in turn):
@@ -15,7 +17,11 @@ leave-one-out error on the labels (at most ``LOO_MOST`` of them held out in turn
 - a place (``x_mm``, ``y_mm``, both labelled together) from the twin's place through the rig's frame: the best of
   the 8 quarter turns and mirror images of the axes plus an offset; or an affine map of the twin's place; or that
   affine map plus a Gaussian-kernel ridge correction (three widths), which bends the twin's layout onto the labels
-  where the twin is off;
+  where the twin is off. Those places start the few-label recipe's refit on the field model beside the starts of
+  its maps of the readings (:func:`~tactile_manip.learning.contact.fewlabel.pseudo_labels` with ``start``), the
+  share of each chosen with the passes by leave-one-out on the labels (eFlesh spatial run, a twin fitted without
+  labels, seeds 0 and 1: 10 labels 1.86 and 1.93 mm against 2.69 and 2.70 for the maps alone; 25 labels 1.26 and
+  1.06 against 1.14 and 1.18);
 - a load (``force_n``, ``depth_mm``) by one fit, not a choice among routes: the field-norm fit of
   :mod:`~tactile_manip.learning.contact.fewlabel` with the twin's load as one more shrunk term, so the labels say
   how much the twin adds. A choice by leave-one-out among the twin's load alone, the norm's fit with it and the
@@ -30,13 +36,14 @@ The bank may be any set of presses with those targets in the pad's reading layou
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+from typing import Any
 
 import numpy as np
 
 from tactile_manip.errors import DatasetError
 from tactile_manip.learning.contact.field_inverse import places_by_pass
-from tactile_manip.learning.contact.fewlabel import (LOAD_TARGETS, PLACE_TARGETS, RBF_ALPHA, RBF_WIDTHS,
-                                                     PseudoLabels, _loo_rmse, _norm_fit, _principal_axes)
+from tactile_manip.learning.contact.fewlabel import (LOAD_TARGETS, MIN_LABELLED, PLACE_TARGETS, RBF_ALPHA, RBF_WIDTHS,
+                                                     PseudoLabels, _loo_rmse, _norm_fit, _principal_axes, pseudo_labels)
 
 NEIGHBOURS = 8        # bank presses whose targets place a reading
 NORM_WEIGHT = 0.5     # weight of the log field norm beside the reading's direction in the bank distance
@@ -83,7 +90,8 @@ def twin_targets(readings: np.ndarray, bank_readings: np.ndarray, bank_targets: 
 def twin_labels(readings: np.ndarray, targets: np.ndarray, labelled: np.ndarray, *, bank_readings: np.ndarray,
                 bank_targets: np.ndarray, names: Sequence[str], bank_names: Sequence[str],
                 earlier: np.ndarray | None = None, weights: np.ndarray | None = None,
-                neighbours: int = NEIGHBOURS, norm_weight: float = NORM_WEIGHT, refine: bool = True) -> PseudoLabels:
+                neighbours: int = NEIGHBOURS, norm_weight: float = NORM_WEIGHT, refine: bool = True,
+                map_neighbours: int = 20, stages: Callable[..., Any] | None = None) -> PseudoLabels:
     """Label every row of ``readings`` (N, ...) from the twin's bank and the rows where ``labelled`` (N,) holds.
 
     ``targets`` (N, K) named ``names`` is read on the labelled rows only; every name must be among the bank's
@@ -93,7 +101,11 @@ def twin_labels(readings: np.ndarray, targets: np.ndarray, labelled: np.ndarray,
     :func:`~tactile_manip.learning.contact.fewlabel.pseudo_labels` (the field norm's change, the labels' weights
     in the norm's fit). Without labelled rows the twin's answer is every label and the leave-one-out RMSE is NaN;
     with ``refine`` its places (one or two place targets) are then refitted on a smooth model of the real field
-    (:func:`refined_places`).
+    (:func:`refined_places`). With labels and ``refine``, the twin's places (two place targets), refitted so and
+    brought into the labels' frame by the correction of least leave-one-out error, start the few-label recipe's
+    refit beside its maps (:func:`~tactile_manip.learning.contact.fewlabel.pseudo_labels` with ``start``), which
+    weighs them by the leave-one-out on the labels (``map_neighbours``: the neighbours of its maps; with no more
+    rows than that, the corrected places are the labels); ``stages`` shows its progress as there.
     Raises ``DatasetError`` for a target the bank lacks, readings of another layout than the bank's, non-finite
     readings, labels or bank, or one or two labelled rows (too few for a correction, too many to ignore).
     """
@@ -124,8 +136,10 @@ def twin_labels(readings: np.ndarray, targets: np.ndarray, labelled: np.ndarray,
     corrected, corrected_loo = "", 0.0
     if len(places) == 2 and lab.sum() >= 5 and "z_mm" in bank_names:
         bank_places = np.asarray(bank_targets, np.float64)[:, [list(bank_names).index(names[k]) for k in places]]
-        bank, corrected, corrected_loo = _corrected_bank(x, bank, bank_places, y[:, places], lab, neighbours,
-                                                         norm_weight)
+        if in_labels_frame(twin_targets(x[lab], bank, bank_places, neighbours=neighbours, norm_weight=norm_weight),
+                           y[lab][:, places]):
+            bank, corrected, corrected_loo = _corrected_bank(x, bank, bank_places, y[:, places], lab, neighbours,
+                                                             norm_weight)
     twin = twin_targets(x, bank, np.asarray(bank_targets, np.float64)[:, cols], neighbours=neighbours,
                         norm_weight=norm_weight)
     values, loo, methods = twin.copy(), np.full(len(names), np.nan), ["twin"] * len(names)
@@ -136,12 +150,24 @@ def twin_labels(readings: np.ndarray, targets: np.ndarray, labelled: np.ndarray,
                        for k, m in enumerate(methods)]
         return PseudoLabels(values=values, loo_rmse=loo, methods=tuple(methods))
     if len(places) == 2:
-        err, name, fit = min(((_place_loo(fit, y[:, places], lab), name, fit)
-                              for name, fit in _place_fits(twin[:, places])), key=lambda t: t[0])
-        values[:, places] = fit(lab, y[:, places])
-        # the correction of the readings saw every label: its own leave-one-out error bounds the place's from below
-        loo[places] = max(err, corrected_loo)
-        methods = [f"twin place{corrected}, {name}" if k in places else m for k, m in enumerate(methods)]
+        yp = y[:, places]
+        start = refined_places(x, twin[:, places]) if refine else twin[:, places]
+        err, name, fit = min(((_place_loo(fit, yp, lab), name, fit) for name, fit in _place_fits(start)),
+                             key=lambda t: t[0])
+        what = f"twin place{corrected}{', refitted' if refine else ''}, {name}"
+        if refine and lab.sum() >= MIN_LABELLED and len(x) > map_neighbours:
+            found = pseudo_labels(x, yp, lab, names=[names[k] for k in places], stages=stages,
+                                  neighbours=map_neighbours,
+                                  start=(f"the {what}", [(lambda keep, _, k=k: fit(keep, yp)[:, k]) for k in range(2)]))
+            values[:, places] = found.values
+            loo[places] = np.maximum(found.loo_rmse, corrected_loo)
+            methods = [found.methods[places.index(k)] if k in places else m for k, m in enumerate(methods)]
+        else:
+            values[:, places] = fit(lab, yp)
+            # the correction of the readings saw every label: its own leave-one-out error bounds the place's from
+            # below
+            loo[places] = max(err, corrected_loo)
+            methods = [what if k in places else m for k, m in enumerate(methods)]
     for k in (k for k in range(len(names)) if k not in places or len(places) != 2):
         name, fit = _load_fit(x, twin[:, k], earlier, weights, labelled=lab)
         err = _loo_rmse(fit, y[:, k], lab)
@@ -150,6 +176,17 @@ def twin_labels(readings: np.ndarray, targets: np.ndarray, labelled: np.ndarray,
         methods[k] = name if sources[k] == names[k] else name.replace("twin load", f"twin's {sources[k]}")
     values[lab] = y[lab]
     return PseudoLabels(values=values, loo_rmse=loo, methods=tuple(methods))
+
+
+def in_labels_frame(placed: np.ndarray, labels: np.ndarray) -> bool:
+    """Whether a twin's ``placed`` (K, 2) places of the labelled presses are in the frame of their ``labels`` (K, 2):
+    as near them as they are (RMS) within 1.5 times what the best quarter turn or mirror of the axes and an offset
+    leave. A twin fitted to the readings alone lives in its board file's pad frame, which a rig's frame may turn
+    and shift; its readings can then not be corrected at the labels' places."""
+    a, b = np.asarray(placed, np.float64), np.asarray(labels, np.float64)
+    best = min(float(np.sqrt(np.mean(np.sum((a @ t.T - (a @ t.T).mean(0) - (b - b.mean(0))) ** 2, axis=1))))
+               for t in TURNS)
+    return float(np.sqrt(np.mean(np.sum((a - b) ** 2, axis=1)))) <= 1.5 * best + 1e-9
 
 
 def refined_places(readings: np.ndarray, places: np.ndarray, fitted: np.ndarray | None = None) -> np.ndarray:
@@ -201,8 +238,9 @@ def _corrected_bank(x: np.ndarray, bank: np.ndarray, bank_places: np.ndarray, y:
             miss.append(placed[0] - places[i])
         errs[width] = float(np.sqrt(np.mean(np.square(miss))))
     width = min(errs, key=errs.get)
-    return (corrected(width, np.ones(len(rows), bool)), "" if width is None else f" (readings corrected, {width:g} mm)",
-            errs[width])
+    if width is None:  # nothing corrected: nothing to bound the places' own leave-one-out error with
+        return bank, "", 0.0
+    return corrected(width, np.ones(len(rows), bool)), f" (readings corrected, {width:g} mm)", errs[width]
 
 
 def _place_fits(twin: np.ndarray) -> list[tuple[str, PlaceFit]]:
