@@ -297,52 +297,14 @@ def twin_bank(board: Path | str, work: Path, presses: int) -> Path:
     return out
 
 
-def stage_grid(board_path: Path, *, step_mm: float = 0.5, margin_mm: float = -4.0, depth_mm: float = 6.0,
-               depths: int = 12) -> np.ndarray:
-    """(G, 3) stage poses (x, y, z mm) that press a fitted board's pad all over: its layer less ``margin_mm`` (less
-    than nothing: a little beyond it, since a frame fitted on a few labels may sit millimetres off) in steps of
-    ``step_mm``, ``depths`` approaches up to ``depth_mm``, taken to the stage by the board's ``[twin]`` rig frame (no
-    label is read: the frame is the fit's)."""
-    from tactile_manip.boards import load_board
-
-    board = load_board(str(board_path))
-    twin = board.twin
-    half = np.array(board.layer.size_mm) / 2 - margin_mm
-    gx, gy = (np.arange(-h, h + step_mm / 2, step_mm) for h in half)
-    pad = np.stack(np.meshgrid(gx, gy, indexing="ij"), axis=-1).reshape(-1, 2)
-    turn = np.radians(twin.rig_turn_deg)
-    back = np.array([[np.cos(turn), np.sin(turn)], [-np.sin(turn), np.cos(turn)]])  # R(-turn)
-    xy = pad @ back.T
-    if twin.rig_mirror:
-        xy[:, 1] = -xy[:, 1]
-    xy += np.asarray(twin.rig_origin_mm)
-    z = twin.contact_z_mm + np.linspace(depth_mm / depths, depth_mm, depths) / twin.depth_per_z
-    return np.c_[np.repeat(xy, depths, axis=0), np.tile(z, len(xy))]
-
-
-def simlog_bank(board: Path, run: Path, kind: str, work: Path) -> Path:
-    """The fitted twin's readings at a grid of stage poses (``simulate-log`` on a log of those poses), as a dataset
-    of presses whose targets are the poses (x_mm, y_mm, z_mm): ``train --prior``'s bank, in the rig's frame."""
-    from tactile_manip.data import from_arrays, save_dataset
-
+def simlog_bank(board: Path, work: Path) -> Path:
+    """The fitted twin's readings at a grid of stage poses over its pad (``simulate-log --grid``), as a dataset of
+    presses whose targets are the poses (x_mm, y_mm, z_mm): ``train --prior``'s bank, in the board's rig frame."""
     out = work / f"bank_{board.stem}.npz"
     if out.is_file():
         return out
     start = time.perf_counter()
-    grid = stage_grid(board)
-    log = work / f"grid_{board.stem}.csv"
-    columns = LABELS[kind].split(",")
-    rows = np.c_[np.arange(len(grid)) * 0.01, grid, -np.ones((len(grid), len(columns) - 4))]
-    np.savetxt(log, rows, delimiter=",", fmt="%.6f")
-    sim = work / f"grid_{board.stem}_readings.npz"
-    cli("simulate-log", "--board", str(board), "--labels", str(log), "--label-columns", LABELS[kind],
-        "--out", str(sim), "--force")
-    template = imported(run, kind, "sensor_post_baselines", work, ["--targets", "x_mm,y_mm,z_mm"], "pose")
-    with np.load(sim, allow_pickle=False) as z:
-        readings, stage = z["readings"], z["stage_xyz_mm"]
-    prov = {k: template.provenance[k] for k in ("layout", "board") if k in template.provenance}
-    save_dataset(out, from_arrays(readings, targets=dict(zip(("x_mm", "y_mm", "z_mm"), stage.T)), val_fraction=0.0,
-                                  test_fraction=0.0, provenance={**prov, "source": f"simulate-log of {board.name}"}))
+    cli("simulate-log", "--board", str(board), "--grid", "--out", str(out), "--force")
     MADE_S[str(out)] = time.perf_counter() - start
     return out
 
@@ -473,7 +435,7 @@ def section_contact(runs: dict[str, Path], work: Path, ks: list[int], seeds: lis
                     fitted = fit_board(run, kind, work, None, 0)
                     if fitted and kind == NORMAL and k == 0:
                         break  # a twin of stage poses gives no force in newtons: the labels fit it (K > 0)
-                    bank = (simlog_bank(fitted, run, kind, work) if fitted
+                    bank = (simlog_bank(fitted, work) if fitted
                             else twin_bank(TEMPLATE["board"], work, presses))
                     case = contact_case(run, kind, k, seed, bank, work, "twin")
                     case["board"] = "fitted, no labels" if fitted else given_name() + ", " + FIT_ERRORS.get(

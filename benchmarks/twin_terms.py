@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from benchmarks._common import machine_info, publish
-from benchmarks.twin_protocol import CONTACT_Z_MM, DEFAULT_RUNS, LABELS, run_folders, stage_grid
+from benchmarks.twin_protocol import CONTACT_Z_MM, DEFAULT_RUNS, LABELS, run_folders
 
 SMOOTHING = (1e4, 1e3, 1e2, 10.0)  # of the residual's thin-plate map: what finer detail buys
 
@@ -75,7 +75,7 @@ def smoothed(twin: Any, rows: Any, train: np.ndarray, hours: np.ndarray, smoothi
 def main(argv: list[str] | None = None) -> int:
     from tactile_manip.boards import load_board
     from tactile_manip.commands.twin_logs import rest_field
-    from tactile_manip.sim.twin import BoardTwin
+    from tactile_manip.sim.twin import BoardTwin, stage_grid
     from tactile_manip.sim.twin_fit import PressLog, fit_twin
 
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
@@ -107,13 +107,13 @@ def main(argv: list[str] | None = None) -> int:
                               "smoothed_residual": {}, "machine": machine_info()}
     for stage, fitted in fit.stage_boards.items():
         twin = BoardTwin(fitted)
-        grid = stage_grid_of(fitted)
+        grid = stage_grid(fitted)
         report["stages"][stage] = {**score(twin.readings_ut, rows, test, grid, hours),
                                    "fit_ev": fit.stages[stage]["ev"], "note": fit.stages[stage].get("note", "")}
         print(f"{stage}: test EV {report['stages'][stage]['test_ev']:.4f}, placed "
               f"{report['stages'][stage]['placed_rmse_mm']:.2f} mm", flush=True)
     readout = BoardTwin(fit.stage_boards["readout"])
-    grid = stage_grid_of(fit.stage_boards["readout"])
+    grid = stage_grid(fit.stage_boards["readout"])
     for smoothing in SMOOTHING:
         line = score(smoothed(readout, rows, train, hours, smoothing), rows, test, grid, hours)
         report["smoothed_residual"][f"{smoothing:g}"] = line
@@ -122,19 +122,6 @@ def main(argv: list[str] | None = None) -> int:
     publish(report, args.out, markdown)
     args.out.with_suffix(".md").write_text(markdown(report).strip() + "\n")
     return 0
-
-
-def stage_grid_of(board: Any) -> np.ndarray:
-    """:func:`benchmarks.twin_protocol.stage_grid` of a board in memory."""
-    import dataclasses
-    import tempfile
-
-    from tactile_manip.boards.write import board_toml
-
-    with tempfile.TemporaryDirectory() as tmp:
-        path = Path(tmp) / "twin.toml"
-        path.write_text(board_toml(dataclasses.replace(board, name=f"{board.name}-fitted", path=None)))
-        return stage_grid(path)
 
 
 def markdown(report: dict[str, Any]) -> str:

@@ -14,6 +14,13 @@ firmware order), which ``import --readings-csv`` reads as it reads the real log;
 With ``--readings`` it prints the explained variance (EV, ``1 - SSE / SS`` about each channel's mean; overall: both
 pooled) on the rows after ``--train-fraction`` (the test tail) and on all rows, per channel and overall, writes it
 as JSON beside ``--out`` and plots predicted against measured over time, one panel per chip (``--plot``).
+
+    tactile-manip simulate-log --board my-cube.toml --grid --out twin.npz
+
+``--grid`` simulates no log but the twin pressed all over its pad (:func:`~tactile_manip.sim.twin.stage_grid`:
+0.5 mm steps over the layer and 4 mm beyond it, 12 approaches up to 6 mm, through the board's rig frame) and
+writes them as a dataset of presses whose targets are the stage poses (``x_mm``, ``y_mm``, ``z_mm``): the twin's
+presses that ``train --prior`` reads (docs/your_board.md, "Contact from the twin").
 """
 
 from __future__ import annotations
@@ -33,6 +40,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", required=True, metavar="CSV|NPZ", help="simulated readings (.csv or .npz)")
     p.add_argument("--plot", metavar="PNG", help="predicted against measured over time (default: --out's name .png, "
                                                  "with --readings)")
+    p.add_argument("--grid", action="store_true",
+                   help="no log: the twin pressed all over its pad (0.5 mm steps, 12 approaches to 6 mm), written as "
+                        "a dataset (.npz) of presses whose targets are the stage poses, for train --prior")
     p.add_argument("--force", action="store_true", help="overwrite existing output files")
 
 
@@ -50,6 +60,8 @@ def run(args: argparse.Namespace) -> int:
     from tactile_manip.sim.twin_fit import explained_variance
 
     out = Path(args.out)
+    if args.grid:
+        return _grid(args, out)
     if out.suffix not in (".csv", ".npz"):
         raise ConfigError(f"--out {out}: write .csv (the sensor log's layout) or .npz (import's readings)")
     if args.labels is None:
@@ -88,6 +100,37 @@ def run(args: argparse.Namespace) -> int:
                 per = " ".join(f"{n} {v:.2f}" for n, v in zip(report["channels"], report[f"ev_{part}_per_channel"]))
                 print(f"EV of the {args.stream} readings on {what}: {report[f'ev_{part}']:.3f} ({per})")
     print(f"wrote {', '.join(written)}: {len(sim)} simulated readings of board {board.name}")
+    return 0
+
+
+def _grid(args: argparse.Namespace, out) -> int:
+    """``--grid``: the twin's presses over its pad, as a dataset ``train --prior`` reads."""
+    import numpy as np
+
+    from tactile_manip.boards import load_board
+    from tactile_manip.data import from_arrays, save_dataset
+    from tactile_manip.errors import ConfigError
+    from tactile_manip.outputs import check_output_file
+    from tactile_manip.sim.twin import BoardTwin, stage_grid
+
+    given = [flag for flag, value in (("--labels", args.labels), ("--readings", args.readings),
+                                      ("--plot", args.plot)) if value]
+    if given:
+        raise ConfigError(f"--grid simulates presses all over the pad, not a log: drop {', '.join(given)}")
+    if out.suffix != ".npz":
+        raise ConfigError(f"--out {out}: --grid writes a dataset of presses (.npz), which train --prior reads")
+    check_output_file(out, force=args.force)
+    board = load_board(args.board)
+    twin = BoardTwin(board)
+    poses = stage_grid(board)
+    readings = board.readings_from_chips(twin.readings_ut(poses))
+    save_dataset(out, from_arrays(readings, targets=dict(zip(("x_mm", "y_mm", "z_mm"), poses.T)), val_fraction=0.0,
+                                  test_fraction=0.0, provenance={"source": f"tactile-manip simulate-log --grid of "
+                                                                           f"{board.name}", "layout": board.name,
+                                                                 "board": board.record}))
+    print(f"wrote {out}: {len(poses)} presses of board {board.name}'s twin over its pad "
+          f"({len(np.unique(poses[:, 2]))} approaches at each of {len(poses) // len(np.unique(poses[:, 2]))} places), "
+          "targets x_mm, y_mm, z_mm (the stage poses)")
     return 0
 
 

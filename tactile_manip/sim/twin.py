@@ -275,6 +275,36 @@ class BoardTwin:
         return np.einsum("cij,cj->ci", self.readout, rest) + self.offset_ut
 
 
+def stage_grid(board: Board, *, step_mm: float = 0.5, margin_mm: float = -4.0, depth_mm: float = 6.0,
+               depths: int = 12) -> np.ndarray:
+    """(G, 3) stage poses (x, y, z mm) that press a fitted board's pad all over: its layer less ``margin_mm`` (less
+    than nothing: a little beyond it, since a rig frame fitted on a few labels may sit millimetres off) in steps of
+    ``step_mm``, ``depths`` approaches evenly up to ``depth_mm``, taken to the stage by the board's ``[twin]`` rig
+    frame (a twin fitted without labels has the pad's own: its centre, no turn). Raises ``ConfigError`` for a board
+    without a ``[twin]`` table or a grid of no point."""
+    twin = board.twin
+    if twin is None:
+        raise ConfigError(f"board {board.name} has no [twin] table: fit one to your logs with `tactile-manip "
+                          "fit-board` (docs/your_board.md)")
+    if not (step_mm > 0 and depth_mm > 0 and depths >= 1):
+        raise ConfigError(f"a grid of stage poses needs a positive step ({step_mm} mm) and depth ({depth_mm} mm) and "
+                          f"one approach or more ({depths})")
+    half = np.array(board.layer.size_mm) / 2 - margin_mm
+    if (half <= 0).any():
+        raise ConfigError(f"a margin of {margin_mm} mm leaves nothing of board {board.name}'s "
+                          f"{board.layer.size_mm[0]:g} x {board.layer.size_mm[1]:g} mm layer")
+    gx, gy = (np.arange(-h, h + step_mm / 2, step_mm) for h in half)
+    pad = np.stack(np.meshgrid(gx, gy, indexing="ij"), axis=-1).reshape(-1, 2)
+    turn = np.radians(twin.rig_turn_deg)
+    back = np.array([[np.cos(turn), np.sin(turn)], [-np.sin(turn), np.cos(turn)]])  # R(-turn)
+    xy = pad @ back.T
+    if twin.rig_mirror:
+        xy[:, 1] = -xy[:, 1]
+    xy += np.asarray(twin.rig_origin_mm)
+    z = twin.contact_z_mm + np.linspace(depth_mm / depths, depth_mm, depths) / twin.depth_per_z
+    return np.c_[np.repeat(xy, depths, axis=0), np.tile(z, len(xy))]
+
+
 def press_strength(approach_mm: np.ndarray, twin: TwinSpec, time_h: np.ndarray | None = None) -> np.ndarray:
     """(N,) s = A d^n (mm^2), softened by ``1 + softening_per_hour * t_h`` where times are given."""
     s = twin.press_gain * np.power(approach_mm, twin.press_exponent)
