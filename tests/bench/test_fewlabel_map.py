@@ -19,6 +19,7 @@ def _pad(bend: float) -> tuple[np.ndarray, np.ndarray]:
     return lin + bend * fold, pos
 
 
+@pytest.mark.slow  # about 30 s: two maps of 1500 presses and the labeller on each
 def test_a_flat_map_is_fitted_by_an_affine_map_and_a_folded_one_is_not() -> None:
     flat, pos = _pad(0.0)
     folded, _ = _pad(1.0)

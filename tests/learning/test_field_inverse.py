@@ -161,6 +161,7 @@ def test_too_few_readings_or_places_that_do_not_spread_are_returned_as_they_are(
         refine_places(readings, np.hstack([truth, truth[:, :1]]), labelled)
 
 
+@pytest.mark.slow  # about 25 s: the refit's leave-one-out over 25 held-out presses
 def test_the_labeller_refines_named_places_and_scores_the_refit_by_leave_one_out(presses) -> None:
     readings, truth, labelled = presses
     names = ["x_mm", "y_mm"]
