@@ -250,6 +250,7 @@ def test_a_pad_too_small_for_the_pattern_to_repeat_skips_the_last_pass(monkeypat
     np.testing.assert_array_equal(shipped, refine_places(readings, scattered, labelled))
 
 
+@pytest.mark.slow  # about 14 s: three labellings with their refits
 def test_refits_started_from_maps_bent_opposite_ways_average_their_bends_out(presses, monkeypatch) -> None:
     readings, truth, _ = (part[:800] for part in presses)
     labelled = np.zeros(len(truth), bool)
@@ -335,6 +336,7 @@ def test_the_labeller_settles_the_places_where_a_pass_that_settling_repeats_hold
 
 
 
+@pytest.mark.slow  # about 10 s: the labeller in full, once shown and once not
 def test_the_labeller_reports_each_stage_as_it_goes_and_labels_as_it_does_unseen(presses) -> None:
     readings, truth, labelled = (part[:600] for part in presses)
     names = ["x_mm", "y_mm"]
