@@ -257,9 +257,11 @@ def placed_backwards(board: Any, run: Path) -> dict[str, Any]:
 
 
 def frame_rmse(placed: np.ndarray, true: np.ndarray, turns: list[np.ndarray]) -> float:
-    """2-D RMSE (mm) of ``placed`` against ``true`` (N, 2) after the best of ``turns`` and an offset."""
-    return min(float(np.sqrt(np.mean(np.sum((placed @ r.T - (placed @ r.T).mean(0) - (true - true.mean(0))) ** 2,
-                                            axis=1)))) for r in turns)
+    """2-D RMSE (mm) of ``placed`` against ``true`` (N, 2) after the best of ``turns`` and an offset
+    (:func:`~tactile_manip.learning.contact.twin_prior.frame_rmse`)."""
+    from tactile_manip.learning.contact import twin_prior
+
+    return twin_prior.frame_rmse(placed, true, turns)
 
 
 def fit_board(run: Path, kind: str, work: Path, k: int | str | None, seed: int) -> Path | None:
@@ -400,8 +402,7 @@ def score(pred: np.ndarray, true: np.ndarray, names: list[str], *, fit_frame: bo
         p = pred[:, [names.index("x_mm"), names.index("y_mm")]]
         t = true[:, [names.index("x_mm"), names.index("y_mm")]]
         if fit_frame:
-            return min(float(np.sqrt(np.mean(np.sum((p @ r.T - (p @ r.T).mean(0) - (t - t.mean(0))) ** 2, axis=1))))
-                       for r in TURNS)
+            return frame_rmse(p, t, TURNS)
         return float(np.sqrt(np.mean(np.sum((p - t) ** 2, axis=1))))
     return float(np.sqrt(np.mean((pred[:, 0] - true[:, 0]) ** 2)))
 

@@ -128,9 +128,9 @@ def _grid(args: argparse.Namespace, out) -> int:
                                   test_fraction=0.0, provenance={"source": f"tactile-manip simulate-log --grid of "
                                                                            f"{board.name}", "layout": board.name,
                                                                  "board": board.record}))
-    print(f"wrote {out}: {len(poses)} presses of board {board.name}'s twin over its pad "
-          f"({len(np.unique(poses[:, 2]))} approaches at each of {len(poses) // len(np.unique(poses[:, 2]))} places), "
-          "targets x_mm, y_mm, z_mm (the stage poses)")
+    approaches = len(np.unique(poses[:, 2]))
+    print(f"wrote {out}: {len(poses)} presses of board {board.name}'s twin over its pad ({approaches} approaches at "
+          f"each of {len(poses) // approaches} places), targets x_mm, y_mm, z_mm (the stage poses)")
     return 0
 
 

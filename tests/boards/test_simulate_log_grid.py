@@ -57,3 +57,15 @@ def test_the_grid_refuses_a_log_a_csv_and_a_board_without_a_twin_in_one_line(twi
         err = capsys.readouterr().err
         assert said in err and len(err.strip().splitlines()) == 1, err
         assert not list(tmp_path.glob("a.*"))
+
+
+def test_a_grid_of_no_point_is_refused(twin_file):
+    from tactile_manip.errors import ConfigError
+    from tactile_manip.sim.twin import stage_grid
+
+    board = load_board(twin_file)
+    with pytest.raises(ConfigError, match="positive step"):
+        stage_grid(board, step_mm=0.0)
+    with pytest.raises(ConfigError, match="leaves nothing"):
+        stage_grid(board, margin_mm=max(board.layer.size_mm))
+    assert stage_grid(board, step_mm=2.0, depths=1).shape[1] == 3

@@ -178,15 +178,21 @@ def twin_labels(readings: np.ndarray, targets: np.ndarray, labelled: np.ndarray,
     return PseudoLabels(values=values, loo_rmse=loo, methods=tuple(methods))
 
 
+def frame_rmse(placed: np.ndarray, labels: np.ndarray, turns: Sequence[np.ndarray] = TURNS) -> float:
+    """2-D RMSE of ``placed`` against ``labels`` (N, 2) after the best of ``turns`` (2x2 each; default the 8
+    quarter turns and mirror images of the axes) and an offset, both fitted on these rows."""
+    a, b = np.asarray(placed, np.float64), np.asarray(labels, np.float64)
+    return min(float(np.sqrt(np.mean(np.sum((a @ t.T - (a @ t.T).mean(0) - (b - b.mean(0))) ** 2, axis=1))))
+               for t in turns)
+
+
 def in_labels_frame(placed: np.ndarray, labels: np.ndarray) -> bool:
     """Whether a twin's ``placed`` (K, 2) places of the labelled presses are in the frame of their ``labels`` (K, 2):
     as near them as they are (RMS) within 1.5 times what the best quarter turn or mirror of the axes and an offset
     leave. A twin fitted to the readings alone lives in its board file's pad frame, which a rig's frame may turn
     and shift; its readings can then not be corrected at the labels' places."""
     a, b = np.asarray(placed, np.float64), np.asarray(labels, np.float64)
-    best = min(float(np.sqrt(np.mean(np.sum((a @ t.T - (a @ t.T).mean(0) - (b - b.mean(0))) ** 2, axis=1))))
-               for t in TURNS)
-    return float(np.sqrt(np.mean(np.sum((a - b) ** 2, axis=1)))) <= 1.5 * best + 1e-9
+    return float(np.sqrt(np.mean(np.sum((a - b) ** 2, axis=1)))) <= 1.5 * frame_rmse(a, b) + 1e-9
 
 
 def refined_places(readings: np.ndarray, places: np.ndarray, fitted: np.ndarray | None = None) -> np.ndarray:
